@@ -1,0 +1,1 @@
+"""Live visualisation: rerun recordings and the viser browser dashboard."""

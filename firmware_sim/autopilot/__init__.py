@@ -1,0 +1,1 @@
+"""The autopilot: flight modes, altitude hold, scheduled attitude control, control allocation."""

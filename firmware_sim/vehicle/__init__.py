@@ -1,0 +1,1 @@
+"""The nonlinear 6-DOF simulated vehicle: rigid body, rotors, aerodynamics, actuators, faults."""

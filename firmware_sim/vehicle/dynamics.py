@@ -1,0 +1,467 @@
+"""Nonlinear 6-DOF equations of motion of a dual-system VTOL, compiled with numba.
+
+State vector ``x`` (float64, length ``13 + n_actuators``):
+
+====== ============================================================================
+index  meaning
+====== ============================================================================
+0:3    position of the CG in NED (m), origin on the ground (z = 0), z positive down
+3:6    velocity of the CG in NED (m/s)
+6:10   attitude quaternion body FRD -> NED, scalar first (w, x, y, z)
+10:13  angular velocity in body FRD (rad/s): p, q, r
+13:    actuator positions, normalised: rotors and pushers 0..1 of max thrust, surfaces
+       -1..1 of max deflection (positive: trailing edge down for ailerons and elevator,
+       trailing edge left for rudders)
+====== ============================================================================
+
+Forces: gravity; each rotor's thrust along its axis at its position, falling linearly with
+axial inflow, and its reaction torque; wing/tail aerodynamics (lift with a rounded stall peak
+blended into flat-plate post-stall, parabolic drag, side force, the airspeed-dependent
+derivatives C_lp, C_mq, C_malpha, C_nr, C_nbeta interpolated from tables, control-surface
+moments scaling with dynamic pressure); landing-gear spring-dampers against flat ground.
+Actuators: first-order lag with rate and position limits. Faults enter through ``eff``
+(effectiveness multiplier per actuator, applied to the physical output) and ``stuck`` (the
+actuator position freezes). Integration: classical RK4 at a fixed step, the quaternion
+renormalised after each step.
+
+Everything here takes flat arrays (see :func:`pack`) so that one compiled step costs a few
+microseconds; the Python-level API is :class:`firmware_sim.vehicle.model.Vehicle`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from airframe.loader import Airframe
+
+N_RIGID = 13
+
+# Physics switches (bit mask) for verification runs; the default is everything on.
+GRAVITY = 1
+AERODYNAMICS = 2
+GROUND = 4
+PROPULSION = 8
+ALL_PHYSICS = GRAVITY | AERODYNAMICS | GROUND | PROPULSION
+
+# Indices into the packed scalar-parameter vector P.
+(P_MASS, P_G, P_RHO, P_S, P_B, P_C, P_CL0, P_CLA, P_CLMAX, P_STALL_RND, P_STALL_M, P_CLQ,
+ P_CLDE, P_CD0, P_K, P_CYB, P_CYP, P_CYR, P_CYDA, P_CYDR, P_CLB, P_CLR, P_CLDA, P_CLDR,
+ P_CM0, P_CMDE, P_CNP, P_CNDA, P_CNDR, P_ALIN, P_ASAT, P_DEFL, P_GK, P_GC, P_GF,
+ P_GMU) = range(36)
+N_PARAMS = 36
+
+# Derivative table rows.
+T_CLP, T_CMQ, T_CMA, T_CNR, T_CNB = range(5)
+
+
+class Packed(NamedTuple):
+    """An airframe as the flat arrays the compiled kernels take."""
+
+    P: np.ndarray            # (N_PARAMS,) scalar parameters
+    J: np.ndarray            # (3, 3) inertia, body FRD, kg m^2
+    Jinv: np.ndarray         # (3, 3)
+    rotor_pos: np.ndarray    # (n_rotors, 3) m
+    rotor_axis: np.ndarray   # (n_rotors, 3) thrust direction
+    rotor_torque: np.ndarray  # (n_rotors, 3) reaction torque per newton of thrust, m
+    rotor_tmax: np.ndarray   # (n_rotors,) N
+    rotor_inv_v0: np.ndarray  # (n_rotors,) 1 / zero-thrust axial speed, s/m
+    act_tau: np.ndarray      # (n_act,) s
+    act_rate: np.ndarray     # (n_act,) normalised units per s
+    act_min: np.ndarray      # (n_act,)
+    act_max: np.ndarray      # (n_act,)
+    tab_v: np.ndarray        # (n_tab,) m/s
+    tab: np.ndarray          # (5, n_tab)
+    gear: np.ndarray         # (n_gear, 3) m
+
+
+def pack(af: Airframe) -> Packed:
+    """Flatten an :class:`Airframe` for the compiled kernels."""
+    w = af.wing
+    P = np.zeros(N_PARAMS)
+    P[P_MASS] = af.mass_kg
+    P[P_G] = af.gravity_m_s2
+    P[P_RHO] = af.air_density_kg_m3
+    P[P_S], P[P_B], P[P_C] = w.area_m2, w.span_m, w.chord_m
+    P[P_CL0], P[P_CLA], P[P_CLMAX] = w.CL0, w.CL_alpha, w.CL_max
+    P[P_STALL_RND], P[P_STALL_M] = w.stall_rounding_rad, w.post_stall_blend_per_rad
+    P[P_CLQ], P[P_CLDE], P[P_CD0], P[P_K] = w.CL_q, w.CL_de, w.CD0, w.induced_drag_factor
+    P[P_CYB], P[P_CYP], P[P_CYR], P[P_CYDA], P[P_CYDR] = w.CY_beta, w.CY_p, w.CY_r, w.CY_da, w.CY_dr
+    P[P_CLB], P[P_CLR], P[P_CLDA], P[P_CLDR] = w.Cl_beta, w.Cl_r, w.Cl_da, w.Cl_dr
+    P[P_CM0], P[P_CMDE] = w.Cm0, w.Cm_de
+    P[P_CNP], P[P_CNDA], P[P_CNDR] = w.Cn_p, w.Cn_da, w.Cn_dr
+    P[P_ALIN], P[P_ASAT] = w.moment_angle_linear_rad, w.moment_angle_saturation_rad
+    P[P_DEFL] = af.surfaces.max_deflection_rad
+    g = af.landing_gear
+    P[P_GK], P[P_GC], P[P_GF], P[P_GMU] = (
+        g.stiffness_N_m, g.damping_N_s_m, g.friction_N_s_m, g.friction_coefficient)
+
+    rotors = af.rotors
+    n_act = af.n_actuators
+    act_tau = np.empty(n_act)
+    act_rate = np.empty(n_act)
+    act_min = np.empty(n_act)
+    act_max = np.empty(n_act)
+    for i, r in enumerate(rotors):
+        act_tau[i], act_rate[i], act_min[i], act_max[i] = (
+            r.time_constant_s, r.rate_limit_per_s, 0.0, 1.0)
+    s = af.surfaces
+    for i in range(len(rotors), n_act):
+        act_tau[i] = s.time_constant_s
+        act_rate[i] = s.rate_limit_rad_s / s.max_deflection_rad
+        act_min[i], act_max[i] = -1.0, 1.0
+    d = af.derivatives
+    return Packed(
+        P=P,
+        J=np.array(af.inertia_kg_m2, dtype=float),
+        Jinv=np.linalg.inv(af.inertia_kg_m2),
+        rotor_pos=np.array([r.position_m for r in rotors]),
+        rotor_axis=np.array([r.thrust_axis for r in rotors]),
+        rotor_torque=np.array([-r.torque_to_thrust_m * r.spin_axis for r in rotors]),
+        rotor_tmax=np.array([r.max_thrust_N for r in rotors]),
+        rotor_inv_v0=np.array([1.0 / r.zero_thrust_axial_speed_m_s for r in rotors]),
+        act_tau=act_tau, act_rate=act_rate, act_min=act_min, act_max=act_max,
+        tab_v=np.array(d.airspeed_m_s, dtype=float),
+        tab=np.array([d.C_lp, d.C_mq, d.C_malpha, d.C_nr, d.C_nbeta], dtype=float),
+        gear=np.array(af.landing_gear.points_m, dtype=float),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Small compiled helpers
+# --------------------------------------------------------------------------------------------
+
+
+@njit(cache=True, fastmath=False)
+def quat_to_dcm(q0: float, q1: float, q2: float, q3: float, R: np.ndarray) -> None:
+    """Rotation matrix body -> NED of a unit quaternion (w, x, y, z), written into R."""
+    R[0, 0] = 1.0 - 2.0 * (q2 * q2 + q3 * q3)
+    R[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
+    R[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
+    R[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
+    R[1, 1] = 1.0 - 2.0 * (q1 * q1 + q3 * q3)
+    R[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
+    R[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
+    R[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
+    R[2, 2] = 1.0 - 2.0 * (q1 * q1 + q2 * q2)
+
+
+@njit(cache=True)
+def table_interp(v: float, tab_v: np.ndarray, row: np.ndarray) -> float:
+    """Linear interpolation in a table over airspeed, clamped outside."""
+    n = tab_v.shape[0]
+    if v <= tab_v[0]:
+        return row[0]
+    if v >= tab_v[n - 1]:
+        return row[n - 1]
+    i = 1
+    while tab_v[i] < v:
+        i += 1
+    f = (v - tab_v[i - 1]) / (tab_v[i] - tab_v[i - 1])
+    return row[i - 1] + f * (row[i] - row[i - 1])
+
+
+@njit(cache=True)
+def saturate_angle(a: float, a_lin: float, a_sat: float) -> float:
+    """Identity for |a| <= a_lin, then a smooth (C1) approach to +-a_sat."""
+    m = abs(a)
+    if m <= a_lin:
+        return a
+    w = a_sat - a_lin
+    return math.copysign(a_lin + w * math.tanh((m - a_lin) / w), a)
+
+
+@njit(cache=True)
+def lift_drag_coefficients(alpha: float, P: np.ndarray) -> tuple[float, float]:
+    """CL(alpha), CD(alpha) of the wing (no control or rate terms).
+
+    Attached flow: CL0 + CL_alpha*alpha up to a rounded peak of exactly CL_max, falling
+    beyond; blended with a sigmoid into a flat plate (2 sin^2 a cos a) past the stall.
+    """
+    cl0 = P[P_CL0]
+    cla = P[P_CLA]
+    clmax = P[P_CLMAX]
+    d = P[P_STALL_RND]
+    a_pk = (clmax - cl0) / cla + 0.5 * d
+    if alpha <= a_pk - d:
+        cl_att = cl0 + cla * alpha
+    elif alpha <= a_pk + d:
+        cl_att = clmax - cla * (alpha - a_pk) ** 2 / (2.0 * d)
+    else:
+        cl_att = clmax - 0.5 * cla * d - cla * (alpha - a_pk - d)
+    a0 = a_pk + 4.0 * d  # far enough past the peak that CL_max is reached to 1e-4
+    M = P[P_STALL_M]
+    e1 = math.exp(min(-M * (alpha - a0), 600.0))
+    e2 = math.exp(min(M * (alpha + a0), 600.0))
+    sigma = (1.0 + e1 + e2) / ((1.0 + e1) * (1.0 + e2))
+    sa = math.sin(alpha)
+    ca = math.cos(alpha)
+    cl_fp = 2.0 * math.copysign(1.0, alpha) * sa * sa * ca
+    cl = (1.0 - sigma) * cl_att + sigma * cl_fp
+    cd = P[P_CD0] + (1.0 - sigma) * P[P_K] * cl_att * cl_att + sigma * 2.0 * sa * sa
+    return cl, cd
+
+
+# --------------------------------------------------------------------------------------------
+# Equations of motion
+# --------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
+                atau, arate, amin, amax, tab_v, tab, gear, wind, flags, dx, fm):
+    """Time derivative of the state ``x`` under actuator commands ``u``, written into ``dx``.
+
+    ``fm`` receives the body-frame non-gravitational force (0:3, N) and moment (3:6, N m),
+    plus airspeed (6), alpha (7) and beta (8): what the sensors and tests need.
+    """
+    nr = rtmax.shape[0]
+    na = atau.shape[0]
+    q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
+    p, q, r = x[10], x[11], x[12]
+    R = np.empty((3, 3))
+    quat_to_dcm(q0, q1, q2, q3, R)
+
+    # Air-relative velocity in body axes.
+    vr0 = x[3] - wind[0]
+    vr1 = x[4] - wind[1]
+    vr2 = x[5] - wind[2]
+    ub = R[0, 0] * vr0 + R[1, 0] * vr1 + R[2, 0] * vr2
+    vb = R[0, 1] * vr0 + R[1, 1] * vr1 + R[2, 1] * vr2
+    wb = R[0, 2] * vr0 + R[1, 2] * vr1 + R[2, 2] * vr2
+    Va = math.sqrt(ub * ub + vb * vb + wb * wb)
+
+    Fx = 0.0
+    Fy = 0.0
+    Fz = 0.0
+    Mx = 0.0
+    My = 0.0
+    Mz = 0.0
+    alpha = 0.0
+    beta = 0.0
+    if Va > 1e-6:
+        alpha = math.atan2(wb, ub)
+        sb = vb / Va
+        beta = math.asin(min(1.0, max(-1.0, sb)))
+
+    # Propulsion: lift rotors and pushers.
+    if flags & PROPULSION:
+        for i in range(nr):
+            ax0 = raxis[i, 0]
+            ax1 = raxis[i, 1]
+            ax2 = raxis[i, 2]
+            v_axial = ub * ax0 + vb * ax1 + wb * ax2
+            fade = 1.0 - v_axial * rinv_v0[i]
+            fade = min(1.25, max(0.0, fade))
+            T = eff[i] * rtmax[i] * x[N_RIGID + i] * fade
+            fx = T * ax0
+            fy = T * ax1
+            fz = T * ax2
+            Fx += fx
+            Fy += fy
+            Fz += fz
+            rx = rpos[i, 0]
+            ry = rpos[i, 1]
+            rz = rpos[i, 2]
+            Mx += ry * fz - rz * fy + T * rtorque[i, 0]
+            My += rz * fx - rx * fz + T * rtorque[i, 1]
+            Mz += rx * fy - ry * fx + T * rtorque[i, 2]
+
+    # Aerodynamics.
+    if flags & AERODYNAMICS and Va > 1e-6:
+        rho = P[P_RHO]
+        S = P[P_S]
+        b = P[P_B]
+        c = P[P_C]
+        qbar = 0.5 * rho * Va * Va
+        k_rate = 0.25 * rho * Va * S  # multiplies C_xp * (b or c)^2 * rate
+        defl = P[P_DEFL]
+        s0 = nr
+        d_al = eff[s0] * x[N_RIGID + s0] * defl
+        d_ar = eff[s0 + 1] * x[N_RIGID + s0 + 1] * defl
+        d_e = eff[s0 + 2] * x[N_RIGID + s0 + 2] * defl
+        d_rl = eff[s0 + 3] * x[N_RIGID + s0 + 3] * defl
+        d_rr = eff[s0 + 4] * x[N_RIGID + s0 + 4] * defl
+        d_a = 0.5 * (d_al - d_ar)
+        d_r = 0.5 * (d_rl + d_rr)
+
+        cl, cd = lift_drag_coefficients(alpha, P)
+        lift = qbar * S * (cl + P[P_CLDE] * d_e) + k_rate * c * c * P[P_CLQ] * q
+        drag = qbar * S * cd
+        side = (qbar * S * (P[P_CYB] * beta + P[P_CYDA] * d_a + P[P_CYDR] * d_r)
+                + k_rate * b * (P[P_CYP] * p + P[P_CYR] * r))
+        sa = math.sin(alpha)
+        ca = math.cos(alpha)
+        Fx += -drag * ca + lift * sa
+        Fy += side
+        Fz += -drag * sa - lift * ca
+
+        am = saturate_angle(alpha, P[P_ALIN], P[P_ASAT])
+        bm = saturate_angle(beta, P[P_ALIN], P[P_ASAT])
+        clp = table_interp(Va, tab_v, tab[T_CLP])
+        cmq = table_interp(Va, tab_v, tab[T_CMQ])
+        cma = table_interp(Va, tab_v, tab[T_CMA])
+        cnr = table_interp(Va, tab_v, tab[T_CNR])
+        cnb = table_interp(Va, tab_v, tab[T_CNB])
+        Mx += (qbar * S * b * (P[P_CLB] * bm + P[P_CLDA] * d_a + P[P_CLDR] * d_r)
+               + k_rate * b * b * (clp * p + P[P_CLR] * r))
+        My += (qbar * S * c * (P[P_CM0] + cma * am + P[P_CMDE] * d_e)
+               + k_rate * c * c * cmq * q)
+        Mz += (qbar * S * b * (cnb * bm + P[P_CNDA] * d_a + P[P_CNDR] * d_r)
+               + k_rate * b * b * (P[P_CNP] * p + cnr * r))
+
+    # Landing gear against flat ground at NED z = 0.
+    if flags & GROUND:
+        for i in range(gear.shape[0]):
+            gx = gear[i, 0]
+            gy = gear[i, 1]
+            gz = gear[i, 2]
+            pz = x[2] + R[2, 0] * gx + R[2, 1] * gy + R[2, 2] * gz
+            if pz > 0.0:
+                # Velocity of the contact point in NED: v + R (omega x r).
+                cx = q * gz - r * gy
+                cy = r * gx - p * gz
+                cz = p * gy - q * gx
+                pv0 = x[3] + R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz
+                pv1 = x[4] + R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
+                pv2 = x[5] + R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz
+                normal = P[P_GK] * pz + P[P_GC] * pv2
+                if normal < 0.0:
+                    normal = 0.0
+                fn0 = -P[P_GF] * pv0
+                fn1 = -P[P_GF] * pv1
+                fh = math.sqrt(fn0 * fn0 + fn1 * fn1)
+                fmax = P[P_GMU] * normal
+                if fh > fmax and fh > 0.0:
+                    fn0 *= fmax / fh
+                    fn1 *= fmax / fh
+                fn2 = -normal
+                # To body axes.
+                fbx = R[0, 0] * fn0 + R[1, 0] * fn1 + R[2, 0] * fn2
+                fby = R[0, 1] * fn0 + R[1, 1] * fn1 + R[2, 1] * fn2
+                fbz = R[0, 2] * fn0 + R[1, 2] * fn1 + R[2, 2] * fn2
+                Fx += fbx
+                Fy += fby
+                Fz += fbz
+                Mx += gy * fbz - gz * fby
+                My += gz * fbx - gx * fbz
+                Mz += gx * fby - gy * fbx
+
+    m = P[P_MASS]
+    gdown = P[P_G] if flags & GRAVITY else 0.0
+    dx[0] = x[3]
+    dx[1] = x[4]
+    dx[2] = x[5]
+    dx[3] = (R[0, 0] * Fx + R[0, 1] * Fy + R[0, 2] * Fz) / m
+    dx[4] = (R[1, 0] * Fx + R[1, 1] * Fy + R[1, 2] * Fz) / m
+    dx[5] = (R[2, 0] * Fx + R[2, 1] * Fy + R[2, 2] * Fz) / m + gdown
+    dx[6] = 0.5 * (-q1 * p - q2 * q - q3 * r)
+    dx[7] = 0.5 * (q0 * p + q2 * r - q3 * q)
+    dx[8] = 0.5 * (q0 * q - q1 * r + q3 * p)
+    dx[9] = 0.5 * (q0 * r + q1 * q - q2 * p)
+    # Euler's equation: J w' = M - w x (J w).
+    h0 = J[0, 0] * p + J[0, 1] * q + J[0, 2] * r
+    h1 = J[1, 0] * p + J[1, 1] * q + J[1, 2] * r
+    h2 = J[2, 0] * p + J[2, 1] * q + J[2, 2] * r
+    t0 = Mx - (q * h2 - r * h1)
+    t1 = My - (r * h0 - p * h2)
+    t2 = Mz - (p * h1 - q * h0)
+    dx[10] = Jinv[0, 0] * t0 + Jinv[0, 1] * t1 + Jinv[0, 2] * t2
+    dx[11] = Jinv[1, 0] * t0 + Jinv[1, 1] * t1 + Jinv[1, 2] * t2
+    dx[12] = Jinv[2, 0] * t0 + Jinv[2, 1] * t1 + Jinv[2, 2] * t2
+
+    # First-order actuators with rate and position limits; stuck ones hold their position.
+    for i in range(na):
+        k = N_RIGID + i
+        if stuck[i]:
+            dx[k] = 0.0
+        else:
+            target = min(amax[i], max(amin[i], u[i]))
+            rate = (target - x[k]) / atau[i]
+            dx[k] = min(arate[i], max(-arate[i], rate))
+
+    fm[0] = Fx
+    fm[1] = Fy
+    fm[2] = Fz
+    fm[3] = Mx
+    fm[4] = My
+    fm[5] = Mz
+    fm[6] = Va
+    fm[7] = alpha
+    fm[8] = beta
+
+
+@njit(cache=True)
+def step_n(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
+           atau, arate, amin, amax, tab_v, tab, gear, wind, flags, fm):
+    """Advance ``x`` in place by ``n`` RK4 steps of ``dt`` seconds with commands ``u`` held."""
+    nx = x.shape[0]
+    k1 = np.empty(nx)
+    k2 = np.empty(nx)
+    k3 = np.empty(nx)
+    k4 = np.empty(nx)
+    xt = np.empty(nx)
+    na = atau.shape[0]
+    for _ in range(n):
+        derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
+                    atau, arate, amin, amax, tab_v, tab, gear, wind, flags, k1, fm)
+        for i in range(nx):
+            xt[i] = x[i] + 0.5 * dt * k1[i]
+        derivatives(xt, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
+                    atau, arate, amin, amax, tab_v, tab, gear, wind, flags, k2, fm)
+        for i in range(nx):
+            xt[i] = x[i] + 0.5 * dt * k2[i]
+        derivatives(xt, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
+                    atau, arate, amin, amax, tab_v, tab, gear, wind, flags, k3, fm)
+        for i in range(nx):
+            xt[i] = x[i] + dt * k3[i]
+        derivatives(xt, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
+                    atau, arate, amin, amax, tab_v, tab, gear, wind, flags, k4, fm)
+        for i in range(nx):
+            x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+        nq = math.sqrt(x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9])
+        for i in range(6, 10):
+            x[i] /= nq
+        for i in range(na):
+            k = N_RIGID + i
+            x[k] = min(amax[i], max(amin[i], x[k]))
+    # Leave fm describing the final state.
+    derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
+                atau, arate, amin, amax, tab_v, tab, gear, wind, flags, k1, fm)
+
+
+# --------------------------------------------------------------------------------------------
+# Attitude helpers (plain Python, used outside the hot loop)
+# --------------------------------------------------------------------------------------------
+
+
+def euler_to_quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """Quaternion (w, x, y, z) body -> NED from ZYX Euler angles (rad)."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return np.array([
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    ])
+
+
+def quat_to_euler(q: np.ndarray) -> tuple[float, float, float]:
+    """ZYX Euler angles (roll, pitch, yaw) in rad of a quaternion (w, x, y, z)."""
+    w, x, y, z = (float(v) for v in q)
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def dcm(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix body -> NED of a quaternion (w, x, y, z)."""
+    R = np.empty((3, 3))
+    quat_to_dcm(float(q[0]), float(q[1]), float(q[2]), float(q[3]), R)
+    return R

@@ -1,0 +1,1 @@
+"""Ground-station library and CLI speaking MAVLink to the autopilot."""

@@ -1,0 +1,1 @@
+"""MAVLink dialect and the links (UDP, zenoh) that carry MAVLink 2 frames."""

@@ -1,0 +1,1 @@
+"""vtol-ftc command line and the runners that wire an autopilot to a vehicle."""
