@@ -1,0 +1,286 @@
+"""zenoh transport: raw MAVLink 2 frames as payloads on ``vtolftc/<vehicle>/<link>/<direction>``.
+
+Each :class:`ZenohTransport` opens its own embedded zenoh session (peer mode by default, no
+router needed) on explicit endpoints only: multicast scouting and gossip are off, shared memory
+is off, and with ``allow_remote=False`` every endpoint must be on a loopback address. One end
+listens (``listen=tcp/127.0.0.1:PORT``), the other connects to it; connecting before the
+listener exists is fine (the session retries every 50 ms .. 1 s in the background).
+
+This end *publishes* on ``vtolftc/<vehicle>/<link>/<direction>`` and *subscribes* to the
+opposite direction (``up`` <-> ``down``). Convention: ``up`` flows from the physics toward the
+operator, ``down`` toward the physics: on the HIL link the vehicle simulator publishes ``up``
+(sensors) and the autopilot ``down`` (actuator controls); on a ground-station link the autopilot
+publishes ``up`` (telemetry) and the ground station ``down`` (commands).
+
+Publications are reliable, ``express`` (no batching delay) and use congestion control BLOCK, so
+a lockstep exchange never loses a frame to a full queue. Incoming samples are queued by the zenoh
+callback thread into a bounded in-process queue that :meth:`recv_datagrams` drains.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import queue
+import re
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
+
+from protocols.link import LinkUrl, Transport
+from protocols.netutil import require_loopback
+
+__all__ = [
+    "DIRECTIONS",
+    "KEY_PREFIX",
+    "ZenohTransport",
+    "key_expr",
+    "parse_zenoh_url",
+    "zenoh_config",
+]
+
+KEY_PREFIX = "vtolftc"
+DIRECTIONS = {"up": "down", "down": "up"}
+"""Direction published -> direction subscribed."""
+MAX_BATCH = 256
+DEFAULT_QUEUE_MAX = 4096
+
+_NAME_RE = re.compile(r"^[A-Za-z0-9_\-]+$")
+_ENDPOINT_RE = re.compile(r"^(tcp|udp|tls|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})$")
+_QUERY_KEYS = {"listen", "connect", "mode"}
+
+
+def key_expr(vehicle: str, link: str, direction: str) -> str:
+    """``vtolftc/<vehicle>/<link>/<direction>`` after validating each chunk."""
+    for what, name in (("vehicle", vehicle), ("link", link)):
+        if not _NAME_RE.match(name or ""):
+            raise ValueError(f"zenoh {what} name {name!r} must match [A-Za-z0-9_-]+")
+    if direction not in DIRECTIONS:
+        raise ValueError(f"zenoh direction {direction!r} must be 'up' or 'down'")
+    return f"{KEY_PREFIX}/{vehicle}/{link}/{direction}"
+
+
+def _check_endpoint(ep: str, *, allow_remote: bool) -> str:
+    m = _ENDPOINT_RE.match(ep)
+    if not m:
+        raise ValueError(
+            f"bad zenoh endpoint {ep!r}: expected PROTO/HOST:PORT with PROTO in tcp, udp, tls, "
+            "quic (e.g. tcp/127.0.0.1:7447)"
+        )
+    port = int(m.group(3))
+    if port > 65535:
+        raise ValueError(f"bad zenoh endpoint {ep!r}: port must be 0..65535")
+    require_loopback(m.group(2), allow_remote=allow_remote, what=f"zenoh endpoint {ep!r}: host")
+    return ep
+
+
+def zenoh_config(
+    *,
+    listen: tuple[str, ...] | list[str] = (),
+    connect: tuple[str, ...] | list[str] = (),
+    mode: str = "peer",
+    allow_remote: bool = False,
+) -> Any:
+    """Build a ``zenoh.Config`` with explicit endpoints only (no multicast, no gossip, no shm).
+
+    Raises:
+        ValueError: bad endpoint, non-loopback endpoint without ``allow_remote``, no endpoint
+            at all, or a mode other than peer/client.
+    """
+    import zenoh
+
+    if mode not in ("peer", "client"):
+        raise ValueError(f"zenoh mode must be 'peer' or 'client', got {mode!r}")
+    listen = [_check_endpoint(e, allow_remote=allow_remote) for e in listen]
+    connect = [_check_endpoint(e, allow_remote=allow_remote) for e in connect]
+    if not listen and not connect:
+        raise ValueError("zenoh link needs at least one listen= or connect= endpoint")
+    if mode == "client" and (listen or not connect):
+        raise ValueError("zenoh client mode takes connect= endpoints only")
+    cfg = zenoh.Config()
+    cfg.insert_json5("mode", json.dumps(mode))
+    # always set, even when empty: a peer's default listener is tcp/[::]:0 (all interfaces)
+    cfg.insert_json5("listen/endpoints", json.dumps(listen))
+    cfg.insert_json5("connect/endpoints", json.dumps(connect))
+    cfg.insert_json5(
+        "connect/retry",
+        json.dumps({"period_init_ms": 50, "period_max_ms": 1000, "period_increase_factor": 2}),
+    )
+    cfg.insert_json5("scouting/multicast/enabled", "false")
+    cfg.insert_json5("scouting/gossip/enabled", "false")
+    # nothing to scout: do not wait for scouted peers before zenoh.open returns
+    cfg.insert_json5("open/return_conditions/connect_scouted", "false")
+    cfg.insert_json5("transport/shared_memory/enabled", "false")
+    return cfg
+
+
+def parse_zenoh_url(url: str) -> LinkUrl:
+    """Parse ``zenoh://VEHICLE/LINK/DIRECTION?listen=EP&connect=EP&mode=peer|client``.
+
+    Only the syntax is checked here; loopback policy applies when the transport is built.
+    """
+    parts = urlsplit(url)
+    if parts.scheme.lower() != "zenoh":
+        raise ValueError(f"bad zenoh URL {url!r}: scheme must be zenoh://")
+    chunks = [parts.netloc, *[c for c in parts.path.split("/") if c != ""]]
+    if len(chunks) != 3 or parts.path.endswith("/") or "//" in parts.path:
+        raise ValueError(
+            f"bad zenoh URL {url!r}: expected zenoh://VEHICLE/LINK/DIRECTION "
+            "(e.g. zenoh://ds1/hil/up?listen=tcp/127.0.0.1:7447)"
+        )
+    vehicle, link, direction = chunks
+    key_expr(vehicle, link, direction)  # validates the names
+    try:
+        query = parse_qs(parts.query, keep_blank_values=True, strict_parsing=bool(parts.query))
+    except ValueError as exc:
+        raise ValueError(f"bad zenoh URL {url!r}: malformed query ({exc})") from exc
+    unknown = set(query) - _QUERY_KEYS
+    if unknown:
+        raise ValueError(
+            f"bad zenoh URL {url!r}: unknown parameter(s) {sorted(unknown)} "
+            f"(allowed: {sorted(_QUERY_KEYS)})"
+        )
+
+    def endpoints(name: str) -> tuple[str, ...]:
+        out: list[str] = []
+        for value in query.get(name, []):
+            out.extend(e.strip() for e in value.split(",") if e.strip())
+        for e in out:
+            _check_endpoint(e, allow_remote=True)
+        return tuple(out)
+
+    listen, connect = endpoints("listen"), endpoints("connect")
+    if not listen and not connect:
+        raise ValueError(
+            f"bad zenoh URL {url!r}: needs listen=ENDPOINT and/or connect=ENDPOINT "
+            "(scouting is disabled, so there is no other way to find the peer)"
+        )
+    modes = query.get("mode", ["peer"])
+    if len(modes) != 1 or modes[0] not in ("peer", "client"):
+        raise ValueError(f"bad zenoh URL {url!r}: mode must be peer or client")
+    return LinkUrl(
+        scheme="zenoh",
+        vehicle=vehicle,
+        link=link,
+        direction=direction,
+        listen=listen,
+        connect=connect,
+        mode=modes[0],
+    )
+
+
+class ZenohTransport(Transport):
+    """Publishes on ``vtolftc/<vehicle>/<link>/<direction>``, subscribes to the opposite one.
+
+    Args:
+        vehicle, link: key-expression chunks ([A-Za-z0-9_-]+).
+        direction: ``up`` or ``down``, the direction this end publishes.
+        listen, connect: zenoh endpoints (loopback unless ``allow_remote``).
+        mode: ``peer`` (embedded, default) or ``client`` (through a router).
+        allow_remote: permit non-loopback endpoints.
+        queue_max: received samples kept before new ones are dropped (counted).
+
+    Raises:
+        ValueError: bad names or endpoints.
+        OSError: the session could not be opened (e.g. listen port in use).
+    """
+
+    kind = "zenoh"
+
+    def __init__(
+        self,
+        vehicle: str,
+        link: str,
+        direction: str,
+        *,
+        listen: tuple[str, ...] | list[str] = (),
+        connect: tuple[str, ...] | list[str] = (),
+        mode: str = "peer",
+        allow_remote: bool = False,
+        queue_max: int = DEFAULT_QUEUE_MAX,
+    ) -> None:
+        import zenoh
+
+        self.pub_key = key_expr(vehicle, link, direction)
+        self.sub_key = key_expr(vehicle, link, DIRECTIONS[direction])
+        cfg = zenoh_config(listen=listen, connect=connect, mode=mode, allow_remote=allow_remote)
+        self._endpoints = (tuple(listen), tuple(connect))
+        self._queue: queue.SimpleQueue[bytes] = queue.SimpleQueue()
+        self._queue_max = int(queue_max)
+        self._overflow = 0
+        self._closed = False
+        try:
+            self._session = zenoh.open(cfg)
+        except zenoh.ZError as exc:  # e.g. listen port in use: same error class as UDP's bind
+            raise OSError(f"cannot open zenoh session ({self.describe()}): {exc}") from exc
+        try:
+            self._sub = self._session.declare_subscriber(self.sub_key, self._on_sample)
+            self._pub = self._session.declare_publisher(
+                self.pub_key,
+                congestion_control=zenoh.CongestionControl.BLOCK,
+                reliability=zenoh.Reliability.RELIABLE,
+                express=True,
+            )
+        except BaseException:
+            self._session.close()
+            raise
+
+    def _on_sample(self, sample: Any) -> None:
+        """zenoh callback thread: queue the payload (bounded)."""
+        q = self._queue
+        if q.qsize() >= self._queue_max:
+            self._overflow += 1
+            return
+        q.put(sample.payload.to_bytes())
+
+    @property
+    def overflow_drops(self) -> int:
+        """Samples dropped because the receive queue was full."""
+        return self._overflow
+
+    def send_bytes(self, data: bytes) -> bool:
+        """Publish one datagram; False once closed."""
+        if self._closed:
+            return False
+        self._pub.put(data)
+        return True
+
+    def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
+        """See :meth:`Transport.recv_datagrams`."""
+        q = self._queue
+        out: list[bytes] = []
+        try:
+            if timeout_s is not None and timeout_s <= 0.0:
+                out.append(q.get_nowait())
+            else:
+                out.append(q.get(timeout=timeout_s))
+            while len(out) < MAX_BATCH:
+                out.append(q.get_nowait())
+        except queue.Empty:
+            pass
+        return out
+
+    def ready(self) -> bool:
+        """True when at least one remote subscriber matches our publisher."""
+        if self._closed:
+            return False
+        return bool(self._pub.matching_status.matching)
+
+    def close(self) -> None:
+        """Undeclare, close the session and wake a blocked receiver. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        for entity in (self._sub, self._pub):
+            with contextlib.suppress(Exception):
+                entity.undeclare()
+        with contextlib.suppress(Exception):
+            self._session.close()
+        self._queue.put(b"")  # wake a recv() blocked in q.get()
+
+    def describe(self) -> str:
+        """``zenoh pub=... sub=... listen=... connect=...``."""
+        listen, connect = self._endpoints
+        return (
+            f"zenoh pub={self.pub_key} sub={self.sub_key} "
+            f"listen={list(listen)} connect={list(connect)}"
+        )
