@@ -1,0 +1,910 @@
+"""Structured (fixed-order, fixed-structure) H-infinity tuning (MATLAB ``hinfstruct``/``systune``).
+
+Problem (paper eqs. 7-8, multi-model form): given tunable parameters theta (controller
+gains, filter constants, ...) and closed-loop "channels" T_i(s; theta) (for example the
+weighted mixed-sensitivity stack [Ws S; Wt T; Wr R] of eq. 8 for each design model),
+
+    minimise_theta  f(theta) = max_i ||T_i(theta)||_inf
+    subject to      every channel realisation internally stable, lower <= theta <= upper.
+
+f is nonsmooth (max over channels and frequencies) and +inf where a channel is unstable.
+The local solver is a frequency-exchange / nonsmooth-aware trust-region method:
+
+1. at the iterate theta_k the exact norms are computed with
+   :func:`synthesis.hinfnorm.hinf_norm`; each channel's peak frequency (and secondary local
+   maxima of sigma_max on a coarse grid) is added to a growing frequency set Omega_i;
+2. the local minimax sub-problem over (channels x Omega_i)
+
+       min_{theta, t} t  s.t.  sigma_max(T_i(j w; theta)) <= t  (w in Omega_i),
+                               spectral abscissa(A_i(theta)) <= -margin,
+                               |theta - theta_k| <= Delta (scaled), bounds,
+
+   is solved in epigraph form by SLSQP with exact gradients of sigma_max from its singular
+   vectors, d sigma = Re(u^H dT v), dT = dC X + C R dA X + C R dB + dD
+   (R = (j w I - A)^-1, X = R B), the state-space derivatives being taken by central
+   differences of the channel matrices;
+3. the candidate is re-verified with the exact H-infinity norm: it is accepted on
+   sufficient decrease (trust radius expanded) or rejected (radius shrunk; the new peak
+   frequencies still enrich Omega).
+
+Unstable starting points are first stabilised by minimising the largest spectral abscissa
+over the channels (Nelder-Mead), and reported clearly if that fails. Several random starts
+(seeded with ``numpy.random.SeedSequence.spawn``, so results do not depend on execution
+order and can be run through any ``map`` such as ``ProcessPoolExecutor.map``) are
+supported. A local method: the result is a local optimum, as with ``systune``.
+
+Mixed-sensitivity helpers (:func:`closed_loops`, :func:`mixed_sensitivity`,
+:func:`mixed_sensitivity_channel`) build S, T, R of eq. 4 and the stacked channel of eq. 8
+directly with numpy (fast enough to be called inside the optimiser).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import minimize
+
+from synthesis.hinfnorm import StateSpaceData, as_state_space, hinf_norm
+
+__all__ = [
+    "Channel",
+    "Parameter",
+    "StartRecord",
+    "TunableSystem",
+    "TuneResult",
+    "TuningProblem",
+    "closed_loops",
+    "mixed_sensitivity",
+    "mixed_sensitivity_channel",
+    "pid",
+    "tune",
+]
+
+Channel = Callable[[NDArray[np.float64]], Any]
+"""A channel maps theta to a state-space (A, B, C, D) tuple or a python-control LTI object.
+
+The state dimension (and input/output sizes) must not depend on theta."""
+
+
+# ------------------------------------------------------------------------------------------
+# problem definition
+# ------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A tunable scalar: name, initial value, bounds and a typical magnitude (``scale``).
+
+    ``scale`` sets the unit of the optimiser's step and of random restarts; by default
+    max(|initial|, 1e-3) if initial != 0, else 1. Use ``lower=0`` for gains that must stay
+    non-negative.
+    """
+
+    name: str
+    initial: float
+    lower: float = -math.inf
+    upper: float = math.inf
+    scale: float | None = None
+
+    def __post_init__(self) -> None:
+        if not (self.lower <= self.initial <= self.upper):
+            raise ValueError(
+                f"parameter {self.name!r}: initial value {self.initial} is outside its bounds "
+                f"[{self.lower}, {self.upper}]"
+            )
+        if self.scale is not None and not (self.scale > 0 and math.isfinite(self.scale)):
+            raise ValueError(f"parameter {self.name!r}: scale must be > 0, got {self.scale}")
+
+    @property
+    def typical(self) -> float:
+        if self.scale is not None:
+            return float(self.scale)
+        return max(abs(self.initial), 1e-3) if self.initial != 0 else 1.0
+
+
+@dataclass
+class TuningProblem:
+    """Structured H-infinity problem: minimise max_i ||channel_i(theta)||_inf (eq. 7-8).
+
+    Parameters
+    ----------
+    parameters:
+        The tunable parameters (order defines theta).
+    channels:
+        Callables theta -> (A, B, C, D) (or python-control LTI) of weighted closed loops.
+        One channel per design model / requirement; the objective is their max.
+    channel_names:
+        Optional labels for reporting.
+    stability_margin:
+        Required decay rate (1/s): every channel's A must have eigenvalues with real part
+        < -stability_margin. 0 means plain (strict) internal stability.
+    """
+
+    parameters: Sequence[Parameter]
+    channels: Sequence[Channel]
+    channel_names: Sequence[str] | None = None
+    stability_margin: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.parameters = list(self.parameters)
+        self.channels = list(self.channels)
+        if not self.parameters:
+            raise ValueError("at least one Parameter is required")
+        if not self.channels:
+            raise ValueError("at least one channel is required")
+        for c in self.channels:
+            if not callable(c):
+                raise ValueError(f"channels must be callables theta -> (A, B, C, D), got {c!r}")
+        names = [p.name for p in self.parameters]
+        if len(set(names)) != len(names):
+            raise ValueError(f"parameter names must be unique, got {names}")
+        if self.channel_names is None:
+            self.channel_names = [f"channel{i}" for i in range(len(self.channels))]
+        elif len(self.channel_names) != len(self.channels):
+            raise ValueError(
+                f"{len(self.channel_names)} channel names given for {len(self.channels)} channels"
+            )
+        if self.stability_margin < 0:
+            raise ValueError(f"stability_margin must be >= 0, got {self.stability_margin}")
+
+    @property
+    def names(self) -> list[str]:
+        return [p.name for p in self.parameters]
+
+    @property
+    def initial(self) -> NDArray[np.float64]:
+        return np.array([p.initial for p in self.parameters], dtype=float)
+
+    @property
+    def lower(self) -> NDArray[np.float64]:
+        return np.array([p.lower for p in self.parameters], dtype=float)
+
+    @property
+    def upper(self) -> NDArray[np.float64]:
+        return np.array([p.upper for p in self.parameters], dtype=float)
+
+    @property
+    def scales(self) -> NDArray[np.float64]:
+        return np.array([p.typical for p in self.parameters], dtype=float)
+
+    def realize(self, theta: NDArray[np.float64]) -> list[StateSpaceData]:
+        """State-space data (A, B, C, D) of every channel at theta."""
+        theta = self._check_theta(theta)
+        return [as_state_space(c(theta)) for c in self.channels]
+
+    def channel_norms(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        """||channel_i(theta)||_inf for every channel (inf if unstable / margin violated)."""
+        out = []
+        for A, B, C, D in self.realize(theta):
+            if self.stability_margin > 0 and A.size and (
+                np.max(np.linalg.eigvals(A).real) >= -self.stability_margin
+            ):
+                out.append(math.inf)
+            else:
+                out.append(hinf_norm((A, B, C, D)).value)
+        return np.array(out)
+
+    def objective(self, theta: NDArray[np.float64]) -> float:
+        """max_i ||channel_i(theta)||_inf (the gamma of eq. 8)."""
+        return float(np.max(self.channel_norms(theta)))
+
+    def _check_theta(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        theta = np.asarray(theta, dtype=float).reshape(-1)
+        if theta.size != len(self.parameters):
+            raise ValueError(
+                f"theta has {theta.size} entries, expected {len(self.parameters)} "
+                f"({self.names})"
+            )
+        return theta
+
+
+TunableSystem = TuningProblem
+"""Alias (MATLAB vocabulary)."""
+
+
+@dataclass(frozen=True)
+class StartRecord:
+    """Outcome of one local run: start point, final point, objective history, status."""
+
+    index: int
+    theta0: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    value: float
+    history: list[float]
+    iterations: int
+    status: str
+
+
+@dataclass(frozen=True)
+class TuneResult:
+    """Best point over all starts.
+
+    ``value`` is the achieved max_i ||channel_i||_inf (inf if no stabilising point was
+    found), ``channel_values`` the per-channel norms, ``starts`` the per-start records.
+    """
+
+    theta: NDArray[np.float64]
+    names: list[str]
+    value: float
+    channel_values: NDArray[np.float64]
+    channel_names: list[str]
+    stable: bool
+    starts: list[StartRecord] = field(repr=False)
+    message: str = ""
+
+    @property
+    def params(self) -> dict[str, float]:
+        """Best theta as a name -> value dict."""
+        return {n: float(v) for n, v in zip(self.names, self.theta, strict=True)}
+
+
+# ------------------------------------------------------------------------------------------
+# local solver
+# ------------------------------------------------------------------------------------------
+
+
+class _Evaluator:
+    """Cached channel realisations, exact norms, frequency responses and derivatives."""
+
+    def __init__(self, problem: TuningProblem):
+        self.pb = problem
+        self.p = len(problem.parameters)
+        self.scales = problem.scales
+        self._cache: dict[bytes, list[StateSpaceData]] = {}
+        self._dcache: dict[bytes, list[list[StateSpaceData]]] = {}
+        self.shapes: list[tuple[int, ...]] | None = None
+
+    def realize(self, theta: NDArray[np.float64]) -> list[StateSpaceData]:
+        key = theta.tobytes()
+        r = self._cache.get(key)
+        if r is None:
+            r = self.pb.realize(theta)
+            shapes = [(A.shape[0], *D.shape) for A, _, _, D in r]
+            if self.shapes is None:
+                self.shapes = shapes
+            elif shapes != self.shapes:
+                raise ValueError(
+                    f"channel dimensions changed with theta: {shapes} vs {self.shapes} "
+                    "(n_states, n_outputs, n_inputs); channels must have fixed dimensions"
+                )
+            if len(self._cache) > 4096:
+                self._cache.clear()
+            self._cache[key] = r
+        return r
+
+    def derivatives(self, theta: NDArray[np.float64]) -> list[list[StateSpaceData]]:
+        """d(A, B, C, D)/d theta_k by central differences, per channel, per parameter."""
+        key = theta.tobytes()
+        r = self._dcache.get(key)
+        if r is not None:
+            return r
+        per_param: list[list[StateSpaceData]] = []
+        for k in range(self.p):
+            h = 1e-6 * max(abs(theta[k]), self.scales[k])
+            tp, tm = theta.copy(), theta.copy()
+            tp[k] += h
+            tm[k] -= h
+            rp, rm = self.realize(tp), self.realize(tm)
+            per_param.append(
+                [
+                    tuple((xp - xm) / (2 * h) for xp, xm in zip(sp, sm, strict=True))
+                    for sp, sm in zip(rp, rm, strict=True)
+                ]  # type: ignore[misc]
+            )
+        out = [[per_param[k][i] for k in range(self.p)] for i in range(len(self.pb.channels))]
+        if len(self._dcache) > 1024:
+            self._dcache.clear()
+        self._dcache[key] = out
+        return out
+
+    def exact(self, theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], list[float]]:
+        vals, peaks = [], []
+        margin = self.pb.stability_margin
+        for A, B, C, D in self.realize(theta):
+            if margin > 0 and A.size and np.max(np.linalg.eigvals(A).real) >= -margin:
+                vals.append(math.inf)
+                peaks.append(math.nan)
+                continue
+            r = hinf_norm((A, B, C, D))
+            vals.append(r.value)
+            peaks.append(r.peak_frequency_rad_s)
+        return np.array(vals), peaks
+
+    def abscissa(self, theta: NDArray[np.float64]) -> float:
+        return max(
+            (float(np.max(np.linalg.eigvals(A).real)) if A.size else -math.inf)
+            for A, _, _, _ in self.realize(theta)
+        )
+
+    def sigma_and_grad(
+        self, theta: NDArray[np.float64], omegas: list[NDArray[np.float64]], grad: bool
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+        """sigma_max(T_i(j w)) for all (i, w in omegas[i]) and its theta-gradient."""
+        sys = self.realize(theta)
+        dsys = self.derivatives(theta) if grad else None
+        sig_all, grad_all = [], []
+        for i, (A, B, C, D) in enumerate(sys):
+            w = omegas[i]
+            if w.size == 0:
+                continue
+            n = A.shape[0]
+            finite = np.isfinite(w)
+            wf = np.where(finite, w, 0.0)
+            if n:
+                Z = 1j * wf[:, None, None] * np.eye(n) - A
+                X = np.linalg.solve(Z, np.broadcast_to(B, (w.size, *B.shape)))
+                T = C @ X + D
+            else:
+                T = np.broadcast_to(D.astype(complex), (w.size, *D.shape)).copy()
+            T[~finite] = D
+            U, s, Vh = np.linalg.svd(T)
+            sig_all.append(s[:, 0])
+            if not grad:
+                continue
+            assert dsys is not None
+            u = U[:, :, 0]
+            v = Vh[:, 0, :].conj()
+            g = np.zeros((w.size, self.p))
+            if n:
+                # CR = C (jwI - A)^-1  (rows), via the transposed solve
+                CR = np.swapaxes(
+                    np.linalg.solve(
+                        np.swapaxes(Z, 1, 2), np.broadcast_to(C.T, (w.size, *C.T.shape))
+                    ),
+                    1,
+                    2,
+                )
+                CR[~finite] = 0.0
+                X[~finite] = 0.0
+            for k in range(self.p):
+                dA, dB, dC, dD = dsys[i][k]
+                dT = np.broadcast_to(dD.astype(complex), T.shape).copy()
+                if n:
+                    dT += dC @ X + CR @ (dA @ X) + CR @ dB
+                g[:, k] = np.real(np.einsum("wi,wij,wj->w", u.conj(), dT, v))
+            grad_all.append(g)
+        sig = np.concatenate(sig_all) if sig_all else np.zeros(0)
+        gr = np.concatenate(grad_all, axis=0) if grad and grad_all else None
+        return sig, gr
+
+    def abscissa_and_grad(
+        self, theta: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Spectral abscissa of every channel's A and its (generalised) gradient."""
+        from scipy.linalg import eig
+
+        sys = self.realize(theta)
+        dsys = self.derivatives(theta)
+        vals = np.full(len(sys), -1e6)
+        grads = np.zeros((len(sys), self.p))
+        for i, (A, _, _, _) in enumerate(sys):
+            if A.size == 0:
+                continue
+            lam, vl, vr = eig(A, left=True, right=True)
+            j = int(np.argmax(lam.real))
+            x, y = vr[:, j], vl[:, j]
+            den = np.vdot(y, x)
+            vals[i] = lam[j].real
+            if abs(den) < 1e-14:
+                continue
+            for k in range(self.p):
+                grads[i, k] = float(np.real(np.vdot(y, dsys[i][k][0] @ x) / den))
+        return vals, grads
+
+
+def _grid_peaks(A: NDArray[Any], B: NDArray[Any], C: NDArray[Any], D: NDArray[Any],
+                level: float, npts: int = 60) -> list[float]:
+    """Local maxima of sigma_max on a coarse log grid that exceed ``level``."""
+    n = A.shape[0]
+    if n == 0:
+        return []
+    mags = np.abs(np.linalg.eigvals(A))
+    mags = mags[mags > 0]
+    if mags.size == 0:
+        return []
+    w = np.geomspace(mags.min() / 20, mags.max() * 20, npts)
+    Z = 1j * w[:, None, None] * np.eye(n) - A
+    T = C @ np.linalg.solve(Z, np.broadcast_to(B, (w.size, *B.shape))) + D
+    s = np.linalg.svd(T, compute_uv=False)[:, 0]
+    idx = [j for j in range(1, npts - 1) if s[j] >= s[j - 1] and s[j] >= s[j + 1]]
+    return [float(w[j]) for j in idx if s[j] >= level]
+
+
+def _same_freq(w1: float, w2: float) -> bool:
+    if math.isinf(w1) or math.isinf(w2):
+        return w1 == w2
+    return abs(w1 - w2) <= 1e-6 * max(abs(w1), abs(w2), 1e-9)
+
+
+@dataclass
+class _Options:
+    max_iter: int
+    tol: float
+    max_freqs: int
+    trust_radius: float
+    stabilize_maxfev: int
+
+
+def _stabilize(
+    ev: _Evaluator, theta: NDArray[np.float64], lo: NDArray[np.float64],
+    hi: NDArray[np.float64], opts: _Options,
+) -> tuple[NDArray[np.float64], bool]:
+    """Minimise the largest spectral abscissa until every channel is stable (phase 1)."""
+    target = -max(ev.pb.stability_margin, 0.0) - 1e-6
+    s = ev.scales
+
+    class _DoneError(Exception):
+        pass
+
+    found: list[NDArray[np.float64]] = []
+
+    def to_theta(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.clip(theta + s * x, lo, hi)
+
+    def fun(x: NDArray[np.float64]) -> float:
+        th = to_theta(x)
+        try:
+            a = ev.abscissa(th)
+        except (np.linalg.LinAlgError, ValueError):
+            return 1e300
+        if a < target and math.isfinite(float(np.max(ev.exact(th)[0]))):
+            found.append(th)
+            raise _DoneError
+        return a
+
+    p = theta.size
+    for attempt in range(3):
+        simplex = np.vstack([np.zeros(p), (0.5 * 2.0**attempt) * np.eye(p)])
+        try:
+            res = minimize(
+                fun, np.zeros(p), method="Nelder-Mead",
+                options={"maxfev": opts.stabilize_maxfev, "xatol": 1e-8, "fatol": 1e-10,
+                         "initial_simplex": simplex},
+            )
+            theta = to_theta(res.x)
+        except _DoneError:
+            return found[-1], True
+    return theta, False
+
+
+def _local(
+    ev: _Evaluator, theta0: NDArray[np.float64], opts: _Options
+) -> tuple[NDArray[np.float64], float, list[float], int, str]:
+    pb = ev.pb
+    lo, hi = pb.lower, pb.upper
+    theta = np.clip(np.asarray(theta0, dtype=float), lo, hi)
+    vals, peaks = ev.exact(theta)
+    f = float(np.max(vals))
+    history: list[float] = []
+    if not math.isfinite(f):
+        theta, ok = _stabilize(ev, theta, lo, hi, opts)
+        if not ok:
+            return theta, math.inf, [math.inf], 0, "unstable: no stabilising point found"
+        vals, peaks = ev.exact(theta)
+        f = float(np.max(vals))
+    history.append(f)
+    # step unit: the parameter's typical magnitude, or its current magnitude if larger
+    s = np.maximum(ev.scales, np.abs(theta))
+    nch = len(pb.channels)
+    omegas: list[list[float]] = [[] for _ in range(nch)]
+
+    def add_freqs(th: NDArray[np.float64], pk: list[float], level: float) -> None:
+        sys = ev.realize(th)
+        for i in range(nch):
+            cand = [pk[i]] if math.isfinite(pk[i]) or pk[i] == math.inf else []
+            cand += _grid_peaks(*sys[i], level=level)
+            for wv in cand:
+                if not any(_same_freq(wv, wo) for wo in omegas[i]):
+                    omegas[i].append(wv)
+            if len(omegas[i]) > opts.max_freqs:
+                w = np.array(omegas[i])
+                sig, _ = ev.sigma_and_grad(
+                    th, [w if j == i else np.zeros(0) for j in range(nch)], False
+                )
+                keep = np.argsort(-sig)[: opts.max_freqs]
+                omegas[i] = [omegas[i][j] for j in sorted(keep)]
+
+    add_freqs(theta, peaks, 0.5 * f)
+    radius = opts.trust_radius
+    it = 0
+    status = "max_iter reached"
+    margin = pb.stability_margin
+    abs_target = -max(margin, 0.0) - 1e-9
+    p = theta.size
+    while it < opts.max_iter:
+        it += 1
+        W = [np.array(o) for o in omegas]
+        th_k = theta.copy()
+        s = np.maximum(ev.scales, np.abs(theta))  # relative trust region
+
+        def unpack(
+            y: NDArray[np.float64], th_k: NDArray[np.float64] = th_k, s: NDArray[np.float64] = s
+        ) -> NDArray[np.float64]:
+            return np.clip(th_k + s * y[:p], lo, hi)
+
+        def cons_f(y: NDArray[np.float64], W: list[NDArray[np.float64]] = W) -> NDArray[np.float64]:
+            th = unpack(y)
+            sig, _ = ev.sigma_and_grad(th, W, False)
+            a, _ = ev.abscissa_and_grad(th)
+            return np.concatenate([y[p] - sig, abs_target - a])
+
+        def cons_j(
+            y: NDArray[np.float64], W: list[NDArray[np.float64]] = W, s: NDArray[np.float64] = s
+        ) -> NDArray[np.float64]:
+            th = unpack(y)
+            _, g = ev.sigma_and_grad(th, W, True)
+            _, ga = ev.abscissa_and_grad(th)
+            rows = []
+            if g is not None:
+                rows.append(np.hstack([-g * s, np.ones((g.shape[0], 1))]))
+            rows.append(np.hstack([-ga * s, np.zeros((ga.shape[0], 1))]))
+            return np.vstack(rows)
+
+        blo = np.maximum(-radius, (lo - th_k) / s)
+        bhi = np.minimum(radius, (hi - th_k) / s)
+        bounds = [(float(a), float(b)) for a, b in zip(blo, bhi, strict=True)] + [(None, None)]
+        y0 = np.zeros(p + 1)
+        y0[p] = f
+        try:
+            res = minimize(
+                lambda y: y[p], y0, jac=lambda y: np.eye(p + 1)[p], method="SLSQP",
+                bounds=bounds, constraints=[{"type": "ineq", "fun": cons_f, "jac": cons_j}],
+                options={"maxiter": 100, "ftol": 1e-10 * max(f, 1e-12)},
+            )
+            y = res.x
+        except (np.linalg.LinAlgError, ValueError):
+            y = y0
+        theta_new = unpack(y)
+        predicted = f - float(y[p])
+        step = float(np.max(np.abs(y[:p]))) if p else 0.0
+        try:
+            vals_new, peaks_new = ev.exact(theta_new)
+        except (np.linalg.LinAlgError, ValueError):
+            vals_new, peaks_new = np.full(nch, math.inf), [math.nan] * nch
+        f_new = float(np.max(vals_new))
+        if math.isfinite(f_new):
+            add_freqs(theta_new, peaks_new, 0.5 * f_new)
+        if math.isfinite(f_new) and f_new < f - 1e-3 * max(predicted, 0.0) and f_new < f:
+            rel_dec = (f - f_new) / f
+            theta, f, peaks = theta_new, f_new, peaks_new
+            history.append(f)
+            if step >= 0.9 * radius:
+                radius = min(2.0 * radius, 1e3)
+            if rel_dec < opts.tol and predicted <= opts.tol * f:
+                status = "converged (small decrease)"
+                break
+        else:
+            if predicted <= opts.tol * f and step < 1e-3 * radius:
+                status = "converged (stationary for the frequency model)"
+                break
+            radius = 0.3 * min(radius, max(step, 1e-12))
+            if radius < 1e-8:
+                status = "converged (trust radius collapsed)"
+                break
+    return theta, f, history, it, status
+
+
+# ------------------------------------------------------------------------------------------
+# driver
+# ------------------------------------------------------------------------------------------
+
+
+def _sample_start(
+    pb: TuningProblem, rng: np.random.Generator, spread: float
+) -> NDArray[np.float64]:
+    th = np.empty(len(pb.parameters))
+    for k, prm in enumerate(pb.parameters):
+        if math.isfinite(prm.lower) and math.isfinite(prm.upper):
+            if prm.lower > 0 and prm.upper / prm.lower > 10:
+                th[k] = math.exp(rng.uniform(math.log(prm.lower), math.log(prm.upper)))
+            else:
+                th[k] = rng.uniform(prm.lower, prm.upper)
+        elif prm.initial != 0 and (prm.lower >= 0 or prm.upper <= 0):
+            th[k] = prm.initial * 10.0 ** rng.uniform(-spread, spread)
+        else:
+            th[k] = prm.initial + prm.typical * rng.standard_normal() * 10.0**spread / 3
+        th[k] = min(max(th[k], prm.lower), prm.upper)
+    return th
+
+
+def _run_start(args: tuple[TuningProblem, int, NDArray[np.float64], _Options]) -> StartRecord:
+    pb, index, theta0, opts = args
+    ev = _Evaluator(pb)
+    try:
+        theta, f, hist, it, status = _local(ev, theta0, opts)
+    except (np.linalg.LinAlgError, FloatingPointError) as exc:
+        theta, f, hist, it, status = theta0, math.inf, [math.inf], 0, f"failed: {exc}"
+    return StartRecord(index, np.array(theta0), np.array(theta), f, hist, it, status)
+
+
+def tune(
+    problem: TuningProblem,
+    *,
+    n_starts: int = 0,
+    seed: int | None = 0,
+    max_iter: int = 60,
+    tol: float = 1e-7,
+    max_freqs: int = 40,
+    trust_radius: float = 1.0,
+    spread: float = 1.0,
+    start_sampler: Callable[[np.random.Generator], NDArray[np.float64]] | None = None,
+    map_fn: Callable[[Callable[[Any], StartRecord], Iterable[Any]], Iterable[StartRecord]]
+    | None = None,
+) -> TuneResult:
+    """Minimise max_i ||channel_i(theta)||_inf over theta (paper eqs. 7-8, ``systune`` role).
+
+    Parameters
+    ----------
+    problem:
+        The :class:`TuningProblem`.
+    n_starts:
+        Number of random starts in addition to the initial point (``Parameter.initial``).
+    seed:
+        Seed of the random starts (``SeedSequence(seed).spawn``); same seed, same result.
+    max_iter, tol:
+        Outer iterations per start and relative-decrease tolerance.
+    max_freqs:
+        Cap on the size of each channel's active frequency set.
+    trust_radius:
+        Initial trust radius in units of ``Parameter.scale``.
+    spread:
+        Random starts multiply positive parameters by 10**U(-spread, spread) (bounded
+        parameters are drawn uniformly / log-uniformly within their bounds).
+    start_sampler:
+        Optional ``rng -> theta`` replacing the default random start distribution.
+    map_fn:
+        Optional ``map`` for parallel execution, e.g. ``ProcessPoolExecutor().map`` (the
+        problem's channels must then be picklable). Default: built-in ``map``.
+
+    Returns
+    -------
+    TuneResult
+        The best start's theta, overall norm, per-channel norms and all start records.
+    """
+    if n_starts < 0:
+        raise ValueError(f"n_starts must be >= 0, got {n_starts}")
+    if max_iter < 1:
+        raise ValueError(f"max_iter must be >= 1, got {max_iter}")
+    opts = _Options(max_iter, tol, max_freqs, trust_radius, 200 * len(problem.parameters) + 200)
+    starts = [problem.initial]
+    children = np.random.SeedSequence(seed).spawn(n_starts)
+    for child in children:
+        rng = np.random.default_rng(child)
+        th = (
+            problem._check_theta(start_sampler(rng))
+            if start_sampler is not None
+            else _sample_start(problem, rng, spread)
+        )
+        starts.append(th)
+    jobs = [(problem, i, th, opts) for i, th in enumerate(starts)]
+    records = list((map_fn or map)(_run_start, jobs))
+    records.sort(key=lambda r: r.index)
+    best = min(records, key=lambda r: (r.value, r.index))
+    stable = math.isfinite(best.value)
+    chan = problem.channel_norms(best.theta) if stable else np.full(len(problem.channels), np.inf)
+    msg = (
+        f"best of {len(records)} start(s): start {best.index}, {best.status}"
+        if stable
+        else "no start reached a stabilising parameter vector; the problem may not be "
+        "stabilisable with this structure/bounds (try other initial values or bounds)"
+    )
+    return TuneResult(
+        theta=best.theta,
+        names=problem.names,
+        value=float(best.value),
+        channel_values=chan,
+        channel_names=list(problem.channel_names or []),
+        stable=stable,
+        starts=records,
+        message=msg,
+    )
+
+
+# ------------------------------------------------------------------------------------------
+# mixed sensitivity helpers (eq. 4 and eq. 8)
+# ------------------------------------------------------------------------------------------
+
+
+def pid(kp: float, ki: float, kd: float, tf: float) -> StateSpaceData:
+    """PID with filtered derivative K(s) = kp + ki/s + kd s/(tf s + 1) as (A, B, C, D).
+
+    States: integrator and derivative filter (always present, so the state dimension does
+    not depend on the gains). ``tf`` > 0 (s). Note: with ki = 0 the integrator state is
+    unobservable and gives a closed-loop eigenvalue at 0, i.e. an infinite norm under the
+    internal-stability convention of :func:`synthesis.hinfnorm.hinf_norm`; keep ki > 0 or
+    use a PD structure of your own.
+    """
+    if not tf > 0:
+        raise ValueError(f"derivative filter time constant tf must be > 0 s, got {tf}")
+    A = np.array([[0.0, 0.0], [0.0, -1.0 / tf]])
+    B = np.array([[1.0], [1.0 / tf]])
+    C = np.array([[ki, -kd / tf]])
+    D = np.array([[kp + kd / tf]])
+    return A, B, C, D
+
+
+def _lti(sys: Any, what: str) -> StateSpaceData:
+    if isinstance(sys, int | float | np.integer | np.floating):
+        return (np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.array([[float(sys)]]))
+    try:
+        return as_state_space(sys)
+    except ValueError as exc:
+        raise ValueError(f"{what}: {exc}") from exc
+
+
+def _weight(W: Any, name: str, size: int) -> StateSpaceData | None:
+    """Validate a weight (proper, stable) and expand a SISO weight to W * I_size."""
+    if W is None:
+        return None
+    try:
+        import control
+
+        if isinstance(W, control.TransferFunction):
+            for i in range(W.noutputs):
+                for j in range(W.ninputs):
+                    num = np.trim_zeros(np.atleast_1d(W.num[i][j]), "f")
+                    den = np.trim_zeros(np.atleast_1d(W.den[i][j]), "f")
+                    if num.size > den.size:
+                        raise ValueError(
+                            f"weight {name} is improper (numerator degree {num.size - 1} > "
+                            f"denominator degree {den.size - 1}); it has no state-space "
+                            "realisation. Make it proper with far-away poles, e.g. "
+                            "W(s) / (s / (100 w_c) + 1)^k"
+                        )
+    except ImportError:  # pragma: no cover
+        pass
+    A, B, C, D = _lti(W, f"weight {name}")
+    if A.size and np.max(np.linalg.eigvals(A).real) >= 0:
+        poles = np.linalg.eigvals(A)
+        raise ValueError(
+            f"weight {name} has pole(s) {poles[poles.real >= 0]} in the closed right half "
+            "plane; an integrator-like weight (e.g. A = 0 in eq. 5, Ws = (s/M + wb)/s) makes "
+            "the weighted channel marginally stable, with infinite H-infinity norm. Use a "
+            "small positive A (e.g. 1e-4) instead"
+        )
+    if D.shape == (1, 1) and size > 1:
+        eye = np.eye(size)
+        A, B, C, D = (np.kron(eye, X) for X in (A, B, C, D))
+    if D.shape[1] != size:
+        raise ValueError(
+            f"weight {name} has {D.shape[1]} inputs but the weighted signal has {size} "
+            "components (use a SISO weight or a weight with matching inputs)"
+        )
+    return A, B, C, D
+
+
+def _loop(G: StateSpaceData, K: StateSpaceData) -> tuple[
+    NDArray[Any], NDArray[Any], tuple[NDArray[Any], NDArray[Any]],
+    tuple[NDArray[Any], NDArray[Any]], tuple[NDArray[Any], NDArray[Any]],
+]:
+    """Negative-feedback loop e = r - y, u = K e, y = G u: (A, B, (C,D)_S, (C,D)_T, (C,D)_R)."""
+    Ag, Bg, Cg, Dg = G
+    Ak, Bk, Ck, Dk = K
+    p, m = Dg.shape
+    if Dk.shape != (m, p):
+        raise ValueError(
+            f"controller must be {m}x{p} (inputs = plant outputs) for a {p}x{m} plant, got "
+            f"{Dk.shape[0]}x{Dk.shape[1]}"
+        )
+    ng, nk = Ag.shape[0], Ak.shape[0]
+    F = np.eye(p) + Dg @ Dk
+    try:
+        E = np.linalg.inv(F)
+    except np.linalg.LinAlgError as exc:
+        raise ValueError("feedback loop is ill-posed: I + G(inf) K(inf) is singular") from exc
+    Ce = -E @ np.hstack([Cg, Dg @ Ck])
+    De = E
+    Cu = np.hstack([np.zeros((m, ng)), Ck]) + Dk @ Ce
+    Du = Dk @ De
+    dtype = np.result_type(Ag, Ak, Bg, Bk, Cg, Ck, Dg, Dk)
+    A = np.zeros((ng + nk, ng + nk), dtype=dtype)
+    A[:ng, :ng] = Ag
+    A[ng:, ng:] = Ak
+    A[:ng] += Bg @ Cu
+    A[ng:] += Bk @ Ce
+    B = np.vstack([Bg @ Du, Bk @ De])
+    return A, B, (Ce, De), (-Ce, np.eye(p) - De), (Cu, Du)
+
+
+def closed_loops(G: Any, K: Any) -> tuple[Any, Any, Any]:
+    """S, T, R of eq. 4 for the negative-feedback loop of plant G and controller K.
+
+    S = (I + G K)^-1 (r -> e), T = (I + G K)^-1 G K (r -> y), R = K (I + G K)^-1 (r -> u),
+    as python-control StateSpace objects sharing the realisation [x_G; x_K] (not minimal).
+    """
+    import control
+
+    A, B, (Cs, Ds), (Ct, Dt), (Cr, Dr) = _loop(_lti(G, "plant G"), _lti(K, "controller K"))
+    return (
+        control.ss(A, B, Cs, Ds),
+        control.ss(A, B, Ct, Dt),
+        control.ss(A, B, Cr, Dr),
+    )
+
+
+def _mixed(
+    G: StateSpaceData, K: StateSpaceData, Ws: StateSpaceData | None,
+    Wt: StateSpaceData | None, Wr: StateSpaceData | None,
+) -> StateSpaceData:
+    A, B, *outs = _loop(G, K)
+    n = A.shape[0]
+    blocks_A = [A]
+    rows_couple: list[NDArray[Any]] = []
+    C_rows: list[NDArray[Any]] = []
+    D_rows: list[NDArray[Any]] = []
+    weights = [Ws, Wt, Wr]
+    nw_tot = sum(W[0].shape[0] for W in weights if W is not None)
+    offset = n
+    for W, (Cx, Dx) in zip(weights, outs, strict=True):
+        if W is None:
+            continue
+        Aw, Bw, Cw, Dw = W
+        nw = Aw.shape[0]
+        blocks_A.append(Aw)
+        coup = np.zeros((nw, n + nw_tot), dtype=np.result_type(A, Aw))
+        coup[:, :n] = Bw @ Cx
+        coup[:, offset : offset + nw] = Aw
+        rows_couple.append((coup, Bw @ Dx))  # type: ignore[arg-type]
+        Crow = np.zeros((Dw.shape[0], n + nw_tot), dtype=np.result_type(Cx, Cw))
+        Crow[:, :n] = Dw @ Cx
+        Crow[:, offset : offset + nw] = Cw
+        C_rows.append(Crow)
+        D_rows.append(Dw @ Dx)
+        offset += nw
+    if not C_rows:
+        raise ValueError("at least one of Ws, Wt, Wr must be given")
+    Atot = np.zeros((n + nw_tot, n + nw_tot), dtype=np.result_type(*blocks_A))
+    Atot[:n, :n] = A
+    Btot = [B]
+    r0 = n
+    for coup, bw in rows_couple:  # type: ignore[misc]
+        Atot[r0 : r0 + coup.shape[0]] = coup
+        Btot.append(bw)
+        r0 += coup.shape[0]
+    return Atot, np.vstack(Btot), np.vstack(C_rows), np.vstack(D_rows)
+
+
+def mixed_sensitivity(G: Any, K: Any, Ws: Any = None, Wt: Any = None, Wr: Any = None) -> Any:
+    """Stacked weighted closed loop [Ws S; Wt T; Wr R] of eq. 8 as a python-control StateSpace.
+
+    G, K, weights: python-control LTI objects, (A, B, C, D) tuples or scalars. Weights left
+    as None are omitted. A SISO weight applied to a vector signal means W * I. Weights must
+    be proper and stable: an improper Wt or Wr (e.g. Wt(s) = s/wt + ...) raises ValueError
+    asking for extra high-frequency poles; a Ws with a pole at s = 0 (A = 0 in eq. 5) raises
+    ValueError asking for a small A > 0. (eqs. 5 and 6 of the paper are proper and stable.)
+    """
+    import control
+
+    Gd, Kd = _lti(G, "plant G"), _lti(K, "controller K")
+    p, m = Gd[3].shape
+    data = _mixed(Gd, Kd, _weight(Ws, "Ws", p), _weight(Wt, "Wt", p), _weight(Wr, "Wr", m))
+    return control.ss(*data)
+
+
+def mixed_sensitivity_channel(
+    G: Any,
+    controller: Callable[[NDArray[np.float64]], Any],
+    Ws: Any = None,
+    Wt: Any = None,
+    Wr: Any = None,
+) -> Channel:
+    """Channel theta -> (A, B, C, D) of [Ws S; Wt T; Wr R] (eq. 8) for K = controller(theta).
+
+    Plant and weights are converted and validated once (see :func:`mixed_sensitivity`);
+    each call only assembles numpy matrices, so it is cheap inside the tuner.
+    """
+    Gd = _lti(G, "plant G")
+    p, m = Gd[3].shape
+    Wsd, Wtd, Wrd = _weight(Ws, "Ws", p), _weight(Wt, "Wt", p), _weight(Wr, "Wr", m)
+    if Wsd is None and Wtd is None and Wrd is None:
+        raise ValueError("at least one of Ws, Wt, Wr must be given")
+
+    def channel(theta: NDArray[np.float64]) -> StateSpaceData:
+        return _mixed(Gd, _lti(controller(theta), "controller(theta)"), Wsd, Wtd, Wrd)
+
+    return channel
