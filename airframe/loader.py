@@ -219,6 +219,16 @@ class _Num:
 
 _POS = {"lo": 0.0, "open_lo": True}
 
+# A group of identical rotors (lift rotors, pushers) and its [[...rotor]] entries.
+_ROTOR_GROUP: dict[str, Any] = {
+    "max_thrust_N": _Num("N", **_POS, hi=10000.0),
+    "torque_to_thrust_m": _Num("m", 0.0, 0.2),
+    "time_constant_s": _Num("s", **_POS, hi=2.0),
+    "rate_limit_per_s": _Num("1/s", **_POS, hi=1e4),
+    "zero_thrust_axial_speed_m_s": _Num("m/s", **_POS),
+    "rotor": "rotors",
+}
+
 _SCHEMA: dict[str, dict[str, Any]] = {
     "airframe": {"name": str, "description": str},
     "environment": {
@@ -270,22 +280,8 @@ _SCHEMA: dict[str, dict[str, Any]] = {
         "C_nr": "table",
         "C_nbeta": "table",
     },
-    "lift_rotors": {
-        "max_thrust_N": _Num("N", **_POS, hi=10000.0),
-        "torque_to_thrust_m": _Num("m", 0.0, 0.2),
-        "time_constant_s": _Num("s", **_POS, hi=2.0),
-        "rate_limit_per_s": _Num("1/s", **_POS, hi=1e4),
-        "zero_thrust_axial_speed_m_s": _Num("m/s", **_POS),
-        "rotor": "rotors",
-    },
-    "pushers": {
-        "max_thrust_N": _Num("N", **_POS, hi=10000.0),
-        "torque_to_thrust_m": _Num("m", 0.0, 0.2),
-        "time_constant_s": _Num("s", **_POS, hi=2.0),
-        "rate_limit_per_s": _Num("1/s", **_POS, hi=1e4),
-        "zero_thrust_axial_speed_m_s": _Num("m/s", **_POS),
-        "rotor": "rotors",
-    },
+    "lift_rotors": _ROTOR_GROUP,
+    "pushers": _ROTOR_GROUP,
     "surfaces": {
         "max_deflection_deg": _Num("deg", **_POS, hi=60.0),
         "time_constant_s": _Num("s", **_POS, hi=2.0),
