@@ -40,6 +40,11 @@ class AxisCoefficients:
     stiffness: float   # My^alpha or -qbar S b C_nbeta (N m / rad), <= 0; 0 for roll
 
 
+def _check_gamma(gamma: float) -> None:
+    if not 0.0 <= gamma < 1.0:
+        raise ValueError(f"gamma = {gamma!r}: expected a loss of effectiveness in [0, 1)")
+
+
 def axis_coefficients(af: Airframe, axis: Axis, airspeed_m_s: float) -> AxisCoefficients:
     """The paper's dimensional derivatives of ``axis`` at ``airspeed_m_s``."""
     if axis not in AXES:
@@ -71,8 +76,7 @@ def rate_model(af: Airframe, axis: Axis, airspeed_m_s: float, gamma: float = 0.0
     Roll is first order; pitch and yaw are written over the common denominator
     J s^2 - M_rate s - M_stiffness with a zero at the origin, as in the paper.
     """
-    if not 0.0 <= gamma < 1.0:
-        raise ValueError(f"gamma = {gamma!r}: expected a loss of effectiveness in [0, 1)")
+    _check_gamma(gamma)
     c = axis_coefficients(af, axis, airspeed_m_s)
     k = 1.0 - gamma
     if axis == "roll":
@@ -85,9 +89,8 @@ def attitude_model(af: Airframe, axis: Axis, airspeed_m_s: float, gamma: float =
     """Moment -> [rate; angle] of ``axis`` as a minimal state-space model (states: angle,
     rate). Outputs: 0 = rate (rad/s), 1 = angle (rad). For pitch and yaw this is the
     rate model of eq 2-3 with the zero at the origin cancelled by the integration to angle."""
+    _check_gamma(gamma)
     c = axis_coefficients(af, axis, airspeed_m_s)
-    if not 0.0 <= gamma < 1.0:
-        raise ValueError(f"gamma = {gamma!r}: expected a loss of effectiveness in [0, 1)")
     k = 1.0 - gamma
     A = np.array([[0.0, 1.0], [c.stiffness / c.inertia, c.damping / c.inertia]])
     B = np.array([[0.0], [k / c.inertia]])
