@@ -7,6 +7,7 @@ as one clear line on stderr and exit status 2, never a traceback; Ctrl-C exits w
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import math
 import sys
@@ -19,6 +20,13 @@ from firmware_sim.vehicle.faults import FaultError
 
 class UsageError(Exception):
     """Bad input from the user: printed as one line, exit status 2."""
+
+
+# Each of these modules defines ``register(subparsers)``, adding its sub-command(s) with
+# ``set_defaults(func=...)``; the functions raise UsageError / RuntimeError as described above.
+# Modules are imported when the parser is built, so keep their top-level imports light.
+_COMMAND_MODULES: tuple[str, ...] = (
+)
 
 
 def _fmt(v: float, nd: int = 2) -> str:
@@ -96,6 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="pitch held by the rotor-assisted transition trims (default 0 deg)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=cmd_trim)
+    for module in _COMMAND_MODULES:
+        importlib.import_module(module).register(sub)
     return ap
 
 
