@@ -1,2 +1,8 @@
 """Offline robust-control toolbox: control-oriented models, uncertainty weights, structured
-H-infinity tuning, mu analysis, baselines and gain-schedule export."""
+H-infinity tuning, mu analysis, baselines and gain-schedule export.
+
+Library API (see ``synthesis/README.md`` for examples): ``hinfnorm.hinf_norm``,
+``mu.mu_bounds`` / ``mu.mu_sweep``, ``structured.TuningProblem`` / ``structured.tune``,
+``uncertainty.cover``; the paper's design on top: ``loops`` (cascaded P-PID, eq. 8 channel),
+``design`` (GS-SHIF and SHIF tunes), ``robustness`` (eq. 12-14), ``baselines`` (LQR),
+``export`` (gain files), ``report`` and ``pipeline`` (``vtolftc synth``)."""

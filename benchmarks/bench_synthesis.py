@@ -1,0 +1,51 @@
+"""Benchmark of the full attitude synthesis, end to end (issue 3's performance target: < 60 s
+on 2 cores).
+
+Runs :func:`synthesis.pipeline.run_synthesis` on DS-1: uncertainty weights (18 covers, inside
+the tunes), 18 GS-SHIF tunes + 3 SHIF multi-model tunes (structured H-infinity, multi-start),
+the LQR baseline, the mu analysis (robust stability and performance, 36 sweeps: GS-SHIF and
+SHIF at every point), the gain files and (unless ``--no-report``) the report with its plots;
+then prints the per-stage wall times, the total, and the total without the report (the
+"synthesis" proper: loops, weights, mu, baselines).
+
+Usage: ``python benchmarks/bench_synthesis.py [--starts N] [--jobs N] [--seed S]
+[--out DIR] [--no-report]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+from airframe.loader import load_airframe
+from synthesis.pipeline import run_synthesis
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--starts", type=int, default=4, help="random starts per tune (default 4)")
+    ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=None, help="output dir (default: a temp dir)")
+    ap.add_argument("--no-report", action="store_true")
+    args = ap.parse_args()
+    af = load_airframe()
+    with tempfile.TemporaryDirectory() as tmp:
+        out = args.out or Path(tmp)
+        t0 = time.perf_counter()
+        res = run_synthesis(af, out, n_starts=args.starts, jobs=args.jobs, seed=args.seed,
+                            report=not args.no_report)
+        total = time.perf_counter() - t0
+    print(f"full synthesis of {af.name}: {args.starts} random starts + 1 per tune, "
+          f"{args.jobs} worker process(es)")
+    for k, v in res.times.items():
+        print(f"  {k:<34s} {v:7.2f} s")
+    print(f"  {'total':<34s} {total:7.2f} s")
+    print(f"  {'total without the report':<34s} {total - res.times.get('report', 0.0):7.2f} s"
+          "   (target < 60 s on 2 cores)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,375 @@
+"""Cascaded P-PID attitude loop of the paper (fig. 5) and its weighted closed-loop functions.
+
+One axis. Plant ``G`` = :func:`synthesis.models.attitude_model` (moment u [N m] -> outputs
+[rate (rad/s); angle (rad)], strictly proper). Controller (gains ``theta`` in the order of
+:data:`PARAM_NAMES`, units as in :mod:`firmware_sim.autopilot.pid`)::
+
+    rate_ref = kp_angle (angle_ref - angle)                                   [rad/s]
+    u        = K_rate(s) (rate_ref - rate),
+               K_rate(s) = kp_rate + ki_rate/s + kd_rate s/(tf_rate_s s + 1)  [N m]
+
+Signals: r = angle_ref, e = r - angle, u = controller moment, d = moment disturbance at the
+plant input (the plant sees u + d: the multiplicative input uncertainty G (1 + W_t Delta) of
+paper eq. 11 enters there with d = Delta W_t u). With L_u = K_rate (kp_angle G_angle + G_rate)
+(the loop broken at the plant input),
+
+    S   = e/r  = (1 + K_rate G_rate) / (1 + L_u)
+    R   = u/r  = kp_angle K_rate / (1 + L_u)
+    T_u = -u/d = L_u / (1 + L_u)
+
+The tuned channel of eq. 8 is the column [Ws S; Wt T_u; Wr R] (three SISO functions stacked;
+their H-infinity norm is sup_w sqrt(|Ws S|^2 + |Wt T_u|^2 + |Wr R|^2)). It is realised with
+two copies of the closed loop (one driven by r, one by d) so that it is a single-input LTI
+system; see :class:`CascadeChannel` (picklable, cheap: numpy only).
+
+Weights: Ws of eq. 5 (:class:`SensitivityWeight`) and Wr of eq. 6 (:class:`ControlWeight`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import control as ct
+import numpy as np
+from numpy.typing import NDArray
+
+from synthesis.hinfnorm import StateSpaceData, as_state_space
+
+__all__ = [
+    "PARAM_NAMES",
+    "CascadeChannel",
+    "ClosedLoop",
+    "ControlWeight",
+    "SensitivityWeight",
+    "closed_loop",
+    "rate_controller",
+    "series",
+]
+
+PARAM_NAMES: tuple[str, ...] = ("kp_angle", "kp_rate", "ki_rate", "kd_rate", "tf_rate_s")
+
+
+# ------------------------------------------------------------------------------------------
+# weights (eq. 5, eq. 6)
+# ------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SensitivityWeight:
+    """Ws(s) = (s/M + omega_b) / (s + A omega_b) (paper eq. 5).
+
+    ``M``: allowed peak of |S| (high-frequency gain 1/M); ``omega_b`` [rad/s]: the required
+    bandwidth (|Ws| = 1 near omega_b); ``A``: allowed steady-state error (low-frequency gain
+    1/A). A must be > 0 (A = 0 puts a pole at s = 0 and the weighted norm is infinite).
+    """
+
+    M: float
+    omega_b_rad_s: float
+    A: float = 1e-3
+
+    def __post_init__(self) -> None:
+        for name, v in (("M", self.M), ("omega_b", self.omega_b_rad_s), ("A", self.A)):
+            if not (v > 0 and math.isfinite(v)):
+                raise ValueError(f"sensitivity weight: {name} = {v!r}, expected a finite "
+                                 "number > 0 (A = 0 gives an infinite weighted norm)")
+
+    def tf(self) -> ct.TransferFunction:
+        return ct.tf([1.0 / self.M, self.omega_b_rad_s], [1.0, self.A * self.omega_b_rad_s])
+
+    def ss(self) -> StateSpaceData:
+        a = -self.A * self.omega_b_rad_s
+        # (s/M + wb)/(s - a) = 1/M + (wb + a/M)/(s - a)
+        return (np.array([[a]]), np.array([[1.0]]),
+                np.array([[self.omega_b_rad_s + a / self.M]]), np.array([[1.0 / self.M]]))
+
+    def response(self, omegas: NDArray[np.float64]) -> NDArray[np.complex128]:
+        s = 1j * np.asarray(omegas, float)
+        return (s / self.M + self.omega_b_rad_s) / (s + self.A * self.omega_b_rad_s)
+
+    def to_dict(self) -> dict[str, float]:
+        return {"M": self.M, "omega_b_rad_s": self.omega_b_rad_s, "A": self.A}
+
+
+@dataclass(frozen=True)
+class ControlWeight:
+    """Wr(s) = ((r_max/u_max) s + omega_a 1e-3) / (s + omega_a) (paper eq. 6).
+
+    ``r_max`` [rad]: largest angle reference step; ``u_max`` [N m]: the largest moment the
+    actuators produce about the axis; ``omega_a`` [rad/s]: actuator bandwidth (paper: 5).
+    High-frequency gain r_max/u_max, so ||Wr R|| <= 1 keeps the moment of a reference step of
+    r_max within u_max.
+    """
+
+    r_max_rad: float
+    u_max_N_m: float
+    omega_a_rad_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name, v in (("r_max", self.r_max_rad), ("u_max", self.u_max_N_m),
+                        ("omega_a", self.omega_a_rad_s)):
+            if not (v > 0 and math.isfinite(v)):
+                raise ValueError(f"control weight: {name} = {v!r}, expected a finite number > 0")
+
+    @property
+    def high_gain(self) -> float:
+        return self.r_max_rad / self.u_max_N_m
+
+    def tf(self) -> ct.TransferFunction:
+        return ct.tf([self.high_gain, self.omega_a_rad_s * 1e-3], [1.0, self.omega_a_rad_s])
+
+    def ss(self) -> StateSpaceData:
+        wa, h = self.omega_a_rad_s, self.high_gain
+        # (h s + wa 1e-3)/(s + wa) = h + (wa 1e-3 - h wa)/(s + wa)
+        return (np.array([[-wa]]), np.array([[1.0]]), np.array([[wa * 1e-3 - h * wa]]),
+                np.array([[h]]))
+
+    def response(self, omegas: NDArray[np.float64]) -> NDArray[np.complex128]:
+        s = 1j * np.asarray(omegas, float)
+        return (self.high_gain * s + self.omega_a_rad_s * 1e-3) / (s + self.omega_a_rad_s)
+
+    def to_dict(self) -> dict[str, float]:
+        return {"r_max_rad": self.r_max_rad, "u_max_N_m": self.u_max_N_m,
+                "omega_a_rad_s": self.omega_a_rad_s}
+
+
+# ------------------------------------------------------------------------------------------
+# loop algebra
+# ------------------------------------------------------------------------------------------
+
+
+def rate_controller(kp: float, ki: float, kd: float, tf: float) -> StateSpaceData:
+    """K_rate(s) = kp + ki/s + kd s/(tf s + 1) as (A, B, C, D); states: integral, filter."""
+    if not tf > 0:
+        raise ValueError(f"derivative filter time constant tf_rate_s must be > 0 s, got {tf}")
+    return (np.array([[0.0, 0.0], [0.0, -1.0 / tf]]), np.array([[1.0], [1.0 / tf]]),
+            np.array([[ki, -kd / tf]]), np.array([[kp + kd / tf]]))
+
+
+def series(H: StateSpaceData, W: StateSpaceData) -> StateSpaceData:
+    """W(s) H(s) (H first) as state space, states [x_H; x_W]."""
+    Ah, Bh, Ch, Dh = H
+    Aw, Bw, Cw, Dw = W
+    nh, nw = Ah.shape[0], Aw.shape[0]
+    A = np.zeros((nh + nw, nh + nw))
+    A[:nh, :nh] = Ah
+    A[nh:, :nh] = Bw @ Ch
+    A[nh:, nh:] = Aw
+    return A, np.vstack([Bh, Bw @ Dh]), np.hstack([Dw @ Ch, Cw]), Dw @ Dh
+
+
+@dataclass(frozen=True)
+class ClosedLoop:
+    """Closed loop of one axis: state [x_plant (2); x_controller (2)], inputs [r, d],
+    outputs [e, u, rate, angle] (see the module docstring)."""
+
+    A: NDArray[np.float64]
+    B: NDArray[np.float64]
+    C: NDArray[np.float64]
+    D: NDArray[np.float64]
+
+    def _siso(self, out: int, inp: int, sign: float = 1.0) -> StateSpaceData:
+        return (self.A, self.B[:, [inp]], sign * self.C[[out], :],
+                sign * self.D[[out]][:, [inp]])
+
+    def S(self) -> StateSpaceData:
+        """e/r."""
+        return self._siso(0, 0)
+
+    def R(self) -> StateSpaceData:
+        """u/r."""
+        return self._siso(1, 0)
+
+    def T_u(self) -> StateSpaceData:
+        """-u/d: complementary sensitivity at the plant input."""
+        return self._siso(1, 1, -1.0)
+
+    def S_ud(self) -> StateSpaceData:
+        """e/d (= -G_angle S_u)."""
+        return self._siso(0, 1)
+
+    @property
+    def poles(self) -> NDArray[np.complex128]:
+        return np.linalg.eigvals(self.A)
+
+    def stable(self, margin: float = 0.0) -> bool:
+        return bool(np.max(self.poles.real) < -margin)
+
+    def lti(self) -> ct.StateSpace:
+        return ct.ss(self.A, self.B, self.C, self.D)
+
+
+def _plant(G: Any) -> StateSpaceData:
+    Ag, Bg, Cg, Dg = as_state_space(G)
+    if Dg.shape != (2, 1):
+        raise ValueError(f"plant must be moment -> [rate; angle] (2 outputs, 1 input), got "
+                         f"{Dg.shape[0]} outputs x {Dg.shape[1]} inputs")
+    if np.any(Dg != 0):
+        raise ValueError("plant must be strictly proper (D = 0), as attitude_model is")
+    return Ag, Bg, Cg, Dg
+
+
+def _closed(Gd: StateSpaceData, theta: NDArray[np.float64]) -> ClosedLoop:
+    Ag, Bg, Cg, _ = Gd
+    kpa, kp, ki, kd, tf = (float(x) for x in theta)
+    Ak, Bk, Ck, Dk = rate_controller(kp, ki, kd, tf)
+    Cq, Cth = Cg[[0]], Cg[[1]]
+    Cy = kpa * Cth + Cq          # e_rate = kpa r - Cy x_g
+    ng, nk = Ag.shape[0], Ak.shape[0]
+    A = np.zeros((ng + nk, ng + nk))
+    A[:ng, :ng] = Ag - Bg @ Dk @ Cy
+    A[:ng, ng:] = Bg @ Ck
+    A[ng:, :ng] = -Bk @ Cy
+    A[ng:, ng:] = Ak
+    B = np.zeros((ng + nk, 2))
+    B[:ng, [0]] = Bg @ Dk * kpa
+    B[:ng, [1]] = Bg
+    B[ng:, [0]] = Bk * kpa
+    C = np.zeros((4, ng + nk))
+    D = np.zeros((4, 2))
+    C[0, :ng] = -Cth[0]
+    D[0, 0] = 1.0
+    C[[1], :ng] = -Dk @ Cy
+    C[[1], ng:] = Ck
+    D[1, 0] = float(Dk[0, 0]) * kpa
+    C[2, :ng] = Cq[0]
+    C[3, :ng] = Cth[0]
+    return ClosedLoop(A, B, C, D)
+
+
+def closed_loop(G: Any, theta: Any) -> ClosedLoop:
+    """Closed loop of plant ``G`` (moment -> [rate; angle]) and the P-PID gains ``theta``
+    (sequence in :data:`PARAM_NAMES` order, or a mapping with those keys)."""
+    if isinstance(theta, dict):
+        theta = [theta[k] for k in PARAM_NAMES]
+    th = np.asarray(theta, float).reshape(-1)
+    if th.size != 5:
+        raise ValueError(f"expected the 5 gains {PARAM_NAMES}, got {th.size} values")
+    return _closed(_plant(G), th)
+
+
+def _stack(parts: list[StateSpaceData]) -> StateSpaceData:
+    """Single-input systems stacked: same input, outputs concatenated, states block-diag."""
+    n = sum(p[0].shape[0] for p in parts)
+    A = np.zeros((n, n))
+    C_rows, D_rows, B_rows = [], [], []
+    o = 0
+    for Ap, Bp, Cp, Dp in parts:
+        k = Ap.shape[0]
+        A[o:o + k, o:o + k] = Ap
+        B_rows.append(Bp)
+        c = np.zeros((Cp.shape[0], n))
+        c[:, o:o + k] = Cp
+        C_rows.append(c)
+        D_rows.append(Dp)
+        o += k
+    return A, np.vstack(B_rows), np.vstack(C_rows), np.vstack(D_rows)
+
+
+@dataclass
+class CascadeChannel:
+    """theta -> (A, B, C, D) of [Ws S; Wt T_u; Wr R] (eq. 8) for one axis and plant.
+
+    Any of the weights may be None (its row is omitted). Picklable (no closures), so it can
+    be sent to worker processes. ``outputs`` names the rows.
+    """
+
+    G: Any
+    Ws: Any = None
+    Wt: Any = None
+    Wr: Any = None
+
+    def __post_init__(self) -> None:
+        self._G = _plant(self.G)
+        self._W = [None if W is None else as_state_space(W.ss() if hasattr(W, "ss") else W)
+                   for W in (self.Ws, self.Wt, self.Wr)]
+        if all(W is None for W in self._W):
+            raise ValueError("at least one of Ws, Wt, Wr must be given")
+        names = ("Ws*S", "Wt*T", "Wr*R")
+        self.outputs = [n for n, W in zip(names, self._W, strict=True) if W is not None]
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"G": self._G, "Ws": self._W[0], "Wt": self._W[1], "Wr": self._W[2]}
+
+    def __setstate__(self, st: dict[str, Any]) -> None:
+        self.G, self.Ws, self.Wt, self.Wr = st["G"], st["Ws"], st["Wt"], st["Wr"]
+        self.__post_init__()
+
+    def _template(self) -> None:
+        """Static part of the stacked realisation; states [x_cl(r) (4), x_Ws, x_Wr,
+        x_cl(d) (4), x_Wt] (the S and R rows share one copy of the loop driven by r, the
+        T_u row uses a second copy driven by d)."""
+        Ws, Wt, Wr = self._W
+        ncl = self._G[0].shape[0] + 2
+        sizes = [ncl, 0 if Ws is None else Ws[0].shape[0], 0 if Wr is None else Wr[0].shape[0]]
+        sizes += [ncl if Wt is not None else 0, 0 if Wt is None else Wt[0].shape[0]]
+        off = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        self._off, self._ncl = off, ncl
+        n = int(off[-1])
+        p = len(self.outputs)
+        A = np.zeros((n, n))
+        C = np.zeros((p, n))
+        row = 0
+        self._rows: dict[str, int] = {}
+        for name, W, k in (("Ws*S", Ws, 1), ("Wt*T", Wt, 4), ("Wr*R", Wr, 2)):
+            if W is None:
+                continue
+            Aw, _, Cw, _ = W
+            A[off[k]:off[k + 1], off[k]:off[k + 1]] = Aw
+            C[row, off[k]:off[k + 1]] = Cw[0]
+            self._rows[name] = row
+            row += 1
+        self._A0, self._C0 = A, C
+
+    def __call__(self, theta: NDArray[np.float64]) -> StateSpaceData:
+        if not hasattr(self, "_A0"):
+            self._template()
+        cl = _closed(self._G, np.asarray(theta, float))
+        Ws, Wt, Wr = self._W
+        off, ncl = self._off, self._ncl
+        A, C = self._A0.copy(), self._C0.copy()
+        B = np.zeros((A.shape[0], 1))
+        D = np.zeros((C.shape[0], 1))
+        Ce, De = cl.C[0], cl.D[0, 0]           # e from r
+        Cu, Du = cl.C[1], cl.D[1, 0]           # u from r (u has no feed-through from d)
+        A[:ncl, :ncl] = cl.A
+        B[:ncl, 0] = cl.B[:, 0]
+        for W, k, Cx, Dx, name in ((Ws, 1, Ce, De, "Ws*S"), (Wr, 2, Cu, Du, "Wr*R")):
+            if W is None:
+                continue
+            _, Bw, _, Dw = W
+            sl = slice(off[k], off[k + 1])
+            A[sl, :ncl] = np.outer(Bw[:, 0], Cx)
+            B[sl, 0] = Bw[:, 0] * Dx
+            r = self._rows[name]
+            C[r, :ncl] = Dw[0, 0] * Cx
+            D[r, 0] = Dw[0, 0] * Dx
+        if Wt is not None:
+            _, Bw, _, Dw = Wt
+            c2 = slice(off[3], off[4])
+            A[c2, c2] = cl.A
+            B[c2, 0] = cl.B[:, 1]
+            sl = slice(off[4], off[5])
+            A[sl, c2] = np.outer(Bw[:, 0], -Cu)   # T_u = -u/d
+            r = self._rows["Wt*T"]
+            C[r, c2] = -Dw[0, 0] * Cu
+        return A, B, C, D
+
+    def rows(self, theta: NDArray[np.float64]) -> dict[str, StateSpaceData]:
+        """Each weighted function on its own (name -> (A, B, C, D))."""
+        A, B, C, D = self(theta)
+        return {n: (A, B, C[[i]], D[[i]]) for i, n in enumerate(self.outputs)}
+
+    def reference(self, theta: NDArray[np.float64]) -> StateSpaceData:
+        """The same channel assembled the slow, obvious way (series + stack; for tests)."""
+        cl = _closed(self._G, np.asarray(theta, float))
+        Ws, Wt, Wr = self._W
+        parts = []
+        if Ws is not None:
+            parts.append(series(cl.S(), Ws))
+        if Wt is not None:
+            parts.append(series(cl.T_u(), Wt))
+        if Wr is not None:
+            parts.append(series(cl.R(), Wr))
+        return _stack(parts)

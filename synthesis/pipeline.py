@@ -1,0 +1,270 @@
+"""End-to-end synthesis of an airframe: the 18 GS-SHIF tunes, SHIF, LQR, mu analysis,
+the three gain files and the report (what ``vtolftc synth`` and the benchmark run).
+
+Outputs in ``out_dir``: ``gs-shif.json`` and ``shif.json`` (``vtolftc-gain-schedule/1``),
+``lqr.json`` (``vtolftc-lqr-gains/1``), ``report/`` (markdown + PNG). The gain files are
+written (atomically) as soon as the tunes are done and rewritten with the mu results after
+the analysis, so an interrupted run keeps the gains it has computed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import signal
+import time
+from collections.abc import Callable
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from airframe.loader import Airframe
+from synthesis.baselines import LQR_Q, LQR_R, LqrAxis, lqr_design
+from synthesis.design import (
+    A_SENSITIVITY,
+    OMEGA_A_RAD_S,
+    R_MAX_RAD,
+    TABLE2,
+    AxisDesign,
+    run_designs,
+)
+from synthesis.export import lqr_document, schedule_document, write_json
+from synthesis.models import AXES, Axis, attitude_model
+from synthesis.robustness import AxisRobustness, analyse
+from synthesis.uncertainty import GAMMA_RANGE, PAPER_DESIGN_POINTS, DesignPoint
+
+__all__ = ["SynthesisResult", "run_synthesis"]
+
+
+@dataclass
+class SynthesisResult:
+    """Everything the synthesis produced (in memory), plus per-stage wall times [s]."""
+
+    airframe: Airframe
+    points: tuple[DesignPoint, ...]
+    gs: dict[Axis, list[AxisDesign]]
+    shif: dict[Axis, AxisDesign]
+    lqr: dict[Axis, LqrAxis]
+    mu_gs: dict[Axis, list[AxisRobustness]] = field(default_factory=dict)
+    mu_shif: dict[Axis, list[AxisRobustness]] = field(default_factory=dict)
+    times: dict[str, float] = field(default_factory=dict)
+    files: dict[str, Path] = field(default_factory=dict)
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    def nominal_stable(self) -> dict[Axis, list[bool]]:
+        return {ax: [d.stable for d in self.gs[ax]] for ax in AXES}
+
+
+def _mu_job(args: tuple[Any, ...]) -> AxisRobustness:
+    af, axis, point, theta, w, seed = args
+    G = attitude_model(af, axis, point.airspeed_m_s)
+    return analyse(G, theta, w.Ws, w.Wt, w.Wr, seed=seed)
+
+
+def _weights_meta(res: SynthesisResult) -> dict[str, Any]:
+    return {
+        "Ws_form": "(s/M + omega_b) / (s + A omega_b)  (paper eq. 5, table 2)",
+        "Wr_form": "((r_max/u_max) s + omega_a 1e-3) / (s + omega_a)  (paper eq. 6)",
+        "Wt_form": "gain * prod (s/z_i + 1)/(s/p_i + 1)  (fitted cover, paper fig. 3)",
+        "A": A_SENSITIVITY, "omega_a_rad_s": OMEGA_A_RAD_S, "r_max_rad": R_MAX_RAD,
+        "gamma_range": list(GAMMA_RANGE),
+        "per_axis": {ax: [w.to_dict() for d in res.gs[ax] for w in d.weights] for ax in AXES},
+    }
+
+
+def _design_points_meta(points: tuple[DesignPoint, ...]) -> list[dict[str, float]]:
+    return [{"number": p.number, "airspeed_m_s": p.airspeed_m_s,
+             "v_min_m_s": p.v_min_m_s, "v_max_m_s": p.v_max_m_s} for p in points]
+
+
+def _axis_meta_gs(res: SynthesisResult, ax: Axis) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "achieved_norms": [d.norms for d in res.gs[ax]],
+        "nominal_stable": [d.stable for d in res.gs[ax]],
+        "closed_loop_poles": [d.poles[0] for d in res.gs[ax]],
+    }
+    if ax in res.mu_gs:
+        out["mu"] = [m.summary() for m in res.mu_gs[ax]]
+    return out
+
+
+def _axis_meta_shif(res: SynthesisResult, ax: Axis) -> dict[str, Any]:
+    d = res.shif[ax]
+    out: dict[str, Any] = {
+        "achieved_norms_max_over_points": d.norms,
+        "achieved_norms_per_point": d.per_model_norms,
+        "nominal_stable": d.stable,
+        "closed_loop_poles_per_point": d.poles,
+    }
+    if ax in res.mu_shif:
+        out["mu"] = [m.summary() for m in res.mu_shif[ax]]
+    return out
+
+
+def write_gain_files(res: SynthesisResult, out_dir: Path) -> dict[str, Path]:
+    """(Re)write gs-shif.json, shif.json and lqr.json from ``res`` (atomically)."""
+    af = res.airframe
+    common = {
+        "design_points": _design_points_meta(res.points),
+        "weights": _weights_meta(res),
+        "settings": res.settings,
+        "method": "structured H-infinity mixed sensitivity (paper eq. 4-8) on the cascaded "
+                  "P-PID of fig. 5; mu analysis eq. 12-14",
+    }
+    files: dict[str, Path] = {}
+    gs_doc = schedule_document(
+        af, "gs-shif", [p.airspeed_m_s for p in res.points],
+        {ax: [d.gains for d in res.gs[ax]] for ax in AXES},
+        {ax: _axis_meta_gs(res, ax) for ax in AXES}, common)
+    files["gs-shif"] = write_json(out_dir / "gs-shif.json", gs_doc)
+    if res.shif:
+        sh_doc = schedule_document(
+            af, "shif", [0.0], {ax: [res.shif[ax].gains] for ax in AXES},
+            {ax: _axis_meta_shif(res, ax) for ax in AXES},
+            {**common, "note": "one constant P-PID per axis tuned over all six design points "
+                               "at once (multi-model minimax, same weights per point)"})
+        files["shif"] = write_json(out_dir / "shif.json", sh_doc)
+    if res.lqr:
+        lq_doc = lqr_document(af, {ax: res.lqr[ax].gains() for ax in AXES}, {
+            "Q": list(LQR_Q), "R": LQR_R,
+            "states": ["int(angle_ref - angle) [rad s]", "angle [rad]", "rate [rad/s]"],
+            "design_model": "hover (V = 0): J rate' = D rate + K angle + tau",
+            "closed_loop_poles": {ax: list(res.lqr[ax].poles) for ax in AXES},
+        })
+        files["lqr"] = write_json(out_dir / "lqr.json", lq_doc)
+    return files
+
+
+def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs: int = 2,
+                  seed: int = 0, report: bool = True, mu: bool = True,
+                  points: tuple[DesignPoint, ...] = PAPER_DESIGN_POINTS,
+                  progress: Callable[[str, int], None] | None = None,
+                  ) -> SynthesisResult:
+    """The whole synthesis; see the module docstring.
+
+    ``progress(label, n)`` is called when ``n`` more work units are done (the total is
+    :func:`work_units`). ``jobs`` worker processes (1 = in-process).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    times: dict[str, float] = {}
+    tick = (lambda label, n=1: progress(label, n)) if progress else (lambda label, n=1: None)
+    executor: Executor | None = (ProcessPoolExecutor(jobs, initializer=_worker_init)
+                                 if jobs > 1 else None)
+    interrupted = False
+    try:
+        t0 = time.perf_counter()
+        gs, sh = run_designs(af, n_starts=n_starts, seed=seed, points=points,
+                             executor=executor, progress=lambda s: tick(f"tune {s}"))
+        times["tuning (18 GS-SHIF + 3 SHIF)"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
+        lqr = lqr_design(af)
+        times["LQR"] = time.perf_counter() - t0
+        tick("LQR")
+        res = SynthesisResult(af, tuple(points), gs, sh, lqr, settings={
+            "n_starts": n_starts, "seed": seed, "jobs": jobs, "table2": TABLE2})
+        t0 = time.perf_counter()
+        res.files = write_gain_files(res, out)
+        times["export (first)"] = time.perf_counter() - t0
+
+        if mu:
+            t0 = time.perf_counter()
+            jobs_mu: list[tuple[Any, ...]] = []
+            for ax in AXES:
+                for i, p in enumerate(points):
+                    d = gs[ax][i]
+                    jobs_mu.append(("gs", ax, i, (af, ax, p, d.theta, d.weights[0], seed)))
+                    if ax in sh:
+                        jobs_mu.append(("shif", ax, i,
+                                        (af, ax, p, sh[ax].theta, sh[ax].weights[i], seed)))
+            runnable = [j for j in jobs_mu if _nominally_stable(res, j)]
+            results = {}
+            if executor is None:
+                pairs: Any = ((j, _mu_job(j[3])) for j in runnable)
+            else:
+                futs = {executor.submit(_mu_job, j[3]): j for j in runnable}
+                pairs = ((futs[f], f.result()) for f in as_completed(futs))
+            for j, r in pairs:
+                results[j[:3]] = r
+                tick(f"mu {j[0]} {j[1]} point {points[j[2]].number}")
+            if len(jobs_mu) > len(runnable):
+                tick("mu (skipped: nominally unstable)", len(jobs_mu) - len(runnable))
+            for kind, store in (("gs", res.mu_gs), ("shif", res.mu_shif)):
+                for ax in AXES:
+                    vals = [results.get((kind, ax, i)) for i in range(len(points))]
+                    if all(v is not None for v in vals):
+                        store[ax] = vals  # type: ignore[assignment]
+            times["mu analysis"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            res.files = write_gain_files(res, out)
+            times["export"] = time.perf_counter() - t0
+        if report:
+            from synthesis.report import write_report
+
+            t0 = time.perf_counter()
+            res.times = times
+            res.files["report"] = write_report(res, out / "report")
+            times["report"] = time.perf_counter() - t0
+            tick("report")
+        res.times = times
+        return res
+    except KeyboardInterrupt:
+        interrupted = True
+        raise
+    finally:
+        if executor is not None:
+            if interrupted:
+                _stop_workers(executor)
+            else:
+                executor.shutdown(wait=True, cancel_futures=True)
+
+
+def _worker_init() -> None:
+    """Workers ignore Ctrl-C: the parent handles it and stops them (no worker tracebacks)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop_workers(executor: Executor) -> None:
+    """Terminate our own worker processes (by pid) after Ctrl-C, then drop the pool."""
+    procs = dict(getattr(executor, "_processes", None) or {})
+    executor.shutdown(wait=False, cancel_futures=True)
+    for pid, proc in procs.items():
+        try:
+            proc.terminate()
+        except (OSError, AttributeError):
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGTERM)
+    for proc in procs.values():
+        with contextlib.suppress(OSError, AttributeError, AssertionError):
+            proc.join(timeout=2.0)
+
+
+def _nominally_stable(res: SynthesisResult, job: tuple[Any, ...]) -> bool:
+    kind, ax, i, _ = job
+    if kind == "gs":
+        return res.gs[ax][i].stable
+    return bool(max(z.real for z in res.shif[ax].poles[i]) < 0)
+
+
+def work_units(n_points: int = len(PAPER_DESIGN_POINTS), mu: bool = True,
+               report: bool = True) -> int:
+    """Total of the ``progress`` units of :func:`run_synthesis`."""
+    n = 3 * n_points + 3 + 1
+    if mu:
+        n += 2 * 3 * n_points
+    if report:
+        n += 1
+    return n
+
+
+def fmt(x: float, nd: int = 3) -> str:
+    """Number for tables: fixed or scientific as fits; inf/nan spelled out."""
+    if not math.isfinite(x):
+        return str(x)
+    if x != 0 and (abs(x) < 10 ** -nd or abs(x) >= 1e5):
+        return f"{x:.{nd - 1}e}"
+    return f"{x:.{nd}f}"
+

@@ -1,0 +1,122 @@
+"""``vtolftc synth``: the attitude synthesis of an airframe (paper sections 3-4).
+
+Writes ``DIR/gs-shif.json``, ``DIR/shif.json`` (format ``vtolftc-gain-schedule/1``),
+``DIR/lqr.json`` (``vtolftc-lqr-gains/1``) and ``DIR/report/`` (markdown tables and PNG
+plots). A progress bar goes to stderr; the per-stage wall times and a summary are printed at
+the end. Ctrl-C stops at once (exit 130) and keeps the files already written (every file is
+written atomically, the gain files as soon as the tunes are done).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+
+def _check(args: argparse.Namespace) -> None:
+    from vtolftc.cli import UsageError
+
+    if not 0 <= args.starts <= 200:
+        raise UsageError(f"--starts {args.starts}: expected 0..200 random starts per tune")
+    if not 1 <= args.jobs <= 64:
+        raise UsageError(f"--jobs {args.jobs}: expected 1..64 worker processes")
+    if not 0 <= args.seed < 2**32:
+        raise UsageError(f"--seed {args.seed}: expected an integer in [0, 2^32)")
+    if args.airframe is not None and not Path(args.airframe).is_file():
+        raise UsageError(f"--airframe {args.airframe}: no such file (give an airframe TOML "
+                         "file such as airframe/ds1.toml)")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: exists and is not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"--out {out}: cannot create the directory: {exc}") from None
+    if not os.access(out, os.W_OK):
+        raise UsageError(f"--out {out}: directory is not writable")
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
+    """Structured H-infinity GS-SHIF and SHIF designs, LQR baseline, mu analysis, report."""
+    from airframe.loader import load_airframe
+
+    _check(args)
+    af = load_airframe(args.airframe)
+    from tqdm import tqdm
+
+    from synthesis.pipeline import run_synthesis, work_units
+
+    t0 = time.perf_counter()
+    bar = tqdm(total=work_units(mu=not args.no_mu, report=not args.no_report),
+               desc="synth", unit="step", file=sys.stderr, dynamic_ncols=True,
+               disable=args.quiet)
+
+    def progress(label: str, n: int) -> None:
+        bar.set_postfix_str(label[:40])
+        bar.update(n)
+
+    def _term(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt  # SIGTERM: same clean stop as Ctrl-C
+
+    old_term = signal.signal(signal.SIGTERM, _term)
+    try:
+        res = run_synthesis(af, args.out, n_starts=args.starts, jobs=args.jobs,
+                            seed=args.seed, mu=not args.no_mu, report=not args.no_report,
+                            progress=progress)
+    finally:
+        signal.signal(signal.SIGTERM, old_term)
+        bar.close()
+    total = time.perf_counter() - t0
+    _summary(res, total)
+    return 0
+
+
+def _summary(res: Any, total: float) -> None:
+    from synthesis.models import AXES
+
+    print(f"Synthesis of {res.airframe.name} ({res.airframe.sha256[:12]}...), "
+          f"{len(res.points)} design points x 3 axes.")
+    print("\n| axis | point | gamma | ||Ws S|| | ||Wt T|| | ||Wr R|| | stable | mu_Delta | "
+          "mu_Delta-hat |")
+    print("|---|---:|---:|---:|---:|---:|---|---:|---:|")
+    for ax in AXES:
+        for k, d in enumerate(res.gs[ax]):
+            m = res.mu_gs.get(ax)
+            mu = (f"{m[k].mu_rs:.3f} | {m[k].mu_rp:.3f}" if m else "- | -")
+            n = d.norms
+            print(f"| {ax} | {res.points[k].number} | {n['gamma']:.3f} | {n['Ws*S']:.3f} | "
+                  f"{n['Wt*T']:.3f} | {n['Wr*R']:.3f} | {'yes' if d.stable else 'NO'} | {mu} |")
+    print("\nSHIF max gamma over points: "
+          + ", ".join(f"{ax} {res.shif[ax].norms['gamma']:.3f}" for ax in AXES))
+    print("\nStage times:")
+    for k, v in res.times.items():
+        print(f"  {k:<34s} {v:7.2f} s")
+    print(f"  {'total':<34s} {total:7.2f} s")
+    print("\nFiles:")
+    for k, p in res.files.items():
+        print(f"  {k:<8s} {p}")
+    unstable = [f"{ax} {d.label}" for ax in AXES for d in res.gs[ax] if not d.stable]
+    if unstable:
+        print("WARNING: nominally unstable closed loops: " + ", ".join(unstable))
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("synth", help="attitude synthesis: GS-SHIF/SHIF/LQR gains, mu, report",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--airframe", type=Path, default=None,
+                   help="airframe TOML file (default: the shipped DS-1)")
+    p.add_argument("--out", type=Path, default=Path("synth_out"),
+                   help="output directory (default synth_out)")
+    p.add_argument("--starts", type=int, default=4,
+                   help="random starts per tune in addition to the classical start (default 4)")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random starts (default 0)")
+    p.add_argument("--no-mu", action="store_true", help="skip the mu analysis")
+    p.add_argument("--no-report", action="store_true", help="skip the report folder")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_synth)
