@@ -205,7 +205,8 @@ def test_effectiveness_update_is_in_place_and_matches_fresh_setup():
 
 def test_warm_start_reduces_iterations():
     def run(warm: bool) -> float:
-        qp = make_qp(polish=False, settings={"warm_starting": warm, "max_iter": 4000})
+        qp = make_qp(polish=False, settings={"warm_starting": warm, "max_iter": 4000,
+                                                "time_limit": 1e6})
         t = np.arange(200) * 0.004
         its = []
         for i, ti in enumerate(t):
