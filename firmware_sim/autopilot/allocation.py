@@ -428,6 +428,39 @@ class PseudoInverseAllocator:
 
 
 @numba.njit(cache=True)
+def _step_bounds(umin_def, umax_def, umin_in, umax_in, prev, has_prev, rate, has_rate, dt,
+                 lo, hi):
+    """Per-step bounds into ``lo``/``hi`` (compiled): position limits (non-finite entries of
+    the per-step limits replaced by the construction ones, upper raised to the lower where
+    crossed), intersected with ``prev ± rate dt`` when ``prev`` is given and finite (see
+    ``rate_limited_bounds``). Returns 1 when ``prev`` is absent or finite, else 0."""
+    n = lo.shape[0]
+    prev_ok = 1
+    if has_prev:
+        for j in range(n):
+            if not np.isfinite(prev[j]):
+                prev_ok = 0
+                break
+    for j in range(n):
+        pmin = umin_in[j] if np.isfinite(umin_in[j]) else umin_def[j]
+        pmax = umax_in[j] if np.isfinite(umax_in[j]) else umax_def[j]
+        if pmax < pmin:
+            pmax = pmin
+        a = pmin
+        b = pmax
+        if has_prev and prev_ok and has_rate:
+            st = rate[j] * dt
+            a = max(pmin, prev[j] - st)
+            b = min(pmax, prev[j] + st)
+            if a > b:
+                a = min(max(prev[j], pmin), pmax)
+                b = a
+        lo[j] = a
+        hi[j] = b
+    return prev_ok
+
+
+@numba.njit(cache=True)
 def _prepare(v, B, pref, B_last, w_v2, reg, tri_r, tri_c, Hn, Px, BtW2s, scale, qn):
     """Validate the step's data and build the normalised QP (compiled).
 
@@ -908,16 +941,26 @@ class QPAllocator:
         if B.shape != (self.n_v, self.n_u):
             raise ValueError(f"B: expected shape ({self.n_v}, {self.n_u}), got {B.shape}")
 
-        if u_min is None and u_max is None:
-            pmin, pmax = self.u_min, self.u_max
-        else:
-            pmin = self.u_min if u_min is None else self._sane_limit(u_min, self.u_min, "u_min")
-            pmax = self.u_max if u_max is None else self._sane_limit(u_max, self.u_max, "u_max")
-            pmax = np.maximum(pmax, pmin)
+        # Per-step bounds (compiled; same result as _sane_limit + rate_limited_bounds).
+        umin_in = self.u_min if u_min is None else _as_vec(u_min, self.n_u, "u_min")
+        umax_in = self.u_max if u_max is None else _as_vec(u_max, self.n_u, "u_max")
         prev = self._u_last if u_prev is None else _as_vec(u_prev, self.n_u, "u_prev")
-        prev_ok = prev is None or bool(np.all(np.isfinite(prev)))
-        lo, hi = rate_limited_bounds(
-            pmin, pmax, prev if prev_ok else None, self.rate_limit, self.dt
+        lo = np.empty(self.n_u)
+        hi = np.empty(self.n_u)
+        prev_ok = bool(
+            _step_bounds(
+                self.u_min,
+                self.u_max,
+                umin_in,
+                umax_in,
+                self._zeros_u if prev is None else prev,
+                prev is not None,
+                self._zeros_u if self.rate_limit is None else self.rate_limit,
+                self.rate_limit is not None,
+                self.dt,
+                lo,
+                hi,
+            )
         )
         pref = self.u_pref if u_pref is None else _as_vec(u_pref, self.n_u, "u_pref")
         code = -1

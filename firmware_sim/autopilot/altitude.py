@@ -1,0 +1,98 @@
+"""Altitude hold with constant gains (the paper: the altitude loop is not scheduled).
+
+Two laws, both on the altitude above home ``h = -pos_ned_z`` [m] and the climb rate
+``v_up = -vel_ned_z`` [m/s]:
+
+- :class:`MulticopterAltitudeHold` (takeoff, hover, transition, landing): a cascaded P / PI
+  like PX4's MPC_Z loop::
+
+      v_up_ref = clip(MPC_Z_P (h_ref - h), -MPC_Z_VEL_MAX_DN, MPC_Z_VEL_MAX_UP)
+      a_up     = MPC_Z_VEL_P_ACC (v_up_ref - v_up) + MPC_Z_VEL_I_ACC int(v_up_ref - v_up) dt
+
+  returns the upward acceleration command [m/s^2] (clipped to ``[-a_dn_max, a_up_max]``); the
+  integral is clamped (anti-windup) and frozen while the output saturates in its direction.
+  The caller turns it into a vertical force (``-m (g + a_up)`` along NED down).
+- :class:`FixedWingAltitudeHold` (wing-borne): altitude by pitch::
+
+      v_up_ref  = clip(FW_ALT_P (h_ref - h), -FW_SINK_MAX, FW_CLMB_MAX)
+      theta_ref = FW_VZ_P (v_up_ref - v_up) + FW_VZ_I int(v_up_ref - v_up) dt
+
+  clipped to ``[FW_P_LIM_MIN, FW_P_LIM_MAX]`` [rad]; the integral carries the trim pitch (it is
+  initialised with the pitch at engagement, so the handover is bumpless) and converges to it.
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["FixedWingAltitudeHold", "MulticopterAltitudeHold"]
+
+
+class MulticopterAltitudeHold:
+    """Constant-gain altitude / climb-rate loop giving an upward acceleration command.
+
+    Args:
+        dt: control period [s].
+        a_up_max, a_dn_max: limits of the acceleration command [m/s^2] (both > 0).
+        i_limit: limit of the integral term [m/s^2].
+    """
+
+    def __init__(self, dt: float, a_up_max: float = 5.0, a_dn_max: float = 4.0,
+                 i_limit: float = 4.0) -> None:
+        self.dt = float(dt)
+        self.a_up_max = float(a_up_max)
+        self.a_dn_max = float(a_dn_max)
+        self.i_limit = float(i_limit)
+        self.integral = 0.0
+        self.v_up_ref = 0.0
+
+    def reset(self, integral: float = 0.0) -> None:
+        self.integral = float(integral)
+
+    def update(self, h_ref: float, h: float, v_up: float, *, kp_z: float, kp_vz: float,
+               ki_vz: float, v_max_up: float, v_max_dn: float,
+               v_up_override: float | None = None) -> float:
+        """One step; returns the upward acceleration command [m/s^2].
+
+        ``v_up_override`` replaces the altitude P loop by a climb-rate reference (landing).
+        """
+        if v_up_override is None:
+            v_ref = min(max(kp_z * (h_ref - h), -v_max_dn), v_max_up)
+        else:
+            v_ref = float(v_up_override)
+        self.v_up_ref = v_ref
+        e = v_ref - v_up
+        p = kp_vz * e
+        dI = ki_vz * e * self.dt
+        u = p + self.integral + dI
+        if (u > self.a_up_max and dI > 0.0) or (u < -self.a_dn_max and dI < 0.0):
+            dI = 0.0
+        self.integral = min(max(self.integral + dI, -self.i_limit), self.i_limit)
+        return min(max(p + self.integral, -self.a_dn_max), self.a_up_max)
+
+
+class FixedWingAltitudeHold:
+    """Constant-gain altitude loop giving a pitch reference [rad] (see the module docstring)."""
+
+    def __init__(self, dt: float) -> None:
+        self.dt = float(dt)
+        self.integral = 0.0
+        self.v_up_ref = 0.0
+
+    def reset(self, pitch_rad: float = 0.0) -> None:
+        """Engage with the integral at ``pitch_rad`` (bumpless from the current pitch)."""
+        self.integral = float(pitch_rad) if math.isfinite(pitch_rad) else 0.0
+
+    def update(self, h_ref: float, h: float, v_up: float, *, kp_alt: float, kp_vz: float,
+               ki_vz: float, climb_max: float, sink_max: float, pitch_min: float,
+               pitch_max: float) -> float:
+        v_ref = min(max(kp_alt * (h_ref - h), -sink_max), climb_max)
+        self.v_up_ref = v_ref
+        e = v_ref - v_up
+        p = kp_vz * e
+        dI = ki_vz * e * self.dt
+        u = p + self.integral + dI
+        if (u > pitch_max and dI > 0.0) or (u < pitch_min and dI < 0.0):
+            dI = 0.0
+        self.integral = min(max(self.integral + dI, pitch_min), pitch_max)
+        return min(max(p + self.integral, pitch_min), pitch_max)

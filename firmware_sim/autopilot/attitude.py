@@ -1,0 +1,189 @@
+"""Attitude controllers behind one interface, selectable by name.
+
+- ``gs-shif``: the paper's gain-scheduled cascaded P-PID per axis (``gains/gs-shif.json``,
+  a :class:`~firmware_sim.autopilot.schedule.GainSchedule`), gains interpolated in the
+  measured airspeed every step;
+- ``shif``: the same class with the constant-gain schedule ``gains/shif.json``;
+- ``lqr``: state feedback with integral action per axis (``gains/lqr.json``, see
+  :mod:`firmware_sim.autopilot.lqr`).
+
+All take the attitude reference and the measured attitude (roll, pitch, yaw; ZYX Euler, rad),
+the body rates (rad/s) and the airspeed (m/s), and return the moment command [L, M, N] (N m,
+FRD body axes). The yaw error is wrapped to (-pi, pi]. Anti-windup by feedback of the
+allocation's saturation: the caller passes, per axis, whether the last allocation fell short
+of the commanded moment upwards (``sat_hi``) or downwards (``sat_lo``); the integrator of
+that axis then does not move further in that direction (conditional integration; the output
+itself is not clipped, since the weighted allocation achieves part of any larger command).
+The controllers never see fault state: only navigation data (passive FTC).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from firmware_sim.autopilot.lqr import LQRGains, LQRGainsError
+from firmware_sim.autopilot.pid import CascadedPPID, wrap_angle
+from firmware_sim.autopilot.schedule import AXES, GainSchedule, GainScheduleError
+
+__all__ = [
+    "CONTROLLERS",
+    "AttitudeController",
+    "ControllerError",
+    "LQRAttitudeController",
+    "ScheduledPPIDController",
+    "default_gains_dir",
+    "gains_file",
+    "make_controller",
+]
+
+#: Controller names and their gain files.
+CONTROLLERS: dict[str, str] = {"gs-shif": "gs-shif.json", "shif": "shif.json",
+                               "lqr": "lqr.json"}
+
+
+class ControllerError(ValueError):
+    """Unknown controller name, missing or invalid gain file (the message says what to do)."""
+
+
+def default_gains_dir() -> Path:
+    """The shipped gains directory, ``firmware_sim/autopilot/gains``."""
+    return Path(__file__).with_name("gains")
+
+
+def gains_file(controller: str, gains_dir: str | Path | None = None) -> Path:
+    """Path of the gain file of ``controller`` in ``gains_dir`` (default: the shipped one)."""
+    if controller not in CONTROLLERS:
+        raise ControllerError(f"unknown controller {controller!r}: expected one of "
+                              f"{', '.join(CONTROLLERS)}")
+    d = Path(gains_dir) if gains_dir is not None else default_gains_dir()
+    return d / CONTROLLERS[controller]
+
+
+class AttitudeController(Protocol):
+    """What the autopilot needs from an attitude controller."""
+
+    name: str
+    gains_path: Path
+    gains_sha256: str
+
+    def reset(self) -> None: ...
+
+    def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
+               rates: NDArray[np.float64], airspeed_m_s: float,
+               sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]: ...
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+class ScheduledPPIDController:
+    """Cascaded P-PID per axis with gains from a :class:`GainSchedule` at the airspeed.
+
+    Args:
+        schedule: the gain schedule (one breakpoint = constant gains, SHIF).
+        dt: control period [s].
+        rate_limits: limits of the rate references (roll, pitch, yaw) [rad/s].
+        name: controller name for reports.
+    """
+
+    def __init__(self, schedule: GainSchedule, dt: float = 0.004, *,
+                 rate_limits: tuple[float, float, float] = (2.0, 2.0, 1.0),
+                 name: str = "gs-shif", gains_path: Path | None = None) -> None:
+        self.schedule = schedule
+        self.name = name
+        self.gains_path = gains_path if gains_path is not None else Path("<memory>")
+        self.gains_sha256 = _sha256(gains_path) if gains_path is not None else ""
+        g0 = schedule.gains_at(0.0)
+        self.pids = [CascadedPPID(g0[ax], dt, wrap=(ax == "yaw"), rate_limit=rl,
+                                  output_limit=1e6)
+                     for ax, rl in zip(AXES, rate_limits, strict=True)]
+        self._out = np.zeros(3)
+
+    def reset(self) -> None:
+        for p in self.pids:
+            p.reset()
+
+    def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
+               rates: NDArray[np.float64], airspeed_m_s: float,
+               sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]:
+        g = self.schedule.gains_at(airspeed_m_s)
+        out = self._out
+        for k, ax in enumerate(AXES):
+            pid = self.pids[k]
+            before = pid.integral
+            out[k] = pid.update(float(ref[k]), float(att[k]), float(rates[k]), g[ax])
+            di = pid.integral - before
+            if (di > 0.0 and sat_hi[k]) or (di < 0.0 and sat_lo[k]):
+                out[k] -= di
+                pid.integral = before
+        return out.copy()
+
+
+class LQRAttitudeController:
+    """``tau = k_int * int(e) + k_angle * e - k_rate * rate`` per axis (see :mod:`.lqr`).
+
+    Anti-windup: the integral term does not move in the direction of a saturated axis.
+    """
+
+    def __init__(self, gains: LQRGains, dt: float = 0.004, *, name: str = "lqr",
+                 gains_path: Path | None = None) -> None:
+        self.gains = gains
+        self.dt = float(dt)
+        self.name = name
+        self.gains_path = gains_path if gains_path is not None else Path("<memory>")
+        self.gains_sha256 = _sha256(gains_path) if gains_path is not None else ""
+        self.integral_term = np.zeros(3)  # k_int * int(e) [N m], bumpless under scheduling
+
+    def reset(self) -> None:
+        self.integral_term[:] = 0.0
+
+    def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
+               rates: NDArray[np.float64], airspeed_m_s: float,
+               sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]:
+        g = self.gains.gains_at(airspeed_m_s)
+        out = np.empty(3)
+        for k, ax in enumerate(AXES):
+            gk = g[ax]
+            e = float(ref[k]) - float(att[k])
+            if k == 2:
+                e = wrap_angle(e)
+            dI = gk.k_int * e * self.dt
+            if not ((dI > 0.0 and sat_hi[k]) or (dI < 0.0 and sat_lo[k])):
+                self.integral_term[k] += dI
+            out[k] = gk.k_angle * e - gk.k_rate * float(rates[k]) + self.integral_term[k]
+        return out
+
+
+def make_controller(name: str, gains_dir: str | Path | None = None, dt: float = 0.004, *,
+                    airframe_name: str | None = None,
+                    airframe_sha256: str | None = None) -> AttitudeController:
+    """Build the controller ``name`` (``gs-shif``, ``shif`` or ``lqr``) from its gain file.
+
+    When ``airframe_name``/``airframe_sha256`` are given, the file must have been designed
+    for that airframe. Raises :class:`ControllerError` with a clear message otherwise.
+    """
+    path = gains_file(name, gains_dir)
+    if not path.is_file():
+        where = "the shipped gains directory" if gains_dir is None else "--gains"
+        raise ControllerError(
+            f"controller {name!r}: gain file {path} not found in {where}; run the synthesis "
+            "to produce it or pass a directory holding gs-shif.json, shif.json and lqr.json")
+    if not (dt > 0 and math.isfinite(dt)):
+        raise ControllerError(f"dt = {dt!r}: expected a positive control period in seconds")
+    try:
+        if name == "lqr":
+            lq = LQRGains.load(path)
+            lq.verify_airframe(airframe_name, airframe_sha256)
+            return LQRAttitudeController(lq, dt, name=name, gains_path=path)
+        sched = GainSchedule.load(path)
+        sched.verify_airframe(airframe_name, airframe_sha256)
+    except (GainScheduleError, LQRGainsError) as exc:
+        raise ControllerError(f"controller {name!r}: {exc}") from None
+    return ScheduledPPIDController(sched, dt, name=name, gains_path=path)

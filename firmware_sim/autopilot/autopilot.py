@@ -1,0 +1,619 @@
+"""The autopilot: modes, altitude/position/airspeed loops, attitude control, QP allocation.
+
+:class:`Autopilot` implements :class:`~firmware_sim.autopilot.interface.AutopilotAPI`. Each
+``step(nav)`` (250 Hz):
+
+1. the mode machine (:mod:`.modes`) takes its automatic transitions;
+2. the outer loops give the references of the mode: attitude (roll, pitch, yaw), vertical
+   force ``Fz`` (body z, N; from the constant-gain altitude hold of :mod:`.altitude` plus a
+   nominal-aerodynamics feed-forward of the wing's lift) and forward force ``Fx`` (pusher ramp
+   in the transition, airspeed hold in fixed-wing);
+3. the attitude controller (``gs-shif``, ``shif`` or ``lqr``, :mod:`.attitude`) gives the
+   moments ``[L, M, N]`` (N m);
+4. ``QPAllocator`` maps ``v = [Fz, Fx, L, M, N]`` onto all 15 actuators at once with the
+   nominal ``B(V)`` at the measured airspeed (:mod:`.effectiveness`), actuator position
+   limits, rate limits as per-step bounds and a warm-started OSQP solve (the paper's
+   redundancy management; ``B`` is evaluated on a 0.1 m/s airspeed grid). In fixed-wing the
+   lift rotors are excluded (upper bound ramped to 0 over ``VT_TRANS_P2_DUR`` after the
+   transition, then 0) and the ``Fz`` row is dropped; in hover the surfaces stay in the
+   problem (their columns vanish with the airspeed). The pushers are off (upper bound 0) in
+   the multicopter modes and the back transition.
+
+Anti-windup: where the allocation could not achieve a moment (achieved short of the command by
+more than a small tolerance), the controller's integrator on that axis is frozen in that
+direction at the next step.
+
+Attitude references: hover/takeoff/land: position hold through small tilt references (at most
+``MPC_TILTMAX_AIR``), heading held; front transition: roll 0, pitch 0, heading held (the
+paper); fixed-wing: roll 0, heading held, pitch from the altitude hold; back transition:
+roll 0, pitch 0.
+
+Passive FTC: the autopilot sees only :class:`NavState` and the airframe file (nominal model);
+it never imports the vehicle and never reads fault state.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from airframe.loader import Airframe, load_airframe
+from firmware_sim.autopilot.allocation import AllocationStatus, QPAllocator
+from firmware_sim.autopilot.altitude import FixedWingAltitudeHold, MulticopterAltitudeHold
+from firmware_sim.autopilot.attitude import AttitudeController, make_controller
+from firmware_sim.autopilot.effectiveness import EffectivenessModel
+from firmware_sim.autopilot.interface import (
+    N_ACTUATORS,
+    AutopilotStatus,
+    CommandResult,
+    FlightMode,
+    NavState,
+    ParameterStore,
+    ParamType,
+)
+from firmware_sim.autopilot.modes import ModeMachine, landed_state, vtol_state
+
+__all__ = [
+    "CMD_COMPONENT_ARM_DISARM",
+    "CMD_DO_SET_MODE",
+    "CMD_DO_VTOL_TRANSITION",
+    "CMD_NAV_LAND",
+    "CMD_NAV_TAKEOFF",
+    "FORCE_DISARM_MAGIC",
+    "Autopilot",
+    "default_parameters",
+    "quat_to_euler",
+]
+
+CMD_NAV_LAND = 21
+CMD_NAV_TAKEOFF = 22
+CMD_DO_SET_MODE = 176
+CMD_COMPONENT_ARM_DISARM = 400
+CMD_DO_VTOL_TRANSITION = 3000
+FORCE_DISARM_MAGIC = 21196
+MAV_VTOL_STATE_MC = 3
+MAV_VTOL_STATE_FW = 4
+ARMED_IDLE_THROTTLE = 0.05
+
+#: Virtual-axis weights of the QP: [Fz (N), Fx (N), L, M, N (N m)]; moments first.
+ALLOCATION_WEIGHTS = np.array([1.0, 0.5, 10.0, 10.0, 5.0])
+
+
+def quat_to_euler(q: NDArray[np.float64]) -> tuple[float, float, float]:
+    """ZYX Euler angles (roll, pitch, yaw) [rad] of a quaternion (w, x, y, z)."""
+    w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def _body_velocity(q: NDArray[np.float64], v: NDArray[np.float64]) -> tuple[float, float, float]:
+    """NED vector ``v`` in body FRD axes (R^T v) for the quaternion ``q``."""
+    w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+    vn, ve, vd = float(v[0]), float(v[1]), float(v[2])
+    r00 = 1 - 2 * (y * y + z * z)
+    r01 = 2 * (x * y - w * z)
+    r02 = 2 * (x * z + w * y)
+    r10 = 2 * (x * y + w * z)
+    r11 = 1 - 2 * (x * x + z * z)
+    r12 = 2 * (y * z - w * x)
+    r20 = 2 * (x * z - w * y)
+    r21 = 2 * (y * z + w * x)
+    r22 = 1 - 2 * (x * x + y * y)
+    return (r00 * vn + r10 * ve + r20 * vd, r01 * vn + r11 * ve + r21 * vd,
+            r02 * vn + r12 * ve + r22 * vd)
+
+
+_PARAMS: tuple[tuple[str, float, ParamType, float, float, str], ...] = (
+    ("SYS_FAILURE_EN", 0, ParamType.INT32, 0, 1,
+     "enable fault injection commands (read by the MAVLink endpoint only)"),
+    ("MIS_TAKEOFF_ALT", 30.0, ParamType.REAL32, 1.0, 500.0, "default takeoff altitude, m"),
+    ("VT_ARSP_TRANS", 13.0, ParamType.REAL32, 5.0, 40.0,
+     "airspeed completing the front transition, m/s"),
+    ("VT_TRANS_TMOUT", 15.0, ParamType.REAL32, 1.0, 120.0,
+     "front transition timeout (quad-chute back to hover), s"),
+    ("VT_F_TRANS_THR", 0.7, ParamType.REAL32, 0.0, 1.0,
+     "pusher thrust fraction during the front transition"),
+    ("VT_PSHER_SLEW", 0.33, ParamType.REAL32, 0.01, 10.0,
+     "pusher ramp rate in the front transition, 1/s"),
+    ("VT_TRANS_P2_DUR", 2.0, ParamType.REAL32, 0.0, 20.0,
+     "lift-rotor ramp-down after the front transition, s"),
+    ("VT_B_TRANS_DUR", 20.0, ParamType.REAL32, 1.0, 120.0, "back transition timeout, s"),
+    ("VT_B_TRANS_ARSP", 5.0, ParamType.REAL32, 0.0, 20.0,
+     "airspeed completing the back transition, m/s"),
+    ("FW_AIRSPD_TRIM", 18.0, ParamType.REAL32, 10.0, 40.0, "fixed-wing cruise airspeed, m/s"),
+    ("FW_AIRSPD_P", 0.6, ParamType.REAL32, 0.0, 10.0,
+     "airspeed hold: forward acceleration per airspeed error, 1/s"),
+    ("FW_AIRSPD_I", 0.1, ParamType.REAL32, 0.0, 10.0, "airspeed hold integral gain, 1/s^2"),
+    ("FW_ALT_P", 0.25, ParamType.REAL32, 0.0, 5.0, "fixed-wing climb rate per altitude error, 1/s"),
+    ("FW_VZ_P", 0.03, ParamType.REAL32, 0.0, 1.0, "pitch per climb-rate error, rad s/m"),
+    ("FW_VZ_I", 0.01, ParamType.REAL32, 0.0, 1.0, "pitch integral per climb-rate error, rad/m"),
+    ("FW_CLMB_MAX", 3.0, ParamType.REAL32, 0.1, 10.0, "fixed-wing max climb rate, m/s"),
+    ("FW_SINK_MAX", 3.0, ParamType.REAL32, 0.1, 10.0, "fixed-wing max sink rate, m/s"),
+    ("FW_P_LIM_MAX", 20.0, ParamType.REAL32, 0.0, 45.0, "fixed-wing max pitch reference, deg"),
+    ("FW_P_LIM_MIN", -15.0, ParamType.REAL32, -45.0, 0.0, "fixed-wing min pitch reference, deg"),
+    ("MPC_Z_P", 1.0, ParamType.REAL32, 0.0, 10.0, "climb rate per altitude error, 1/s"),
+    ("MPC_Z_VEL_P_ACC", 4.0, ParamType.REAL32, 0.0, 30.0,
+     "vertical acceleration per climb-rate error, 1/s"),
+    ("MPC_Z_VEL_I_ACC", 2.0, ParamType.REAL32, 0.0, 30.0, "climb-rate integral gain, 1/s^2"),
+    ("MPC_Z_VEL_MAX_UP", 3.0, ParamType.REAL32, 0.1, 10.0, "max climb rate, m/s"),
+    ("MPC_Z_VEL_MAX_DN", 1.5, ParamType.REAL32, 0.1, 10.0, "max descent rate, m/s"),
+    ("MPC_TKO_SPEED", 2.5, ParamType.REAL32, 0.1, 10.0, "takeoff climb rate, m/s"),
+    ("MPC_LAND_SPEED", 0.7, ParamType.REAL32, 0.1, 5.0, "landing descent rate, m/s"),
+    ("MPC_XY_P", 0.95, ParamType.REAL32, 0.0, 5.0, "horizontal speed per position error, 1/s"),
+    ("MPC_XY_VEL_P_ACC", 1.8, ParamType.REAL32, 0.0, 10.0,
+     "horizontal acceleration per speed error, 1/s"),
+    ("MPC_XY_VEL_MAX", 5.0, ParamType.REAL32, 0.1, 20.0, "max horizontal speed in hover, m/s"),
+    ("MPC_TILTMAX_AIR", 10.0, ParamType.REAL32, 0.0, 45.0,
+     "max tilt reference of the position hold, deg"),
+)
+
+
+def default_parameters() -> ParameterStore:
+    """A fresh parameter store with every autopilot parameter at its default."""
+    ps = ParameterStore()
+    for name, default, typ, lo, hi, desc in _PARAMS:
+        ps.register(name, default, typ, lo, hi, desc)
+    return ps
+
+
+class Autopilot:
+    """The flight software (see the module docstring).
+
+    Args:
+        airframe: the airframe (nominal model for allocation); default the shipped DS-1.
+        controller: ``"gs-shif"``, ``"shif"`` or ``"lqr"``.
+        gains_dir: directory holding the gain files (default ``firmware_sim/autopilot/gains``).
+        dt_s: control period [s] (default 0.004, 250 Hz).
+    """
+
+    def __init__(self, airframe: Airframe | None = None, controller: str = "gs-shif",
+                 gains_dir: str | Path | None = None, dt_s: float = 0.004) -> None:
+        self.airframe = airframe if airframe is not None else load_airframe()
+        af = self.airframe
+        if af.n_actuators != N_ACTUATORS:
+            raise ValueError(f"airframe {af.name}: {af.n_actuators} actuators, the autopilot "
+                             f"expects {N_ACTUATORS}")
+        self.dt = float(dt_s)
+        self.controller_name = controller
+        self.attitude: AttitudeController = make_controller(
+            controller, gains_dir, self.dt, airframe_name=af.name, airframe_sha256=af.sha256)
+        self.params = default_parameters()
+        # fast read access to the parameter values (read every step, so changes act at once)
+        _store = self.params._params
+        self._param = lambda name: _store[name].value
+        self.effectiveness = EffectivenessModel(af)
+        self.n_rotors = len(af.lift_rotors)
+        self.i_push = [af.actuator_index(r_name) for r_name in
+                       (f"pusher_{p.name}" for p in af.pushers)]
+        self.n_u = af.n_actuators
+        u_min = np.zeros(self.n_u)
+        u_max = np.ones(self.n_u)
+        n_rot_all = len(af.rotors)
+        u_min[n_rot_all:] = -1.0
+        rate = np.empty(self.n_u)
+        for i, r in enumerate(af.rotors):
+            rate[i] = r.rate_limit_per_s
+        rate[n_rot_all:] = af.surfaces.rate_limit_rad_s / af.surfaces.max_deflection_rad
+        self.u_min, self.u_max = u_min, u_max
+        self.hover_throttle = af.weight_N / sum(r.max_thrust_N for r in af.lift_rotors)
+        self.u_pref_mc = np.zeros(self.n_u)
+        self.u_pref_mc[: self.n_rotors] = self.hover_throttle
+        self.u_pref_fw = np.zeros(self.n_u)
+        # No wall-clock time limit: OSQP stops at max_iter (80), so a run is deterministic
+        # (same inputs, same commands) whatever the machine's load.
+        self.allocator = QPAllocator(5, u_min, u_max, w_v=ALLOCATION_WEIGHTS,
+                                     u_pref=self.u_pref_mc, rate_limit=rate, dt=self.dt,
+                                     settings={"time_limit": 1e10})
+        self.mc_alt = MulticopterAltitudeHold(self.dt)
+        self.fw_alt = FixedWingAltitudeHold(self.dt)
+        self.modes = ModeMachine()
+        self._event_log: list[tuple[int, str]] = []
+        self._B = np.zeros((5, self.n_u))
+        self._u = np.zeros(self.n_u)
+        self._v = np.zeros(5)
+        self._ref = np.zeros(3)
+        self._att = np.zeros(3)
+        self._sat_hi = np.zeros(3, dtype=bool)
+        self._sat_lo = np.zeros(3, dtype=bool)
+        self._time_usec = 0
+        self._airspeed = 0.0
+        self._alt_ref = 0.0
+        self._alt = 0.0
+        self._ground_alt = math.nan
+        self._hold_ne = np.zeros(2)
+        self._hold_locked = False
+        self._yaw_hold = 0.0
+        self._takeoff_alt = 30.0
+        self._pusher_ramp = 0.0
+        self._fw_entry_usec = 0
+        self._airspeed_int = 0.0
+        self._landed_timer = 0.0
+        self._last_mode = self.modes.mode
+        self._message = ""
+        self._alloc_status = "idle"
+        self._have_nav = False
+        self._last_nav: NavState | None = None
+
+    # ------------------------------------------------------------------------------------
+    # Commands
+    # ------------------------------------------------------------------------------------
+    def command(self, command_id: int, params: Sequence[float]) -> CommandResult:
+        """Handle a MAVLink COMMAND_LONG (id and its seven params, NaN = default).
+
+        COMPONENT_ARM_DISARM 400: param1 1 arm (on the ground, once navigation data came),
+        0 disarm (on the ground; in the air only with param2 = 21196). NAV_TAKEOFF 22: param7
+        the takeoff altitude in metres ABOVE HOME (NaN: ``MIS_TAKEOFF_ALT``), armed and on
+        the ground only. DO_VTOL_TRANSITION 3000: param1 4 = to fixed-wing, 3 = to
+        multicopter (in the air). NAV_LAND 21 (from fixed-wing: back transition first).
+        DO_SET_MODE 176 with PX4 custom modes (param1 custom flag, param2 main, param3 sub):
+        POSCTL/ALTCTL/AUTO.LOITER hold, AUTO.TAKEOFF, AUTO.LAND. Not allowed now: DENIED;
+        unknown id: UNSUPPORTED.
+        """
+        p = [float("nan")] * 7
+        for i, x in enumerate(list(params)[:7]):
+            try:
+                p[i] = float(x)
+            except (TypeError, ValueError):
+                return CommandResult.DENIED
+        m = self.modes
+        cid = int(command_id)
+        if cid == CMD_COMPONENT_ARM_DISARM:
+            if p[0] == 1.0:
+                if not self._have_nav:
+                    self._note("arming denied: no navigation data yet")
+                    return CommandResult.DENIED
+                res = m.arm()
+                if res == CommandResult.ACCEPTED and m.mode == FlightMode.IDLE:
+                    self._on_arm()
+                return self._after(res)
+            if p[0] == 0.0:
+                return self._after(m.disarm(force=p[1] == FORCE_DISARM_MAGIC))
+            return CommandResult.DENIED
+        if cid == CMD_NAV_TAKEOFF:
+            alt = p[6] if math.isfinite(p[6]) else self.params.get("MIS_TAKEOFF_ALT")
+            if not 1.0 <= alt <= 500.0:
+                return CommandResult.DENIED
+            res = m.takeoff()
+            if res == CommandResult.ACCEPTED:
+                self._takeoff_alt = alt
+                self._alt_ref = alt
+            return self._after(res)
+        if cid == CMD_DO_VTOL_TRANSITION:
+            if p[0] == MAV_VTOL_STATE_FW:
+                return self._after(m.transition(True))
+            if p[0] == MAV_VTOL_STATE_MC:
+                return self._after(m.transition(False))
+            return CommandResult.DENIED
+        if cid == CMD_NAV_LAND:
+            return self._after(m.land())
+        if cid == CMD_DO_SET_MODE:
+            return self._after(self._set_mode(p))
+        return CommandResult.UNSUPPORTED
+
+    def _set_mode(self, p: list[float]) -> CommandResult:
+        """DO_SET_MODE with PX4's custom modes: POSCTL/ALTCTL/AUTO.LOITER = hold the current
+        flight (hover, or cruise in fixed-wing), AUTO.TAKEOFF, AUTO.LAND."""
+        if not (math.isfinite(p[0]) and int(p[0]) & 1 and math.isfinite(p[1])):
+            return CommandResult.DENIED
+        main = int(p[1])
+        sub = int(p[2]) if math.isfinite(p[2]) else 0
+        m = self.modes
+        if main in (2, 3) or (main == 4 and sub == 3):
+            if m.mode in (FlightMode.TAKEOFF, FlightMode.LAND):
+                m.set_mode(FlightMode.HOVER, "hold commanded")
+            return CommandResult.ACCEPTED
+        if main == 4 and sub == 2:
+            return m.takeoff() if m.mode == FlightMode.IDLE else CommandResult.DENIED
+        if main == 4 and sub == 6:
+            return m.land()
+        return CommandResult.DENIED
+
+    def _after(self, res: CommandResult) -> CommandResult:
+        self._drain_events()
+        return res
+
+    def _note(self, text: str) -> None:
+        self.modes.events.append((self._time_usec, text))
+        self._drain_events()
+
+    def _drain_events(self) -> None:
+        if self.modes.events:
+            self._message = self.modes.events[-1][1]
+            self.event_log.extend(self.modes.events)
+            self.modes.events.clear()
+
+    @property
+    def event_log(self) -> list[tuple[int, str]]:
+        """Every event so far as (time_usec, text) (mode changes, arming, quad-chute ...)."""
+        return self._event_log
+
+    def _on_arm(self) -> None:
+        nav = self._last_nav
+        if nav is not None:
+            self._ground_alt = -float(nav.pos_ned_m[2])
+            self._hold_ne[:] = nav.pos_ned_m[:2]
+            self._yaw_hold = quat_to_euler(nav.q_wxyz)[2]
+        self._reset_loops()
+
+    def _reset_loops(self) -> None:
+        self.attitude.reset()
+        self.mc_alt.reset()
+        self._sat_hi[:] = False
+        self._sat_lo[:] = False
+
+    # ------------------------------------------------------------------------------------
+    # Control step
+    # ------------------------------------------------------------------------------------
+    def step(self, nav: NavState) -> NDArray[np.float64]:
+        """One control step on ``nav``; returns the 15 normalised actuator commands."""
+        P = self._param
+        if not math.isfinite(float(nav.pos_ned_m.sum() + nav.vel_ned_m_s.sum()
+                                   + nav.omega_body_rad_s.sum() + nav.q_wxyz.sum())):
+            # unusable navigation data: hold the previous command (never output NaN)
+            self._alloc_status = "invalid navigation data"
+            return self._u.copy()
+        self._have_nav = True
+        self._last_nav = nav
+        self._time_usec = int(nav.time_usec)
+        q = nav.q_wxyz
+        roll, pitch, yaw = quat_to_euler(q)
+        att = self._att
+        att[0], att[1], att[2] = roll, pitch, yaw
+        rates = nav.omega_body_rad_s
+        h = -float(nav.pos_ned_m[2])
+        v_up = -float(nav.vel_ned_m_s[2])
+        V = float(nav.airspeed_m_s)
+        if not math.isfinite(V):
+            V = 0.0
+        self._airspeed = V
+        self._alt = h
+        m = self.modes
+        if not math.isfinite(self._ground_alt):
+            self._ground_alt = h
+
+        # landing detection (only meaningful in LAND)
+        landed = False
+        if m.mode == FlightMode.LAND:
+            if h - self._ground_alt < 0.3 and abs(v_up) < 0.25:
+                self._landed_timer += self.dt
+            else:
+                self._landed_timer = 0.0
+            landed = self._landed_timer > 1.0
+        m.update(self._time_usec, altitude_m=h, takeoff_alt_m=self._takeoff_alt,
+                 airspeed_m_s=V, arsp_trans=P("VT_ARSP_TRANS"),
+                 trans_timeout_s=P("VT_TRANS_TMOUT"), b_trans_arsp=P("VT_B_TRANS_ARSP"),
+                 b_trans_dur_s=P("VT_B_TRANS_DUR"), landed=landed)
+        mode = m.mode
+        if mode != self._last_mode:
+            self._enter_mode(mode, self._last_mode, nav, pitch)
+            self._last_mode = mode
+        self._drain_events()
+
+        u = self._u
+        if not m.armed or mode == FlightMode.IDLE:
+            u[:] = 0.0
+            if m.armed:
+                u[: self.n_rotors] = ARMED_IDLE_THROTTLE
+            self._v[:] = 0.0
+            self._ref[:] = (0.0, 0.0, self._yaw_hold)
+            self._alloc_status = "idle"
+            self.allocator.reset(u)
+            self._reset_loops()
+            return u.copy()
+
+        # ---- outer loops: references and forces ----------------------------------------
+        ref = self._ref
+        ref[2] = self._yaw_hold
+        mass = self.airframe.mass_kg
+        g = self.airframe.gravity_m_s2
+        fx_cmd = 0.0
+        use_fz = True
+        rotor_hi = 1.0
+        pusher_hi = 1.0
+        u_pref = self.u_pref_mc
+        cos_tilt = max(0.5, math.cos(roll) * math.cos(pitch))
+        ub, _vb, wb = _body_velocity(q, nav.vel_ned_m_s)
+        alpha = math.atan2(wb, ub) if ub > 1.0 else 0.0
+        lift, drag = self._aero_estimate(V, alpha)
+        fz_aero = -lift * math.cos(alpha) - drag * math.sin(alpha)  # body z, N
+
+        if mode in (FlightMode.TAKEOFF, FlightMode.HOVER, FlightMode.LAND,
+                    FlightMode.FRONT_TRANSITION, FlightMode.BACK_TRANSITION):
+            override = None
+            vmax_up = P("MPC_Z_VEL_MAX_UP")
+            if mode == FlightMode.TAKEOFF:
+                vmax_up = min(vmax_up, P("MPC_TKO_SPEED"))
+            if mode == FlightMode.LAND:
+                override = -P("MPC_LAND_SPEED")
+                self._alt_ref = h
+            a_up = self.mc_alt.update(self._alt_ref, h, v_up, kp_z=P("MPC_Z_P"),
+                                      kp_vz=P("MPC_Z_VEL_P_ACC"), ki_vz=P("MPC_Z_VEL_I_ACC"),
+                                      v_max_up=vmax_up, v_max_dn=P("MPC_Z_VEL_MAX_DN"),
+                                      v_up_override=override)
+            fz_cmd = -mass * (g + a_up) / cos_tilt - fz_aero
+            if mode == FlightMode.FRONT_TRANSITION:
+                ref[0] = 0.0
+                ref[1] = 0.0
+                self._pusher_ramp = min(1.0, self._pusher_ramp + P("VT_PSHER_SLEW") * self.dt)
+                fx_cmd = P("VT_F_TRANS_THR") * self._pusher_ramp * self._pusher_max_force(V)
+            elif mode == FlightMode.BACK_TRANSITION:
+                ref[0] = 0.0
+                ref[1] = 0.0
+                pusher_hi = 0.0
+            else:
+                ref[0], ref[1] = self._position_hold(nav, yaw)
+                pusher_hi = 0.0
+        else:  # FIXED_WING
+            t_fw = (self._time_usec - self._fw_entry_usec) * 1e-6
+            ramp = P("VT_TRANS_P2_DUR")
+            rotor_hi = max(0.0, 1.0 - t_fw / ramp) if ramp > 0 else 0.0
+            u_pref = self.u_pref_fw
+            lim = math.radians
+            ref[0] = 0.0
+            ref[1] = self.fw_alt.update(self._alt_ref, h, v_up, kp_alt=P("FW_ALT_P"),
+                                        kp_vz=P("FW_VZ_P"), ki_vz=P("FW_VZ_I"),
+                                        climb_max=P("FW_CLMB_MAX"), sink_max=P("FW_SINK_MAX"),
+                                        pitch_min=lim(P("FW_P_LIM_MIN")),
+                                        pitch_max=lim(P("FW_P_LIM_MAX")))
+            fx_max = self._pusher_max_force(V)
+            e_v = P("FW_AIRSPD_TRIM") - V
+            a_x = P("FW_AIRSPD_P") * e_v + self._airspeed_int
+            fx_cmd = drag * math.cos(alpha) - lift * math.sin(alpha) + mass * (
+                a_x + g * math.sin(pitch))
+            if not ((fx_cmd >= fx_max and e_v > 0) or (fx_cmd <= 0.0 and e_v < 0)):
+                self._airspeed_int = min(max(self._airspeed_int
+                                             + P("FW_AIRSPD_I") * e_v * self.dt, -3.0), 3.0)
+            fx_cmd = min(max(fx_cmd, 0.0), fx_max)
+            if rotor_hi > 0.0:
+                a_up = self.mc_alt.update(self._alt_ref, h, v_up, kp_z=P("MPC_Z_P"),
+                                          kp_vz=P("MPC_Z_VEL_P_ACC"),
+                                          ki_vz=P("MPC_Z_VEL_I_ACC"),
+                                          v_max_up=P("MPC_Z_VEL_MAX_UP"),
+                                          v_max_dn=P("MPC_Z_VEL_MAX_DN"))
+                fz_cmd = -mass * (g + a_up) / cos_tilt - fz_aero
+            else:
+                use_fz = False
+                fz_cmd = 0.0
+
+        # ---- attitude control --------------------------------------------------------------
+        on_ground = mode == FlightMode.TAKEOFF and h - self._ground_alt < 0.5
+        if on_ground:
+            self.attitude.reset()
+        tau = self.attitude.update(ref, att, rates, V, self._sat_hi, self._sat_lo)
+
+        # ---- allocation ---------------------------------------------------------------------
+        # B(V) on a 0.1 m/s airspeed grid: OSQP refactors its KKT matrix only when B changes
+        # (every ~12 steps in the transition instead of every step); the dynamic pressure
+        # differs from the exact one by < 1 % above 10 m/s, far below the faults' 20-50 %.
+        B = self.effectiveness.matrix_on_grid(V, 0.1)
+        if not use_fz:
+            B = self._B
+            np.copyto(B, self.effectiveness.matrix_on_grid(V, 0.1))
+            B[0, :] = 0.0
+        v = self._v
+        v[0] = fz_cmd
+        v[1] = fx_cmd
+        v[2:] = tau
+        hi = self.u_max.copy()
+        hi[: self.n_rotors] = rotor_hi
+        for i in self.i_push:
+            hi[i] = pusher_hi
+        res = self.allocator.allocate(v, B, u_max=hi, u_pref=u_pref)
+        self._alloc_status = res.status.name.lower()
+        if res.status == AllocationStatus.FALLBACK:
+            self._alloc_status = "fallback"
+        self._track_saturation(v, res.v_achieved)
+        u[:] = res.u
+        return u.copy()
+
+    # ------------------------------------------------------------------------------------
+    def _enter_mode(self, mode: FlightMode, old: FlightMode, nav: NavState,
+                    pitch: float) -> None:
+        h = -float(nav.pos_ned_m[2])
+        if mode == FlightMode.TAKEOFF:
+            self._hold_ne[:] = nav.pos_ned_m[:2]
+            self._hold_locked = True
+        elif mode == FlightMode.HOVER:
+            if old in (FlightMode.FRONT_TRANSITION, FlightMode.BACK_TRANSITION,
+                       FlightMode.FIXED_WING):
+                self._hold_locked = False  # brake first, then hold where stopped
+            if old == FlightMode.TAKEOFF:
+                self._alt_ref = self._takeoff_alt
+        elif mode == FlightMode.FRONT_TRANSITION:
+            self._pusher_ramp = 0.0
+        elif mode == FlightMode.FIXED_WING:
+            self._fw_entry_usec = self._time_usec
+            self.fw_alt.reset(pitch)
+            self._airspeed_int = 0.0
+        elif mode == FlightMode.BACK_TRANSITION:
+            self.mc_alt.reset(self.mc_alt.integral)
+        elif mode == FlightMode.LAND:
+            self._alt_ref = h
+        if mode == FlightMode.IDLE:
+            self._reset_loops()
+
+    def _aero_estimate(self, V: float, alpha: float) -> tuple[float, float]:
+        """Nominal wing lift and drag [N] at airspeed V and angle of attack alpha (from the
+        airframe file, linear lift clipped at CL_max)."""
+        if V < 1.0:
+            return 0.0, 0.0
+        w = self.airframe.wing
+        qS = self.effectiveness.dynamic_pressure(V) * w.area_m2
+        cl = min(max(w.CL0 + w.CL_alpha * alpha, -w.CL_max), w.CL_max)
+        cd = w.CD0 + w.induced_drag_factor * cl * cl
+        return qS * cl, qS * cd
+
+    def _pusher_max_force(self, V: float) -> float:
+        """Nominal total pusher thrust at full command and airspeed V [N]."""
+        tot = 0.0
+        for r in self.airframe.pushers:
+            tot += r.max_thrust_N * min(1.25, max(0.0, 1.0 - V / r.zero_thrust_axial_speed_m_s))
+        return tot
+
+    def _position_hold(self, nav: NavState, yaw: float) -> tuple[float, float]:
+        """Roll and pitch references [rad] holding the horizontal position (brake first)."""
+        P = self._param
+        vn, ve = float(nav.vel_ned_m_s[0]), float(nav.vel_ned_m_s[1])
+        if not self._hold_locked:
+            if math.hypot(vn, ve) < 0.5:
+                self._hold_ne[:] = nav.pos_ned_m[:2]
+                self._hold_locked = True
+            vrn, vre = 0.0, 0.0
+        else:
+            kp = P("MPC_XY_P")
+            vrn = kp * (self._hold_ne[0] - float(nav.pos_ned_m[0]))
+            vre = kp * (self._hold_ne[1] - float(nav.pos_ned_m[1]))
+            vmax = P("MPC_XY_VEL_MAX")
+            s = math.hypot(vrn, vre)
+            if s > vmax:
+                vrn, vre = vrn * vmax / s, vre * vmax / s
+        kv = P("MPC_XY_VEL_P_ACC")
+        an, ae = kv * (vrn - vn), kv * (vre - ve)
+        g = self.airframe.gravity_m_s2
+        a_fwd = math.cos(yaw) * an + math.sin(yaw) * ae
+        a_right = -math.sin(yaw) * an + math.cos(yaw) * ae
+        tmax = math.radians(P("MPC_TILTMAX_AIR"))
+        pitch_ref = min(max(-math.atan2(a_fwd, g), -tmax), tmax)
+        roll_ref = min(max(math.atan2(a_right, g), -tmax), tmax)
+        return roll_ref, pitch_ref
+
+    def _track_saturation(self, v: NDArray[np.float64], achieved: NDArray[np.float64]) -> None:
+        """Which moment axes the allocation could not achieve, and in which direction."""
+        for k in range(3):
+            want = float(v[2 + k])
+            got = float(achieved[2 + k])
+            tol = 0.02 + 0.02 * abs(want)
+            self._sat_hi[k] = want > got + tol
+            self._sat_lo[k] = want < got - tol
+
+    # ------------------------------------------------------------------------------------
+    def status(self) -> AutopilotStatus:
+        """Snapshot for telemetry, logs and ground stations."""
+        mode = self.modes.mode
+        return AutopilotStatus(
+            time_usec=self._time_usec,
+            mode=mode,
+            armed=self.modes.armed,
+            vtol_state=vtol_state(mode),
+            landed_state=landed_state(mode),
+            attitude_ref_rad=self._ref.copy(),
+            attitude_rad=self._att.copy(),
+            altitude_ref_m=float(self._alt_ref),
+            airspeed_m_s=float(self._airspeed),
+            virtual_command=self._v.copy(),
+            actuator_commands=self._u.copy(),
+            allocation_status=self._alloc_status,
+            controller=self.controller_name,
+            message=self._message,
+        )
+
+    @property
+    def allocation_stats(self) -> dict[str, object]:
+        """The allocator's running statistics (counts per status, iterations, timing)."""
+        return self.allocator.stats.as_dict()

@@ -1,0 +1,195 @@
+"""Flight-mode state machine of the autopilot (no control law here, only the logic).
+
+Modes (:class:`~firmware_sim.autopilot.interface.FlightMode`) and how they change:
+
+=================== ==================================================================
+IDLE                on the ground, disarmed or armed (rotors idle). ``arm`` / ``disarm``;
+                    ``takeoff`` (armed) -> TAKEOFF.
+TAKEOFF             multicopter climb to the takeoff altitude -> HOVER when within
+                    ``TAKEOFF_TOL_M`` of it.
+HOVER               multicopter position and altitude hold. ``transition(FW)`` ->
+                    FRONT_TRANSITION; ``land`` -> LAND.
+FRONT_TRANSITION    pusher ramps up, lift rotors hold altitude, wing takes over; -> FIXED_WING
+                    when the airspeed reaches ``VT_ARSP_TRANS``; if it has not within
+                    ``VT_TRANS_TMOUT`` seconds -> HOVER (quad-chute, with a message).
+                    ``transition(MC)`` -> BACK_TRANSITION.
+FIXED_WING          wing-borne cruise. ``transition(MC)`` -> BACK_TRANSITION; ``land`` ->
+                    BACK_TRANSITION then LAND.
+BACK_TRANSITION     pusher off, decelerate, rotors take over -> HOVER (or LAND) when the
+                    airspeed is below ``VT_B_TRANS_ARSP`` or after ``VT_B_TRANS_DUR``.
+LAND                multicopter descent -> IDLE and disarmed once landed.
+=================== ==================================================================
+
+Commands that are not allowed in the current state are answered ``DENIED`` (and change
+nothing). PX4's custom-mode numbers for the heartbeat are given by :func:`px4_custom_mode`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from firmware_sim.autopilot.interface import CommandResult, FlightMode, LandedState, VtolState
+
+__all__ = [
+    "MC_MODES",
+    "PX4_MAIN",
+    "PX4_SUB_AUTO",
+    "ModeMachine",
+    "landed_state",
+    "px4_custom_mode",
+    "vtol_state",
+]
+
+#: Modes flown as a multicopter.
+MC_MODES = frozenset({FlightMode.TAKEOFF, FlightMode.HOVER, FlightMode.LAND})
+
+#: PX4 main modes (custom_mode >> 16 & 0xff) and AUTO sub modes (custom_mode >> 24).
+PX4_MAIN = {"MANUAL": 1, "ALTCTL": 2, "POSCTL": 3, "AUTO": 4, "ACRO": 5, "OFFBOARD": 6,
+            "STABILIZED": 7}
+PX4_SUB_AUTO = {"READY": 1, "TAKEOFF": 2, "LOITER": 3, "MISSION": 4, "RTL": 5, "LAND": 6}
+
+TAKEOFF_TOL_M = 0.5
+
+
+def px4_custom_mode(mode: FlightMode) -> int:
+    """PX4 custom mode (``main << 16 | sub << 24``) that best describes ``mode``."""
+    main, sub = PX4_MAIN["AUTO"], PX4_SUB_AUTO["LOITER"]
+    if mode == FlightMode.IDLE:
+        sub = PX4_SUB_AUTO["READY"]
+    elif mode == FlightMode.TAKEOFF:
+        sub = PX4_SUB_AUTO["TAKEOFF"]
+    elif mode == FlightMode.LAND:
+        sub = PX4_SUB_AUTO["LAND"]
+    return (main << 16) | (sub << 24)
+
+
+def vtol_state(mode: FlightMode) -> VtolState:
+    """MAV_VTOL_STATE of a mode."""
+    if mode == FlightMode.FRONT_TRANSITION:
+        return VtolState.TRANSITION_TO_FW
+    if mode == FlightMode.BACK_TRANSITION:
+        return VtolState.TRANSITION_TO_MC
+    if mode == FlightMode.FIXED_WING:
+        return VtolState.FW
+    return VtolState.MC
+
+
+def landed_state(mode: FlightMode) -> LandedState:
+    """MAV_LANDED_STATE of a mode."""
+    return {FlightMode.IDLE: LandedState.ON_GROUND, FlightMode.TAKEOFF: LandedState.TAKEOFF,
+            FlightMode.LAND: LandedState.LANDING}.get(mode, LandedState.IN_AIR)
+
+
+@dataclass
+class ModeMachine:
+    """Mode, arming state and timers; the autopilot asks it what to do and feeds it events.
+
+    ``events`` collects (time_usec, text) of every change, for the status message and logs.
+    """
+
+    mode: FlightMode = FlightMode.IDLE
+    armed: bool = False
+    mode_since_usec: int = 0
+    now_usec: int = 0
+    land_after_back_transition: bool = False
+    events: list[tuple[int, str]] = field(default_factory=list)
+
+    def _say(self, text: str) -> None:
+        self.events.append((self.now_usec, text))
+
+    def set_mode(self, mode: FlightMode, why: str = "") -> None:
+        """Enter ``mode`` now (no check: the caller decided)."""
+        if mode != self.mode:
+            old = self.mode
+            self.mode = mode
+            self.mode_since_usec = self.now_usec
+            self._say(f"mode {old.name} -> {mode.name}" + (f" ({why})" if why else ""))
+
+    def time_in_mode_s(self) -> float:
+        return (self.now_usec - self.mode_since_usec) * 1e-6
+
+    @property
+    def in_air(self) -> bool:
+        return self.mode != FlightMode.IDLE
+
+    # -- commands ---------------------------------------------------------------------------
+    def arm(self) -> CommandResult:
+        if self.armed:
+            return CommandResult.ACCEPTED
+        if self.mode != FlightMode.IDLE:
+            return CommandResult.DENIED
+        self.armed = True
+        self._say("armed")
+        return CommandResult.ACCEPTED
+
+    def disarm(self, force: bool) -> CommandResult:
+        if not self.armed:
+            return CommandResult.ACCEPTED
+        if self.mode != FlightMode.IDLE and not force:
+            return CommandResult.DENIED
+        self.armed = False
+        self.set_mode(FlightMode.IDLE, "disarmed" + (" (forced)" if force else ""))
+        self._say("disarmed" + (" in the air (forced)" if force and self.in_air else ""))
+        return CommandResult.ACCEPTED
+
+    def takeoff(self) -> CommandResult:
+        if not self.armed or self.mode != FlightMode.IDLE:
+            return CommandResult.DENIED
+        self.set_mode(FlightMode.TAKEOFF, "takeoff command")
+        return CommandResult.ACCEPTED
+
+    def transition(self, to_fw: bool) -> CommandResult:
+        if not self.armed or self.mode in (FlightMode.IDLE, FlightMode.TAKEOFF, FlightMode.LAND):
+            return CommandResult.DENIED
+        if to_fw:
+            if self.mode in (FlightMode.FIXED_WING, FlightMode.FRONT_TRANSITION):
+                return CommandResult.ACCEPTED
+            if self.mode == FlightMode.BACK_TRANSITION:
+                return CommandResult.DENIED
+            self.set_mode(FlightMode.FRONT_TRANSITION, "transition to fixed-wing commanded")
+            return CommandResult.ACCEPTED
+        if self.mode in (FlightMode.HOVER, FlightMode.BACK_TRANSITION):
+            return CommandResult.ACCEPTED
+        self.land_after_back_transition = False
+        self.set_mode(FlightMode.BACK_TRANSITION, "transition to multicopter commanded")
+        return CommandResult.ACCEPTED
+
+    def land(self) -> CommandResult:
+        if not self.armed or self.mode == FlightMode.IDLE:
+            return CommandResult.DENIED
+        if self.mode == FlightMode.LAND:
+            return CommandResult.ACCEPTED
+        if self.mode in (FlightMode.FIXED_WING, FlightMode.FRONT_TRANSITION,
+                         FlightMode.BACK_TRANSITION):
+            self.land_after_back_transition = True
+            self.set_mode(FlightMode.BACK_TRANSITION, "land: back transition first")
+            return CommandResult.ACCEPTED
+        self.set_mode(FlightMode.LAND, "land command")
+        return CommandResult.ACCEPTED
+
+    # -- automatic changes --------------------------------------------------------------------
+    def update(self, now_usec: int, *, altitude_m: float, takeoff_alt_m: float,
+               airspeed_m_s: float, arsp_trans: float, trans_timeout_s: float,
+               b_trans_arsp: float, b_trans_dur_s: float, landed: bool) -> None:
+        """Advance the timers and take the automatic transitions of the table above."""
+        self.now_usec = int(now_usec)
+        m = self.mode
+        if m == FlightMode.TAKEOFF and abs(altitude_m - takeoff_alt_m) < TAKEOFF_TOL_M:
+            self.set_mode(FlightMode.HOVER, f"takeoff altitude {takeoff_alt_m:g} m reached")
+        elif m == FlightMode.FRONT_TRANSITION:
+            if airspeed_m_s >= arsp_trans:
+                self.set_mode(FlightMode.FIXED_WING,
+                              f"transition complete at {airspeed_m_s:.1f} m/s")
+            elif self.time_in_mode_s() > trans_timeout_s:
+                self.set_mode(FlightMode.HOVER, f"quad-chute: transition timeout, airspeed "
+                              f"{airspeed_m_s:.1f} m/s < {arsp_trans:g} m/s after "
+                              f"{trans_timeout_s:g} s")
+        elif m == FlightMode.BACK_TRANSITION:
+            if airspeed_m_s < b_trans_arsp or self.time_in_mode_s() > b_trans_dur_s:
+                nxt = FlightMode.LAND if self.land_after_back_transition else FlightMode.HOVER
+                self.land_after_back_transition = False
+                self.set_mode(nxt, f"back transition complete at {airspeed_m_s:.1f} m/s")
+        elif m == FlightMode.LAND and landed:
+            self.armed = False
+            self.set_mode(FlightMode.IDLE, "landed")
+            self._say("disarmed after landing")

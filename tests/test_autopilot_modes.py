@@ -1,0 +1,227 @@
+"""Mode machine, commands, parameters and status of the autopilot (synthetic navigation data,
+no vehicle)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from firmware_sim.autopilot.autopilot import (
+    CMD_COMPONENT_ARM_DISARM,
+    CMD_DO_SET_MODE,
+    CMD_DO_VTOL_TRANSITION,
+    CMD_NAV_LAND,
+    CMD_NAV_TAKEOFF,
+    Autopilot,
+)
+from firmware_sim.autopilot.interface import (
+    AutopilotAPI,
+    CommandResult,
+    FlightMode,
+    LandedState,
+    NavState,
+    ParamError,
+    ParamType,
+    VtolState,
+)
+from firmware_sim.autopilot.modes import ModeMachine, px4_custom_mode
+
+NAN = float("nan")
+A = CommandResult.ACCEPTED
+D = CommandResult.DENIED
+
+
+@pytest.fixture(scope="module")
+def gains_dir(tmp_path_factory, ds1):
+    """Hand-picked gains in the shipped formats (independent of the synthesis output)."""
+    d = tmp_path_factory.mktemp("gains")
+    base = {"roll": (5.0, 14.0, 14.0, 0.3, 0.02), "pitch": (5.0, 12.0, 12.0, 0.25, 0.02),
+            "yaw": (2.5, 14.0, 7.0, 0.0, 0.02)}
+    fields = ("kp_angle", "kp_rate", "ki_rate", "kd_rate", "tf_rate_s")
+    af = {"name": ds1.name, "sha256": ds1.sha256}
+    for name, bp in (("gs-shif", [0.0, 13.0]), ("shif", [0.0])):
+        axes = {ax: {f: [v] * len(bp) for f, v in zip(fields, g, strict=True)}
+                for ax, g in base.items()}
+        (d / f"{name}.json").write_text(json.dumps({
+            "format": "vtolftc-gain-schedule/1", "controller": name, "airframe": af,
+            "airspeed_breakpoints_m_s": bp, "axes": axes}))
+    (d / "lqr.json").write_text(json.dumps({
+        "format": "vtolftc-lqr-gains/1", "controller": "lqr", "airframe": af,
+        "airspeed_breakpoints_m_s": [0.0],
+        "axes": {ax: {"k_int": [g[0] * g[2] * 0.5], "k_angle": [g[0] * g[1]],
+                      "k_rate": [g[1]]} for ax, g in base.items()}}))
+    return d
+
+
+def nav(t_s: float, alt: float = 0.29, airspeed: float = 0.0, vn: float = 0.0) -> NavState:
+    return NavState(round(t_s * 1e6), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3),
+                    np.array([0.0, 0.0, -alt]), np.array([vn, 0.0, 0.0]), airspeed)
+
+
+def cmd(ap, cid, *p):
+    return ap.command(cid, list(p) + [NAN] * (7 - len(p)))
+
+
+@pytest.fixture
+def ap(ds1, gains_dir):
+    return Autopilot(ds1, controller="shif", gains_dir=gains_dir)
+
+
+def test_autopilot_implements_the_api(ap):
+    assert isinstance(ap, AutopilotAPI)
+
+
+def test_ground_commands_and_denials(ap):
+    # nothing known yet: arming denied
+    assert cmd(ap, CMD_COMPONENT_ARM_DISARM, 1.0) == D
+    u = ap.step(nav(0.0))
+    assert u.shape == (15,) and np.all(u == 0.0)            # disarmed: everything off
+    assert cmd(ap, CMD_NAV_TAKEOFF) == D                     # takeoff while disarmed
+    assert cmd(ap, CMD_DO_VTOL_TRANSITION, 4.0) == D         # transition while disarmed
+    assert cmd(ap, 12345) == CommandResult.UNSUPPORTED
+    assert cmd(ap, CMD_COMPONENT_ARM_DISARM, 7.0) == D       # not 0 or 1
+    assert cmd(ap, CMD_COMPONENT_ARM_DISARM, 1.0) == A
+    st = ap.status()
+    assert st.armed and st.mode == FlightMode.IDLE and st.landed_state == LandedState.ON_GROUND
+    u = ap.step(nav(0.004))
+    assert np.all(u[:8] == pytest.approx(0.05)) and np.all(u[8:] == 0.0)   # armed idle
+    assert cmd(ap, CMD_DO_VTOL_TRANSITION, 4.0) == D         # on the ground
+    assert cmd(ap, CMD_NAV_LAND) == D                        # on the ground
+    assert cmd(ap, CMD_COMPONENT_ARM_DISARM, 0.0) == A       # disarm on the ground
+    assert not ap.status().armed
+
+
+def test_takeoff_default_altitude_param_and_flight_sequence(ap):
+    ap.step(nav(0.0))
+    ap.params.set("MIS_TAKEOFF_ALT", 12.0)                   # parameter change takes effect
+    assert cmd(ap, CMD_COMPONENT_ARM_DISARM, 1.0) == A
+    assert cmd(ap, CMD_NAV_TAKEOFF, NAN, NAN, NAN, NAN, NAN, NAN, NAN) == A
+    st = ap.status()
+    assert st.mode == FlightMode.TAKEOFF and st.altitude_ref_m == 12.0
+    assert st.landed_state == LandedState.TAKEOFF and st.vtol_state == VtolState.MC
+    u = ap.step(nav(0.004))
+    assert np.all(u[:8] == pytest.approx(0.04))               # rotor rate limit 10/s
+    for k in range(2, 30):
+        u = ap.step(nav(0.004 * k))
+    assert np.all(u[:8] > 0.5)                                # climbing
+    assert cmd(ap, CMD_DO_VTOL_TRANSITION, 4.0) == D          # not during the climb
+    # in-air disarm needs the force magic
+    assert cmd(ap, CMD_COMPONENT_ARM_DISARM, 0.0) == D
+    ap.step(nav(0.120, alt=11.8))                             # within 0.5 m -> hover
+    assert ap.status().mode == FlightMode.HOVER
+    assert ap.status().landed_state == LandedState.IN_AIR
+    assert cmd(ap, CMD_DO_VTOL_TRANSITION, 2.0) == D          # bad param1
+    assert cmd(ap, CMD_DO_VTOL_TRANSITION, 4.0) == A
+    ap.step(nav(0.124, alt=12.0, airspeed=10.0, vn=10.0))
+    st = ap.status()
+    assert st.mode == FlightMode.FRONT_TRANSITION and st.vtol_state == VtolState.TRANSITION_TO_FW
+    np.testing.assert_allclose(st.attitude_ref_rad[:2], 0.0)  # roll 0, pitch 0 (paper)
+    assert st.virtual_command[1] > 0.0                        # pusher ramping up
+    ap.params.set("VT_ARSP_TRANS", 9.5)                       # takes effect at once
+    ap.step(nav(0.128, alt=12.0, airspeed=10.0, vn=10.0))
+    st = ap.status()
+    assert st.mode == FlightMode.FIXED_WING and st.vtol_state == VtolState.FW
+    assert "transition complete" in st.message
+    assert cmd(ap, CMD_DO_VTOL_TRANSITION, 4.0) == A          # already there
+    assert cmd(ap, CMD_DO_VTOL_TRANSITION, 3.0) == A
+    assert ap.status().mode == FlightMode.BACK_TRANSITION
+    ap.step(nav(0.132, alt=12.0, airspeed=4.0, vn=4.0))       # slow enough -> hover
+    assert ap.status().mode == FlightMode.HOVER
+    assert cmd(ap, CMD_NAV_LAND) == A
+    assert ap.status().mode == FlightMode.LAND
+    assert ap.status().landed_state == LandedState.LANDING
+    t = 0.136
+    while t < 2.2:                                            # on the ground, still: landed
+        ap.step(nav(t))
+        t += 0.004
+    st = ap.status()
+    assert st.mode == FlightMode.IDLE and not st.armed
+
+
+def test_forced_disarm_in_air(ap):
+    ap.step(nav(0.0))
+    cmd(ap, CMD_COMPONENT_ARM_DISARM, 1.0)
+    cmd(ap, CMD_NAV_TAKEOFF)
+    assert cmd(ap, CMD_COMPONENT_ARM_DISARM, 0.0, 21196.0) == A
+    assert not ap.status().armed and np.all(ap.step(nav(0.004, alt=5.0)) == 0.0)
+
+
+def test_set_mode(ap):
+    ap.step(nav(0.0))
+    assert cmd(ap, CMD_DO_SET_MODE, 1.0, 4.0, 2.0) == D       # AUTO.TAKEOFF while disarmed
+    cmd(ap, CMD_COMPONENT_ARM_DISARM, 1.0)
+    assert cmd(ap, CMD_DO_SET_MODE, 1.0, 4.0, 2.0) == A
+    assert ap.status().mode == FlightMode.TAKEOFF
+    assert cmd(ap, CMD_DO_SET_MODE, 1.0, 3.0) == A            # POSCTL: hold
+    assert ap.status().mode == FlightMode.HOVER
+    assert cmd(ap, CMD_DO_SET_MODE, 1.0, 6.0) == D            # OFFBOARD: not offered
+    assert cmd(ap, CMD_DO_SET_MODE, NAN, NAN) == D
+    assert cmd(ap, CMD_DO_SET_MODE, 1.0, 4.0, 6.0) == A       # AUTO.LAND
+    assert ap.status().mode == FlightMode.LAND
+    assert px4_custom_mode(FlightMode.LAND) == (4 << 16) | (6 << 24)
+
+
+def test_parameters(ap):
+    p = ap.params
+    for name in ("SYS_FAILURE_EN", "MIS_TAKEOFF_ALT", "VT_ARSP_TRANS", "VT_TRANS_TMOUT",
+                 "FW_AIRSPD_TRIM", "MPC_Z_P", "MPC_Z_VEL_P_ACC", "MPC_Z_VEL_I_ACC"):
+        assert name in p
+    f = p.by_index(p.index("SYS_FAILURE_EN"))
+    assert f.type == ParamType.INT32 and f.value == 0
+    assert p.get("VT_ARSP_TRANS") == 13.0 and p.get("FW_AIRSPD_TRIM") == 18.0
+    assert p.get("MIS_TAKEOFF_ALT") == 30.0
+    with pytest.raises(ParamError):
+        p.set("SYS_FAILURE_EN", 0.5)
+    with pytest.raises(ParamError):
+        p.set("VT_ARSP_TRANS", -3.0)
+    with pytest.raises(ParamError):
+        p.set("NO_SUCH_PARAM", 1.0)
+
+
+def test_mode_machine_quad_chute_and_back_transition():
+    m = ModeMachine()
+    kw = dict(altitude_m=30.0, takeoff_alt_m=30.0, arsp_trans=13.0, trans_timeout_s=5.0,
+              b_trans_arsp=5.0, b_trans_dur_s=20.0, landed=False)
+    assert m.arm() == A and m.takeoff() == A
+    m.update(0, airspeed_m_s=0.0, **kw)
+    assert m.mode == FlightMode.HOVER
+    assert m.transition(True) == A and m.mode == FlightMode.FRONT_TRANSITION
+    m.update(4_900_000, airspeed_m_s=9.0, **kw)
+    assert m.mode == FlightMode.FRONT_TRANSITION
+    m.update(5_100_000, airspeed_m_s=9.0, **kw)
+    assert m.mode == FlightMode.HOVER
+    assert any("quad-chute" in t for _, t in m.events)
+    assert m.transition(True) == A
+    m.update(6_000_000, airspeed_m_s=13.0, **kw)
+    assert m.mode == FlightMode.FIXED_WING
+    assert m.land() == A and m.mode == FlightMode.BACK_TRANSITION
+    assert m.transition(True) == D                         # not while going back
+    m.update(7_000_000, airspeed_m_s=4.0, **kw)
+    assert m.mode == FlightMode.LAND                       # land after the back transition
+    kw["landed"] = True
+    m.update(8_000_000, airspeed_m_s=0.0, **kw)
+    assert m.mode == FlightMode.IDLE and not m.armed
+
+
+def test_nan_and_garbage_params_do_not_raise(ap):
+    ap.step(nav(0.0))
+    assert cmd(ap, CMD_COMPONENT_ARM_DISARM, NAN) == D
+    assert ap.command(CMD_COMPONENT_ARM_DISARM, ["x"]) == D
+    assert cmd(ap, CMD_NAV_TAKEOFF, *([NAN] * 6), -5.0) == D
+    assert math.isfinite(ap.status().altitude_ref_m)
+
+
+def test_non_finite_navigation_holds_the_last_command(ap):
+    ap.step(nav(0.0))
+    cmd(ap, CMD_COMPONENT_ARM_DISARM, 1.0)
+    cmd(ap, CMD_NAV_TAKEOFF)
+    for k in range(1, 20):
+        u = ap.step(nav(0.004 * k))
+    bad = nav(0.1)
+    bad.pos_ned_m[2] = NAN
+    u2 = ap.step(bad)
+    np.testing.assert_array_equal(u, u2)
+    assert ap.status().allocation_status == "invalid navigation data"

@@ -1,0 +1,260 @@
+"""``vtolftc fly`` and ``vtolftc compare``: the paper's cases flown in-process.
+
+``vtolftc fly --case 1 --controller gs-shif`` flies one case and writes a run folder;
+``vtolftc compare --case 1`` flies the three controllers and prints a table like the paper's
+table 4 (RMSE of altitude and attitude tracking over the transition window), with bar charts
+like figs 13/14 in the output folder. Ctrl-C stops cleanly, keeping what was written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+CONTROLLER_NAMES = ("gs-shif", "shif", "lqr")
+_PAPER_TABLE4 = {
+    "1": {"lqr": (0.2997, 4.7117, 1.432, 6.6718), "shif": (0.2817, 1.2638, 0.6627, 1.683),
+          "gs-shif": (0.2812, 0.5411, 0.4223, 1.6551)},
+    "2": {"lqr": (0.2761, 3.1536, 2.9905, 3.9939), "shif": (0.2744, 1.0816, 1.2335, 1.3610),
+          "gs-shif": (0.2758, 0.1921, 0.6891, 0.9096)},
+}
+
+
+def default_observers(run_dir: Path, args: argparse.Namespace) -> list[Any]:
+    """The observers of a run (the run-folder writer; the lead adds the rerun recorder)."""
+    from vtolftc.runfolder import RunFolderWriter
+
+    return [RunFolderWriter(run_dir, plots=not getattr(args, "no_plots", False))]
+
+
+def _check_common(args: argparse.Namespace) -> None:
+    from vtolftc.cli import UsageError
+
+    if not (math.isfinite(args.duration) and 0.0 < args.duration <= 3600.0):
+        raise UsageError(f"--duration {args.duration!r}: expected seconds in (0, 3600]")
+    if args.gains is not None and not Path(args.gains).is_dir():
+        raise UsageError(f"--gains {args.gains}: not a directory (expected one holding "
+                         "gs-shif.json, shif.json and lqr.json)")
+
+
+def _fly_one(case: str, controller: str, args: argparse.Namespace, run_dir: Path,
+             extra_faults: list[Any]) -> Any:
+    from airframe.loader import load_airframe
+    from vtolftc.scenario import paper_scenario, run_scenario
+
+    af = load_airframe(getattr(args, "airframe", None))
+    scen = paper_scenario(case, args.duration, airframe=af, extra_faults=extra_faults)
+    _check_controller(controller, args)
+    info = {"seed": 0, "max_deflection_deg": math.degrees(af.surfaces.max_deflection_rad),
+            "faults": [f.describe() for f in scen.faults],
+            "actions": [{"t_s": a.t_s, "kind": a.kind, "label": a.label,
+                         "command_id": a.command_id, "params": list(a.params)}
+                        for a in scen.actions]}
+    return run_scenario(scen, controller, airframe=af, gains_dir=args.gains,
+                        observers=default_observers(run_dir, args), info=info)
+
+
+def _check_controller(controller: str, args: argparse.Namespace) -> None:
+    """Load the controller's gain file once, so that a missing or invalid file is reported
+    (exit 2) before anything is flown or written."""
+    from airframe.loader import load_airframe
+    from firmware_sim.autopilot.attitude import ControllerError, make_controller
+    from vtolftc.cli import UsageError
+
+    af = load_airframe(getattr(args, "airframe", None))
+    try:
+        make_controller(controller, args.gains, airframe_name=af.name,
+                        airframe_sha256=af.sha256)
+    except ControllerError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _summary_lines(res: Any) -> list[str]:
+    m = res.metrics
+
+    def f(x: Any, nd: int = 3) -> str:
+        return "—" if x is None or (isinstance(x, float) and not math.isfinite(x)) \
+            else f"{x:.{nd}f}"
+
+    return [
+        f"  crashed: {m['crashed']}" + (f" at t = {m['crash_time_s']:.2f} s"
+                                         if m["crashed"] else ""),
+        f"  transition: start {f(m['transition_start_s'], 2)} s, complete "
+        f"{f(m['transition_complete_s'], 2)} s"
+        + (" (quad-chute back to hover)" if m["quad_chute"] else ""),
+        f"  RMSE over t >= {m['window_start_s']:g} s: altitude {f(m['rmse_altitude_m'])} m, "
+        f"roll {f(m['rmse_roll_deg'])} deg, pitch {f(m['rmse_pitch_deg'])} deg, "
+        f"yaw {f(m['rmse_yaw_deg'])} deg",
+        f"  max |error|: roll {f(m['max_abs_roll_error_deg'], 2)}, pitch "
+        f"{f(m['max_abs_pitch_error_deg'], 2)}, yaw {f(m['max_abs_yaw_error_deg'], 2)} deg",
+        f"  final: altitude {f(m['final_altitude_m'], 2)} m (error "
+        f"{f(m['final_altitude_error_m'], 2)} m), airspeed {f(m['final_airspeed_m_s'], 1)} m/s,"
+        f" attitude ({f(m['final_roll_deg'], 2)}, {f(m['final_pitch_deg'], 2)}, "
+        f"{f(m['final_yaw_deg'], 2)}) deg",
+        f"  allocation: {res.allocation['counts']['solved']} solved, "
+        f"{res.allocation['counts']['fallback']} fallbacks; wall {res.wall_time_s:.2f} s "
+        f"({res.real_time_factor:.1f}x real time)",
+    ]
+
+
+def cmd_fly(args: argparse.Namespace) -> int:
+    """Fly one of the paper's cases in-process and write a run folder."""
+    from airframe.loader import load_airframe
+    from firmware_sim.vehicle.faults import parse_fault_spec
+    from vtolftc.runfolder import default_run_dir
+
+    _check_common(args)
+    af = load_airframe(getattr(args, "airframe", None))
+    extra: list[Any] = []
+    for spec in args.fault or []:
+        extra += parse_fault_spec(spec, af.actuator_names)
+    _check_controller(args.controller, args)
+    run_dir = Path(args.out) if args.out else default_run_dir(args.case, args.controller)
+    print(f"flying case {args.case} with {args.controller} for {args.duration:g} s "
+          f"-> {run_dir}")
+    try:
+        res = _fly_one(args.case, args.controller, args, run_dir, extra)
+    except KeyboardInterrupt:
+        print(f"interrupted: what was flown so far is in {run_dir}")
+        raise
+    for line in _summary_lines(res):
+        print(line)
+    return 0
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    """Fly a case with the three controllers and print a table like the paper's table 4."""
+    from vtolftc.runfolder import default_run_dir, json_safe
+
+    _check_common(args)
+    for ctrl in CONTROLLER_NAMES:
+        _check_controller(ctrl, args)
+    out = Path(args.out) if args.out else default_run_dir(args.case, "compare")
+    out.mkdir(parents=True, exist_ok=True)
+    results: dict[str, dict[str, Any]] = {}
+    table = ""
+    print(f"comparing gs-shif, shif, lqr on case {args.case} -> {out}")
+    try:
+        for ctrl in CONTROLLER_NAMES:
+            res = _fly_one(args.case, ctrl, args, out / ctrl, [])
+            results[ctrl] = res.metrics
+            print(f"{ctrl}:")
+            for line in _summary_lines(res):
+                print(line)
+    finally:
+        if results:
+            table = comparison_table(args.case, results)
+            (out / "comparison.md").write_text(table + "\n", encoding="utf-8")
+            (out / "comparison.json").write_text(
+                json.dumps(json_safe(results), indent=2) + "\n", encoding="utf-8")
+            try:
+                comparison_plot(args.case, results, out / "rmse.png")
+            except Exception as exc:  # plots never lose the tables
+                print(f"bar chart failed: {exc}")
+    print()
+    print(table)
+    return 0
+
+
+def comparison_table(case: str, results: dict[str, dict[str, Any]]) -> str:
+    """Markdown table like the paper's table 4 (and the paper's numbers for reference)."""
+    lines = [f"Case {case}: RMSE of the reference tracking over t >= 20 s",
+             "", "| FTC method | e_h (m) | e_phi (deg) | e_theta (deg) | e_psi (deg) | "
+             "transition complete (s) | crashed |", "|---|---:|---:|---:|---:|---:|---|"]
+    for ctrl in ("lqr", "shif", "gs-shif"):
+        if ctrl not in results:
+            continue
+        m = results[ctrl]
+        tc = m.get("transition_complete_s")
+
+        def g(x: Any) -> str:
+            return "—" if x is None or not math.isfinite(x) else f"{x:.4f}"
+
+        lines.append(f"| {ctrl.upper()} | {g(m['rmse_altitude_m'])} | {g(m['rmse_roll_deg'])} "
+                     f"| {g(m['rmse_pitch_deg'])} | {g(m['rmse_yaw_deg'])} | "
+                     f"{'—' if tc is None else f'{tc:.2f}'} | {m['crashed']} |")
+    paper = _PAPER_TABLE4.get(str(case))
+    if paper:
+        lines += ["", "Paper (table 4), for reference:", "",
+                  "| FTC method | e_h (m) | e_phi (deg) | e_theta (deg) | e_psi (deg) |",
+                  "|---|---:|---:|---:|---:|"]
+        for ctrl in ("lqr", "shif", "gs-shif"):
+            v = paper[ctrl]
+            lines.append(f"| {ctrl.upper()} | " + " | ".join(f"{x:.4f}" for x in v) + " |")
+    return "\n".join(lines)
+
+
+def comparison_plot(case: str, results: dict[str, dict[str, Any]], path: Path) -> None:
+    """Bar charts of the RMSEs (paper figs 13/14)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    keys = [("rmse_altitude_m", "e_h (m)"), ("rmse_roll_deg", "e_phi (deg)"),
+            ("rmse_pitch_deg", "e_theta (deg)"), ("rmse_yaw_deg", "e_psi (deg)")]
+    ctrls = [c for c in ("lqr", "shif", "gs-shif") if c in results]
+    fig, axs = plt.subplots(1, 4, figsize=(12, 3.5))
+    for a, (k, label) in zip(axs, keys, strict=True):
+        vals = [results[c].get(k) or 0.0 for c in ctrls]
+        a.bar(np.arange(len(ctrls)), vals, color=["tab:red", "tab:blue", "tab:green"][
+            : len(ctrls)])
+        a.set_xticks(np.arange(len(ctrls)), [c.upper() for c in ctrls])
+        a.set_title(label)
+        a.grid(True, axis="y")
+    fig.suptitle(f"RMSE of the reference tracking, case {case}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _case(text: str) -> str:
+    from vtolftc.cli import UsageError
+
+    t = text.strip().removeprefix("case")
+    if t not in ("0", "1", "2"):
+        raise UsageError(f"--case {text!r}: expected 0 (nominal), 1 or 2")
+    return t
+
+
+def register(sub: Any) -> None:
+    """Add ``fly`` and ``compare`` to the ``vtolftc`` sub-commands."""
+    p = sub.add_parser("fly", help="fly one of the paper's cases in-process (run folder)",
+                       description=cmd_fly.__doc__)
+    p.add_argument("--case", default="1", help="fault case: 0 (nominal), 1 or 2 (default 1)")
+    p.add_argument("--controller", default="gs-shif", choices=CONTROLLER_NAMES,
+                   help="attitude controller (default gs-shif)")
+    _common(p)
+    p.add_argument("--fault", action="extend", nargs="+", metavar="SPEC",
+                   help="extra fault(s) ACTUATOR:KIND[=VALUE][@START_S], e.g. "
+                        "rotor_1a:loss=0.5@25 (several allowed)")
+    p.set_defaults(func=_wrap(cmd_fly))
+    p = sub.add_parser("compare", help="fly a case with gs-shif, shif and lqr; table 4",
+                       description=cmd_compare.__doc__)
+    p.add_argument("--case", default="1", help="fault case: 0, 1 or 2 (default 1)")
+    _common(p)
+    p.set_defaults(func=_wrap(cmd_compare))
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--duration", type=float, default=40.0,
+                   help="simulated seconds (default 40)")
+    p.add_argument("--out", default=None, help="output folder (default runs/<case>-...)")
+    p.add_argument("--gains", default=None,
+                   help="gains directory (default firmware_sim/autopilot/gains)")
+    p.add_argument("--airframe", type=Path, default=None,
+                   help="airframe TOML file (default: the shipped DS-1)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+
+
+def _wrap(func: Any) -> Any:
+    def run(args: argparse.Namespace) -> int:
+        args.case = _case(str(args.case))
+        return func(args)
+
+    run.__doc__ = func.__doc__
+    return run

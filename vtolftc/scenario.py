@@ -1,0 +1,272 @@
+"""Scenarios and the in-process runner (above both the vehicle and the autopilot).
+
+A :class:`Scenario` is a list of timed :class:`Action` s: MAVLink commands as a ground station
+sends them (command id and seven params) and fault injections into the vehicle. The same
+scenario is replayed by the in-process runner (:func:`run_scenario`) and by the SITL runner
+through a ground station, so both fly the very same timeline.
+
+:func:`paper_scenario` is the paper's timeline (section 5): start on the ground at home,
+disarmed; t = 1 s arm and take off to 30 m; t = 20 s DO_VTOL_TRANSITION to fixed-wing;
+t = 22 s the case's faults (``fault_cases.toml``) injected into the vehicle; end at 40 s.
+
+The in-process runner is deterministic: vehicle at 1 kHz (RK4), autopilot at 250 Hz (4
+physics steps per control step), the autopilot fed ``decode_hil_state(encode_hil_state(...))``
+of the vehicle truth (bit-identical to what it receives over MAVLink HIL_STATE_QUATERNION),
+its output passed through ``wire_commands`` (float32) before the vehicle. Actions due at a
+control step are executed before that step's ``Autopilot.step``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from airframe.loader import Airframe, load_airframe
+from firmware_sim.autopilot.autopilot import (
+    CMD_COMPONENT_ARM_DISARM,
+    CMD_DO_VTOL_TRANSITION,
+    CMD_NAV_TAKEOFF,
+    Autopilot,
+)
+from firmware_sim.autopilot.interface import (
+    CommandResult,
+    NavState,
+    decode_hil_state,
+    encode_hil_state,
+    wire_commands,
+)
+from firmware_sim.vehicle.faults import Fault, case_description, case_faults
+from firmware_sim.vehicle.model import Vehicle
+from vtolftc.metrics import MetricsAccumulator
+from vtolftc.telemetry import RunObserver, TelemetrySample, VehicleTruth
+
+__all__ = [
+    "Action",
+    "RunResult",
+    "Scenario",
+    "paper_scenario",
+    "run_scenario",
+]
+
+NAN = float("nan")
+
+
+@dataclass(frozen=True)
+class Action:
+    """One timed action of a scenario.
+
+    ``kind`` ``"command"``: a COMMAND_LONG ``command_id`` with ``params`` (7 floats, NaN =
+    default) sent to the autopilot. ``kind`` ``"fault"``: ``fault`` injected into the vehicle
+    (its own ``start_s`` says when it acts; normally equal to ``t_s``).
+    """
+
+    t_s: float
+    kind: str
+    label: str
+    command_id: int = 0
+    params: tuple[float, ...] = ()
+    fault: Fault | None = None
+
+    @property
+    def t_usec(self) -> int:
+        return round(self.t_s * 1e6)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A named, timed list of actions and a duration [s of simulated time]."""
+
+    name: str
+    case: str
+    duration_s: float
+    actions: tuple[Action, ...]
+    description: str = ""
+    transition_start_s: float = 20.0
+
+    @property
+    def faults(self) -> list[Fault]:
+        return [a.fault for a in self.actions if a.fault is not None]
+
+
+def _cmd(t: float, label: str, cid: int, *params: float) -> Action:
+    p = tuple(float(x) for x in params) + (NAN,) * (7 - len(params))
+    return Action(t, "command", label, command_id=cid, params=p)
+
+
+def paper_scenario(case: int | str = 1, duration_s: float = 40.0, *,
+                   airframe: Airframe | None = None, extra_faults: Iterable[Fault] = (),
+                   takeoff_alt_m: float = 30.0, arm_s: float = 1.0,
+                   transition_s: float = 20.0) -> Scenario:
+    """The paper's timeline for fault case ``case`` (0 = nominal, 1, 2), see module docstring.
+
+    ``extra_faults`` are added (each injected at its own start time). The takeoff altitude is
+    sent as NAV_TAKEOFF param7, metres above home.
+    """
+    af = airframe if airframe is not None else load_airframe()
+    if not (math.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration {duration_s!r}: expected a positive number of seconds")
+    faults = list(case_faults(case, af.actuator_names)) + list(extra_faults)
+    actions = [
+        _cmd(arm_s, "arm", CMD_COMPONENT_ARM_DISARM, 1.0, 0.0),
+        _cmd(arm_s, f"takeoff to {takeoff_alt_m:g} m", CMD_NAV_TAKEOFF,
+             NAN, NAN, NAN, NAN, NAN, NAN, takeoff_alt_m),
+        _cmd(transition_s, "transition to fixed-wing", CMD_DO_VTOL_TRANSITION, 4.0, 0.0),
+    ]
+    actions += [Action(f.start_s, "fault", f"fault {f.describe()}", fault=f) for f in faults]
+    actions.sort(key=lambda a: a.t_s)  # stable: commands at equal times keep their order
+    key = str(case).removeprefix("case")
+    return Scenario(name=f"case{key}", case=key, duration_s=float(duration_s),
+                    actions=tuple(actions), description=case_description(key),
+                    transition_start_s=transition_s)
+
+
+@dataclass
+class RunResult:
+    """What a run produced: metrics, events and timing."""
+
+    metrics: dict[str, Any]
+    events: list[tuple[int, str, str]] = field(default_factory=list)
+    wall_time_s: float = 0.0
+    sim_time_s: float = 0.0
+    interrupted: bool = False
+    timing_s: dict[str, float] = field(default_factory=dict)
+    allocation: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else math.inf
+
+
+def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
+                 airframe: Airframe | None = None, gains_dir: str | Path | None = None,
+                 observers: Sequence[RunObserver] = (), physics_hz: int = 1000,
+                 control_hz: int = 250, stop_on_crash: bool = True,
+                 autopilot_setup: Callable[[Autopilot], None] | None = None,
+                 info: dict[str, Any] | None = None) -> RunResult:
+    """Fly ``scenario`` in-process with ``controller``; see the module docstring.
+
+    Observers get ``on_start``, every sample, every event and exactly one ``on_finish``
+    (also on Ctrl-C, which is re-raised after the observers have finished). With
+    ``stop_on_crash`` the run ends at the first crashed sample. ``autopilot_setup`` may
+    change parameters before the flight. ``RunResult.timing_s`` holds the
+    wall time of each part (physics, encode/decode, autopilot, observers).
+    """
+    af = airframe if airframe is not None else load_airframe()
+    if physics_hz % control_hz:
+        raise ValueError(f"physics rate {physics_hz} Hz is not a multiple of the control "
+                         f"rate {control_hz} Hz")
+    n_sub = physics_hz // control_hz
+    ap = Autopilot(af, controller=controller, gains_dir=gains_dir, dt_s=1.0 / control_hz)
+    if autopilot_setup is not None:
+        autopilot_setup(ap)
+    veh = Vehicle(af, dt_usec=1_000_000 // physics_hz)
+    home = veh.sensor_model.home
+    acc = MetricsAccumulator(window_start_s=scenario.transition_start_s)
+    result = RunResult(metrics={})
+    obs = list(observers)
+
+    def event(t_usec: int, kind: str, text: str) -> None:
+        result.events.append((t_usec, kind, text))
+        for o in obs:
+            o.on_event(t_usec, kind, text)
+
+    start_info = {
+        "airframe": af.name, "airframe_sha256": af.sha256,
+        "actuator_names": list(af.actuator_names), "controller": controller,
+        "case": scenario.case, "scenario": scenario.name, "duration_s": scenario.duration_s,
+        "description": scenario.description, "physics_hz": physics_hz,
+        "control_hz": control_hz, "gains_file": str(ap.attitude.gains_path),
+        "gains_sha256": ap.attitude.gains_sha256,
+    }
+    if info:
+        start_info.update(info)
+    for o in obs:
+        o.on_start(start_info)
+
+    actions = sorted(scenario.actions, key=lambda a: a.t_s)
+    i_act = 0
+    n_steps = round(scenario.duration_s * control_hz)
+    t_phys = t_enc = t_ap = t_obs = 0.0
+    pc = time.perf_counter
+    wall0 = pc()
+    n_events = 0
+    try:
+        for _ in range(n_steps):
+            now = veh.time_usec
+            while i_act < len(actions) and actions[i_act].t_usec <= now:
+                a = actions[i_act]
+                i_act += 1
+                if a.kind == "command":
+                    res = ap.command(a.command_id, a.params)
+                    event(now, "command", f"{a.label}: command {a.command_id} -> "
+                          f"{CommandResult(res).name}")
+                elif a.kind == "fault" and a.fault is not None:
+                    veh.inject(a.fault)
+                    event(now, "fault", f"injected {a.fault.describe()}")
+            t0 = pc()
+            x = veh.x
+            truth_nav = NavState(now, x[6:10].copy(), x[10:13].copy(), x[0:3].copy(),
+                                 x[3:6].copy(), float(veh.fm[6]))
+            nav = decode_hil_state(encode_hil_state(truth_nav, home.lat_deg, home.lon_deg,
+                                                    home.alt_m),
+                                   home.lat_deg, home.lon_deg, home.alt_m)
+            t1 = pc()
+            u = ap.step(nav)
+            st = ap.status()
+            t2 = pc()
+            log = ap.event_log
+            while n_events < len(log):
+                te, text = log[n_events]
+                n_events += 1
+                warn = "quad-chute" in text or "denied" in text or "forced" in text
+                event(te, "warning" if warn else "mode", text)
+            cmds = wire_commands(u)
+            truth = None
+            if obs:
+                truth = VehicleTruth(x[0:3].copy(), x[3:6].copy(), x[6:10].copy(),
+                                     np.array(veh.euler_rad), x[10:13].copy(),
+                                     float(veh.fm[6]), veh.actuator_positions,
+                                     veh.effectiveness)
+            sample = TelemetrySample(now, nav, st, truth)
+            acc.add(sample)
+            for o in obs:
+                o.on_sample(sample)
+            t3 = pc()
+            veh.step(cmds, n_sub)
+            t4 = pc()
+            t_enc += t1 - t0
+            t_ap += t2 - t1
+            t_obs += t3 - t2
+            t_phys += t4 - t3
+            if stop_on_crash and acc.crashed:
+                event(now, "warning", f"crash detected at t = {now * 1e-6:.2f} s: run stopped")
+                break
+    except KeyboardInterrupt:
+        result.interrupted = True
+    finally:
+        result.wall_time_s = pc() - wall0
+        result.sim_time_s = veh.time_usec * 1e-6
+        m = acc.result()
+        m["controller"] = controller
+        m["case"] = scenario.case
+        m["allocation"] = ap.allocation_stats
+        if result.interrupted:
+            m["interrupted"] = True
+        result.metrics = m
+        result.allocation = ap.allocation_stats
+        result.timing_s = {"physics": t_phys, "encode_decode": t_enc, "autopilot": t_ap,
+                           "observers": t_obs, "total": result.wall_time_s}
+        for o in obs:
+            # observers must not raise; never lose the others' output
+            with contextlib.suppress(Exception):
+                o.on_finish(m)
+    if result.interrupted:
+        raise KeyboardInterrupt
+    return result
