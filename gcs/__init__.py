@@ -1,1 +1,16 @@
-"""Ground-station library and CLI speaking MAVLink to the autopilot."""
+"""Ground-station library and CLI speaking MAVLink to the autopilot.
+
+:class:`gcs.client.GroundStation` connects (UDP 14550 by default, or any link URL), keeps a
+:class:`gcs.client.VehicleSnapshot`, sends commands with acknowledgement and retries, reads and
+writes parameters and injects faults. ``vtolftc gcs ...`` is its command line.
+"""
+
+from gcs.client import (
+    CommandOutcome,
+    GcsError,
+    GcsTimeout,
+    GroundStation,
+    VehicleSnapshot,
+)
+
+__all__ = ["CommandOutcome", "GcsError", "GcsTimeout", "GroundStation", "VehicleSnapshot"]

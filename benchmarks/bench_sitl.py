@@ -1,0 +1,75 @@
+"""SITL benchmark: real-time factor of the 40 s case in lockstep, and the HIL step round trip.
+
+    python benchmarks/bench_sitl.py [--transport udp|zenoh|both] [--duration 40] [--case 1]
+
+For each transport it flies the case with ``vtolftc.sitl.run_sitl`` (vehicle and autopilot as
+separate processes, ground-station commands, no plots) and reports:
+
+- the real-time factor: simulated seconds / wall seconds from the start hold to the end hold
+  (process start-up excluded);
+- the round trip of one HIL step, measured in the vehicle process: from sending the step's
+  HIL_SENSOR + HIL_STATE_QUATERNION datagram to receiving its HIL_ACTUATOR_CONTROLS (median,
+  p90, p99), and the part of it spent in the autopilot's control step (step, status and the
+  answer), the rest being the two link hops, parsing and the wake-ups;
+
+and, for reference, the in-process run of the same scenario (same autopilot, no links).
+Target of the issue: >= 20x real time over either transport.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+from vtolftc.scenario import paper_scenario, run_scenario
+from vtolftc.sitl import SitlConfig, run_sitl
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--transport", default="both", choices=("udp", "zenoh", "both"))
+    ap.add_argument("--duration", type=float, default=40.0)
+    ap.add_argument("--case", default="1")
+    ap.add_argument("--controller", default="gs-shif")
+    ap.add_argument("--spin-us", type=float, default=0.0,
+                    help="busy-poll time of both processes before sleeping (default 0)")
+    args = ap.parse_args()
+    scenario = paper_scenario(args.case, args.duration)
+
+    t0 = time.perf_counter()
+    ref = run_scenario(scenario, args.controller)
+    wall = time.perf_counter() - t0
+    print(f"in-process: {args.duration:g} s simulated in {wall:.2f} s "
+          f"({args.duration / wall:.1f}x real time); autopilot "
+          f"{1e6 * ref.timing_s['autopilot'] / (args.duration * 250):.0f} us/step, physics "
+          f"{1e6 * ref.timing_s['physics'] / (args.duration * 250):.0f} us/step")
+
+    transports = ("udp", "zenoh") if args.transport == "both" else (args.transport,)
+    print("\n| transport | real-time factor | flight wall (s) | HIL step round trip mean / "
+          "median / p90 / p99 (us) | in autopilot, mean (us/step) | link + rest, mean "
+          "(us/step) |")
+    print("|---|---:|---:|---|---:|---:|")
+    for tr in transports:
+        with tempfile.TemporaryDirectory(prefix=f"bench_sitl_{tr}_") as tmp:
+            res = run_sitl(SitlConfig(case=args.case, controller=args.controller, transport=tr,
+                                      duration_s=args.duration, out_dir=Path(tmp),
+                                      plots=False, spin_us=args.spin_us), scenario)
+            rtt = res.vehicle_summary.get("step_round_trip_us", {})
+            steps = max(1, res.autopilot_summary.get("steps", 1))
+            in_ap = 1e6 * res.autopilot_summary.get("wall_in_autopilot_s", 0.0) / steps
+            sw = res.autopilot_summary.get("step_wall_us", {})
+            nan = float("nan")
+            mean = rtt.get("mean", nan)
+            print(f"| {tr} | {res.real_time_factor:.1f}x | {res.flight_wall_s:.2f} | "
+                  f"{mean:.0f} / {rtt.get('median', nan):.0f} / {rtt.get('p90', nan):.0f} / "
+                  f"{rtt.get('p99', nan):.0f} | {in_ap:.0f} | {mean - in_ap:.0f} |")
+            same = {k: (ref.metrics[k], res.metrics.get(k))
+                    for k in ("rmse_altitude_m", "rmse_roll_deg")}
+            print(f"    autopilot control step in the process: median {sw.get('median', nan):.0f}"
+                  f" us, p99 {sw.get('p99', nan):.0f} us; metrics (in-process, SITL): {same}")
+
+
+if __name__ == "__main__":
+    main()

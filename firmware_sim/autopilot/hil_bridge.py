@@ -1,0 +1,147 @@
+"""The autopilot's end of the HIL link to the simulated vehicle (PX4 SITL style).
+
+:class:`HilBridge` turns what the vehicle sends into the autopilot's inputs and the
+autopilot's outputs into HIL_ACTUATOR_CONTROLS:
+
+- GPS_GLOBAL_ORIGIN gives the geodetic origin of the NED frame (home), needed to decode
+  positions; degE7 / mm are turned back into the decimal degrees and metres they came from.
+- HIL_SENSOR and HIL_STATE_QUATERNION of the same ``time_usec`` form one control step: the
+  navigation state is :func:`interface.decode_hil_state` of the HIL_STATE_QUATERNION (the
+  autopilot has no estimator; HIL_SENSOR and HIL_GPS are kept for health flags and telemetry).
+- :meth:`send_controls` answers a step with ``controls[0:15]`` = :func:`interface.wire_commands`,
+  ``mode`` = MAV_MODE_FLAG_SAFETY_ARMED when armed, ``flags`` bit 0 = lockstep.
+- :meth:`forward_command` sends a fault-injection COMMAND_LONG to the vehicle (faults act in
+  the vehicle, never in the controller); the vehicle's COMMAND_ACK and FAULT_INJECTION_STATUS
+  come back through :attr:`fault_status` and :attr:`vehicle_acks`.
+
+A 1 Hz HEARTBEAT on this link tells the vehicle the autopilot is alive (also while it holds the
+simulation) and, on UDP, gives a ``udp-server`` vehicle its peer address.
+"""
+
+from __future__ import annotations
+
+import collections
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from firmware_sim.autopilot.interface import HilState, NavState, decode_hil_state, wire_commands
+from protocols.link import Link
+
+__all__ = ["HilBridge"]
+
+MAV_MODE_FLAG_SAFETY_ARMED = 128
+_HEARTBEAT_PERIOD_S = 1.0
+
+
+class HilBridge:
+    """Decode the vehicle's HIL stream into :class:`NavState` steps; send the controls."""
+
+    def __init__(self, link: Link, *, lockstep: bool = True) -> None:
+        self.link = link
+        self.lockstep = lockstep
+        self.home: tuple[float, float, float] | None = None
+        self.last_sensor: Any = None
+        self.last_gps: Any = None
+        self.last_state: Any = None
+        self.last_rx_wall = -np.inf
+        self.fault_status: Any = None
+        self.vehicle_acks: collections.deque[Any] = collections.deque(maxlen=32)
+        self._sensor_time: int | None = None
+        self._pending: NavState | None = None
+        self._next_heartbeat = 0.0
+        self.steps_answered = 0
+        self.resent = 0
+        self._last_answer: tuple[int, bytes] | None = None
+        self.decode_errors = 0
+
+    # ------------------------------------------------------------------ input
+    def handle(self, msg: Any) -> None:
+        """Take one message from the vehicle."""
+        self.last_rx_wall = time.monotonic()
+        t = msg.get_type()
+        if t == "HIL_SENSOR":
+            self.last_sensor = msg
+            self._sensor_time = int(msg.time_usec)
+        elif t == "HIL_STATE_QUATERNION":
+            self.last_state = msg
+            if self.home is None:
+                self.decode_errors += 1
+                return
+            t_us = int(msg.time_usec)
+            if self._sensor_time != t_us:
+                return  # a step is the pair; an unpaired state is not a step
+            if self._last_answer is not None and t_us <= self._last_answer[0]:
+                if t_us == self._last_answer[0]:  # the vehicle resent: our answer was lost
+                    self.link.send(self._last_answer[1])
+                    self.resent += 1
+                return
+            try:
+                self._pending = decode_hil_state(self.hil_state(msg), *self.home)
+            except ValueError:
+                self.decode_errors += 1
+        elif t == "HIL_GPS":
+            self.last_gps = msg
+        elif t == "GPS_GLOBAL_ORIGIN":
+            self.home = (float(f"{msg.latitude * 1e-7:.7f}"),
+                         float(f"{msg.longitude * 1e-7:.7f}"),
+                         float(f"{msg.altitude * 1e-3:.3f}"))
+        elif t == "FAULT_INJECTION_STATUS":
+            self.fault_status = msg
+        elif t == "COMMAND_ACK":
+            self.vehicle_acks.append(msg)
+
+    @staticmethod
+    def hil_state(msg: Any) -> HilState:
+        """The wire fields of a HIL_STATE_QUATERNION message."""
+        return HilState(
+            time_usec=int(msg.time_usec),
+            attitude_quaternion=tuple(float(x) for x in msg.attitude_quaternion),
+            rollspeed=float(msg.rollspeed), pitchspeed=float(msg.pitchspeed),
+            yawspeed=float(msg.yawspeed), lat=int(msg.lat), lon=int(msg.lon), alt=int(msg.alt),
+            vx=int(msg.vx), vy=int(msg.vy), vz=int(msg.vz), ind_airspeed=int(msg.ind_airspeed),
+            true_airspeed=int(msg.true_airspeed), xacc=int(msg.xacc), yacc=int(msg.yacc),
+            zacc=int(msg.zacc))
+
+    def peek(self) -> NavState | None:
+        """The navigation state of the step waiting for an answer, if any."""
+        return self._pending
+
+    def take(self) -> NavState | None:
+        """Remove and return the waiting step's navigation state."""
+        nav, self._pending = self._pending, None
+        return nav
+
+    @property
+    def connected(self) -> bool:
+        """True once the vehicle was heard within the last 2 s."""
+        return time.monotonic() - self.last_rx_wall < 2.0
+
+    # ------------------------------------------------------------------ output
+    def send_controls(self, time_usec: int, commands: NDArray[np.float64], armed: bool) -> None:
+        """HIL_ACTUATOR_CONTROLS answering the step at ``time_usec``."""
+        u = np.zeros(16)
+        u[:15] = wire_commands(commands)
+        codec = self.link.codec
+        data = codec.hil_actuator_controls_encode(
+            int(time_usec), u.tolist(), MAV_MODE_FLAG_SAFETY_ARMED if armed else 0,
+            1 if self.lockstep else 0).pack(codec)
+        codec.seq = (codec.seq + 1) & 0xFF
+        self._last_answer = (int(time_usec), data)
+        self.link.send(data)
+        self.steps_answered += 1
+
+    def forward_command(self, msg: Any) -> None:
+        """Send a fault-injection COMMAND_LONG on to the vehicle (same command and params)."""
+        p = [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
+             msg.param7]
+        self.link.send(self.link.codec.command_long_encode(0, 0, int(msg.command), 0, *p))
+
+    def tick(self, now: float | None = None) -> None:
+        """Send the 1 Hz HIL-link heartbeat when due (wall clock)."""
+        now = time.monotonic() if now is None else now
+        if now >= self._next_heartbeat:
+            self._next_heartbeat = now + _HEARTBEAT_PERIOD_S
+            self.link.send(self.link.codec.heartbeat_encode(22, 12, 0, 0, 4))

@@ -1,0 +1,529 @@
+"""The simulated vehicle as a process: a :class:`Vehicle` behind a MAVLink HIL link.
+
+    python -m firmware_sim.vehicle.process --link udp-server://127.0.0.1:4560 [--lockstep]
+        [--realtime] [--airframe FILE] [--seed N] [--noise] [--duration S] [--out DIR]
+
+Physics runs at 1 kHz (the vehicle's RK4 step); every 4 ms of simulated time (one control
+period) the process sends, in one datagram, PX4-SITL style:
+
+- HIL_SENSOR: :meth:`Vehicle.sensors` in HIL units (m/s^2, rad/s, gauss, hPa, deg C),
+  ``fields_updated`` = 0x1FFF (accel, gyro, mag, baro, diff pressure, pressure alt, temp);
+- HIL_GPS at 10 Hz (fix 3D, degE7, mm, cm/s), as PX4's simulators do;
+- HIL_STATE_QUATERNION: the ground truth through
+  :func:`firmware_sim.autopilot.interface.encode_hil_state` (true airspeed in both airspeed
+  fields), the very encoding the in-process runner uses, so the autopilot sees bit-identical
+  inputs in both;
+- GPS_GLOBAL_ORIGIN (first datagram, then at 1 Hz): the geodetic origin of the NED frame, from
+  which the autopilot decodes positions.
+
+It receives HIL_ACTUATOR_CONTROLS: ``controls[0:15]`` are the 15 normalised commands in the
+airframe's actuator order, ``mode`` bit 7 (MAV_MODE_FLAG_SAFETY_ARMED) the armed state (logged;
+the autopilot is responsible for disarmed outputs), ``flags`` bit 0 lockstep.
+
+Lockstep (default): the vehicle advances from ``t`` to ``t + 4 ms`` only once the controls with
+``time_usec == t`` have arrived, so the simulation runs as fast as both processes allow and is
+reproducible. The process ends cleanly (exit status 3) if nothing arrives from the autopilot
+for ``--peer-timeout`` wall seconds (the autopilot sends a 1 Hz HEARTBEAT on this link while it
+holds the simulation). Real-time mode (``--realtime``): free-running at wall-clock pace with the
+latest controls received.
+
+Faults: COMMAND_LONG INJECT_FAILURE (420: OK 0 / OFF 1 / STUCK 2) and the dialect's
+MAV_CMD_INJECT_PARTIAL_LOSS (59900, loss 0..1) forwarded by the autopilot (never sent to the
+controller) act from the next physics step (in lockstep: exactly at the time of the step the
+autopilot was answering). Units and instances map to actuators as
+:mod:`protocols.failure_units` documents (MOTOR 1-8 lift rotors in airframe order, 9-10
+pushers; SERVO 1-5 aileron_left, aileron_right, elevator, rudder_left, rudder_right; instance 0
+= every instance of the unit). A new fault on an actuator replaces its previous one. Every
+fault command is answered with COMMAND_ACK and FAULT_INJECTION_STATUS (also sent at 1 Hz).
+
+Run folder (``--out DIR``): ``vehicle_truth.csv`` (simulated time, NED position and velocity,
+roll/pitch/yaw, body rates, airspeed, then per actuator: position, effectiveness, command; one
+row per control step, flushed every simulated second), ``vehicle_events.jsonl`` (faults,
+start/stop), ``vehicle_summary.json`` (link counters, steps, wall time).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from airframe.loader import Airframe, AirframeError, load_airframe
+from firmware_sim.autopilot.interface import NavState, encode_hil_state
+from firmware_sim.vehicle.faults import Fault, FaultKind
+from firmware_sim.vehicle.model import Vehicle
+from firmware_sim.vehicle.sensors import SensorNoise
+from protocols import open_link
+from protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
+
+__all__ = ["VehicleProcess", "main"]
+
+CONTROL_PERIOD_USEC = 4000
+VEHICLE_SYSTEM_ID = 1
+VEHICLE_COMPONENT_ID = 25   # MAV_COMP_ID_USER1: the simulator, not the autopilot
+FIELDS_ALL = 0x1FFF
+CMD_INJECT_FAILURE = 420
+CMD_INJECT_PARTIAL_LOSS = 59900
+FAILURE_TYPE_OK, FAILURE_TYPE_OFF, FAILURE_TYPE_STUCK = 0, 1, 2
+FAILURE_TYPE_PARTIAL_LOSS = 100
+MAV_RESULT_ACCEPTED, MAV_RESULT_DENIED, MAV_RESULT_UNSUPPORTED = 0, 2, 3
+MAV_RESULT_FAILED = 4
+EXIT_PEER_LOST = 3
+
+
+def _decimal_of_float32(x: float) -> float:
+    """The shortest decimal that the float32 ``x`` stands for (0.2f -> 0.2, not
+    0.20000000298...): COMMAND_LONG params are float32, and a loss typed as 0.2 must act as
+    the 0.2 of an in-process run."""
+    return float(np.format_float_positional(np.float32(x), unique=True))
+
+
+class VehicleProcess:
+    """The vehicle side of the HIL link (see the module docstring)."""
+
+    def __init__(self, link_url: str, *, airframe: Airframe | None = None,
+                 lockstep: bool = True, seed: int = 0, noise: bool = False,
+                 initial_state: np.ndarray | None = None, duration_s: float | None = None,
+                 out_dir: Path | None = None, peer_timeout_s: float = 5.0,
+                 connect_timeout_s: float = 60.0, gps_rate_hz: float = 10.0,
+                 allow_remote: bool = False, log: TextIO | None = None,
+                 parent_pid: int | None = None) -> None:
+        self.airframe = airframe or load_airframe()
+        self.parent_pid = parent_pid
+        self._next_parent_check = 0.0
+        self.spin_s = 0.0
+        """Lockstep: poll this long without sleeping before blocking (wake-up latency)."""
+        self.vehicle = Vehicle(self.airframe, state=initial_state, seed=seed,
+                               noise=SensorNoise.typical() if noise else None)
+        self.table = ActuatorTable.from_names(self.airframe.actuator_names)
+        self.home = self.vehicle.sensor_model.home
+        self.lockstep = lockstep
+        self.duration_usec = None if duration_s is None else round(duration_s * 1e6)
+        self.peer_timeout_s = peer_timeout_s
+        self.connect_timeout_s = connect_timeout_s
+        self.gps_period_usec = round(1e6 / gps_rate_hz) if gps_rate_hz > 0 else 0
+        self.log = log or sys.stderr
+        self.link = open_link(link_url, system_id=VEHICLE_SYSTEM_ID,
+                              component_id=VEHICLE_COMPONENT_ID, allow_remote=allow_remote)
+        self.codec = self.link.codec
+        n = self.airframe.n_actuators
+        self.commands = np.zeros(n)
+        self.armed = False
+        self.faults: dict[str, Fault] = {}
+        self.change_count = 0
+        self.steps = 0
+        self.step_rtt_s: list[float] = []
+        """Lockstep: wall time from sending a step's state to receiving its controls (s)."""
+        self.running = True
+        self._last_peer = time.monotonic()
+        self._next_gps = 0
+        self._next_origin = 0
+        self._next_status = 0
+        self.out_dir = out_dir
+        self._truth: TextIO | None = None
+        self._events: TextIO | None = None
+        self._rows: list[np.ndarray] = []
+        if out_dir is not None:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            self._truth = (out_dir / "vehicle_truth.csv").open("w")
+            cols = ["time_s", "pn_m", "pe_m", "pd_m", "vn_m_s", "ve_m_s", "vd_m_s",
+                    "roll_rad", "pitch_rad", "yaw_rad", "p_rad_s", "q_rad_s", "r_rad_s",
+                    "airspeed_m_s"]
+            for kind in ("pos", "eff", "cmd"):
+                cols += [f"{kind}_{a}" for a in self.airframe.actuator_names]
+            self._truth.write(",".join(cols) + "\n")
+            self._events = (out_dir / "vehicle_events.jsonl").open("w")
+        self.t_wall0 = time.monotonic()
+
+    # ------------------------------------------------------------------ output
+    def _event(self, event: str, text: str, **extra: Any) -> None:
+        rec = {"time_s": self.vehicle.time_usec * 1e-6, "event": event, "text": text, **extra}
+        if self._events is not None:
+            self._events.write(json.dumps(rec) + "\n")
+            self._events.flush()
+
+    def _record(self, flush: bool = True) -> None:
+        if self._truth is None:
+            return
+        v = self.vehicle
+        x = v.x
+        self._rows.append(np.concatenate((
+            [v.time_usec * 1e-6], x[0:6], v.euler_rad, x[10:13], [v.airspeed_m_s],
+            v.actuator_positions, v.eff, self.commands)))
+        if flush and len(self._rows) >= 250:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self._truth is not None and self._rows:
+            np.savetxt(self._truth, np.vstack(self._rows), delimiter=",", fmt="%.9g")
+            self._truth.flush()
+            self._rows.clear()
+
+    def _pack(self, msg: Any) -> bytes:
+        data = msg.pack(self.codec)
+        self.codec.seq = (self.codec.seq + 1) & 0xFF
+        return data
+
+    def state_datagram(self) -> bytes:
+        """HIL_SENSOR [+ HIL_GPS] [+ GPS_GLOBAL_ORIGIN] + HIL_STATE_QUATERNION at the current
+        time, packed back to back in one datagram (the link parses several frames per
+        datagram)."""
+        v = self.vehicle
+        t = v.time_usec
+        c = self.codec
+        parts: list[bytes] = []
+        if t >= self._next_origin:
+            self._next_origin = t + 1_000_000
+            h = self.home
+            parts.append(self._pack(c.gps_global_origin_encode(
+                round(h.lat_deg * 1e7), round(h.lon_deg * 1e7), round(h.alt_m * 1e3), t)))
+        s = v.sensors()
+        a, g, m = s.accel_m_s2, s.gyro_rad_s, s.mag_gauss
+        parts.append(self._pack(c.hil_sensor_encode(
+            t, a[0], a[1], a[2], g[0], g[1], g[2], m[0], m[1], m[2], s.abs_pressure_hpa,
+            s.diff_pressure_hpa, s.pressure_alt_m, s.temperature_c, FIELDS_ALL, 0)))
+        if self.gps_period_usec and t >= self._next_gps:
+            self._next_gps = t + self.gps_period_usec
+            vn, ve, vd = (float(x) for x in s.gps_vel_ned_m_s)
+            cog = round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100) % 36000
+            parts.append(self._pack(c.hil_gps_encode(
+                t, 3, round(s.gps_lat_deg * 1e7), round(s.gps_lon_deg * 1e7),
+                round(s.gps_alt_m * 1e3), 100, 100, min(65535, round(100 * math.hypot(vn, ve))),
+                round(100 * vn), round(100 * ve), round(100 * vd), cog, 12, 0, 0)))
+        nav = NavState(t, v.quaternion, v.omega_body_rad_s, v.position_ned_m,
+                       v.velocity_ned_m_s, v.airspeed_m_s)
+        hs = encode_hil_state(nav, self.home.lat_deg, self.home.lon_deg, self.home.alt_m)
+        parts.append(self._pack(c.hil_state_quaternion_encode(
+            hs.time_usec, hs.attitude_quaternion, hs.rollspeed, hs.pitchspeed, hs.yawspeed,
+            hs.lat, hs.lon, hs.alt, hs.vx, hs.vy, hs.vz, hs.ind_airspeed, hs.true_airspeed,
+            hs.xacc, hs.yacc, hs.zacc)))
+        if t >= self._next_status:
+            self._next_status = t + 1_000_000
+            parts.append(self._pack(self._fault_status_msg()))
+        return b"".join(parts)
+
+    def _fault_status_msg(self) -> Any:
+        motor_f, motor_l = [0] * 16, [0.0] * 16
+        servo_f, servo_l = [0] * 16, [0.0] * 16
+        for name, f in self.faults.items():
+            unit, inst = self.table.unit_instance(name)
+            ftype = {FaultKind.LOSS: FAILURE_TYPE_PARTIAL_LOSS, FaultKind.OFF: FAILURE_TYPE_OFF,
+                     FaultKind.STUCK: FAILURE_TYPE_STUCK}[f.kind]
+            loss = 1.0 if f.kind is FaultKind.OFF else (
+                float(f.loss) if f.kind is FaultKind.LOSS else 0.0)
+            if unit == FAILURE_UNIT_MOTOR:
+                motor_f[inst - 1], motor_l[inst - 1] = ftype, loss
+            else:
+                servo_f[inst - 1], servo_l[inst - 1] = ftype, loss
+        return self.codec.fault_injection_status_encode(
+            self.vehicle.time_usec, self.change_count & 0xFFFF, len(self.table.motors),
+            len(self.table.servos), motor_f, motor_l, servo_f, servo_l)
+
+    # ------------------------------------------------------------------ input
+    def handle(self, msg: Any) -> bool:
+        """Process one message from the autopilot; True if it is the controls for ``t``."""
+        self._last_peer = time.monotonic()
+        kind = msg.get_type()
+        if kind == "HIL_ACTUATOR_CONTROLS":
+            u = np.asarray(msg.controls[: self.airframe.n_actuators], dtype=np.float64)
+            if np.all(np.isfinite(u)):
+                self.commands[:] = u
+            self.armed = bool(msg.mode & 128)
+            return int(msg.time_usec) == self.vehicle.time_usec
+        if kind == "COMMAND_LONG":
+            try:
+                self._command(msg)
+            except Exception as exc:  # never let one command stop the simulation
+                print(f"vehicle: command {msg.command} failed: {exc!r}", file=self.log)
+                self._ack(int(msg.command), MAV_RESULT_FAILED, msg)
+        return False
+
+    def _command(self, msg: Any) -> None:
+        cmd = int(msg.command)
+        if cmd == CMD_INJECT_FAILURE:
+            unit, ftype, inst = msg.param1, msg.param2, msg.param3
+            kinds = {FAILURE_TYPE_OK: None, FAILURE_TYPE_OFF: FaultKind.OFF,
+                     FAILURE_TYPE_STUCK: FaultKind.STUCK}
+            if not math.isfinite(ftype) or int(ftype) not in kinds:
+                return self._ack(cmd, MAV_RESULT_UNSUPPORTED, msg)
+            result = self._apply(unit, inst, kinds[int(ftype)], 0.0)
+        elif cmd == CMD_INJECT_PARTIAL_LOSS:
+            loss = msg.param3
+            if not (math.isfinite(loss) and 0.0 <= loss <= 1.0):
+                return self._ack(cmd, MAV_RESULT_DENIED, msg)
+            kind = None if loss == 0.0 else FaultKind.LOSS
+            result = self._apply(msg.param1, msg.param2, kind, _decimal_of_float32(loss))
+        else:
+            return self._ack(cmd, MAV_RESULT_UNSUPPORTED, msg)
+        self._ack(cmd, result, msg)
+        self.link.send(self._fault_status_msg())
+        return None
+
+    def _apply(self, unit: float, instance: float, kind: FaultKind | None,
+               loss: float) -> int:
+        if not math.isfinite(unit) or int(unit) not in (FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO):
+            return MAV_RESULT_UNSUPPORTED
+        names = self.table.motors if int(unit) == FAILURE_UNIT_MOTOR else self.table.servos
+        inst = int(instance) if math.isfinite(instance) else -1
+        if inst == 0:
+            targets = list(names)
+        elif 1 <= inst <= len(names) and inst == instance:
+            targets = [names[inst - 1]]
+        else:
+            return MAV_RESULT_DENIED
+        t_s = self.vehicle.time_usec * 1e-6
+        for name in targets:
+            if kind is None:
+                self.faults.pop(name, None)
+            else:
+                self.faults[name] = Fault(name, kind, loss if kind is FaultKind.LOSS else 0.0,
+                                          t_s)
+        # rebuild the vehicle's fault set (a new fault replaces the actuator's previous one);
+        # the faults act from the next physics step (Vehicle.step applies due faults first)
+        self.vehicle.clear_faults()
+        for f in self.faults.values():
+            self.vehicle.inject(Fault(f.actuator, f.kind, f.loss, t_s))
+        self.change_count += 1
+        what = "cleared" if kind is None else (
+            f"{loss:.0%} loss" if kind is FaultKind.LOSS else kind.value)
+        self._event("fault", f"{', '.join(targets)}: {what}", actuators=targets,
+                    kind="ok" if kind is None else kind.value, loss=loss)
+        print(f"vehicle: t = {t_s:.3f} s: {', '.join(targets)}: {what}", file=self.log,
+              flush=True)
+        return MAV_RESULT_ACCEPTED
+
+    def _ack(self, cmd: int, result: int, msg: Any) -> None:
+        self.link.send(self.codec.command_ack_encode(
+            cmd, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()))
+
+    # ------------------------------------------------------------------ loops
+    def wait_for_peer(self) -> bool:
+        """Wait until the autopilot is heard (its HIL-link heartbeat), so replies have a
+        destination. False on timeout or stop."""
+        deadline = time.monotonic() + self.connect_timeout_s
+        while self.running and time.monotonic() < deadline and not self._orphaned():
+            msgs = self.link.recv(0.2)
+            if msgs:
+                for m in msgs:
+                    self.handle(m)
+                return True
+        return False
+
+    def _spin(self, link: Any) -> list[Any]:
+        """Poll without sleeping for up to ``spin_s`` (see ``--spin-us``)."""
+        end = time.perf_counter() + self.spin_s
+        while True:
+            msgs = link.recv(0.0)
+            if msgs or time.perf_counter() >= end:
+                return msgs
+
+    def _orphaned(self) -> bool:
+        """True if ``parent_pid`` was given and that process is gone (checked at 1 Hz)."""
+        if self.parent_pid is None:
+            return False
+        now = time.monotonic()
+        if now < self._next_parent_check:
+            return False
+        self._next_parent_check = now + 1.0
+        try:
+            os.kill(self.parent_pid, 0)
+        except ProcessLookupError:
+            print(f"vehicle: parent process {self.parent_pid} is gone: stopping",
+                  file=self.log, flush=True)
+            return True
+        except PermissionError:
+            return False
+        return False
+
+    def _done(self) -> bool:
+        return self.duration_usec is not None and self.vehicle.time_usec >= self.duration_usec
+
+    def run(self) -> int:
+        """Run until the duration, a stop signal or the loss of the autopilot. Exit status."""
+        self._event("start", f"vehicle process, {'lockstep' if self.lockstep else 'real time'}")
+        try:
+            if not self.wait_for_peer():
+                print(f"vehicle: no autopilot on {self.link!r} within "
+                      f"{self.connect_timeout_s:g} s", file=self.log, flush=True)
+                return EXIT_PEER_LOST
+            return self._run_lockstep() if self.lockstep else self._run_realtime()
+        finally:
+            self.close()
+
+    def _run_lockstep(self) -> int:
+        link = self.link
+        v = self.vehicle
+        pc = time.perf_counter
+        if self._done():
+            return 0
+        datagram = self.state_datagram()
+        t_sent = pc()
+        link.send(datagram)
+        while self.running:
+            got = False
+            while not got:
+                msgs = self._spin(link) if self.spin_s > 0 else None
+                if not msgs:
+                    msgs = link.recv(0.5)
+                if not msgs:
+                    if not self.running:
+                        return 0
+                    # lost on the way (e.g. sent before a zenoh subscriber matched) or the
+                    # autopilot holds: send the same bytes again (it answers a step once)
+                    link.send(datagram)
+                    if self._orphaned():
+                        return EXIT_PEER_LOST
+                    if time.monotonic() - self._last_peer > self.peer_timeout_s:
+                        print(f"vehicle: autopilot silent for {self.peer_timeout_s:g} s at "
+                              f"t = {v.time_usec * 1e-6:.3f} s: stopping", file=self.log,
+                              flush=True)
+                        return EXIT_PEER_LOST
+                    continue
+                for m in msgs:
+                    got = self.handle(m) or got
+            self.step_rtt_s.append(pc() - t_sent)
+            self._record(flush=False)
+            v.step(self.commands, CONTROL_PERIOD_USEC // v.dt_usec)
+            self.steps += 1
+            if self._done():
+                break
+            datagram = self.state_datagram()
+            t_sent = pc()
+            link.send(datagram)
+            # bookkeeping while the autopilot computes
+            if len(self._rows) >= 250:
+                self._flush()
+        return 0
+
+    def _run_realtime(self) -> int:
+        link = self.link
+        v = self.vehicle
+        period = CONTROL_PERIOD_USEC * 1e-6
+        next_tick = time.monotonic()
+        while self.running and not self._done():
+            link.send(self.state_datagram())
+            next_tick += period
+            while True:
+                remaining = next_tick - time.monotonic()
+                for m in link.recv(max(0.0, min(remaining, 0.002))):
+                    self.handle(m)
+                if remaining <= 0:
+                    break
+            if time.monotonic() - self._last_peer > self.peer_timeout_s or self._orphaned():
+                print("vehicle: autopilot silent: stopping", file=self.log, flush=True)
+                return EXIT_PEER_LOST
+            if time.monotonic() - next_tick > 1.0:  # fell behind (suspended): resync
+                next_tick = time.monotonic()
+            self._record()
+            v.step(self.commands, CONTROL_PERIOD_USEC // v.dt_usec)
+            self.steps += 1
+        return 0
+
+    def close(self) -> None:
+        """Flush the run folder and close the link. Idempotent."""
+        with contextlib.suppress(Exception):
+            self._flush()
+        wall = time.monotonic() - self.t_wall0
+        summary = {
+            "sim_time_s": self.vehicle.time_usec * 1e-6, "steps": self.steps,
+            "wall_time_s": wall, "lockstep": self.lockstep,
+            "faults": {n: {"kind": f.kind.value, "loss": f.loss, "start_s": f.start_s}
+                       for n, f in self.faults.items()},
+            "link": self.link.stats.as_dict(),
+        }
+        if self.step_rtt_s:
+            rtt = np.asarray(self.step_rtt_s) * 1e6
+            summary["step_round_trip_us"] = {
+                "mean": float(np.mean(rtt)),
+                "median": float(np.median(rtt)), "p90": float(np.percentile(rtt, 90)),
+                "p99": float(np.percentile(rtt, 99)), "n": int(rtt.size)}
+        if self._events is not None:
+            self._event("stop", f"{self.steps} steps, t = {summary['sim_time_s']:.3f} s")
+            self._events.close()
+            self._events = None
+        if self._truth is not None:
+            self._truth.close()
+            self._truth = None
+            assert self.out_dir is not None
+            (self.out_dir / "vehicle_summary.json").write_text(json.dumps(summary, indent=2))
+        self.link.close()
+
+
+def _parse_args(argv: list[str] | None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(
+        prog="python -m firmware_sim.vehicle.process",
+        description="Simulated vehicle behind a MAVLink HIL link (PX4 SITL style).")
+    ap.add_argument("--link", required=True,
+                    help="HIL link URL, e.g. udp-server://127.0.0.1:4560 or "
+                         "zenoh://ds1/hil/up?listen=tcp/127.0.0.1:7447")
+    mode = ap.add_mutually_exclusive_group()
+    mode.add_argument("--lockstep", dest="lockstep", action="store_true", default=True,
+                      help="advance only when the controls for the last step arrived (default)")
+    mode.add_argument("--realtime", dest="lockstep", action="store_false",
+                      help="free-running at wall-clock pace")
+    ap.add_argument("--airframe", type=Path, default=None, help="airframe TOML (default DS-1)")
+    ap.add_argument("--seed", type=int, default=0, help="sensor-noise seed (default 0)")
+    ap.add_argument("--noise", action="store_true", help="typical sensor noise (default none)")
+    ap.add_argument("--duration", type=float, default=None,
+                    help="stop after this many simulated seconds (default: run until stopped)")
+    ap.add_argument("--out", type=Path, default=None, help="run folder for truth telemetry")
+    ap.add_argument("--peer-timeout", type=float, default=5.0,
+                    help="stop if the autopilot is silent this long, wall seconds (default 5)")
+    ap.add_argument("--connect-timeout", type=float, default=60.0,
+                    help="wait this long for the autopilot at start, wall seconds (default 60)")
+    ap.add_argument("--gps-rate", type=float, default=10.0, help="HIL_GPS rate in Hz (10)")
+    ap.add_argument("--allow-remote", action="store_true",
+                    help="allow non-loopback link addresses (containers on separate hosts)")
+    ap.add_argument("--parent-pid", type=int, default=None,
+                    help="stop when this process is gone (used by vtolftc sitl)")
+    ap.add_argument("--spin-us", type=float, default=0.0,
+                    help="lockstep: busy-poll this long for the controls before sleeping "
+                         "(faster on idle cores, costs CPU; default 0)")
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parse_args(argv)
+    for name, val in (("--duration", args.duration), ("--peer-timeout", args.peer_timeout),
+                      ("--connect-timeout", args.connect_timeout)):
+        if val is not None and not (math.isfinite(val) and val > 0):
+            print(f"vehicle: error: {name} {val!r}: expected a positive number of seconds",
+                  file=sys.stderr)
+            return 2
+    try:
+        airframe = load_airframe(args.airframe) if args.airframe else load_airframe()
+        proc = VehicleProcess(
+            args.link, airframe=airframe, lockstep=args.lockstep, seed=args.seed,
+            noise=args.noise, duration_s=args.duration, out_dir=args.out,
+            peer_timeout_s=args.peer_timeout, connect_timeout_s=args.connect_timeout,
+            gps_rate_hz=args.gps_rate, allow_remote=args.allow_remote,
+            parent_pid=args.parent_pid)
+        proc.spin_s = max(0.0, args.spin_us) * 1e-6
+    except (AirframeError, ValueError, OSError) as exc:
+        print(f"vehicle: error: {exc}", file=sys.stderr)
+        return 2
+
+    def stop(_sig: int, _frame: Any) -> None:
+        proc.running = False
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    rc = proc.run()
+    st = proc.link.stats
+    print(f"vehicle: stopped at t = {proc.vehicle.time_usec * 1e-6:.3f} s after {proc.steps} "
+          f"steps; link dropped {st.dropped} (garbage {st.dropped_garbage}, crc "
+          f"{st.dropped_crc}, truncated {st.dropped_truncated})", file=sys.stderr, flush=True)
+    return rc
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,182 @@
+"""Case 1 flown by separate vehicle and autopilot processes through a ground station gives the
+metrics of the in-process run, over UDP and over zenoh; Ctrl-C stops everything cleanly.
+
+Tolerance: none. With the QP solver's wall-clock time limit switched off (``deterministic``,
+on both sides) the lockstep SITL run reproduces the in-process run bit for bit: the autopilot
+decodes the same HIL_STATE_QUATERNION encoding, its commands travel as float32 both ways, the
+commands act at the same control step (simulation hold) and the faults from the same physics
+step; fault magnitudes sent as float32 are read back as the decimal they stand for. (With the
+default 1 ms OSQP time limit even two in-process runs differ in the 6th digit, by how loaded the
+machine is.)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from firmware_sim.autopilot.process import make_deterministic
+from protocols import open_link, parse_link_url
+from vtolftc.scenario import paper_scenario, run_scenario
+from vtolftc.sitl import SitlConfig, SitlRun, run_sitl
+
+pytestmark = pytest.mark.slow
+
+DURATION_S = 30.0  # transition at 20 s, faults at 22 s, fixed-wing from about 28 s
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return run_scenario(paper_scenario(1, DURATION_S), "gs-shif",
+                        autopilot_setup=make_deterministic).metrics
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, float) and math.isnan(a):
+        return b is None or (isinstance(b, float) and math.isnan(b))
+    return a == b
+
+
+def _spray_garbage(run: SitlRun) -> None:
+    """Garbage and truncated frames into every port a stranger can reach: the vehicle's HIL
+    endpoint and the autopilot's ground-station endpoint."""
+    junk = [b"\x00garbage\xff" * 4, b"\xfd\x40\x00\x00\x07truncated", bytes(range(200))]
+    run.wait_hold(0, 60.0)  # both processes up and talking (held at t = 0)
+    if run.cfg.transport == "udp":
+        port = parse_link_url(run.urls["vehicle"]).port
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            for j in junk:
+                sock.sendto(j, ("127.0.0.1", port))
+        for j in junk:
+            run.gs.link.send(j)  # from the ground station's socket, the autopilot's peer
+        return
+    hil = parse_link_url(run.urls["vehicle"]).listen[0]
+    gcs = parse_link_url(run.urls["autopilot_gcs"]).listen[0]
+    for url in (f"zenoh://ds1/hil/down?connect={hil}", f"zenoh://ds1/gcs/down?connect={gcs}"):
+        with open_link(url) as link:
+            deadline = time.monotonic() + 10.0
+            while not link.transport.ready() and time.monotonic() < deadline:
+                time.sleep(0.02)
+            for j in junk:
+                link.send(j)
+            time.sleep(0.2)
+
+
+@pytest.mark.parametrize("transport", ["udp", "zenoh"])
+def test_case1_sitl_equals_in_process(transport, reference, tmp_path):
+    """Also with garbage thrown at every reachable port before the flight."""
+    cfg = SitlConfig(case="1", transport=transport, duration_s=DURATION_S, out_dir=tmp_path,
+                     deterministic=True, plots=False)
+    with SitlRun(cfg) as run:
+        run.start()
+        _spray_garbage(run)
+        res = run.fly(paper_scenario(1, DURATION_S))
+    m = res.metrics
+    assert not m["crashed"] and m["transition_complete_s"] is not None
+    assert m["samples"] == reference["samples"] == round(DURATION_S * 250)
+    keys = [k for k in reference if k != "allocation"]
+    diff = {k: (reference[k], m.get(k)) for k in keys if not _same(reference[k], m.get(k))}
+    assert not diff, f"SITL ({transport}) differs from in-process: {diff}"
+    assert m["allocation"]["counts"] == reference["allocation"]["counts"]
+    assert [o["result"] for o in res.outcomes] == ["ACCEPTED"] * len(res.outcomes)
+    assert len(res.outcomes) == 3 + 6  # arm, takeoff, transition; 6 actuator faults
+    assert (tmp_path / "autopilot" / "telemetry.csv").is_file()
+    assert (tmp_path / "vehicle" / "vehicle_truth.csv").is_file()
+    # the garbage was dropped and counted, and nothing else was
+    assert res.vehicle_summary["link"]["dropped"] >= 2, res.vehicle_summary["link"]
+    assert res.autopilot_summary["gcs_links"][0]["dropped"] >= 2
+    assert res.autopilot_summary["hil_link"]["dropped"] == 0
+    print(f"{transport}: {res.real_time_factor:.1f}x real time")
+
+
+def _children_of(out: Path) -> list[int]:
+    pids = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                cmd = (d / "cmdline").read_bytes()
+            except OSError:
+                continue
+            if str(out).encode() in cmd:
+                pids.append(int(d.name))
+    return pids
+
+
+def test_ctrl_c_stops_both_processes_and_keeps_the_run_folder(tmp_path):
+    out = tmp_path / "run"
+    p = subprocess.Popen([sys.executable, "-m", "vtolftc.cli", "sitl", "--case", "1",
+                          "--duration", "40", "--out", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline and not (out / "autopilot" / "telemetry.csv").exists():
+            time.sleep(0.2)
+        time.sleep(1.0)
+        kids = [pid for pid in _children_of(out) if pid != p.pid]
+        assert len(kids) == 2, kids
+        p.send_signal(signal.SIGINT)
+        rc = p.wait(timeout=60.0)
+        err = p.stderr.read().decode()
+        assert rc == 130, err
+        assert "Traceback" not in err
+        time.sleep(0.5)
+        alive = [pid for pid in kids if Path(f"/proc/{pid}").exists()
+                 and b"Z" not in Path(f"/proc/{pid}/stat").read_bytes().split(b")")[-1][:3]]
+        assert not alive, f"left running: {alive}"
+        assert (out / "autopilot" / "metrics.json").is_file()
+        assert (out / "vehicle" / "vehicle_truth.csv").stat().st_size > 0
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait(10.0)
+        for pid in _children_of(out):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+
+
+def test_realtime_mode_flies_at_wall_clock_pace(tmp_path):
+    """Real-time vehicle: no hold, commands sent when the telemetry shows their time."""
+    scenario = paper_scenario(1, 4.0, arm_s=0.5)
+    res = run_sitl(SitlConfig(case="1", realtime=True, duration_s=4.0, out_dir=tmp_path,
+                              plots=False), scenario)
+    assert [o["result"] for o in res.outcomes] == ["ACCEPTED", "ACCEPTED"]  # arm, takeoff
+    assert 0.5 < res.real_time_factor < 1.5, res.real_time_factor
+    # an autopilot that falls behind skips to the newest state (as PX4 does): on a loaded
+    # machine not every 4 ms step gets a control step
+    assert res.metrics["samples"] >= 0.3 * 4.0 * 250
+    assert res.metrics["final_altitude_m"] > 0.5  # climbing
+
+
+def test_children_stop_when_the_runner_is_killed(tmp_path):
+    """SIGKILL leaves no chance to clean up: the processes watch their parent instead."""
+    out = tmp_path / "run"
+    code = ("import time, pathlib; from vtolftc.sitl import SitlConfig, SitlRun; "
+            f"r = SitlRun(SitlConfig(out_dir=pathlib.Path({str(out)!r}), plots=False)); "
+            "r.start(); print('up', flush=True); time.sleep(120)")
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE)
+    try:
+        assert p.stdout.readline().strip() == b"up"
+        kids = [pid for pid in _children_of(out) if pid != p.pid]
+        assert len(kids) == 2
+        p.kill()
+        p.wait(10.0)
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline and any(Path(f"/proc/{k}").exists() for k in kids):
+            time.sleep(0.2)
+        assert not [k for k in kids if Path(f"/proc/{k}").exists()]
+        assert "parent process" in (out / "autopilot.log").read_text()
+    finally:
+        if p.poll() is None:
+            p.kill()
+        for pid in _children_of(out):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)

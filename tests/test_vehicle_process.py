@@ -1,0 +1,189 @@
+"""The vehicle process against a scripted autopilot: HIL messages, lockstep, fault commands,
+run folder, and the clean exit when the autopilot vanishes."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from firmware_sim.autopilot.interface import HilState, NavState, decode_hil_state, encode_hil_state
+from firmware_sim.vehicle.model import Vehicle
+from firmware_sim.vehicle.process import VehicleProcess
+from protocols import open_link
+from protocols.netutil import free_udp_port
+
+
+class _Harness:
+    """A VehicleProcess on a free UDP port, run in a thread; ``ap`` is the test's link."""
+
+    def __init__(self, tmp_path) -> None:
+        port = free_udp_port()
+        self.proc = VehicleProcess(f"udp-server://127.0.0.1:{port}", out_dir=tmp_path,
+                                   peer_timeout_s=5.0, connect_timeout_s=5.0)
+        self.ap = open_link(f"udp-client://127.0.0.1:{port}", system_id=1, component_id=1)
+        self.rc: list[int] = []
+        self.thread = threading.Thread(target=lambda: self.rc.append(self.proc.run()),
+                                       daemon=True)
+        self.thread.start()
+        self.ap.send(self.ap.codec.heartbeat_encode(22, 12, 0, 0, 3))
+
+    def step_msgs(self, timeout: float = 3.0) -> dict[str, object]:
+        """Messages of one state datagram, by type."""
+        got: dict[str, object] = {}
+        deadline = time.monotonic() + timeout
+        while "HIL_STATE_QUATERNION" not in got and time.monotonic() < deadline:
+            for m in self.ap.recv(0.2):
+                got[m.get_type()] = m
+        return got
+
+    def controls(self, t_us: int, u: list[float] | None = None, armed: bool = True) -> None:
+        c = [0.0] * 16 if u is None else list(u) + [0.0] * (16 - len(u))
+        self.ap.send(self.ap.codec.hil_actuator_controls_encode(t_us, c, 128 if armed else 0, 1))
+
+    def command(self, cmd: int, *p: float) -> list[object]:
+        """Send a COMMAND_LONG; messages received until its ACK (and 0.1 s more)."""
+        self.ap.recv(0.0)
+        params = list(p) + [math.nan] * (7 - len(p))
+        self.ap.send(self.ap.codec.command_long_encode(0, 0, cmd, 0, *params))
+        out: list[object] = []
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline and not any(
+                m.get_type() == "COMMAND_ACK" for m in out):
+            out += self.ap.recv(0.1)
+        out += self.ap.recv(0.1)
+        return out
+
+    def close(self) -> None:
+        self.proc.running = False
+        self.thread.join(5.0)
+        self.ap.close()
+
+
+@pytest.fixture()
+def harness(tmp_path):
+    h = _Harness(tmp_path)
+    yield h
+    h.close()
+
+
+def test_state_datagram_and_lockstep(harness):
+    got = harness.step_msgs()
+    assert {"GPS_GLOBAL_ORIGIN", "HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION"} <= set(got)
+    sensor, state, origin = got["HIL_SENSOR"], got["HIL_STATE_QUATERNION"], \
+        got["GPS_GLOBAL_ORIGIN"]
+    assert sensor.time_usec == state.time_usec == 0 and sensor.fields_updated == 0x1FFF
+    # at rest on the gear: the accelerometer reads -g (up) in FRD, pressure near the home's
+    assert sensor.zacc == pytest.approx(-9.81, abs=0.05)
+    assert 990.0 < sensor.abs_pressure < 1013.25
+    home = (origin.latitude * 1e-7, origin.longitude * 1e-7, origin.altitude * 1e-3)
+    # the HIL_STATE_QUATERNION is encode_hil_state of the truth, exactly as in-process
+    ref = Vehicle()
+    nav = NavState(0, ref.quaternion, ref.omega_body_rad_s, ref.position_ned_m,
+                   ref.velocity_ned_m_s, ref.airspeed_m_s)
+    h = ref.sensor_model.home
+    expect = encode_hil_state(nav, h.lat_deg, h.lon_deg, h.alt_m)
+    wire = HilState(state.time_usec, tuple(state.attitude_quaternion), state.rollspeed,
+                    state.pitchspeed, state.yawspeed, state.lat, state.lon, state.alt, state.vx,
+                    state.vy, state.vz, state.ind_airspeed, state.true_airspeed)
+    assert wire == expect
+    assert decode_hil_state(wire, *home).pos_ned_m[2] == pytest.approx(ref.position_ned_m[2],
+                                                                       abs=1e-3)
+    # lockstep: controls for another time do not advance the vehicle
+    harness.controls(4000)
+    late = harness.ap.recv(0.7)  # at most a resend of the t = 0 datagram
+    assert all(m.time_usec == 0 for m in late if m.get_type() == "HIL_SENSOR")
+    assert harness.proc.vehicle.time_usec == 0
+    harness.controls(0)
+    got = harness.step_msgs()
+    assert got["HIL_SENSOR"].time_usec == 4000 and harness.proc.vehicle.time_usec == 4000
+    assert "HIL_GPS" not in got  # 10 Hz: next one at 100 ms
+
+
+def test_faults_applied_acknowledged_and_reported(harness):
+    harness.step_msgs()
+    names = harness.proc.airframe.actuator_names
+    out = harness.command(59900, 101.0, 4.0, 0.5)
+    ack = next(m for m in out if m.get_type() == "COMMAND_ACK")
+    assert ack.command == 59900 and ack.result == 0
+    st = next(m for m in out if m.get_type() == "FAULT_INJECTION_STATUS")
+    assert st.motor_count == 10 and st.servo_count == 5
+    assert st.motor_failure[3] == 100 and st.motor_loss[3] == pytest.approx(0.5)
+    # servo 3 = elevator OFF (420, FAILURE_TYPE_OFF)
+    out = harness.command(420, 102.0, 1.0, 3.0)
+    assert next(m for m in out if m.get_type() == "COMMAND_ACK").result == 0
+    harness.controls(0)
+    harness.step_msgs()
+    eff = harness.proc.vehicle.effectiveness
+    assert eff[names.index("rotor_2b")] == 0.5 and eff[names.index("elevator")] == 0.0
+    assert np.count_nonzero(eff != 1.0) == 2
+    # a new fault on an actuator replaces the old one; loss 0 clears
+    harness.command(59900, 101.0, 4.0, 0.2)
+    harness.command(59900, 102.0, 3.0, 0.0)
+    harness.controls(4000)
+    harness.step_msgs()
+    eff = harness.proc.vehicle.effectiveness
+    assert eff[names.index("rotor_2b")] == 0.8 and eff[names.index("elevator")] == 1.0
+    # refusals: bad instance, bad loss, unknown unit, unknown failure type
+    for args, result in (((101.0, 11.0, 0.5), 2), ((101.0, 1.0, 1.5), 2),
+                         ((105.0, 1.0, 0.5), 3)):
+        out = harness.command(59900, *args)
+        assert next(m for m in out if m.get_type() == "COMMAND_ACK").result == result
+    out = harness.command(420, 101.0, 5.0, 1.0)
+    assert next(m for m in out if m.get_type() == "COMMAND_ACK").result == 3
+
+
+def test_run_folder_written_on_stop(harness, tmp_path):
+    harness.step_msgs()
+    harness.command(59900, 101.0, 0.0, 0.1)  # instance 0: every motor
+    for k in range(5):
+        harness.controls(4000 * k)
+        harness.step_msgs()
+    harness.close()
+    truth = np.loadtxt(tmp_path / "vehicle_truth.csv", delimiter=",", skiprows=1)
+    assert truth.shape[0] == 5 and truth[-1, 0] == pytest.approx(0.016)
+    header = (tmp_path / "vehicle_truth.csv").read_text().splitlines()[0].split(",")
+    assert truth[-1, header.index("eff_rotor_1a")] == pytest.approx(0.9)
+    assert truth[-1, header.index("eff_elevator")] == 1.0
+    events = [json.loads(x) for x in (tmp_path / "vehicle_events.jsonl").read_text().splitlines()]
+    assert [e["event"] for e in events][-1] == "stop"
+    assert any(e["event"] == "fault" and len(e["actuators"]) == 10 for e in events)
+    summary = json.loads((tmp_path / "vehicle_summary.json").read_text())
+    assert summary["steps"] == 5 and summary["link"]["dropped"] == 0
+
+
+def test_process_exits_when_the_autopilot_vanishes():
+    port = free_udp_port()
+    p = subprocess.Popen([sys.executable, "-m", "firmware_sim.vehicle.process", "--link",
+                          f"udp-server://127.0.0.1:{port}", "--peer-timeout", "1",
+                          "--connect-timeout", "20"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    try:
+        ap = open_link(f"udp-client://127.0.0.1:{port}")
+        deadline = time.monotonic() + 20.0
+        got = []
+        while not got and time.monotonic() < deadline:
+            ap.send(ap.codec.heartbeat_encode(22, 12, 0, 0, 3))
+            got = ap.recv(0.5)
+        assert got, "the vehicle never answered"
+        ap.close()  # the autopilot vanishes
+        rc = p.wait(timeout=20.0)
+        err = p.stderr.read().decode()
+        assert rc == 3 and "silent" in err
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait(5.0)
+
+
+def test_bad_arguments_exit_2():
+    r = subprocess.run([sys.executable, "-m", "firmware_sim.vehicle.process", "--link",
+                        "udp-server://8.8.8.8:4560"], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 2 and "loopback" in r.stderr and "Traceback" not in r.stderr

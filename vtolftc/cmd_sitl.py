@@ -1,0 +1,134 @@
+"""``vtolftc sitl``: fly a paper case with the vehicle and the autopilot as two processes.
+
+    vtolftc sitl --case 1 --controller gs-shif [--transport udp|zenoh] [--realtime]
+                 [--duration 40] [--out DIR] [--compare]
+
+Starts ``firmware_sim.vehicle.process`` and ``firmware_sim.autopilot.process`` on free
+loopback ports (UDP, or embedded zenoh peers on tcp/127.0.0.1), flies the case through a
+ground station with the real MAVLink commands (arm, takeoff, transition, fault injection with
+SYS_FAILURE_EN = 1) at the scenario's simulated times, stops both processes (also on Ctrl-C)
+and prints the metrics, computed by the same function as the in-process run. ``--compare``
+also flies the case in-process and prints both side by side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+__all__ = ["METRIC_ROWS", "register"]
+
+METRIC_ROWS = (
+    ("rmse_altitude_m", "RMSE altitude (m)"),
+    ("rmse_roll_deg", "RMSE roll (deg)"),
+    ("rmse_pitch_deg", "RMSE pitch (deg)"),
+    ("rmse_yaw_deg", "RMSE yaw (deg)"),
+    ("transition_complete_s", "transition complete (s)"),
+    ("final_altitude_m", "final altitude (m)"),
+    ("final_airspeed_m_s", "final airspeed (m/s)"),
+    ("crashed", "crashed"),
+)
+
+
+def register(sub: Any) -> None:
+    """Add the ``sitl`` sub-command."""
+    p = sub.add_parser("sitl", help="fly a case with separate vehicle and autopilot processes "
+                                    "over MAVLink (UDP or zenoh)",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--case", default="1", help="fault case: 0 (nominal), 1 or 2 (default 1)")
+    p.add_argument("--controller", default="gs-shif", help="gs-shif (default), shif or lqr")
+    p.add_argument("--transport", default="udp", help="udp (default) or zenoh")
+    p.add_argument("--realtime", action="store_true",
+                   help="real-time vehicle instead of lockstep (commands land a few steps late)")
+    p.add_argument("--duration", type=float, default=40.0,
+                   help="simulated seconds (default 40)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="run folder (default runs/sitl-case<N>-<controller>-<transport>-<UTC>)")
+    p.add_argument("--airframe", type=Path, default=None, help="airframe TOML (default DS-1)")
+    p.add_argument("--gains-dir", type=Path, default=None, help="directory of the gain files")
+    p.add_argument("--deterministic", action="store_true",
+                   help="no wall-clock time limit in the allocation QP (same result whatever "
+                        "the CPU load; also for --compare)")
+    p.add_argument("--compare", action="store_true",
+                   help="also fly the case in-process and compare the metrics")
+    p.set_defaults(func=cmd_sitl)
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        return "nan" if math.isnan(v) else f"{v:.4f}"
+    return str(v)
+
+
+def cmd_sitl(args: argparse.Namespace) -> int:
+    """Start the processes, fly, stop, print the metrics."""
+    from vtolftc.cli import UsageError
+
+    if args.transport not in ("udp", "zenoh"):
+        raise UsageError(f"--transport {args.transport!r}: expected udp or zenoh")
+    if args.controller not in ("gs-shif", "shif", "lqr"):
+        raise UsageError(f"--controller {args.controller!r}: expected gs-shif, shif or lqr")
+    if not (math.isfinite(args.duration) and 0 < args.duration <= 3600):
+        raise UsageError(f"--duration {args.duration!r}: expected 0 < seconds <= 3600")
+    case = str(args.case).removeprefix("case")
+    from firmware_sim.vehicle.faults import FaultError, load_cases
+
+    if f"case{case}" not in load_cases():
+        raise UsageError(f"--case {args.case!r}: expected one of "
+                         f"{', '.join(k.removeprefix('case') for k in load_cases())}")
+    from vtolftc.runfolder import default_run_dir
+    from vtolftc.scenario import paper_scenario
+    from vtolftc.sitl import SitlConfig, SitlError, run_sitl
+
+    af = None
+    if args.airframe is not None:
+        from airframe.loader import load_airframe
+
+        af = load_airframe(args.airframe)
+    try:
+        scenario = paper_scenario(case, args.duration, airframe=af)
+    except (FaultError, ValueError) as exc:
+        raise UsageError(str(exc)) from None
+    out = args.out or default_run_dir(case, f"{args.controller}-sitl-{args.transport}")
+    cfg = SitlConfig(case=case, controller=args.controller, transport=args.transport,
+                     realtime=args.realtime, duration_s=args.duration, out_dir=out,
+                     airframe=args.airframe, gains_dir=args.gains_dir,
+                     deterministic=args.deterministic)
+    mode = "real time" if args.realtime else "lockstep"
+    print(f"SITL {scenario.name} ({scenario.description}), {args.controller}, "
+          f"{args.transport}, {mode}; run folder {out}", flush=True)
+    try:
+        res = run_sitl(cfg, scenario)
+    except SitlError as exc:
+        raise RuntimeError(f"{exc} (run folder kept: {out})") from None
+    except KeyboardInterrupt:
+        print(f"interrupted: processes stopped, run folder kept: {out}")
+        raise
+    for o in res.outcomes:
+        line = f"  t = {o['t_s']:6.2f} s  {o['label']}: {o['command']} {o['result']}"
+        print(line + (f" ({o['detail']})" if o["result"] != "ACCEPTED" and o["detail"] else ""))
+    ref = None
+    if args.compare:
+        from firmware_sim.autopilot.process import make_deterministic
+        from vtolftc.scenario import run_scenario
+
+        ref = run_scenario(scenario, args.controller, airframe=af, gains_dir=args.gains_dir,
+                           autopilot_setup=make_deterministic if args.deterministic
+                           else None).metrics
+    head = f"| metric | SITL ({args.transport}) |" + (" in-process |" if ref else "")
+    print("\n" + head)
+    print("|---|---:|" + ("---:|" if ref else ""))
+    for key, label in METRIC_ROWS:
+        row = f"| {label} | {_fmt(res.metrics.get(key))} |"
+        if ref is not None:
+            row += f" {_fmt(ref.get(key))} |"
+        print(row)
+    print(f"\nsimulated {res.sim_time_s:.2f} s in {res.flight_wall_s:.2f} s of wall time "
+          f"({res.real_time_factor:.1f}x real time); metrics in {out}/autopilot/metrics.json")
+    return 0

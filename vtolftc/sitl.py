@@ -1,0 +1,384 @@
+"""SITL runner: the vehicle and the autopilot as separate processes, flown by a ground station.
+
+:class:`SitlRun` starts ``python -m firmware_sim.vehicle.process`` and ``python -m
+firmware_sim.autopilot.process`` (each in its own process group, output in log files of the
+run folder) on free loopback ports, over UDP or zenoh (embedded peers, explicit
+``tcp/127.0.0.1`` endpoints, no scouting), connects a :class:`gcs.client.GroundStation` and
+flies a :class:`vtolftc.scenario.Scenario` by sending the real MAVLink commands: arming,
+NAV_TAKEOFF, DO_VTOL_TRANSITION, and the faults as MAV_CMD_INJECT_PARTIAL_LOSS /
+INJECT_FAILURE after setting SYS_FAILURE_EN = 1. The autopilot forwards the faults to the
+vehicle process; the controller never sees them.
+
+Timing (lockstep, the default): the ground station is not in the lockstep loop, so a command
+sent "when the telemetry says t" would land some steps late, by an amount that depends on the
+machine's load. The runner therefore uses the autopilot's simulation hold (parameter
+``SIM_HOLD_MS``, see :mod:`firmware_sim.autopilot.gcs_endpoint`): the autopilot starts held at
+t = 0; for each action time T the runner sets SIM_HOLD_MS = T (releasing the previous hold),
+waits for the autopilot's ``SIM_HOLD`` notice (NAMED_VALUE_INT) that it stopped before the
+control step at T, sends the commands (each acknowledged) and moves on. Commands then act at
+exactly the control step at which the in-process runner executes them, and a fault forwarded
+to the vehicle arrives before the controls of that step, so it acts from the same physics
+step as the in-process ``Vehicle.inject`` (fault magnitudes travel as float32 and are read back
+as the decimal they stand for: 0.2, not 0.200000003). The autopilot's inputs are bit-identical
+to the in-process run's (same HIL_STATE_QUATERNION encoding, float32 commands both ways), so
+with ``deterministic=True`` (and the in-process run given
+:func:`firmware_sim.autopilot.process.make_deterministic`) every metric is *equal*, tested over
+UDP and zenoh. Without it, the allocator's OSQP ``time_limit`` (1 ms of wall clock) lets the
+machine's load change a QP solution now and then: two in-process runs then already differ
+around the 6th significant digit, and so does SITL against in-process.
+
+Real-time mode (``realtime=True``): no hold; each action is sent when the ground station's
+telemetry shows the simulated time has reached it, so it lands tens of milliseconds (a few
+control steps) late and the metrics differ slightly from the in-process run.
+
+Stopping: after the last action the hold is set to the scenario's end; once held there, the
+autopilot is stopped with SIGTERM (it writes ``metrics.json``), then the vehicle. Ctrl-C or any
+error stops both the same way (SIGTERM to the process group, SIGKILL after a grace period);
+the run folder is kept.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from gcs.client import CommandOutcome, GcsError, GroundStation
+from protocols.netutil import free_tcp_port, free_udp_port
+
+__all__ = ["SitlConfig", "SitlError", "SitlResult", "SitlRun", "run_sitl"]
+
+TRANSPORTS = ("udp", "zenoh")
+
+
+class SitlError(RuntimeError):
+    """A SITL run could not start or did not complete (the message says why)."""
+
+
+@dataclass
+class SitlConfig:
+    """What to fly and how.
+
+    ``duration_s``: simulated seconds; ``out_dir``: run folder (created); ``hold_timeout_s``:
+    wall seconds allowed per simulated second between two actions (plus a fixed 60 s).
+    """
+
+    case: str = "1"
+    controller: str = "gs-shif"
+    transport: str = "udp"
+    realtime: bool = False
+    duration_s: float = 40.0
+    out_dir: Path = Path("runs/sitl")
+    airframe: Path | None = None
+    gains_dir: Path | None = None
+    vehicle: str = "ds1"
+    startup_timeout_s: float = 120.0
+    hold_timeout_s: float = 5.0
+    deterministic: bool = False
+    """Autopilot without the QP solver's wall-clock time limit (see
+    :func:`firmware_sim.autopilot.process.make_deterministic`)."""
+    plots: bool = True
+    hold_at_start: bool = True
+    """Lockstep: start held at t = 0 (needed by :meth:`SitlRun.fly`); False = free-running."""
+    failure_injection: bool = True
+    spin_us: float = 0.0
+    """Busy-poll time of both processes before sleeping on the HIL link (``--spin-us``)."""
+    """Start the autopilot with SYS_FAILURE_EN = 1."""
+    extra_autopilot_args: list[str] = field(default_factory=list)
+    extra_vehicle_args: list[str] = field(default_factory=list)
+
+
+@dataclass
+class SitlResult:
+    """Metrics (from the autopilot's run folder) and timing of a SITL run."""
+
+    metrics: dict[str, Any]
+    sim_time_s: float
+    flight_wall_s: float
+    out_dir: Path
+    outcomes: list[dict[str, Any]] = field(default_factory=list)
+    autopilot_summary: dict[str, Any] = field(default_factory=dict)
+    vehicle_summary: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated seconds per wall second of the flight (start hold to end hold)."""
+        return self.sim_time_s / self.flight_wall_s if self.flight_wall_s > 0 else math.inf
+
+
+def _python() -> str:
+    return sys.executable or "python3"
+
+
+class SitlRun:
+    """Two processes and a ground station (see the module docstring). Use as a context
+    manager: the processes are always stopped on exit."""
+
+    def __init__(self, config: SitlConfig) -> None:
+        if config.transport not in TRANSPORTS:
+            raise ValueError(f"transport {config.transport!r}: expected udp or zenoh")
+        self.cfg = config
+        self.out = Path(config.out_dir)
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self._logs: list[Any] = []
+        self.gs: GroundStation | None = None
+        self._hold_cond = threading.Condition()
+        self._hold_ms: int | None = None
+        self.urls: dict[str, str] = {}
+
+    # ------------------------------------------------------------------ urls
+    def _urls(self) -> tuple[str, str, str, str]:
+        """(vehicle HIL, autopilot HIL, autopilot GCS, ground station) link URLs."""
+        v = self.cfg.vehicle
+        if self.cfg.transport == "udp":
+            hil, gcs = free_udp_port(), free_udp_port()
+            return (f"udp-server://127.0.0.1:{hil}", f"udp-client://127.0.0.1:{hil}",
+                    f"udp-client://127.0.0.1:{gcs}", f"udp-server://127.0.0.1:{gcs}")
+        hil, gcs = free_tcp_port(), free_tcp_port()
+        return (f"zenoh://{v}/hil/up?listen=tcp/127.0.0.1:{hil}",
+                f"zenoh://{v}/hil/down?connect=tcp/127.0.0.1:{hil}",
+                f"zenoh://{v}/gcs/up?listen=tcp/127.0.0.1:{gcs}",
+                f"zenoh://{v}/gcs/down?connect=tcp/127.0.0.1:{gcs}")
+
+    # ------------------------------------------------------------------ processes
+    def _spawn(self, name: str, args: list[str]) -> None:
+        log = (self.out / f"{name}.log").open("wb")
+        self._logs.append(log)
+        env = dict(os.environ)
+        env.setdefault("PYTHONUNBUFFERED", "1")
+        self.procs[name] = subprocess.Popen(
+            [_python(), *args], stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            start_new_session=True, env=env)
+
+    def _check_alive(self) -> None:
+        for name, p in self.procs.items():
+            rc = p.poll()
+            if rc is not None:
+                tail = ""
+                with contextlib.suppress(OSError):
+                    tail = (self.out / f"{name}.log").read_text(errors="replace")[-800:]
+                raise SitlError(f"the {name} process ended early (exit status {rc}); end of "
+                                f"{self.out / (name + '.log')}:\n{tail}")
+
+    def start(self) -> None:
+        """Start both processes and connect the ground station (autopilot held at t = 0)."""
+        cfg = self.cfg
+        self.out.mkdir(parents=True, exist_ok=True)
+        v_url, a_hil, a_gcs, gs_url = self._urls()
+        self.urls = {"vehicle": v_url, "autopilot_hil": a_hil, "autopilot_gcs": a_gcs,
+                     "ground_station": gs_url}
+        common = []
+        if cfg.airframe is not None:
+            common += ["--airframe", str(cfg.airframe)]
+        mode = ["--realtime"] if cfg.realtime else ["--lockstep"]
+        # the ground station first: a udp-server must be bound before the autopilot sends
+        if cfg.transport == "udp":
+            self.gs = GroundStation(gs_url)
+        common += ["--parent-pid", str(os.getpid())]  # no orphans if this process is killed
+        if cfg.spin_us > 0:
+            common += ["--spin-us", f"{cfg.spin_us:g}"]
+        self._spawn("vehicle", ["-m", "firmware_sim.vehicle.process", "--link", v_url, *mode,
+                                *common, "--out", str(self.out / "vehicle"),
+                                "--peer-timeout", "30", "--connect-timeout",
+                                str(cfg.startup_timeout_s), *cfg.extra_vehicle_args])
+        ap_args = ["-m", "firmware_sim.autopilot.process", "--hil-link", a_hil, "--gcs-link",
+                   a_gcs, "--no-default-gcs", *mode, *common, "--controller", cfg.controller,
+                   "--out", str(self.out / "autopilot"), "--case", str(cfg.case),
+                   "--vehicle-timeout", "30",
+                   "--param", f"SYS_FAILURE_EN={1 if cfg.failure_injection else 0}"]
+        if not cfg.realtime and cfg.hold_at_start:
+            ap_args += ["--hold-ms", "0"]
+        if cfg.deterministic:
+            ap_args.append("--deterministic")
+        if not cfg.plots:
+            ap_args.append("--no-plots")
+        if cfg.gains_dir is not None:
+            ap_args += ["--gains-dir", str(cfg.gains_dir)]
+        self._spawn("autopilot", ap_args + list(cfg.extra_autopilot_args))
+        if self.gs is None:
+            self.gs = GroundStation(gs_url)
+        self.gs.add_listener(self._on_message)
+        deadline = time.monotonic() + cfg.startup_timeout_s
+        while self.gs.snapshot().heartbeat_age_s > 2.0:
+            self._check_alive()
+            if time.monotonic() > deadline:
+                raise SitlError(f"no heartbeat from the autopilot within "
+                                f"{cfg.startup_timeout_s:g} s (see {self.out}/autopilot.log)")
+            time.sleep(0.05)
+
+    def _on_message(self, m: Any) -> None:
+        if m.get_type() == "NAMED_VALUE_INT":
+            name = m.name if isinstance(m.name, str) else m.name.decode(errors="replace")
+            if name.rstrip("\x00") == "SIM_HOLD":
+                with self._hold_cond:
+                    self._hold_ms = int(m.value)
+                    self._hold_cond.notify_all()
+
+    def wait_hold(self, t_ms: int, timeout_s: float) -> None:
+        """Wait for the autopilot's notice that it holds at ``t_ms``."""
+        deadline = time.monotonic() + timeout_s
+        with self._hold_cond:
+            while self._hold_ms != t_ms:
+                self._check_alive()
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise SitlError(f"the simulation did not reach t = {t_ms / 1000:g} s within "
+                                    f"{timeout_s:g} s (last hold {self._hold_ms} ms)")
+                self._hold_cond.wait(min(left, 0.2))
+
+    def hold_at(self, t_ms: int, prev_ms: int) -> None:
+        """Release the current hold and wait until the simulation holds at ``t_ms``."""
+        assert self.gs is not None
+        self.gs.param_set("SIM_HOLD_MS", t_ms)
+        budget = 60.0 + self.cfg.hold_timeout_s * max(0, t_ms - prev_ms) / 1000.0
+        self.wait_hold(t_ms, budget)
+
+    # ------------------------------------------------------------------ flight
+    def fly(self, scenario: Any) -> SitlResult:
+        """Fly ``scenario`` (a :class:`vtolftc.scenario.Scenario`) and return the metrics."""
+        from airframe.loader import load_airframe
+
+        assert self.gs is not None
+        cfg = self.cfg
+        af = load_airframe(cfg.airframe) if cfg.airframe else load_airframe()
+        groups: dict[int, list[Any]] = {}
+        for a in sorted(scenario.actions, key=lambda a: a.t_s):
+            groups.setdefault(math.ceil(round(a.t_s * 1e6) / 1000), []).append(a)
+        end_ms = round(scenario.duration_s * 1000)
+        outcomes: list[dict[str, Any]] = []
+        if cfg.realtime:
+            wall0 = time.monotonic()
+            for t_ms, actions in sorted(groups.items()):
+                if t_ms >= end_ms:
+                    break
+                self._wait_sim(t_ms / 1000.0)
+                outcomes += self._execute(actions, af, t_ms)
+            self._wait_sim(scenario.duration_s)
+            flight_wall = time.monotonic() - wall0
+        else:
+            self.wait_hold(0, cfg.startup_timeout_s)
+            wall0 = time.monotonic()
+            prev = 0
+            for t_ms, actions in sorted(groups.items()):
+                if t_ms >= end_ms:
+                    break
+                if t_ms != prev:
+                    self.hold_at(t_ms, prev)
+                    prev = t_ms
+                outcomes += self._execute(actions, af, t_ms)
+            self.hold_at(end_ms, prev)
+            flight_wall = time.monotonic() - wall0
+        self.stop()
+        metrics = _read_json(self.out / "autopilot" / "metrics.json")
+        if not metrics:
+            raise SitlError(f"the autopilot wrote no metrics (see {self.out}/autopilot.log)")
+        result = SitlResult(
+            metrics=metrics, sim_time_s=float(metrics.get("sim_time_s", scenario.duration_s)),
+            flight_wall_s=flight_wall, out_dir=self.out, outcomes=outcomes,
+            autopilot_summary=_read_json(self.out / "autopilot" / "autopilot_summary.json"),
+            vehicle_summary=_read_json(self.out / "vehicle" / "vehicle_summary.json"))
+        (self.out / "sitl.json").write_text(json.dumps({
+            "config": {k: str(v) if isinstance(v, Path) else v
+                       for k, v in cfg.__dict__.items()},
+            "real_time_factor": result.real_time_factor, "flight_wall_s": flight_wall,
+            "outcomes": outcomes, "metrics": metrics}, indent=2, default=str))
+        return result
+
+    def _wait_sim(self, t_s: float) -> None:
+        assert self.gs is not None
+        deadline = time.monotonic() + 60.0 + 2.0 * t_s
+        while self.gs.snapshot().sim_time_s < t_s:
+            self._check_alive()
+            if time.monotonic() > deadline:
+                raise SitlError(f"simulated time did not reach {t_s:g} s")
+            time.sleep(0.002)
+
+    def _execute(self, actions: list[Any], af: Any, t_ms: int) -> list[dict[str, Any]]:
+        assert self.gs is not None
+        out = []
+        for a in actions:
+            if a.kind == "command":
+                res = self.gs.command_long(a.command_id, list(a.params))
+                outs = [res]
+            elif a.kind == "fault" and a.fault is not None:
+                f = a.fault
+                kind = f.kind.value if hasattr(f.kind, "value") else str(f.kind)
+                loss = float(f.loss) if kind == "loss" else None
+                outs = [self.gs.inject(f.actuator, loss=loss, kind=kind)]
+            else:
+                continue
+            for res in outs:
+                out.append({"t_s": t_ms / 1000.0, "label": a.label, "command": res.name,
+                            "result": res.result_name, "detail": res.detail})
+                if res.result is None:
+                    raise SitlError(f"t = {t_ms / 1000:g} s: {a.label}: no COMMAND_ACK")
+        return out
+
+    # ------------------------------------------------------------------ stop
+    def stop(self, grace_s: float = 10.0) -> None:
+        """SIGTERM the autopilot (it writes its metrics), then the vehicle; SIGKILL whatever
+        is still alive after ``grace_s``. Idempotent."""
+        for name in ("autopilot", "vehicle"):
+            p = self.procs.get(name)
+            if p is None or p.poll() is not None:
+                continue
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(p.pid, signal.SIGTERM)
+            try:
+                p.wait(timeout=grace_s)
+            except subprocess.TimeoutExpired:
+                with contextlib.suppress(ProcessLookupError, PermissionError):
+                    os.killpg(p.pid, signal.SIGKILL)
+                p.wait(timeout=5.0)
+
+    def close(self) -> None:
+        """Stop the processes, close the ground station and the log files."""
+        try:
+            self.stop()
+        finally:
+            if self.gs is not None:
+                self.gs.close()
+            for f in self._logs:
+                with contextlib.suppress(OSError):
+                    f.close()
+
+    def __enter__(self) -> SitlRun:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def run_sitl(config: SitlConfig, scenario: Any = None) -> SitlResult:
+    """Start, fly (default: ``paper_scenario(case, duration)``) and stop; always cleans up."""
+    if scenario is None:
+        from vtolftc.scenario import paper_scenario
+
+        scenario = paper_scenario(config.case, config.duration_s)
+    with SitlRun(config) as run:
+        try:
+            run.start()
+            return run.fly(scenario)
+        except GcsError as exc:
+            raise SitlError(f"ground station: {exc}") from exc
+
+
+def outcome_line(o: CommandOutcome) -> str:
+    """One line for a command outcome (CLI output)."""
+    return str(o)
