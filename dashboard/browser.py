@@ -1,0 +1,200 @@
+"""Drive the dashboard page in a real headless Chromium (Selenium), for tests and benchmarks.
+
+Uses the system's Chromium and chromedriver (Debian packages ``chromium`` and
+``chromium-driver``); nothing is ever downloaded (the driver path is always given, so
+Selenium Manager stays out of it). WebGL runs on SwiftShader (software), so the 3-D view
+renders without a GPU.
+
+The page exposes its state in ``data-*`` attributes of ``#vtolftc-status`` (link, mode, vtol,
+armed, update, north, altitude, airspeed) and the command results in ``#vtolftc-commands``
+(see :mod:`dashboard.model`); :class:`DashboardPage` reads them in one script call each.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+__all__ = ["DashboardPage", "find_chromedriver", "find_chromium"]
+
+_STATUS_JS = ("const e = document.getElementById('vtolftc-status');"
+              "return e && e.dataset.link ? Object.assign({}, e.dataset) : null;")
+_COMMANDS_JS = ("const e = document.getElementById('vtolftc-commands');"
+                "if (!e) return [];"
+                "return Array.from(e.querySelectorAll('.vtolftc-cmd'))"
+                ".map(d => [d.dataset.state, d.innerText, Number(d.dataset.seq)]);")
+# Counts, inside the page, how often the displayed update number changes (what the user sees);
+# event-driven (MutationObserver), so it adds no polling load to a busy renderer.
+_COUNTER_JS = """
+window.__vtolftcUpdates = 0; window.__vtolftcLast = null; window.__vtolftcT0 = performance.now();
+if (window.__vtolftcObs) window.__vtolftcObs.disconnect();
+window.__vtolftcObs = new MutationObserver(() => {
+  const e = document.getElementById('vtolftc-status');
+  const u = e ? e.dataset.update : null;
+  if (u !== null && u !== window.__vtolftcLast) { window.__vtolftcUpdates++;
+                                                   window.__vtolftcLast = u; }
+});
+window.__vtolftcObs.observe(document.body, {childList: true, subtree: true,
+                                             attributes: true, attributeFilter: ['data-update']});
+"""
+
+
+def find_chromium() -> str | None:
+    """Path of a Chromium binary (``$CHROMIUM`` first), None if there is none."""
+    env = os.environ.get("CHROMIUM")
+    if env and Path(env).exists():
+        return env
+    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
+        p = shutil.which(name)
+        if p:
+            return p
+    return None
+
+
+def find_chromedriver() -> str | None:
+    """Path of chromedriver (``$CHROMEDRIVER`` first), None if there is none."""
+    env = os.environ.get("CHROMEDRIVER")
+    if env and Path(env).exists():
+        return env
+    p = shutil.which("chromedriver")
+    if p:
+        return p
+    for cand in ("/usr/lib/chromium/chromedriver", "/usr/bin/chromedriver"):
+        if Path(cand).exists():
+            return cand
+    return None
+
+
+class DashboardPage:
+    """A headless Chromium showing the dashboard at ``url``.
+
+    Raises:
+        RuntimeError: chromium or chromedriver missing (the message says what to install).
+    """
+
+    def __init__(self, url: str, *, width: int = 1400, height: int = 900,
+                 timeout_s: float = 60.0) -> None:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.options import Options
+        from selenium.webdriver.chrome.service import Service
+
+        chromium, driver = find_chromium(), find_chromedriver()
+        if chromium is None:
+            raise RuntimeError("no chromium found (apt-get install -y chromium)")
+        if driver is None:
+            raise RuntimeError("no chromedriver found (apt-get install -y chromium-driver)")
+        opts = Options()
+        opts.binary_location = chromium
+        for a in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                  f"--window-size={width},{height}", "--use-angle=swiftshader",
+                  "--enable-unsafe-swiftshader", "--disable-gpu-sandbox",
+                  "--no-first-run", "--disable-extensions", "--disable-background-networking",
+                  "--disable-component-update", "--disable-sync"):
+            opts.add_argument(a)
+        self.driver = webdriver.Chrome(service=Service(driver), options=opts)
+        self.driver.set_page_load_timeout(timeout_s)
+        self.driver.set_script_timeout(timeout_s)
+        self.driver.get(url)
+
+    # -- reading -------------------------------------------------------------------------
+    def status(self) -> dict[str, str] | None:
+        """The status panel's data attributes (None before the first update arrived)."""
+        return self.driver.execute_script(_STATUS_JS)
+
+    def commands(self) -> list[tuple[str, str, int]]:
+        """(state, text, sequence number) of the command results shown, newest first."""
+        return [tuple(x) for x in self.driver.execute_script(_COMMANDS_JS)]
+
+    def wait(self, predicate: Callable[[dict[str, str]], bool], timeout_s: float,
+             what: str) -> dict[str, str]:
+        """Poll the status until ``predicate(status)``; AssertionError with the last status."""
+        deadline = time.monotonic() + timeout_s
+        st: dict[str, str] | None = None
+        while time.monotonic() < deadline:
+            st = self.status()
+            if st is not None and predicate(st):
+                return st
+            time.sleep(0.1)
+        raise AssertionError(f"page: timed out after {timeout_s:g} s waiting for {what}; "
+                             f"last status {st}; commands {self.commands()[:3]}")
+
+    # -- acting --------------------------------------------------------------------------
+    def click(self, text: str) -> None:
+        """Click the button labelled ``text`` (a real mouse click through the driver)."""
+        from selenium.webdriver.common.by import By
+
+        for b in self.driver.find_elements(By.TAG_NAME, "button"):
+            if b.text.strip() == text:
+                b.click()
+                return
+        raise AssertionError(f"page: no button {text!r}")
+
+    def press(self, button: str, timeout_s: float = 10.0) -> tuple[str, str, int]:
+        """Click ``button`` and wait for the page to show the result of the command it sent:
+        (state, text, seq) with state accepted / refused / no answer / error."""
+        cmds = self.commands()
+        seq0 = cmds[0][2] if cmds else 0
+        self.click(button)
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            cmds = self.commands()
+            new = [c for c in cmds if c[2] > seq0 and c[0] != "pending"]
+            if new:
+                return new[-1]                 # the oldest new one: this click's
+            time.sleep(0.05)
+        raise AssertionError(f"page: no result for {button!r} within {timeout_s:g} s: "
+                             f"{self.commands()[:3]}")
+
+    def press_until_accepted(self, button: str, timeout_s: float) -> tuple[str, str, int]:
+        """Press ``button`` until its command is accepted (e.g. arming is refused while the
+        autopilot has no navigation data yet); returns the accepted result."""
+        deadline = time.monotonic() + timeout_s
+        res: tuple[str, str, int] | None = None
+        while time.monotonic() < deadline:
+            res = self.press(button, timeout_s=max(1.0, deadline - time.monotonic()))
+            if res[0] == "accepted":
+                return res
+            time.sleep(0.5)
+        raise AssertionError(f"page: {button!r} not accepted within {timeout_s:g} s; last "
+                             f"result {res}")
+
+    def start_update_counter(self) -> None:
+        """Start counting, in the page, the status updates it displays."""
+        self.driver.execute_script(_COUNTER_JS)
+
+    def update_rate(self) -> tuple[int, float]:
+        """(updates seen since :meth:`start_update_counter`, seconds elapsed) in the page."""
+        n, ms = self.driver.execute_script(
+            "return [window.__vtolftcUpdates, performance.now() - window.__vtolftcT0];")
+        return int(n), float(ms) / 1000.0
+
+    def screenshot(self, path: Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.driver.save_screenshot(str(path))
+        return path
+
+    def screenshot_array(self) -> Any:
+        """The page as an RGB uint8 array (H, W, 3)."""
+        import io
+
+        import numpy as np
+        from PIL import Image
+
+        png = self.driver.get_screenshot_as_png()
+        return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self.driver.quit()
+
+    def __enter__(self) -> DashboardPage:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
