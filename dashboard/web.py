@@ -73,6 +73,7 @@ class Dashboard:
         airframe: the airframe (default: the shipped DS-1) for geometry and actuator names.
         ground_station: an already open ground station to use instead of opening ``url``
             (it is not closed by :meth:`close`).
+        allow_remote: allow a non-loopback address in ``url`` (autopilot on another host).
 
     Raises:
         RuntimeError: the ground-station link or the web port cannot be opened.
@@ -81,7 +82,7 @@ class Dashboard:
     def __init__(self, url: str = "udp-server://127.0.0.1:14550", *, host: str = "127.0.0.1",
                  port: int = 8080, rate_hz: float = 10.0, airframe: Any = None,
                  ground_station: Any = None, plot_hz: float = 4.0,
-                 verbose: bool = False) -> None:
+                 verbose: bool = False, allow_remote: bool = False) -> None:
         import viser
 
         from gcs.client import GcsError, GroundStation
@@ -96,7 +97,7 @@ class Dashboard:
         self._own_gs = ground_station is None
         if ground_station is None:
             try:
-                ground_station = GroundStation(url)
+                ground_station = GroundStation(url, allow_remote=allow_remote)
             except GcsError as exc:
                 raise RuntimeError(str(exc)) from None
         self.gs = ground_station

@@ -45,7 +45,8 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
     from dashboard.web import Dashboard
 
     af = load_airframe(args.airframe)
-    dash = Dashboard(args.url, host=args.host, port=args.port, rate_hz=args.rate, airframe=af)
+    dash = Dashboard(args.url, host=args.host, port=args.port, rate_hz=args.rate, airframe=af,
+                     allow_remote=args.allow_remote)
     print(f"dashboard: {dash.page_url}  (autopilot link {args.url}; Ctrl-C to stop)",
           flush=True)
     try:
@@ -82,7 +83,8 @@ def register(sub: Any) -> None:
     p.add_argument("--airframe", type=Path, default=None,
                    help="airframe TOML file (default DS-1)")
     p.add_argument("--allow-remote", action="store_true",
-                   help="allow --host to be a non-loopback address")
+                   help="allow non-loopback addresses for --host and --url (dashboard or "
+                        "autopilot on another host)")
     p.add_argument("--duration", type=float, default=None,
                    help="stop after this many seconds (default: until Ctrl-C)")
     p.set_defaults(func=cmd_dashboard)

@@ -24,10 +24,22 @@ _PAPER_TABLE4 = {
 
 
 def default_observers(run_dir: Path, args: argparse.Namespace) -> list[Any]:
-    """The observers of a run (the run-folder writer; the lead adds the rerun recorder)."""
+    """The observers of a run: the run-folder writer (telemetry, events, metrics, plots) and
+    the rerun recorder (``run.rrd`` always; a live viewer too with ``--rerun``)."""
+    from dashboard.recording import RerunRecorder
     from vtolftc.runfolder import RunFolderWriter
 
-    return [RunFolderWriter(run_dir, plots=not getattr(args, "no_plots", False))]
+    return [RunFolderWriter(run_dir, plots=not getattr(args, "no_plots", False)),
+            RerunRecorder(run_dir / "run.rrd", live=bool(getattr(args, "rerun", False)))]
+
+
+def _keep_viewer(observers: list[Any]) -> None:
+    """With ``--rerun`` and no display, keep the web viewer serving until Ctrl-C (a no-op
+    when a native viewer was spawned)."""
+    for obs in observers:
+        wait = getattr(obs, "wait_viewer", None)
+        if wait is not None:
+            wait()
 
 
 def _check_common(args: argparse.Namespace) -> None:
@@ -53,8 +65,12 @@ def _fly_one(case: str, controller: str, args: argparse.Namespace, run_dir: Path
             "actions": [{"t_s": a.t_s, "kind": a.kind, "label": a.label,
                          "command_id": a.command_id, "params": list(a.params)}
                         for a in scen.actions]}
-    return run_scenario(scen, controller, airframe=af, gains_dir=args.gains,
-                        observers=default_observers(run_dir, args), info=info)
+    observers = default_observers(run_dir, args)
+    res = run_scenario(scen, controller, airframe=af, gains_dir=args.gains,
+                       observers=observers, info=info)
+    if getattr(args, "rerun", False):
+        _keep_viewer(observers)
+    return res
 
 
 def _check_controller(controller: str, args: argparse.Namespace) -> None:
@@ -232,6 +248,9 @@ def register(sub: Any) -> None:
     p.add_argument("--fault", action="extend", nargs="+", metavar="SPEC",
                    help="extra fault(s) ACTUATOR:KIND[=VALUE][@START_S], e.g. "
                         "rotor_1a:loss=0.5@25 (several allowed)")
+    p.add_argument("--rerun", action="store_true",
+                   help="also show the run live in rerun (a native viewer if there is a "
+                        "display, else a web viewer on 127.0.0.1 whose URL is printed)")
     p.set_defaults(func=_wrap(cmd_fly))
     p = sub.add_parser("compare", help="fly a case with gs-shif, shif and lqr; table 4",
                        description=cmd_compare.__doc__)

@@ -53,6 +53,11 @@ def register(sub: Any) -> None:
                         "the CPU load; also for --compare)")
     p.add_argument("--compare", action="store_true",
                    help="also fly the case in-process and compare the metrics")
+    p.add_argument("--dashboard", action="store_true",
+                   help="also serve the web dashboard on 127.0.0.1 (its own ground-station "
+                        "link to the autopilot); best with --realtime")
+    p.add_argument("--dashboard-port", type=int, default=8080,
+                   help="web port of --dashboard (default 8080)")
     p.set_defaults(func=cmd_sitl)
 
 
@@ -64,6 +69,23 @@ def _fmt(v: Any) -> str:
     if isinstance(v, float):
         return "nan" if math.isnan(v) else f"{v:.4f}"
     return str(v)
+
+
+def _start_dashboard(args: argparse.Namespace, cfg: Any, af: Any) -> Any:
+    """Serve the dashboard on its own ground-station link (a free loopback UDP port that the
+    autopilot is told to stream to), before the processes start."""
+    from protocols.netutil import free_udp_port
+    from vtolftc.cli import UsageError
+
+    if not 0 <= args.dashboard_port <= 65535:
+        raise UsageError(f"--dashboard-port {args.dashboard_port}: expected 0..65535")
+    from dashboard.web import Dashboard
+
+    port = free_udp_port()
+    cfg.extra_autopilot_args += ["--gcs-link", f"udp-client://127.0.0.1:{port}"]
+    dash = Dashboard(f"udp-server://127.0.0.1:{port}", port=args.dashboard_port, airframe=af)
+    print(f"dashboard: {dash.page_url}", flush=True)
+    return dash
 
 
 def cmd_sitl(args: argparse.Namespace) -> int:
@@ -103,6 +125,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     mode = "real time" if args.realtime else "lockstep"
     print(f"SITL {scenario.name} ({scenario.description}), {args.controller}, "
           f"{args.transport}, {mode}; run folder {out}", flush=True)
+    dash = _start_dashboard(args, cfg, af) if args.dashboard else None
     try:
         res = run_sitl(cfg, scenario)
     except SitlError as exc:
@@ -110,6 +133,9 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print(f"interrupted: processes stopped, run folder kept: {out}")
         raise
+    finally:
+        if dash is not None:
+            dash.close()
     for o in res.outcomes:
         line = f"  t = {o['t_s']:6.2f} s  {o['label']}: {o['command']} {o['result']}"
         print(line + (f" ({o['detail']})" if o["result"] != "ACCEPTED" and o["detail"] else ""))
