@@ -11,6 +11,10 @@ separate processes, ground-station commands, no plots) and reports:
   HIL_SENSOR + HIL_STATE_QUATERNION datagram to receiving its HIL_ACTUATOR_CONTROLS (median,
   p90, p99), and the part of it spent in the autopilot's control step (step, status and the
   answer), the rest being the two link hops, parsing and the wake-ups;
+- the per-part breakdown of a step: in the autopilot process ``Autopilot.step``, status +
+  HIL_ACTUATOR_CONTROLS, and the work after the answer (metrics, run-folder writer, ground-
+  station streams; overlaps with the vehicle); in the vehicle process the truth snapshot +
+  physics, sensors + encoding of the next datagram, and its send;
 
 and, for reference, the in-process run of the same scenario (same autopilot, no links).
 Target of the issue: >= 20x real time over either transport.
@@ -69,6 +73,13 @@ def main() -> None:
                     for k in ("rmse_altitude_m", "rmse_roll_deg")}
             print(f"    autopilot control step in the process: median {sw.get('median', nan):.0f}"
                   f" us, p99 {sw.get('p99', nan):.0f} us; metrics (in-process, SITL): {same}")
+            ap_parts = res.autopilot_summary.get("part_mean_us", {})
+            veh_parts = res.vehicle_summary.get("part_mean_us", {})
+            step_wall = 1e6 * res.flight_wall_s / steps
+            print(f"    per step ({step_wall:.0f} us of wall time each): autopilot process "
+                  + ", ".join(f"{k} {x:.0f} us" for k, x in ap_parts.items())
+                  + "; vehicle process " + ", ".join(f"{k} {x:.0f} us"
+                                                     for k, x in veh_parts.items()))
 
 
 if __name__ == "__main__":

@@ -212,8 +212,8 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                     event(now, "fault", f"injected {a.fault.describe()}")
             t0 = pc()
             x = veh.x
-            truth_nav = NavState(now, x[6:10].copy(), x[10:13].copy(), x[0:3].copy(),
-                                 x[3:6].copy(), float(veh.fm[6]))
+            # views of the state: encode_hil_state only reads them
+            truth_nav = NavState(now, x[6:10], x[10:13], x[0:3], x[3:6], float(veh.fm[6]))
             nav = decode_hil_state(encode_hil_state(truth_nav, home.lat_deg, home.lon_deg,
                                                     home.alt_m),
                                    home.lat_deg, home.lon_deg, home.alt_m)

@@ -221,6 +221,19 @@ def _as_vec(x: Any, n: int, name: str) -> np.ndarray:
     return a
 
 
+_F64 = np.dtype(np.float64)
+_perf_counter = time.perf_counter
+_OSQP_SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
+_OSQP_SOLVED_INACCURATE = int(osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
+
+
+def _vec_arg(x: Any, n: int, name: str) -> np.ndarray:
+    """``_as_vec`` with a fast exit for a float64 array of shape (n,) (no copy either way)."""
+    if type(x) is np.ndarray and x.dtype == _F64 and x.shape == (n,):
+        return x
+    return _as_vec(x, n, name)
+
+
 def rate_limited_bounds(
     u_min: np.ndarray,
     u_max: np.ndarray,
@@ -705,6 +718,30 @@ def box_qp_polish(
     return u, bool(ok), int(it)  # u stays within [lo, hi] by construction
 
 
+@numba.njit(cache=True)
+def _polish_duals(H, q, lo, hi, x, do_polish, max_iter, tol, lam):
+    """Post-solve work of one step (compiled): whether OSQP's iterate ``x`` is finite, and
+    when ``do_polish`` the polish from it (``_box_qp_active_set``); when it certifies the
+    optimum ``u``, the bound multipliers for the next warm start are written into ``lam``
+    (``-(H u + q)`` on the bounds held, 0 on the free variables). Returns
+    ``(u, x_finite, polished)``; ``u`` is ``x`` itself when not polished."""
+    n = x.size
+    finite = True
+    for i in range(n):
+        if not np.isfinite(x[i]):
+            finite = False
+            break
+    if not (do_polish and finite):
+        return x, finite, False
+    u, ok, _ = _box_qp_active_set(H, q, lo, hi, x, max_iter, tol)
+    if not ok:
+        return x, finite, False
+    g = H @ u + q
+    for i in range(n):
+        lam[i] = 0.0 if (u[i] > lo[i] and u[i] < hi[i]) else -g[i]
+    return u, finite, True
+
+
 class QPAllocator:
     """Weighted least-squares control allocation with box (and rate) limits, solved by OSQP.
 
@@ -885,26 +922,25 @@ class QPAllocator:
         self, q: np.ndarray, lo: np.ndarray, hi: np.ndarray, B_changed: bool
     ) -> tuple[np.ndarray, str, int, int, float]:
         """Update the data and solve; returns (x, status string, status value, iter, time)."""
+        s = self._solver
         if self._prob is None:
             self._setup(q, lo, hi)
+            s = self._solver
             if self._u_last is not None:
                 self._warm_start(np.clip(self._u_last, lo, hi), self._zeros_u)
+        elif s is not None:
+            s.update_data_vec(q=q, l=lo, u=hi)
+            if B_changed:
+                s.update_data_mat(P_x=self._Px, P_i=None, A_x=None, A_i=None)
+        elif B_changed:
+            self._prob.update(q=q, l=lo, u=hi, Px=self._Px.copy())
         else:
-            s = self._solver
-            if s is not None:
-                s.update_data_vec(q=q, l=lo, u=hi)
-                if B_changed:
-                    s.update_data_mat(P_x=self._Px, P_i=None, A_x=None, A_i=None)
-            elif B_changed:
-                self._prob.update(q=q, l=lo, u=hi, Px=self._Px.copy())
-            else:
-                self._prob.update(q=q, l=lo, u=hi)
-        if self._solver is not None:
-            s = self._solver
+            self._prob.update(q=q, l=lo, u=hi)
+        if s is not None:
             s.solve()
             info = s.info
             x = np.array(s.solution.x, dtype=float)
-            return x, info.status, int(info.status_val), int(info.iter), float(info.solve_time)
+            return x, info.status, info.status_val, info.iter, info.solve_time
         res = self._prob.solve(raise_error=False)
         info = res.info
         x = np.array(res.x, dtype=float)
@@ -933,36 +969,39 @@ class QPAllocator:
         Returns:
             ``AllocationResult``; ``u`` is finite and within the (rate-limited) bounds.
         """
-        t0 = time.perf_counter()
-        v = np.asarray(v, dtype=float)
-        B = np.asarray(B, dtype=float)
+        t0 = _perf_counter()
+        n_u = self.n_u
+        # float64 ndarrays of the right shape (the autopilot's case) pass without copies
+        if type(v) is not np.ndarray or v.dtype != _F64:
+            v = np.asarray(v, dtype=float)
+        if type(B) is not np.ndarray or B.dtype != _F64:
+            B = np.asarray(B, dtype=float)
         if v.shape != (self.n_v,):
             raise ValueError(f"v: expected shape ({self.n_v},), got {v.shape}")
-        if B.shape != (self.n_v, self.n_u):
-            raise ValueError(f"B: expected shape ({self.n_v}, {self.n_u}), got {B.shape}")
+        if B.shape != (self.n_v, n_u):
+            raise ValueError(f"B: expected shape ({self.n_v}, {n_u}), got {B.shape}")
 
         # Per-step bounds (compiled; same result as _sane_limit + rate_limited_bounds).
-        umin_in = self.u_min if u_min is None else _as_vec(u_min, self.n_u, "u_min")
-        umax_in = self.u_max if u_max is None else _as_vec(u_max, self.n_u, "u_max")
-        prev = self._u_last if u_prev is None else _as_vec(u_prev, self.n_u, "u_prev")
-        lo = np.empty(self.n_u)
-        hi = np.empty(self.n_u)
-        prev_ok = bool(
-            _step_bounds(
-                self.u_min,
-                self.u_max,
-                umin_in,
-                umax_in,
-                self._zeros_u if prev is None else prev,
-                prev is not None,
-                self._zeros_u if self.rate_limit is None else self.rate_limit,
-                self.rate_limit is not None,
-                self.dt,
-                lo,
-                hi,
-            )
+        umin_in = self.u_min if u_min is None else _vec_arg(u_min, n_u, "u_min")
+        umax_in = self.u_max if u_max is None else _vec_arg(u_max, n_u, "u_max")
+        prev = self._u_last if u_prev is None else _vec_arg(u_prev, n_u, "u_prev")
+        lo = np.empty(n_u)
+        hi = np.empty(n_u)
+        rate = self.rate_limit
+        prev_ok = _step_bounds(
+            self.u_min,
+            self.u_max,
+            umin_in,
+            umax_in,
+            self._zeros_u if prev is None else prev,
+            prev is not None,
+            self._zeros_u if rate is None else rate,
+            rate is not None,
+            self.dt,
+            lo,
+            hi,
         )
-        pref = self.u_pref if u_pref is None else _as_vec(u_pref, self.n_u, "u_pref")
+        pref = self.u_pref if u_pref is None else _vec_arg(u_pref, n_u, "u_pref")
         code = -1
         if prev_ok:
             code = _prepare(
@@ -1000,7 +1039,7 @@ class QPAllocator:
             x, st_str, st_val, iters, t_solve = self._run_osqp(qn, lo, hi, B_changed)
         except Exception as exc:  # OSQP raised (setup/update/solve error): fall back
             x, st_str, st_val, iters, t_solve = (
-                np.full(self.n_u, np.nan),
+                np.full(n_u, np.nan),
                 f"exception: {exc!r}",
                 -1,
                 0,
@@ -1009,19 +1048,17 @@ class QPAllocator:
             self._prob = None  # set the solver up again next step
             self._solver = None
 
-        x_finite = bool(np.all(np.isfinite(x)))
-        polished = False
-        u: np.ndarray | None = None
-        if self.polish and x_finite:
-            u_pol, polished, _ = box_qp_polish(self._Hn, qn, lo, hi, x)
-            if polished:
-                u = u_pol
-        if u is not None:
+        # finiteness check, polish and (when polished) the warm-start duals in one compiled
+        # call: λ = -(Hn u + qn) on the bounds held, 0 on the free variables
+        lam = np.empty(n_u)
+        u, x_finite, polished = _polish_duals(self._Hn, qn, lo, hi, x, self.polish, 60, 1e-9,
+                                              lam)
+        if polished:
             status = AllocationStatus.SOLVED  # KKT-certified optimum
-        elif st_val == osqp.SolverStatus.OSQP_SOLVED and x_finite:
+        elif st_val == _OSQP_SOLVED and x_finite:
             u = np.clip(x, lo, hi)
             status = AllocationStatus.SOLVED
-        elif st_val == osqp.SolverStatus.OSQP_SOLVED_INACCURATE and x_finite:
+        elif st_val == _OSQP_SOLVED_INACCURATE and x_finite:
             u = np.clip(x, lo, hi)
             status = AllocationStatus.SOLVED_INACCURATE
         else:
@@ -1031,10 +1068,10 @@ class QPAllocator:
                 if self.cost(u_it, v, B, pref) < self.cost(u, v, B, pref):
                     u = u_it
             status = AllocationStatus.FALLBACK
-        if polished or status == AllocationStatus.FALLBACK:
-            # restart the next ADMM solve from the returned point (duals: λ = -(Hn u + qn))
             lam = -(self._Hn @ u + qn)
             lam[(u > lo) & (u < hi)] = 0.0
+        if polished or status == AllocationStatus.FALLBACK:
+            # restart the next ADMM solve from the returned point (duals: λ = -(Hn u + qn))
             try:
                 self._warm_start(u, lam)
             except Exception:
@@ -1066,16 +1103,31 @@ class QPAllocator:
             v = np.nan_to_num(v, nan=0.0, posinf=0.0, neginf=0.0)
         va = B @ u
         self._u_last = u
-        res = AllocationResult(
-            u=u,
-            v_achieved=va,
-            residual=va - v,
-            status=status,
-            iterations=iters,
-            solve_time_s=t_solve,
-            wall_time_s=time.perf_counter() - t0,
-            solver_status=st_str,
-            polished=polished,
-        )
+        res = _new_result(u, va, va - v, status, iters, t_solve, _perf_counter() - t0, st_str,
+                          polished)
         self.stats.record(res)
         return res
+
+
+_AR_FIELDS = ("u", "v_achieved", "residual", "status", "iterations", "solve_time_s",
+              "wall_time_s", "solver_status", "polished")
+(_set_u, _set_va, _set_res, _set_status, _set_iter, _set_solve, _set_wall, _set_str,
+ _set_pol) = (AllocationResult.__dict__[f].__set__ for f in _AR_FIELDS)
+
+
+def _new_result(u: np.ndarray, va: np.ndarray, res: np.ndarray, status: AllocationStatus,
+                iters: int, t_solve: float, t_wall: float, st_str: str,
+                polished: bool) -> AllocationResult:
+    """``AllocationResult(...)`` (same fields, same order) without the frozen dataclass's
+    per-field ``object.__setattr__`` round trips: about 1 us less per step."""
+    r = object.__new__(AllocationResult)
+    _set_u(r, u)
+    _set_va(r, va)
+    _set_res(r, res)
+    _set_status(r, status)
+    _set_iter(r, iters)
+    _set_solve(r, t_solve)
+    _set_wall(r, t_wall)
+    _set_str(r, st_str)
+    _set_pol(r, polished)
+    return r

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from firmware_sim.autopilot.lqr import LQRGains, LQRGainsError
-from firmware_sim.autopilot.pid import CascadedPPID, wrap_angle
+from firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, wrap_angle
 from firmware_sim.autopilot.schedule import AXES, GainSchedule, GainScheduleError
 
 __all__ = [
@@ -79,6 +79,13 @@ class AttitudeController(Protocol):
                sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]: ...
 
 
+def _floats3(x: NDArray[np.float64] | tuple[float, ...] | list[float]) -> list[float]:
+    """The first three entries of ``x`` as Python floats (fast for float ndarrays)."""
+    if type(x) is np.ndarray and x.shape == (3,):
+        return x.tolist()
+    return [float(x[0]), float(x[1]), float(x[2])]
+
+
 def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
@@ -105,6 +112,8 @@ class ScheduledPPIDController:
                                   output_limit=1e6)
                      for ax, rl in zip(AXES, rate_limits, strict=True)]
         self._out = np.zeros(3)
+        self._gains_cache: dict[float, dict[str, PPIDGains]] = {}
+        self._cached_schedule: GainSchedule | None = schedule
 
     def reset(self) -> None:
         for p in self.pids:
@@ -113,17 +122,33 @@ class ScheduledPPIDController:
     def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
                rates: NDArray[np.float64], airspeed_m_s: float,
                sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]:
-        g = self.schedule.gains_at(airspeed_m_s)
+        g = self._gains_cache.get(airspeed_m_s) if self._cached_schedule is self.schedule \
+            else None
+        if g is None:
+            g = self._gains_at(airspeed_m_s)
         out = self._out
+        rl, al, wl = _floats3(ref), _floats3(att), _floats3(rates)
         for k, ax in enumerate(AXES):
             pid = self.pids[k]
             before = pid.integral
-            out[k] = pid.update(float(ref[k]), float(att[k]), float(rates[k]), g[ax])
+            o = pid.update(rl[k], al[k], wl[k], g[ax])
             di = pid.integral - before
             if (di > 0.0 and sat_hi[k]) or (di < 0.0 and sat_lo[k]):
-                out[k] -= di
+                o -= di
                 pid.integral = before
+            out[k] = o
         return out.copy()
+
+    def _gains_at(self, airspeed_m_s: float) -> dict[str, PPIDGains]:
+        """``schedule.gains_at`` memoised on the exact airspeed (the measured airspeed comes
+        in 0.01 m/s steps, so values repeat; the gains of a value never change)."""
+        if self._cached_schedule is not self.schedule or len(self._gains_cache) >= 20_000:
+            self._gains_cache = {}
+            self._cached_schedule = self.schedule
+        g = self.schedule.gains_at(airspeed_m_s)
+        if airspeed_m_s == airspeed_m_s:  # never a NaN key
+            self._gains_cache[airspeed_m_s] = g
+        return g
 
 
 class LQRAttitudeController:
@@ -149,15 +174,17 @@ class LQRAttitudeController:
                sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]:
         g = self.gains.gains_at(airspeed_m_s)
         out = np.empty(3)
+        rl, al, wl = _floats3(ref), _floats3(att), _floats3(rates)
+        it = self.integral_term
         for k, ax in enumerate(AXES):
             gk = g[ax]
-            e = float(ref[k]) - float(att[k])
+            e = rl[k] - al[k]
             if k == 2:
                 e = wrap_angle(e)
             dI = gk.k_int * e * self.dt
             if not ((dI > 0.0 and sat_hi[k]) or (dI < 0.0 and sat_lo[k])):
-                self.integral_term[k] += dI
-            out[k] = gk.k_angle * e - gk.k_rate * float(rates[k]) + self.integral_term[k]
+                it[k] += dI
+            out[k] = gk.k_angle * e - gk.k_rate * wl[k] + it[k]
         return out
 
 

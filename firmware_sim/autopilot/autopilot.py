@@ -79,13 +79,19 @@ MAV_VTOL_STATE_MC = 3
 MAV_VTOL_STATE_FW = 4
 ARMED_IDLE_THROTTLE = 0.05
 
+#: ``AutopilotStatus.allocation_status`` text of each allocation status.
+_STATUS_NAMES: dict[AllocationStatus, str] = {st: st.name.lower() for st in AllocationStatus}
+
 #: Virtual-axis weights of the QP: [Fz (N), Fx (N), L, M, N (N m)]; moments first.
 ALLOCATION_WEIGHTS = np.array([1.0, 0.5, 10.0, 10.0, 5.0])
 
 
 def quat_to_euler(q: NDArray[np.float64]) -> tuple[float, float, float]:
     """ZYX Euler angles (roll, pitch, yaw) [rad] of a quaternion (w, x, y, z)."""
-    w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+    if type(q) is np.ndarray and q.shape == (4,):
+        w, x, y, z = q.tolist()
+    else:
+        w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
     roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
     pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
     yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
@@ -94,8 +100,13 @@ def quat_to_euler(q: NDArray[np.float64]) -> tuple[float, float, float]:
 
 def _body_velocity(q: NDArray[np.float64], v: NDArray[np.float64]) -> tuple[float, float, float]:
     """NED vector ``v`` in body FRD axes (R^T v) for the quaternion ``q``."""
-    w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
-    vn, ve, vd = float(v[0]), float(v[1]), float(v[2])
+    return _body_velocity_f(float(q[0]), float(q[1]), float(q[2]), float(q[3]),
+                            float(v[0]), float(v[1]), float(v[2]))
+
+
+def _body_velocity_f(w: float, x: float, y: float, z: float, vn: float, ve: float,
+                     vd: float) -> tuple[float, float, float]:
+    """:func:`_body_velocity` on plain floats (quaternion w, x, y, z; NED vector)."""
     r00 = 1 - 2 * (y * y + z * z)
     r01 = 2 * (x * y - w * z)
     r02 = 2 * (x * z + w * y)
@@ -187,6 +198,9 @@ class Autopilot:
         # fast read access to the parameter values (read every step, so changes act at once)
         _store = self.params._params
         self._param = lambda name: _store[name].value
+        # the Parameter objects themselves (mutated in place by ParameterStore.set), read as
+        # ``self._p[name].value`` on the hot path without a call per read
+        self._p = dict(_store)
         self.effectiveness = EffectivenessModel(af)
         self.n_rotors = len(af.lift_rotors)
         self.i_push = [af.actuator_index(r_name) for r_name in
@@ -205,6 +219,9 @@ class Autopilot:
         self.u_pref_mc = np.zeros(self.n_u)
         self.u_pref_mc[: self.n_rotors] = self.hover_throttle
         self.u_pref_fw = np.zeros(self.n_u)
+        self._hi = self.u_max.copy()  # per-step upper limits handed to the allocator
+        self._pushers_nominal = [(r.max_thrust_N, r.zero_thrust_axial_speed_m_s)
+                                 for r in af.pushers]
         # No wall-clock time limit: OSQP stops at max_iter (80), so a run is deterministic
         # (same inputs, same commands) whatever the machine's load.
         self.allocator = QPAllocator(5, u_min, u_max, w_v=ALLOCATION_WEIGHTS,
@@ -352,22 +369,27 @@ class Autopilot:
     # ------------------------------------------------------------------------------------
     def step(self, nav: NavState) -> NDArray[np.float64]:
         """One control step on ``nav``; returns the 15 normalised actuator commands."""
-        P = self._param
-        if not math.isfinite(float(nav.pos_ned_m.sum() + nav.vel_ned_m_s.sum()
-                                   + nav.omega_body_rad_s.sum() + nav.q_wxyz.sum())):
+        pp = self._p
+        pos = nav.pos_ned_m.tolist()
+        vel = nav.vel_ned_m_s.tolist()
+        q = nav.q_wxyz
+        ql = q.tolist()
+        isf = math.isfinite
+        if not (isf(pos[0]) and isf(pos[1]) and isf(pos[2]) and isf(vel[0]) and isf(vel[1])
+                and isf(vel[2]) and isf(ql[0]) and isf(ql[1]) and isf(ql[2]) and isf(ql[3])
+                and all(map(isf, nav.omega_body_rad_s.tolist()))):
             # unusable navigation data: hold the previous command (never output NaN)
             self._alloc_status = "invalid navigation data"
             return self._u.copy()
         self._have_nav = True
         self._last_nav = nav
         self._time_usec = int(nav.time_usec)
-        q = nav.q_wxyz
         roll, pitch, yaw = quat_to_euler(q)
         att = self._att
         att[0], att[1], att[2] = roll, pitch, yaw
         rates = nav.omega_body_rad_s
-        h = -float(nav.pos_ned_m[2])
-        v_up = -float(nav.vel_ned_m_s[2])
+        h = -pos[2]
+        v_up = -vel[2]
         V = float(nav.airspeed_m_s)
         if not math.isfinite(V):
             V = 0.0
@@ -386,9 +408,10 @@ class Autopilot:
                 self._landed_timer = 0.0
             landed = self._landed_timer > 1.0
         m.update(self._time_usec, altitude_m=h, takeoff_alt_m=self._takeoff_alt,
-                 airspeed_m_s=V, arsp_trans=P("VT_ARSP_TRANS"),
-                 trans_timeout_s=P("VT_TRANS_TMOUT"), b_trans_arsp=P("VT_B_TRANS_ARSP"),
-                 b_trans_dur_s=P("VT_B_TRANS_DUR"), landed=landed)
+                 airspeed_m_s=V, arsp_trans=pp["VT_ARSP_TRANS"].value,
+                 trans_timeout_s=pp["VT_TRANS_TMOUT"].value,
+                 b_trans_arsp=pp["VT_B_TRANS_ARSP"].value,
+                 b_trans_dur_s=pp["VT_B_TRANS_DUR"].value, landed=landed)
         mode = m.mode
         if mode != self._last_mode:
             self._enter_mode(mode, self._last_mode, nav, pitch)
@@ -418,30 +441,31 @@ class Autopilot:
         pusher_hi = 1.0
         u_pref = self.u_pref_mc
         cos_tilt = max(0.5, math.cos(roll) * math.cos(pitch))
-        ub, _vb, wb = _body_velocity(q, nav.vel_ned_m_s)
+        ub, _vb, wb = _body_velocity_f(ql[0], ql[1], ql[2], ql[3], vel[0], vel[1], vel[2])
         alpha = math.atan2(wb, ub) if ub > 1.0 else 0.0
         lift, drag = self._aero_estimate(V, alpha)
         fz_aero = -lift * math.cos(alpha) - drag * math.sin(alpha)  # body z, N
 
-        if mode in (FlightMode.TAKEOFF, FlightMode.HOVER, FlightMode.LAND,
-                    FlightMode.FRONT_TRANSITION, FlightMode.BACK_TRANSITION):
+        if mode is not FlightMode.FIXED_WING:  # TAKEOFF, HOVER, LAND, FRONT/BACK_TRANSITION
             override = None
-            vmax_up = P("MPC_Z_VEL_MAX_UP")
+            vmax_up = pp["MPC_Z_VEL_MAX_UP"].value
             if mode == FlightMode.TAKEOFF:
-                vmax_up = min(vmax_up, P("MPC_TKO_SPEED"))
+                vmax_up = min(vmax_up, pp["MPC_TKO_SPEED"].value)
             if mode == FlightMode.LAND:
-                override = -P("MPC_LAND_SPEED")
+                override = -pp["MPC_LAND_SPEED"].value
                 self._alt_ref = h
-            a_up = self.mc_alt.update(self._alt_ref, h, v_up, kp_z=P("MPC_Z_P"),
-                                      kp_vz=P("MPC_Z_VEL_P_ACC"), ki_vz=P("MPC_Z_VEL_I_ACC"),
-                                      v_max_up=vmax_up, v_max_dn=P("MPC_Z_VEL_MAX_DN"),
+            a_up = self.mc_alt.update(self._alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
+                                      kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
+                                      ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
+                                      v_max_up=vmax_up, v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value,
                                       v_up_override=override)
             fz_cmd = -mass * (g + a_up) / cos_tilt - fz_aero
             if mode == FlightMode.FRONT_TRANSITION:
                 ref[0] = 0.0
                 ref[1] = 0.0
-                self._pusher_ramp = min(1.0, self._pusher_ramp + P("VT_PSHER_SLEW") * self.dt)
-                fx_cmd = P("VT_F_TRANS_THR") * self._pusher_ramp * self._pusher_max_force(V)
+                self._pusher_ramp = min(1.0, self._pusher_ramp
+                                        + pp["VT_PSHER_SLEW"].value * self.dt)
+                fx_cmd = pp["VT_F_TRANS_THR"].value * self._pusher_ramp * self._pusher_max_force(V)
             elif mode == FlightMode.BACK_TRANSITION:
                 ref[0] = 0.0
                 ref[1] = 0.0
@@ -451,31 +475,32 @@ class Autopilot:
                 pusher_hi = 0.0
         else:  # FIXED_WING
             t_fw = (self._time_usec - self._fw_entry_usec) * 1e-6
-            ramp = P("VT_TRANS_P2_DUR")
+            ramp = pp["VT_TRANS_P2_DUR"].value
             rotor_hi = max(0.0, 1.0 - t_fw / ramp) if ramp > 0 else 0.0
             u_pref = self.u_pref_fw
             lim = math.radians
             ref[0] = 0.0
-            ref[1] = self.fw_alt.update(self._alt_ref, h, v_up, kp_alt=P("FW_ALT_P"),
-                                        kp_vz=P("FW_VZ_P"), ki_vz=P("FW_VZ_I"),
-                                        climb_max=P("FW_CLMB_MAX"), sink_max=P("FW_SINK_MAX"),
-                                        pitch_min=lim(P("FW_P_LIM_MIN")),
-                                        pitch_max=lim(P("FW_P_LIM_MAX")))
+            ref[1] = self.fw_alt.update(self._alt_ref, h, v_up, kp_alt=pp["FW_ALT_P"].value,
+                                        kp_vz=pp["FW_VZ_P"].value, ki_vz=pp["FW_VZ_I"].value,
+                                        climb_max=pp["FW_CLMB_MAX"].value,
+                                        sink_max=pp["FW_SINK_MAX"].value,
+                                        pitch_min=lim(pp["FW_P_LIM_MIN"].value),
+                                        pitch_max=lim(pp["FW_P_LIM_MAX"].value))
             fx_max = self._pusher_max_force(V)
-            e_v = P("FW_AIRSPD_TRIM") - V
-            a_x = P("FW_AIRSPD_P") * e_v + self._airspeed_int
+            e_v = pp["FW_AIRSPD_TRIM"].value - V
+            a_x = pp["FW_AIRSPD_P"].value * e_v + self._airspeed_int
             fx_cmd = drag * math.cos(alpha) - lift * math.sin(alpha) + mass * (
                 a_x + g * math.sin(pitch))
             if not ((fx_cmd >= fx_max and e_v > 0) or (fx_cmd <= 0.0 and e_v < 0)):
                 self._airspeed_int = min(max(self._airspeed_int
-                                             + P("FW_AIRSPD_I") * e_v * self.dt, -3.0), 3.0)
+                                             + pp["FW_AIRSPD_I"].value * e_v * self.dt, -3.0), 3.0)
             fx_cmd = min(max(fx_cmd, 0.0), fx_max)
             if rotor_hi > 0.0:
-                a_up = self.mc_alt.update(self._alt_ref, h, v_up, kp_z=P("MPC_Z_P"),
-                                          kp_vz=P("MPC_Z_VEL_P_ACC"),
-                                          ki_vz=P("MPC_Z_VEL_I_ACC"),
-                                          v_max_up=P("MPC_Z_VEL_MAX_UP"),
-                                          v_max_dn=P("MPC_Z_VEL_MAX_DN"))
+                a_up = self.mc_alt.update(self._alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
+                                          kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
+                                          ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
+                                          v_max_up=pp["MPC_Z_VEL_MAX_UP"].value,
+                                          v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value)
                 fz_cmd = -mass * (g + a_up) / cos_tilt - fz_aero
             else:
                 use_fz = False
@@ -500,14 +525,12 @@ class Autopilot:
         v[0] = fz_cmd
         v[1] = fx_cmd
         v[2:] = tau
-        hi = self.u_max.copy()
+        hi = self._hi
         hi[: self.n_rotors] = rotor_hi
         for i in self.i_push:
             hi[i] = pusher_hi
         res = self.allocator.allocate(v, B, u_max=hi, u_pref=u_pref)
-        self._alloc_status = res.status.name.lower()
-        if res.status == AllocationStatus.FALLBACK:
-            self._alloc_status = "fallback"
+        self._alloc_status = _STATUS_NAMES[res.status]
         self._track_saturation(v, res.v_achieved)
         u[:] = res.u
         return u.copy()
@@ -552,13 +575,13 @@ class Autopilot:
     def _pusher_max_force(self, V: float) -> float:
         """Nominal total pusher thrust at full command and airspeed V [N]."""
         tot = 0.0
-        for r in self.airframe.pushers:
-            tot += r.max_thrust_N * min(1.25, max(0.0, 1.0 - V / r.zero_thrust_axial_speed_m_s))
+        for tmax, v0 in self._pushers_nominal:
+            tot += tmax * min(1.25, max(0.0, 1.0 - V / v0))
         return tot
 
     def _position_hold(self, nav: NavState, yaw: float) -> tuple[float, float]:
         """Roll and pitch references [rad] holding the horizontal position (brake first)."""
-        P = self._param
+        pp = self._p
         vn, ve = float(nav.vel_ned_m_s[0]), float(nav.vel_ned_m_s[1])
         if not self._hold_locked:
             if math.hypot(vn, ve) < 0.5:
@@ -566,31 +589,34 @@ class Autopilot:
                 self._hold_locked = True
             vrn, vre = 0.0, 0.0
         else:
-            kp = P("MPC_XY_P")
+            kp = pp["MPC_XY_P"].value
             vrn = kp * (self._hold_ne[0] - float(nav.pos_ned_m[0]))
             vre = kp * (self._hold_ne[1] - float(nav.pos_ned_m[1]))
-            vmax = P("MPC_XY_VEL_MAX")
+            vmax = pp["MPC_XY_VEL_MAX"].value
             s = math.hypot(vrn, vre)
             if s > vmax:
                 vrn, vre = vrn * vmax / s, vre * vmax / s
-        kv = P("MPC_XY_VEL_P_ACC")
+        kv = pp["MPC_XY_VEL_P_ACC"].value
         an, ae = kv * (vrn - vn), kv * (vre - ve)
         g = self.airframe.gravity_m_s2
         a_fwd = math.cos(yaw) * an + math.sin(yaw) * ae
         a_right = -math.sin(yaw) * an + math.cos(yaw) * ae
-        tmax = math.radians(P("MPC_TILTMAX_AIR"))
+        tmax = math.radians(pp["MPC_TILTMAX_AIR"].value)
         pitch_ref = min(max(-math.atan2(a_fwd, g), -tmax), tmax)
         roll_ref = min(max(math.atan2(a_right, g), -tmax), tmax)
         return roll_ref, pitch_ref
 
     def _track_saturation(self, v: NDArray[np.float64], achieved: NDArray[np.float64]) -> None:
         """Which moment axes the allocation could not achieve, and in which direction."""
+        vl = v.tolist()
+        al = achieved.tolist()
+        hi_, lo_ = self._sat_hi, self._sat_lo
         for k in range(3):
-            want = float(v[2 + k])
-            got = float(achieved[2 + k])
+            want = vl[2 + k]
+            got = al[2 + k]
             tol = 0.02 + 0.02 * abs(want)
-            self._sat_hi[k] = want > got + tol
-            self._sat_lo[k] = want < got - tol
+            hi_[k] = want > got + tol
+            lo_[k] = want < got - tol
 
     # ------------------------------------------------------------------------------------
     def status(self) -> AutopilotStatus:

@@ -34,6 +34,7 @@ __all__ = ["HilBridge"]
 
 MAV_MODE_FLAG_SAFETY_ARMED = 128
 _HEARTBEAT_PERIOD_S = 1.0
+_ZEROS16 = [0.0] * 16
 
 
 class HilBridge:
@@ -96,9 +97,10 @@ class HilBridge:
     @staticmethod
     def hil_state(msg: Any) -> HilState:
         """The wire fields of a HIL_STATE_QUATERNION message."""
+        q = msg.attitude_quaternion
         return HilState(
             time_usec=int(msg.time_usec),
-            attitude_quaternion=tuple(float(x) for x in msg.attitude_quaternion),
+            attitude_quaternion=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
             rollspeed=float(msg.rollspeed), pitchspeed=float(msg.pitchspeed),
             yawspeed=float(msg.yawspeed), lat=int(msg.lat), lon=int(msg.lon), alt=int(msg.alt),
             vx=int(msg.vx), vy=int(msg.vy), vz=int(msg.vz), ind_airspeed=int(msg.ind_airspeed),
@@ -122,11 +124,11 @@ class HilBridge:
     # ------------------------------------------------------------------ output
     def send_controls(self, time_usec: int, commands: NDArray[np.float64], armed: bool) -> None:
         """HIL_ACTUATOR_CONTROLS answering the step at ``time_usec``."""
-        u = np.zeros(16)
-        u[:15] = wire_commands(commands)
+        u = wire_commands(commands).tolist()
+        u += _ZEROS16[len(u):]  # 16 slots, the unused ones 0
         codec = self.link.codec
         data = codec.hil_actuator_controls_encode(
-            int(time_usec), u.tolist(), MAV_MODE_FLAG_SAFETY_ARMED if armed else 0,
+            int(time_usec), u, MAV_MODE_FLAG_SAFETY_ARMED if armed else 0,
             1 if self.lockstep else 0).pack(codec)
         codec.seq = (codec.seq + 1) & 0xFF
         self._last_answer = (int(time_usec), data)

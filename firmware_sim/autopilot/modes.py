@@ -74,10 +74,13 @@ def vtol_state(mode: FlightMode) -> VtolState:
     return VtolState.MC
 
 
+_LANDED_STATES = {FlightMode.IDLE: LandedState.ON_GROUND,
+                  FlightMode.TAKEOFF: LandedState.TAKEOFF, FlightMode.LAND: LandedState.LANDING}
+
+
 def landed_state(mode: FlightMode) -> LandedState:
     """MAV_LANDED_STATE of a mode."""
-    return {FlightMode.IDLE: LandedState.ON_GROUND, FlightMode.TAKEOFF: LandedState.TAKEOFF,
-            FlightMode.LAND: LandedState.LANDING}.get(mode, LandedState.IN_AIR)
+    return _LANDED_STATES.get(mode, LandedState.IN_AIR)
 
 
 @dataclass

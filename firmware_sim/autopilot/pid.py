@@ -203,7 +203,10 @@ class CascadedPPID:
         e = rate_ref - rate
         dt = self.dt
         de = e - self._e_prev
-        a, b = self._filter_coeffs(g.tf_rate_s)
+        if g.tf_rate_s == self._tf_cached:
+            a, b = self._a, self._b
+        else:
+            a, b = self._filter_coeffs(g.tf_rate_s)
         self.derivative = a * self.derivative + b * g.kd_rate * de
         if self.method == "tustin":
             dI = 0.5 * g.ki_rate * dt * (e + self._e_prev)

@@ -135,6 +135,11 @@ class AutopilotProcess:
         self.wall_in_step = 0.0
         self.step_wall_s: list[float] = []
         """Wall time of each control step (autopilot step, status, answer), s."""
+        self.part_wall_s = {"autopilot_step": 0.0, "status_and_answer": 0.0,
+                            "after_answer": 0.0}
+        """Wall time summed over the steps [s]: ``Autopilot.step``; status + encoding and
+        sending HIL_ACTUATOR_CONTROLS; after the answer (metrics, run-folder writer,
+        ground-station streams), which overlaps with the vehicle's work."""
         self._finished = False
 
     def add_observer(self, obs: Any) -> None:
@@ -190,9 +195,11 @@ class AutopilotProcess:
                         hil.take()
                         t0 = pc()
                         u = ap.step(nav)
+                        t1 = pc()
                         st = ap.status()
                         hil.send_controls(nav.time_usec, u, st.armed)
-                        dt = pc() - t0
+                        t2 = pc()
+                        dt = t2 - t0
                         self.wall_in_step += dt
                         self.step_wall_s.append(dt)
                         # the rest overlaps with the vehicle's physics step
@@ -202,6 +209,10 @@ class AutopilotProcess:
                             o.on_sample(sample)
                         gcs.on_step(nav, st)
                         self.steps += 1
+                        part = self.part_wall_s
+                        part["autopilot_step"] += t1 - t0
+                        part["status_and_answer"] += t2 - t1
+                        part["after_answer"] += pc() - t2
                     for m in link.recv(0.0):
                         hil.handle(m)
                 now = time.monotonic()
@@ -257,6 +268,8 @@ class AutopilotProcess:
             w = np.asarray(self.step_wall_s) * 1e6
             summary["step_wall_us"] = {"mean": float(w.mean()), "median": float(np.median(w)),
                                        "p99": float(np.percentile(w, 99))}
+            summary["part_mean_us"] = {k: 1e6 * v / len(self.step_wall_s)
+                                       for k, v in self.part_wall_s.items()}
         if self.out_dir is not None:
             with contextlib.suppress(OSError):
                 (self.out_dir / "metrics.json").write_text(

@@ -11,12 +11,24 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from airframe.loader import Airframe, load_airframe
 from firmware_sim.vehicle import dynamics as dyn
 from firmware_sim.vehicle.faults import Fault, FaultError, FaultKind
 from firmware_sim.vehicle.sensors import Home, SensorModel, SensorNoise, SensorSample
+
+_F64 = np.dtype(np.float64)
+
+
+@numba.njit(cache=True)
+def _all_finite(a: np.ndarray) -> bool:
+    """True when every entry of the 1-D array ``a`` is finite (compiled: ~0.2 us)."""
+    for i in range(a.size):  # noqa: SIM110 (a loop compiles; all(generator) does not)
+        if not np.isfinite(a[i]):
+            return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -188,16 +200,26 @@ class Vehicle:
     def step(self, commands: np.ndarray | Sequence[float] | None = None, n: int = 1) -> None:
         """Hold ``commands`` (or the previous ones if None) for ``n`` physics steps."""
         if commands is not None:
-            u = np.asarray(commands, dtype=float)
+            u = commands
+            if type(u) is not np.ndarray or u.dtype != _F64:
+                u = np.asarray(commands, dtype=float)
             if u.shape != (self.n_actuators,):
                 raise ValueError(f"commands of shape {u.shape}: expected ({self.n_actuators},) "
                                  f"in the order {', '.join(self.airframe.actuator_names)}")
-            if not np.all(np.isfinite(u)):
+            if not _all_finite(u):
                 raise ValueError("commands contain NaN or inf: expected finite values")
             self.u[:] = u
         remaining = int(n)
         pk = self.packed
         dt = self.dt_usec * 1e-6
+        if not self._pending and remaining > 0:
+            # common case: no fault due, one compiled call for the whole batch
+            dyn.step_n(self.x, self.u, self.eff, self.stuck, remaining, dt, pk.P, pk.J, pk.Jinv,
+                       pk.rotor_pos, pk.rotor_axis, pk.rotor_torque, pk.rotor_tmax,
+                       pk.rotor_inv_v0, pk.act_tau, pk.act_rate, pk.act_min, pk.act_max,
+                       pk.tab_v, pk.tab, pk.gear, self.wind, self.physics, self.fm)
+            self.time_usec += remaining * self.dt_usec
+            return
         while remaining > 0:
             self._apply_due_faults()
             batch = remaining

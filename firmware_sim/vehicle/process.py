@@ -59,6 +59,8 @@ import numpy as np
 
 from airframe.loader import Airframe, AirframeError, load_airframe
 from firmware_sim.autopilot.interface import NavState, encode_hil_state
+from firmware_sim.vehicle.dynamics import N_RIGID
+from firmware_sim.vehicle.dynamics import quat_to_euler as dyn_quat_to_euler
 from firmware_sim.vehicle.faults import Fault, FaultKind
 from firmware_sim.vehicle.model import Vehicle
 from firmware_sim.vehicle.sensors import SensorNoise
@@ -123,6 +125,9 @@ class VehicleProcess:
         self.steps = 0
         self.step_rtt_s: list[float] = []
         """Lockstep: wall time from sending a step's state to receiving its controls (s)."""
+        self.part_wall_s = {"record_and_physics": 0.0, "sensors_and_encode": 0.0, "send": 0.0}
+        """Lockstep: wall time summed over the steps [s] of the vehicle's own part of the
+        critical path (after the controls arrived, until the next state is sent)."""
         self.running = True
         self._last_peer = time.monotonic()
         self._next_gps = 0
@@ -131,7 +136,7 @@ class VehicleProcess:
         self.out_dir = out_dir
         self._truth: TextIO | None = None
         self._events: TextIO | None = None
-        self._rows: list[np.ndarray] = []
+        self._rows: list[tuple[int, np.ndarray, float, np.ndarray, np.ndarray]] = []
         if out_dir is not None:
             out_dir.mkdir(parents=True, exist_ok=True)
             self._truth = (out_dir / "vehicle_truth.csv").open("w")
@@ -152,19 +157,24 @@ class VehicleProcess:
             self._events.flush()
 
     def _record(self, flush: bool = True) -> None:
+        """Snapshot the truth of the current step (a few copies, no formatting: the row is
+        built at the next flush, off the lockstep's critical path)."""
         if self._truth is None:
             return
         v = self.vehicle
-        x = v.x
-        self._rows.append(np.concatenate((
-            [v.time_usec * 1e-6], x[0:6], v.euler_rad, x[10:13], [v.airspeed_m_s],
-            v.actuator_positions, v.eff, self.commands)))
+        self._rows.append((v.time_usec, v.x.copy(), float(v.fm[6]), v.eff.copy(),
+                           self.commands.copy()))
         if flush and len(self._rows) >= 250:
             self._flush()
 
     def _flush(self) -> None:
+        """Write the snapshots as CSV rows (``%.9g``) and flush the file (every 250 steps =
+        1 s of simulated time, and at exit)."""
         if self._truth is not None and self._rows:
-            np.savetxt(self._truth, np.vstack(self._rows), delimiter=",", fmt="%.9g")
+            rows = [np.concatenate(([t * 1e-6], x[0:6], dyn_quat_to_euler(x[6:10]),
+                                    x[10:13], [air], x[N_RIGID:], eff, cmd))
+                    for t, x, air, eff, cmd in self._rows]
+            np.savetxt(self._truth, np.vstack(rows), delimiter=",", fmt="%.9g")
             self._truth.flush()
             self._rows.clear()
 
@@ -199,8 +209,8 @@ class VehicleProcess:
                 t, 3, round(s.gps_lat_deg * 1e7), round(s.gps_lon_deg * 1e7),
                 round(s.gps_alt_m * 1e3), 100, 100, min(65535, round(100 * math.hypot(vn, ve))),
                 round(100 * vn), round(100 * ve), round(100 * vd), cog, 12, 0, 0)))
-        nav = NavState(t, v.quaternion, v.omega_body_rad_s, v.position_ned_m,
-                       v.velocity_ned_m_s, v.airspeed_m_s)
+        x = v.x  # views: encode_hil_state only reads them
+        nav = NavState(t, x[6:10], x[10:13], x[0:3], x[3:6], float(v.fm[6]))
         hs = encode_hil_state(nav, self.home.lat_deg, self.home.lon_deg, self.home.alt_m)
         parts.append(self._pack(c.hil_state_quaternion_encode(
             hs.time_usec, hs.attitude_quaternion, hs.rollspeed, hs.pitchspeed, hs.yawspeed,
@@ -234,9 +244,9 @@ class VehicleProcess:
         self._last_peer = time.monotonic()
         kind = msg.get_type()
         if kind == "HIL_ACTUATOR_CONTROLS":
-            u = np.asarray(msg.controls[: self.airframe.n_actuators], dtype=np.float64)
-            if np.all(np.isfinite(u)):
-                self.commands[:] = u
+            c = msg.controls[: self.airframe.n_actuators]
+            if all(map(math.isfinite, c)):
+                self.commands[:] = c
             self.armed = bool(msg.mode & 128)
             return int(msg.time_usec) == self.vehicle.time_usec
         if kind == "COMMAND_LONG":
@@ -390,15 +400,21 @@ class VehicleProcess:
                     continue
                 for m in msgs:
                     got = self.handle(m) or got
-            self.step_rtt_s.append(pc() - t_sent)
+            t_got = pc()
+            self.step_rtt_s.append(t_got - t_sent)
             self._record(flush=False)
             v.step(self.commands, CONTROL_PERIOD_USEC // v.dt_usec)
             self.steps += 1
             if self._done():
                 break
+            t_phys = pc()
             datagram = self.state_datagram()
             t_sent = pc()
             link.send(datagram)
+            part = self.part_wall_s
+            part["record_and_physics"] += t_phys - t_got
+            part["sensors_and_encode"] += t_sent - t_phys
+            part["send"] += pc() - t_sent
             # bookkeeping while the autopilot computes
             if len(self._rows) >= 250:
                 self._flush()
@@ -446,6 +462,8 @@ class VehicleProcess:
                 "mean": float(np.mean(rtt)),
                 "median": float(np.median(rtt)), "p90": float(np.percentile(rtt, 90)),
                 "p99": float(np.percentile(rtt, 99)), "n": int(rtt.size)}
+            summary["part_mean_us"] = {k: 1e6 * x / max(1, self.steps)
+                                       for k, x in self.part_wall_s.items()}
         if self._events is not None:
             self._event("stop", f"{self.steps} steps, t = {summary['sim_time_s']:.3f} s")
             self._events.close()
