@@ -22,8 +22,10 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from dashboard.recording import read_recording
 from firmware_sim.autopilot.process import make_deterministic
 from protocols import open_link, parse_link_url
 from vtolftc.scenario import paper_scenario, run_scenario
@@ -91,6 +93,11 @@ def test_case1_sitl_equals_in_process(transport, reference, tmp_path):
     assert len(res.outcomes) == 3 + 6  # arm, takeoff, transition; 6 actuator faults
     assert (tmp_path / "autopilot" / "telemetry.csv").is_file()
     assert (tmp_path / "vehicle" / "vehicle_truth.csv").is_file()
+    rec = read_recording(tmp_path / "autopilot" / "run.rrd",
+                         ["attitude/roll", "altitude", "actuators/rotors/rotor_2b"])
+    for entity, (times, values) in rec.items():   # the SITL run's rerun recording
+        assert len(times) > 100 and np.all(np.isfinite(values)), entity
+    assert rec["attitude/roll"][0][-1] > DURATION_S - 0.5
     # the garbage was dropped and counted, and nothing else was
     assert res.vehicle_summary["link"]["dropped"] >= 2, res.vehicle_summary["link"]
     assert res.autopilot_summary["gcs_links"][0]["dropped"] >= 2

@@ -22,8 +22,8 @@ executes actions due at a step before that step.
 
 Run folder (``--out DIR``): ``metrics.json`` (:class:`vtolftc.metrics.MetricsAccumulator` over
 the autopilot's own samples, the very function of the in-process runner), the telemetry of the
-autopilot's view (through :class:`vtolftc.runfolder.RunFolderWriter` when available, else
-``autopilot_telemetry.csv``), ``autopilot_events.jsonl`` and ``autopilot_summary.json`` (link
+autopilot's view (:class:`vtolftc.runfolder.RunFolderWriter`: ``telemetry.csv``, events, plots),
+its rerun recording ``run.rrd``, ``autopilot_events.jsonl`` and ``autopilot_summary.json`` (link
 counters incl. dropped garbage / CRC / truncated frames, steps, wall time). Written on every
 exit: end of run, SIGTERM, Ctrl-C, lost vehicle.
 
@@ -56,43 +56,6 @@ __all__ = ["DEFAULT_GCS_LINKS", "AutopilotProcess", "main", "make_deterministic"
 
 DEFAULT_GCS_LINKS = ("udp-client://127.0.0.1:14550", "udp-client://127.0.0.1:14540")
 EXIT_VEHICLE_LOST = 3
-
-
-class _CsvTelemetry:
-    """Fallback telemetry writer (when vtolftc.runfolder is not available)."""
-
-    def __init__(self, path: Path, actuator_names: list[str]) -> None:
-        self.f: TextIO = path.open("w")
-        cols = ["time_s", "mode", "armed", "pn_m", "pe_m", "pd_m", "airspeed_m_s",
-                "roll_ref_rad", "pitch_ref_rad", "yaw_ref_rad", "roll_rad", "pitch_rad",
-                "yaw_rad", "altitude_ref_m"] + [f"u_{a}" for a in actuator_names]
-        self.f.write(",".join(cols) + "\n")
-        self.rows: list[np.ndarray] = []
-
-    def on_start(self, info: dict[str, Any]) -> None:
-        pass
-
-    def on_event(self, time_usec: int, kind: str, text: str) -> None:
-        pass
-
-    def on_sample(self, s: Any) -> None:
-        st = s.status
-        self.rows.append(np.concatenate((
-            [s.time_usec * 1e-6, int(st.mode), float(st.armed)], s.nav.pos_ned_m,
-            [s.nav.airspeed_m_s], st.attitude_ref_rad, st.attitude_rad, [st.altitude_ref_m],
-            st.actuator_commands)))
-        if len(self.rows) >= 250:
-            self.flush()
-
-    def flush(self) -> None:
-        if self.rows:
-            np.savetxt(self.f, np.vstack(self.rows), delimiter=",", fmt="%.9g")
-            self.f.flush()
-            self.rows.clear()
-
-    def on_finish(self, metrics: dict[str, Any]) -> None:
-        self.flush()
-        self.f.close()
 
 
 class AutopilotProcess:
@@ -425,8 +388,8 @@ def main(argv: list[str] | None = None) -> int:
         parent_pid=args.parent_pid)
     proc.spin_s = max(0.0, args.spin_us) * 1e-6
     if args.out is not None:
-        proc.add_observer(_telemetry_writer(args.out, list(af.actuator_names),
-                                            plots=not args.no_plots))
+        for obs in _run_observers(args.out, plots=not args.no_plots):
+            proc.add_observer(obs)
 
     def stop(_sig: int, _frame: Any) -> None:
         proc.running = False
@@ -445,12 +408,13 @@ def make_deterministic(autopilot: Any) -> None:
         settings["time_limit"] = 1e6  # s: never reached (0 is rejected by OSQP 1.x)
 
 
-def _telemetry_writer(out: Path, names: list[str], plots: bool = True) -> Any:
-    try:
-        from vtolftc.runfolder import RunFolderWriter
-    except ImportError:
-        return _CsvTelemetry(out / "autopilot_telemetry.csv", names)
-    return RunFolderWriter(out, plots=plots)
+def _run_observers(out: Path, plots: bool = True) -> list[Any]:
+    """The run folder of the autopilot's own view (telemetry, events, metrics, plots) and its
+    rerun recording ``run.rrd`` (no vehicle truth here: commands, not effective outputs)."""
+    from dashboard.recording import RerunRecorder
+    from vtolftc.runfolder import RunFolderWriter
+
+    return [RunFolderWriter(out, plots=plots), RerunRecorder(out / "run.rrd")]
 
 
 if __name__ == "__main__":
