@@ -3,7 +3,6 @@ no vehicle)."""
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
@@ -35,25 +34,8 @@ D = CommandResult.DENIED
 
 
 @pytest.fixture(scope="module")
-def gains_dir(tmp_path_factory, ds1):
-    """Hand-picked gains in the shipped formats (independent of the synthesis output)."""
-    d = tmp_path_factory.mktemp("gains")
-    base = {"roll": (5.0, 14.0, 14.0, 0.3, 0.02), "pitch": (5.0, 12.0, 12.0, 0.25, 0.02),
-            "yaw": (2.5, 14.0, 7.0, 0.0, 0.02)}
-    fields = ("kp_angle", "kp_rate", "ki_rate", "kd_rate", "tf_rate_s")
-    af = {"name": ds1.name, "sha256": ds1.sha256}
-    for name, bp in (("gs-shif", [0.0, 13.0]), ("shif", [0.0])):
-        axes = {ax: {f: [v] * len(bp) for f, v in zip(fields, g, strict=True)}
-                for ax, g in base.items()}
-        (d / f"{name}.json").write_text(json.dumps({
-            "format": "vtolftc-gain-schedule/1", "controller": name, "airframe": af,
-            "airspeed_breakpoints_m_s": bp, "axes": axes}))
-    (d / "lqr.json").write_text(json.dumps({
-        "format": "vtolftc-lqr-gains/1", "controller": "lqr", "airframe": af,
-        "airspeed_breakpoints_m_s": [0.0],
-        "axes": {ax: {"k_int": [g[0] * g[2] * 0.5], "k_angle": [g[0] * g[1]],
-                      "k_rate": [g[1]]} for ax, g in base.items()}}))
-    return d
+def gains_dir(hand_gains):
+    return hand_gains
 
 
 def nav(t_s: float, alt: float = 0.29, airspeed: float = 0.0, vn: float = 0.0) -> NavState:

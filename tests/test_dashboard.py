@@ -7,51 +7,25 @@ import math
 import re
 import socket
 import time
-from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pytest
 
 from dashboard.geometry import aircraft_geometry, rotor_grid
 from dashboard.model import DashboardModel, euler_to_quaternion, ned_to_display
+from gcs.client import CommandOutcome, VehicleSnapshot
 
 
-@dataclass
-class Snap:
-    """Same attributes as gcs.client.VehicleSnapshot (the model reads only these)."""
-
-    connected: bool = True
-    heartbeat_age_s: float = 0.2
-    armed: bool = False
-    mode_name: str = "AUTO.LOITER"
-    vtol_state: int = 3
-    vtol_state_name: str = "MC"
-    landed_state: int = 2
-    roll: float = 0.0
-    pitch: float = 0.0
-    yaw: float = 0.0
-    position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    altitude_m: float = 0.0
-    airspeed_m_s: float = 0.0
-    groundspeed_m_s: float = 0.0
-    heading_deg: float = 0.0
-    actuator_outputs: list[float] = field(default_factory=list)
-    last_statustext: str = ""
-    sim_time_s: float = 1.0
+def Snap(**fields: Any) -> VehicleSnapshot:
+    """A ground-station snapshot of a connected vehicle hovering in multicopter mode."""
+    base: dict[str, Any] = {"connected": True, "heartbeat_age_s": 0.2, "mode_name": "AUTO.LOITER",
+                            "vtol_state": 3, "vtol_state_name": "MC", "landed_state": 2,
+                            "sim_time_s": 1.0}
+    return VehicleSnapshot(**(base | fields))
 
 
-@dataclass
-class Outcome:
-    command: int
-    name: str
-    result: int | None
-    result_name: str
-    elapsed_s: float
-    detail: str = ""
-
-    @property
-    def accepted(self) -> bool:
-        return self.result == 0
+Outcome = CommandOutcome
 
 
 def _model(ds1, **kw) -> DashboardModel:

@@ -20,31 +20,6 @@ CONTROLLERS = ("gs-shif", "shif", "lqr")
 CRUISE_TRIM_PITCH_DEG = 0.6
 
 
-def write_hand_gains(d, ds1):
-    """Hand-picked gains in the shipped formats, independent of the synthesis output."""
-    base = {"roll": (5.0, 14.0, 14.0, 0.3, 0.02), "pitch": (5.0, 12.0, 12.0, 0.25, 0.02),
-            "yaw": (2.5, 14.0, 7.0, 0.0, 0.02)}
-    fields = ("kp_angle", "kp_rate", "ki_rate", "kd_rate", "tf_rate_s")
-    af = {"name": ds1.name, "sha256": ds1.sha256}
-    for name, bp in (("gs-shif", [0.0, 13.0]), ("shif", [0.0])):
-        axes = {ax: {f: [v] * len(bp) for f, v in zip(fields, g, strict=True)}
-                for ax, g in base.items()}
-        (d / f"{name}.json").write_text(json.dumps({
-            "format": "vtolftc-gain-schedule/1", "controller": name, "airframe": af,
-            "airspeed_breakpoints_m_s": bp, "axes": axes}))
-    (d / "lqr.json").write_text(json.dumps({
-        "format": "vtolftc-lqr-gains/1", "controller": "lqr", "airframe": af,
-        "airspeed_breakpoints_m_s": [0.0],
-        "axes": {ax: {"k_int": [g[0] * g[2] * 0.5], "k_angle": [g[0] * g[1]],
-                      "k_rate": [g[1]]} for ax, g in base.items()}}))
-    return d
-
-
-@pytest.fixture(scope="module")
-def hand_gains(tmp_path_factory, ds1):
-    return write_hand_gains(tmp_path_factory.mktemp("gains"), ds1)
-
-
 class Recorder:
     """Keeps every sample and event."""
 

@@ -29,7 +29,6 @@ starts with the file name.
 from __future__ import annotations
 
 import bisect
-import json
 import math
 import re
 from collections.abc import Mapping
@@ -37,6 +36,8 @@ from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
 from typing import Any
+
+from firmware_sim.autopilot.schedule import read_json_file
 
 __all__ = ["AXES", "FORMAT", "LQR_FIELDS", "LQRAxisGains", "LQRGains", "LQRGainsError"]
 
@@ -90,19 +91,11 @@ class LQRGains:
 
     @classmethod
     def load(cls, path: str | PathLike[str]) -> LQRGains:
-        p = Path(path)
-        try:
-            text = p.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise LQRGainsError(f"{p}: cannot read LQR gains: {exc}") from exc
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise LQRGainsError(f"{p}: not valid JSON: {exc}") from exc
+        data = read_json_file(path, LQRGainsError, "LQR gains")
         try:
             return cls.from_dict(data)
         except LQRGainsError as exc:
-            raise LQRGainsError(f"{p}: {exc}") from None
+            raise LQRGainsError(f"{Path(path)}: {exc}") from None
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> LQRGains:

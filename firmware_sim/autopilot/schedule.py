@@ -86,6 +86,21 @@ class GainScheduleError(ValueError):
     """Invalid gain-schedule data (message names the field, the value and the expectation)."""
 
 
+def read_json_file(path: str | PathLike[str], error: type[ValueError], what: str) -> Any:
+    """Decode the JSON file ``path``; an unreadable file or invalid JSON raises ``error``
+    with a message starting with the file name (``what`` names the content, e.g.
+    "gain schedule")."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise error(f"{p}: cannot read {what}: {exc}") from exc
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise error(f"{p}: not valid JSON: {exc}") from exc
+
+
 def _is_number(x: Any) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool)
 
@@ -139,19 +154,11 @@ class GainSchedule:
     @classmethod
     def load(cls, path: str | PathLike[str]) -> GainSchedule:
         """Read and validate a schedule file (JSON)."""
-        p = Path(path)
-        try:
-            text = p.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise GainScheduleError(f"{p}: cannot read gain schedule: {exc}") from exc
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise GainScheduleError(f"{p}: not valid JSON: {exc}") from exc
+        data = read_json_file(path, GainScheduleError, "gain schedule")
         try:
             return cls.from_dict(data)
         except GainScheduleError as exc:
-            raise GainScheduleError(f"{p}: {exc}") from None
+            raise GainScheduleError(f"{Path(path)}: {exc}") from None
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> GainSchedule:
