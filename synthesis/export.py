@@ -86,11 +86,17 @@ def jsonable(x: Any) -> Any:
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
-    """Write ``text`` to ``path`` atomically (temp file + rename in the same directory)."""
+    """Write ``text`` to ``path`` atomically (temp file + rename in the same directory).
+
+    The file gets the permissions a plain ``open(path, "w")`` would give (0666 less the
+    umask), not the owner-only mode of the temporary file."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
     try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             f.write(text)
             f.flush()

@@ -270,3 +270,20 @@ def test_full_synthesis_end_to_end(ds1, tmp_path):
             assert m.rs_check < 1e-6
     # what holds for DS-1 with the paper's weights: roll robustly stable at points 3-6
     assert all(m.mu_rs < 1.0 for m in res.mu_gs["roll"][2:])
+
+
+def test_atomic_write_gives_ordinary_permissions(tmp_path):
+    """Gain files are read by other users and processes (containers): not owner-only."""
+    import os
+    import stat
+
+    from synthesis.export import atomic_write_text
+
+    umask = os.umask(0o022)
+    try:
+        p = atomic_write_text(tmp_path / "sub" / "gains.json", "{}\n")
+    finally:
+        os.umask(umask)
+    assert p.read_text() == "{}\n"
+    assert stat.S_IMODE(p.stat().st_mode) == 0o644
+    assert [q.name for q in p.parent.iterdir()] == ["gains.json"]   # no temp file left
