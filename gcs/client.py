@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import errno
 import math
 import threading
 import time
@@ -187,7 +188,12 @@ class GroundStation:
             self._link = open_link(url, system_id=system_id, component_id=component_id,
                                    signing=signing, allow_remote=allow_remote)
         except (ValueError, OSError) as exc:
-            raise GcsError(f"cannot open ground-station link {url!r}: {exc}") from exc
+            hint = ""
+            if isinstance(exc, OSError) and exc.errno == errno.EADDRINUSE:
+                hint = (" (another ground station, e.g. the dashboard or QGroundControl, "
+                        "already listens there: use the autopilot's other port, "
+                        "udp-server://127.0.0.1:14540, or one given with --gcs-link)")
+            raise GcsError(f"cannot open ground-station link {url!r}: {exc}{hint}") from exc
         self.url = url
         self.target = (int(target_system), int(target_component))
         self._actuators = actuators

@@ -271,3 +271,13 @@ def test_signed_commands_required_for_arming_and_faults():
             assert "signed" not in gs.arm().detail
     finally:
         ep.close()
+
+
+def test_busy_port_says_which_port_to_use_instead():
+    import socket
+
+    port = free_udp_port()
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", port))
+        with pytest.raises(GcsError, match=r"already listens there.*14540"):
+            GroundStation(f"udp-server://127.0.0.1:{port}")
