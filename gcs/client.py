@@ -205,6 +205,7 @@ class GroundStation:
         self._listeners: list[Callable[[Any], None]] = []
         self._waiters: list[_Waiter] = []
         self._statustexts: collections.deque[tuple[float, str]] = collections.deque(maxlen=64)
+        self._chunks: dict[int, dict[int, bytes]] = {}
         self._param_types: dict[str, int] = {}
         self._closed = False
         self._thread = threading.Thread(target=self._rx_loop, name="gcs-rx", daemon=True)
@@ -579,14 +580,29 @@ class GroundStation:
                 s.actuator_outputs = [float(x) for x in m.actuator[: max(0, int(m.active))]]
                 self._time_us(s, m.time_usec)
             elif t == "STATUSTEXT":
-                text = m.text if isinstance(m.text, str) else m.text.decode(errors="replace")
-                text = text.rstrip("\x00")
-                s.last_statustext = text
-                self._statustexts.append((time.monotonic(), text))
+                text = self._statustext(m)
+                if text is not None:
+                    s.last_statustext = text
+                    self._statustexts.append((time.monotonic(), text))
             elif t == "PARAM_VALUE":
                 self._param_types[_param_id_of(m)] = int(m.param_type)
             elif t == "SYSTEM_TIME":
                 self._time_ms(s, m.time_boot_ms)
+
+    def _statustext(self, m: Any) -> str | None:
+        """The text of a STATUSTEXT, or None while a chunked text (MAVLink 2 ``id`` != 0)
+        is incomplete: chunks of one id are joined until one shorter than 50 bytes."""
+        raw = m.text if isinstance(m.text, bytes) else m.text.encode("utf-8", "replace")
+        raw = raw.rstrip(b"\x00")
+        text_id = int(getattr(m, "id", 0) or 0)
+        if text_id == 0:
+            return raw.decode("utf-8", "replace")
+        parts = self._chunks.setdefault(text_id, {})
+        parts[int(getattr(m, "chunk_seq", 0))] = raw
+        if len(raw) == 50:
+            return None
+        del self._chunks[text_id]
+        return b"".join(parts[k] for k in sorted(parts)).decode("utf-8", "replace")
 
     @staticmethod
     def _time_ms(s: VehicleSnapshot, ms: int) -> None:

@@ -281,3 +281,14 @@ def test_busy_port_says_which_port_to_use_instead():
         taken.bind(("127.0.0.1", port))
         with pytest.raises(GcsError, match=r"already listens there.*14540"):
             GroundStation(f"udp-server://127.0.0.1:{port}")
+
+
+def test_long_statustext_arrives_whole(endpoint_and_gs):
+    """Texts over STATUSTEXT's 50 bytes go out in MAVLink 2 chunks and are joined again."""
+    ep, gs = endpoint_and_gs
+    for text in ("mode TAKEOFF -> HOVER (takeoff altitude 20 m reached)",   # 54 bytes
+                 "y" * 100,                                                # 2 full chunks
+                 "short one"):
+        ep.ep.statustext(text)
+        s = gs.wait_for(lambda s, t=text: s.last_statustext == t, 3.0)
+        assert s.last_statustext == text

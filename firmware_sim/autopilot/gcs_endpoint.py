@@ -175,6 +175,7 @@ class GcsEndpoint:
                             "this simulated time in ms (-1 = off)")
         params.set(SIM_HOLD_PARAM, int(hold_ms))
         self.rates_hz = dict(DEFAULT_RATES_HZ)
+        self._statustext_id = 0
         self._next_due: dict[int, int] = {}
         self._earliest_due = 0
         self._queue: queue.SimpleQueue[tuple[int, Any]] = queue.SimpleQueue()
@@ -232,15 +233,27 @@ class GcsEndpoint:
 
     def statustext(self, text: str, severity: int = SEVERITY_INFO,
                    link: Link | None = None) -> None:
-        """STATUSTEXT (cut to 50 characters) to one link or to all."""
+        """STATUSTEXT to one link or to all. A text longer than the field's 50 bytes goes out
+        in chunks as MAVLink 2 specifies: one ``id`` (1..65535) for all of them, ``chunk_seq``
+        0, 1, ..., the last chunk shorter than 50 bytes (an empty one if needed)."""
         codec = self.links[0].codec if self.links else None
         if codec is None:
             return
-        msg = codec.statustext_encode(severity, text.encode()[:50])
-        if link is None:
-            self._send_all(msg)
+        data = text.encode("utf-8", errors="replace")
+        if len(data) <= 50:
+            msgs = [codec.statustext_encode(severity, data)]
         else:
-            link.send(msg)
+            self._statustext_id = self._statustext_id % 65535 + 1
+            chunks = [data[i:i + 50] for i in range(0, len(data), 50)][:255]
+            if len(chunks[-1]) == 50:
+                chunks.append(b"")
+            msgs = [codec.statustext_encode(severity, c, self._statustext_id, k)
+                    for k, c in enumerate(chunks)]
+        for msg in msgs:
+            if link is None:
+                self._send_all(msg)
+            else:
+                link.send(msg)
 
     @property
     def time_boot_ms(self) -> int:
@@ -295,7 +308,7 @@ class GcsEndpoint:
             try:
                 self._handle(self.links[index], msg)
             except Exception as exc:  # one bad message must not stop the autopilot
-                self.statustext(f"error handling {msg.get_type()}: {exc}"[:50],
+                self.statustext(f"error handling {msg.get_type()}: {exc}",
                                 SEVERITY_WARNING)
 
     def has_pending(self) -> bool:
@@ -453,7 +466,7 @@ class GcsEndpoint:
                 return
             result, reason = self._command(link, msg)
             if reason:
-                self.statustext(reason[:50], SEVERITY_WARNING if result else SEVERITY_INFO,
+                self.statustext(reason, SEVERITY_WARNING if result else SEVERITY_INFO,
                                 link)
             link.send(link.codec.command_ack_encode(
                 int(msg.command), int(result), 0, 0, msg.get_srcSystem(),
@@ -568,7 +581,7 @@ class GcsEndpoint:
         store = self.ap.params
         name = _text(msg.param_id)
         if name not in store:
-            self.statustext(f"unknown parameter {name}"[:50], SEVERITY_WARNING, link)
+            self.statustext(f"unknown parameter {name}", SEVERITY_WARNING, link)
             return
         index = store.index(name)
         prm = store.by_index(index)
@@ -577,7 +590,7 @@ class GcsEndpoint:
             store.set(name, value)
             self.on_event("param", f"{name} = {value:g}")
         except ParamError as exc:
-            self.statustext(str(exc)[:50], SEVERITY_WARNING, link)
+            self.statustext(str(exc), SEVERITY_WARNING, link)
         self._param_value(index, None)  # echo on every link, as PX4 does
 
 
