@@ -287,3 +287,25 @@ def test_atomic_write_gives_ordinary_permissions(tmp_path):
     assert p.read_text() == "{}\n"
     assert stat.S_IMODE(p.stat().st_mode) == 0o644
     assert [q.name for q in p.parent.iterdir()] == ["gains.json"]   # no temp file left
+
+
+@pytest.mark.slow
+def test_shipped_gains_are_what_the_synthesis_gives(ds1, tmp_path):
+    """The gains the autopilot ships are the output of `vtolftc synth` with the settings they
+    record: same achieved norms at every point (the gains themselves may differ where a
+    tie-break within 0.1 % picks another start on another machine's round-off). Fails when
+    the synthesis code or the airframe changed without regenerating the gain files."""
+    from firmware_sim.autopilot.attitude import default_gains_dir
+    from synthesis.pipeline import run_synthesis
+
+    shipped = json.loads((default_gains_dir() / "gs-shif.json").read_text())
+    st = shipped["settings"]
+    run_synthesis(ds1, tmp_path, n_starts=st["n_starts"], jobs=2, seed=st["seed"],
+                  report=False, mu=False)
+    fresh = json.loads((tmp_path / "gs-shif.json").read_text())
+    for ax in AXES:
+        want = [n["gamma"] for n in shipped["axes"][ax]["metadata"]["achieved_norms"]]
+        got = [n["gamma"] for n in fresh["axes"][ax]["metadata"]["achieved_norms"]]
+        assert np.allclose(got, want, rtol=2e-3), (
+            f"{ax}: synthesis gives gamma {got}, shipped gains have {want}: regenerate "
+            "firmware_sim/autopilot/gains with `vtolftc synth --out DIR` and copy the JSON files")
