@@ -41,3 +41,26 @@ def test_link_plan_is_loopback_and_consistent(transport, tmp_path):
         assert all(e.startswith("tcp/127.0.0.1:") for e in vehicle.listen + ap_gcs.listen)
     with pytest.raises(ValueError, match="udp or zenoh"):
         SitlRun(SitlConfig(transport="serial"))
+
+
+@pytest.mark.slow
+def test_sitl_dashboard_flag_serves_the_page_and_follows_the_run(tmp_path, monkeypatch, capsys):
+    """``vtolftc sitl --dashboard``: the dashboard gets its own ground-station link, sees the
+    flight's telemetry, and is closed with the run."""
+    import dashboard.web as web
+
+    made: list[web.Dashboard] = []
+
+    class Spy(web.Dashboard):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            made.append(self)
+
+    monkeypatch.setattr(web, "Dashboard", Spy)
+    rc = cli_run(["sitl", "--case", "0", "--duration", "8", "--dashboard",
+                  "--dashboard-port", "0", "--out", str(tmp_path / "run")])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert f"dashboard: {made[0].page_url}" in out and "127.0.0.1" in made[0].page_url
+    snap = made[0].gs.snapshot()
+    assert snap.armed and snap.sim_time_s > 4.0 and snap.altitude_m > 1.0
