@@ -41,6 +41,10 @@ __all__ = ["CRASH_ATTITUDE_DEG", "MetricsAccumulator", "compute_metrics", "is_cr
 
 CRASH_ATTITUDE_DEG = 60.0
 _CRASH_ATTITUDE_RAD = math.radians(CRASH_ATTITUDE_DEG)
+_M_FIXED_WING = FlightMode.FIXED_WING
+_M_FRONT_TRANSITION = FlightMode.FRONT_TRANSITION
+_M_HOVER = FlightMode.HOVER
+_RAD_TO_DEG = math.degrees(1.0)  # what math.degrees multiplies by (CPython)
 _FLYING = {FlightMode.HOVER, FlightMode.FRONT_TRANSITION, FlightMode.FIXED_WING,
            FlightMode.BACK_TRANSITION}
 
@@ -94,7 +98,9 @@ class MetricsAccumulator:
         self.t_last = t
         nav, st = s.nav, s.status
         roll, pitch, yaw = quat_to_euler(nav.q_wxyz)
-        h = -float(nav.pos_ned_m[2])
+        pos = nav.pos_ned_m
+        h = -(pos.tolist()[2] if type(pos) is np.ndarray and pos.shape == (3,)
+              else float(pos[2]))
         mode = st.mode if type(st.mode) is FlightMode else FlightMode(st.mode)
         if self._ground is None and st.armed:
             self._ground = h
@@ -105,11 +111,13 @@ class MetricsAccumulator:
                                           self._was_high):
             self.crashed = True
             self.crash_time_s = t
-        if mode is FlightMode.FRONT_TRANSITION and self.transition_start_s is None:
-            self.transition_start_s = t
-        if mode is FlightMode.FIXED_WING and self.transition_complete_s is None:
-            self.transition_complete_s = t
-        if self._prev_mode is FlightMode.FRONT_TRANSITION and mode is FlightMode.HOVER:
+        if mode is _M_FRONT_TRANSITION:
+            if self.transition_start_s is None:
+                self.transition_start_s = t
+        elif mode is _M_FIXED_WING:
+            if self.transition_complete_s is None:
+                self.transition_complete_s = t
+        elif mode is _M_HOVER and self._prev_mode is _M_FRONT_TRANSITION:
             self.quad_chute = True
         self._prev_mode = mode
         self.n += 1
@@ -117,23 +125,28 @@ class MetricsAccumulator:
         r0, r1, r2 = ref.tolist() if type(ref) is np.ndarray and ref.shape == (3,) else (
             float(ref[0]), float(ref[1]), float(ref[2]))
         e_h = float(st.altitude_ref_m) - h
-        degrees = math.degrees
         if t >= self.window_start_s:
-            e0 = degrees(r0 - roll)
-            e1 = degrees(r1 - pitch)
-            e2 = _wrap_deg(degrees(r2 - yaw))
+            e0 = (r0 - roll) * _RAD_TO_DEG
+            e1 = (r1 - pitch) * _RAD_TO_DEG
+            e2 = _wrap_deg((r2 - yaw) * _RAD_TO_DEG)
             self.n_win += 1
             se, mx = self._se, self._max
             se[0] += e_h * e_h
             se[1] += e0 * e0
             se[2] += e1 * e1
             se[3] += e2 * e2
-            mx[0] = max(mx[0], abs(e0))
-            mx[1] = max(mx[1], abs(e1))
-            mx[2] = max(mx[2], abs(e2))
+            a = abs(e0)
+            if a > mx[0]:
+                mx[0] = a
+            a = abs(e1)
+            if a > mx[1]:
+                mx[1] = a
+            a = abs(e2)
+            if a > mx[2]:
+                mx[2] = a
         self._last = (h, e_h, float(nav.airspeed_m_s))
         tail = self._tail
-        tail.append((t, degrees(roll), degrees(pitch), degrees(yaw)))
+        tail.append((t, roll * _RAD_TO_DEG, pitch * _RAD_TO_DEG, yaw * _RAD_TO_DEG))
         while t - tail[0][0] > 1.0 + 1e-9:
             tail.popleft()
 

@@ -152,8 +152,9 @@ def encode_hil_state(nav: NavState, home_lat_deg: float, home_lon_deg: float,
     """Encode ``nav`` as HIL_STATE_QUATERNION fields (flat-earth projection about home).
 
     Floats are rounded to float32 exactly as the wire does (``struct`` packing, as pymavlink),
-    integers rounded to nearest and clipped to their field's range. About 5 us: it runs every
-    control step of an in-process run.
+    integers rounded to nearest (ties to even, as ``round``) and clipped to their field's
+    range. The in-process runner (``vtolftc.scenario``) uses a compiled fusion of this and
+    :func:`decode_hil_state` that must return the very same bits: change both together.
     """
     pn, pe, pd = nav.pos_ned_m.tolist()
     lat = home_lat_deg + math.degrees(pn / EARTH_RADIUS_M)
@@ -201,8 +202,10 @@ def decode_hil_state(h: HilState, home_lat_deg: float, home_lon_deg: float,
 
 def wire_commands(u: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:
     """Commands as HIL_ACTUATOR_CONTROLS carries them: float32, 16 slots (ours are 0..14)."""
-    out = np.zeros(16, dtype=np.float32)
     arr = np.asarray(u, dtype=np.float64)
+    if arr.shape == (N_ACTUATORS,):  # the usual case: same float32 rounding, 1 us less
+        return arr.astype(np.float32).astype(np.float64)
+    out = np.zeros(16, dtype=np.float32)
     out[: arr.size] = arr
     return out[:N_ACTUATORS].astype(np.float64)
 

@@ -202,28 +202,31 @@ class CascadedPPID:
         g = self.gains
         e = rate_ref - rate
         dt = self.dt
-        de = e - self._e_prev
-        if g.tf_rate_s == self._tf_cached:
+        e_prev = self._e_prev
+        de = e - e_prev
+        tf = g.tf_rate_s
+        if tf == self._tf_cached:
             a, b = self._a, self._b
         else:
-            a, b = self._filter_coeffs(g.tf_rate_s)
-        self.derivative = a * self.derivative + b * g.kd_rate * de
-        if self.method == "tustin":
-            dI = 0.5 * g.ki_rate * dt * (e + self._e_prev)
-        else:
-            dI = g.ki_rate * dt * e
+            a, b = self._filter_coeffs(tf)
+        derivative = a * self.derivative + b * g.kd_rate * de
+        self.derivative = derivative
+        dI = 0.5 * g.ki_rate * dt * (e + e_prev) if self.method == "tustin" else g.ki_rate * dt * e
         p = g.kp_rate * e
-        u_test = p + self.integral + dI + self.derivative
+        integral = self.integral
+        u_min, u_max = self.u_min, self.u_max
+        u_test = p + integral + dI + derivative
         # conditional integration: integrate at most up to the limit, never further into it
-        if dI > 0.0 and u_test > self.u_max:
-            dI = max(0.0, self.u_max - (u_test - dI))
-        elif dI < 0.0 and u_test < self.u_min:
-            dI = min(0.0, self.u_min - (u_test - dI))
-        self.integral = min(max(self.integral + dI, self.u_min), self.u_max)
-        u = p + self.integral + self.derivative
+        if dI > 0.0 and u_test > u_max:
+            dI = max(0.0, u_max - (u_test - dI))
+        elif dI < 0.0 and u_test < u_min:
+            dI = min(0.0, u_min - (u_test - dI))
+        integral = min(max(integral + dI, u_min), u_max)
+        self.integral = integral
+        u = p + integral + derivative
         self.output_unsat = u
-        self.saturated = u >= self.u_max or u <= self.u_min
-        u = min(max(u, self.u_min), self.u_max)
+        self.saturated = u >= u_max or u <= u_min
+        u = min(max(u, u_min), u_max)
         self._e_prev = e
         self.rate_ref = rate_ref
         self.output = u
@@ -251,7 +254,15 @@ class CascadedPPID:
         """
         if gains is not None:
             self.gains = gains
-        r = self.rate_reference(angle_ref, angle, self.gains, rate_ff)
+        g = self.gains
+        # outer loop: rate_reference(angle_ref, angle, g, rate_ff), inlined (hot path)
+        err = angle_ref - angle
+        if self.wrap:
+            err = wrap_angle(err)
+        r = g.kp_angle * err + rate_ff
+        rl = self.rate_limit
+        if rl is not None:
+            r = min(max(r, -rl), rl)
         return self.update_rate(r, rate)
 
     # ------------------------------------------------------------------------------------
