@@ -23,8 +23,7 @@ import argparse
 import time
 
 import numpy as np
-
-from firmware_sim.autopilot.allocation import PseudoInverseAllocator, QPAllocator
+from vtolftc.firmware_sim.autopilot.allocation import PseudoInverseAllocator, QPAllocator
 
 N_U = 15
 U_MIN = np.r_[np.zeros(10), -np.ones(5)]

@@ -20,8 +20,8 @@ import tempfile
 import time
 
 import numpy as np
+from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 
-from firmware_sim.autopilot.autopilot import Autopilot
 from vtolftc.runfolder import RunFolderWriter
 from vtolftc.scenario import paper_scenario, run_scenario
 

@@ -20,9 +20,9 @@ import statistics
 import time
 from typing import Any
 
-from protocols.link import Link, open_link
-from protocols.mavlink import make_codec
-from protocols.netutil import free_tcp_port
+from vtolftc.protocols.link import Link, open_link
+from vtolftc.protocols.mavlink import make_codec
+from vtolftc.protocols.netutil import free_tcp_port
 
 
 def _hil_sensor(codec: Any, t_us: int) -> Any:
@@ -118,7 +118,7 @@ def bench_codec(n: int) -> None:
     """Pack + parse of both messages in-process: the floor under any transport."""
     a = make_codec(1, 200)
     b = make_codec(1, 1)
-    from protocols.link import Link, Transport
+    from vtolftc.protocols.link import Link, Transport
 
     class _Null(Transport):
         kind = "null"

@@ -1,7 +1,8 @@
 """Benchmark of the full attitude synthesis, end to end (issue 3's performance target: < 60 s
 on 2 cores).
 
-Runs :func:`synthesis.pipeline.run_synthesis` on DS-1: uncertainty weights (18 covers, inside
+Runs :func:`vtolftc.synthesis.pipeline.run_synthesis` on DS-1: uncertainty weights (18 covers,
+inside
 the tunes), 18 GS-SHIF tunes + 3 SHIF multi-model tunes (structured H-infinity, multi-start),
 the LQR baseline, the mu analysis (robust stability and performance, 36 sweeps: GS-SHIF and
 SHIF at every point), the gain files and (unless ``--no-report``) the report with its plots;
@@ -19,8 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from airframe.loader import load_airframe
-from synthesis.pipeline import run_synthesis
+from vtolftc.airframe.loader import load_airframe
+from vtolftc.synthesis.pipeline import run_synthesis
 
 
 def main() -> None:

@@ -15,9 +15,8 @@ import platform
 import time
 
 import numpy as np
-
-from firmware_sim.vehicle.model import Vehicle
-from firmware_sim.vehicle.trim import trim_level_flight
+from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle.trim import trim_level_flight
 
 
 def machine() -> str:

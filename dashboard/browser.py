@@ -7,7 +7,7 @@ renders without a GPU.
 
 The page exposes its state in ``data-*`` attributes of ``#vtolftc-status`` (link, mode, vtol,
 armed, update, north, altitude, airspeed) and the command results in ``#vtolftc-commands``
-(see :mod:`dashboard.model`); :class:`DashboardPage` reads them in one script call each.
+(see :mod:`vtolftc.dashboard.model`); :class:`DashboardPage` reads them in one script call each.
 """
 
 from __future__ import annotations

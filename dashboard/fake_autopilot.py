@@ -20,8 +20,8 @@ import threading
 import time
 from typing import Any
 
-from protocols import open_link
-from protocols.px4 import custom_mode, decode_param_value, encode_param_value
+from vtolftc.protocols import open_link
+from vtolftc.protocols.px4 import custom_mode, decode_param_value, encode_param_value
 
 __all__ = ["FakeAutopilot"]
 

@@ -11,8 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from airframe.loader import Airframe
+from vtolftc.airframe.loader import Airframe
 
 __all__ = ["Box", "Disc", "aircraft_geometry", "rotor_grid"]
 

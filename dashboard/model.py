@@ -1,10 +1,12 @@
 """What the web dashboard shows, computed from ground-station snapshots (no GUI, no network).
 
-:class:`DashboardModel` turns successive :class:`gcs.client.VehicleSnapshot` objects (anything
+:class:`DashboardModel` turns successive :class:`vtolftc.gcs.client.VehicleSnapshot` objects
+(anything
 with the same attributes works) into a :class:`DashboardView`: link state, mode, armed state,
 airspeed, altitude, the aircraft's pose and path in the display frame, the time traces and the
 actuator bars; it also keeps the feedback of the commands sent (accepted, refused, no answer).
-:mod:`dashboard.web` only copies a view into viser's GUI elements, so everything here is tested
+:mod:`vtolftc.dashboard.web` only copies a view into viser's GUI elements, so everything here is
+tested
 without a browser (``tests/test_dashboard.py``).
 
 Display frame: viser's world is z-up. The model shows NED positions in a frame rotated by 180
@@ -173,7 +175,7 @@ class DashboardModel:
     Args:
         actuator_names: the vehicle's actuators in output order (ACTUATOR_OUTPUT_STATUS order).
         rotor_grid: lift-rotor names laid out as seen from above (see
-            :func:`dashboard.geometry.rotor_grid`).
+            :func:`vtolftc.dashboard.geometry.rotor_grid`).
         url: the ground-station link URL (for messages).
         history_s: length of the time traces (s of autopilot time).
         stale_after_s, lost_after_s: heartbeat ages for the link states.

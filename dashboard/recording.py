@@ -59,8 +59,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from vtolftc.firmware_sim.autopilot.interface import N_ACTUATORS, FlightMode
 
-from firmware_sim.autopilot.interface import N_ACTUATORS, FlightMode
 from vtolftc.telemetry import TelemetrySample
 
 __all__ = ["DEFAULT_ACTUATOR_NAMES", "RerunRecorder", "actuator_entity", "read_recording"]
@@ -208,11 +208,11 @@ class RerunRecorder:
         rec = self._rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)   # NED
         try:
-            from dashboard.geometry import aircraft_geometry
+            from vtolftc.dashboard.geometry import aircraft_geometry
 
             af = self._airframe
             if af is None:
-                from airframe.loader import load_airframe
+                from vtolftc.airframe.loader import load_airframe
 
                 af = load_airframe()
             boxes, discs = aircraft_geometry(af)

@@ -1,7 +1,7 @@
 """The viser web dashboard: watch the aircraft and command it over MAVLink.
 
 :class:`Dashboard` serves a page (viser, http://127.0.0.1:8080 by default) and connects to the
-autopilot as a ground station through :class:`gcs.client.GroundStation` (UDP 14550 by
+autopilot as a ground station through :class:`vtolftc.gcs.client.GroundStation` (UDP 14550 by
 default, or any link URL). The page shows
 
 - the aircraft in 3-D (fuselage, wing, booms, rotors and pushers from the airframe file) at
@@ -15,7 +15,7 @@ default, or any link URL). The page shows
   ``gcs/`` and shows the COMMAND_ACK (accepted, refused with the autopilot's reason, or no
   answer). Commands are not sent while the link is down; the page says why.
 
-All display logic is in :class:`dashboard.model.DashboardModel` (tested without a browser);
+All display logic is in :class:`vtolftc.dashboard.model.DashboardModel` (tested without a browser);
 this module only moves its views into viser's elements, from one update thread (``rate_hz``)
 and one command thread (commands never block the page).
 """
@@ -31,9 +31,8 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-
-from dashboard.geometry import aircraft_geometry, rotor_grid
-from dashboard.model import DashboardModel, DashboardView
+from vtolftc.dashboard.geometry import aircraft_geometry, rotor_grid
+from vtolftc.dashboard.model import DashboardModel, DashboardView
 
 __all__ = ["FAULT_GROUPS", "Dashboard"]
 
@@ -84,11 +83,10 @@ class Dashboard:
                  ground_station: Any = None, plot_hz: float = 4.0,
                  verbose: bool = False, allow_remote: bool = False) -> None:
         import viser
-
-        from gcs.client import GcsError, GroundStation
+        from vtolftc.gcs.client import GcsError, GroundStation
 
         if airframe is None:
-            from airframe.loader import load_airframe
+            from vtolftc.airframe.loader import load_airframe
 
             airframe = load_airframe()
         self.airframe = airframe
@@ -102,7 +100,7 @@ class Dashboard:
                 raise RuntimeError(str(exc)) from None
         self.gs = ground_station
         self.model = DashboardModel(airframe.actuator_names, rotor_grid(airframe), url=url)
-        from gcs.actuators import ActuatorTable
+        from vtolftc.gcs.actuators import ActuatorTable
 
         self._table = ActuatorTable.from_names(airframe.actuator_names)
         try:
@@ -262,7 +260,7 @@ class Dashboard:
         self._cmd_queue.put((label, action, on_done or (lambda _o: None)))
 
     def _command_loop(self) -> None:
-        from gcs.client import GcsError
+        from vtolftc.gcs.client import GcsError
 
         while not self._stop.is_set():
             try:

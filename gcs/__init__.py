@@ -1,11 +1,12 @@
 """Ground-station library and CLI speaking MAVLink to the autopilot.
 
-:class:`gcs.client.GroundStation` connects (UDP 14550 by default, or any link URL), keeps a
-:class:`gcs.client.VehicleSnapshot`, sends commands with acknowledgement and retries, reads and
+:class:`vtolftc.gcs.client.GroundStation` connects (UDP 14550 by default, or any link URL), keeps a
+:class:`vtolftc.gcs.client.VehicleSnapshot`, sends commands with acknowledgement and retries, reads
+and
 writes parameters and injects faults. ``vtolftc gcs ...`` is its command line.
 """
 
-from gcs.client import (
+from vtolftc.gcs.client import (
     CommandOutcome,
     GcsError,
     GcsTimeout,

@@ -1,6 +1,7 @@
 """Actuator names <-> MAVLink failure units and instances, for the ground station.
 
-The numbering itself lives in :mod:`protocols.failure_units` (shared with the vehicle and the
+The numbering itself lives in :mod:`vtolftc.protocols.failure_units` (shared with the vehicle and
+the
 autopilot); :func:`default_table` is the table of the shipped DS-1 airframe.
 """
 
@@ -8,7 +9,7 @@ from __future__ import annotations
 
 import functools
 
-from protocols.failure_units import (
+from vtolftc.protocols.failure_units import (
     FAILURE_UNIT_MOTOR,
     FAILURE_UNIT_SERVO,
     GROUPS,
@@ -22,6 +23,6 @@ __all__ = ["FAILURE_UNIT_MOTOR", "FAILURE_UNIT_SERVO", "GROUPS", "ActuatorTable"
 @functools.cache
 def default_table() -> ActuatorTable:
     """The actuator table of the shipped DS-1 airframe (loaded once)."""
-    from airframe.loader import load_airframe
+    from vtolftc.airframe.loader import load_airframe
 
     return ActuatorTable.from_names(load_airframe().actuator_names)

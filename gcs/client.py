@@ -32,9 +32,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from gcs.actuators import ActuatorTable, default_table
-from protocols import SigningConfig, dialect, open_link
-from protocols.px4 import (
+from vtolftc.gcs.actuators import ActuatorTable, default_table
+from vtolftc.protocols import SigningConfig, dialect, open_link
+from vtolftc.protocols.px4 import (
     MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
     MAV_MODE_FLAG_SAFETY_ARMED,
     decode_param_value,

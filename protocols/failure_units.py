@@ -16,7 +16,8 @@ rudder_right
 ================================  ===========================  =========
 
 Instance 0 means every instance of the unit. The vehicle process, the autopilot's
-ground-station endpoint and the ground station (:mod:`gcs.actuators`) all build this table from
+ground-station endpoint and the ground station (:mod:`vtolftc.gcs.actuators`) all build this table
+from
 the airframe's actuator names, so they agree by construction. Only a numbering convention:
 no flight logic.
 """

@@ -1,9 +1,10 @@
 """Links that carry MAVLink 2 frames, with one code path above the transport.
 
-A :class:`Link` owns a codec of the vtol-ftc dialect (see :mod:`protocols.mavlink`) and a
+A :class:`Link` owns a codec of the vtol-ftc dialect (see :mod:`vtolftc.protocols.mavlink`) and a
 :class:`Transport` that moves whole datagrams (one or more MAVLink frames each). Packing, parsing,
-signing and the counters live in :class:`Link`; the transports (:mod:`protocols.udp`,
-:mod:`protocols.zenoh_transport`) only move bytes. Every datagram is parsed on its own with the
+signing and the counters live in :class:`Link`; the transports (:mod:`vtolftc.protocols.udp`,
+:mod:`vtolftc.protocols.zenoh_transport`) only move bytes. Every datagram is parsed on its own with
+the
 generated parser in robust mode: garbage, frames with a bad CRC (or bad header flags), frames cut
 short at the end of a datagram, frames rejected by signing and frames of unknown message ids are
 dropped and counted in :class:`LinkStats`, never raised; after a corrupt frame the parser re-syncs
@@ -44,7 +45,7 @@ from types import TracebackType
 from typing import Any
 from urllib.parse import urlsplit
 
-from protocols.mavlink import SigningConfig, dialect, make_codec
+from vtolftc.protocols.mavlink import SigningConfig, dialect, make_codec
 
 __all__ = [
     "Link",
@@ -439,7 +440,7 @@ def parse_link_url(url: str) -> LinkUrl:
     if parts.fragment:
         raise ValueError(f"bad link URL {url!r}: fragments ('#...') are not allowed")
     if scheme == "zenoh":
-        from protocols.zenoh_transport import parse_zenoh_url
+        from vtolftc.protocols.zenoh_transport import parse_zenoh_url
 
         return parse_zenoh_url(url)
     if parts.path not in ("", "/") or parts.query:
@@ -485,15 +486,15 @@ def open_link(
     spec = parse_link_url(url)
     transport: Transport
     if spec.scheme == "udp-server":
-        from protocols.udp import UdpServerTransport
+        from vtolftc.protocols.udp import UdpServerTransport
 
         transport = UdpServerTransport(spec.host, spec.port, allow_remote=allow_remote)
     elif spec.scheme == "udp-client":
-        from protocols.udp import UdpClientTransport
+        from vtolftc.protocols.udp import UdpClientTransport
 
         transport = UdpClientTransport(spec.host, spec.port, allow_remote=allow_remote)
     else:
-        from protocols.zenoh_transport import ZenohTransport
+        from vtolftc.protocols.zenoh_transport import ZenohTransport
 
         transport = ZenohTransport(
             spec.vehicle,

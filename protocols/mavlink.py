@@ -1,21 +1,18 @@
-"""The vtol-ftc MAVLink dialect: generation, loading, codecs and signing.
+"""The vtol-ftc MAVLink dialect: loading, regeneration, codecs and signing.
 
 The dialect is described by ``protocols/dialects/vtolftc.xml`` (which includes pymavlink's
 ``common.xml``) and turned into Python by pymavlink's own generator (mavgen, MAVLink 2.0 wire
-protocol) the first time :func:`dialect` is called in a process. Nothing is hand-written: the
-packers, the parser and the CRC extras all come from mavgen.
+protocol). Nothing is hand-written: the packers, the parser and the CRC extras all come from
+mavgen.
 
-Where the generated module goes
-    The first writable directory among
+The generated module is committed as ``protocols/generated/vtolftc.py`` and imported like any
+other module (:func:`dialect`); nothing is written at run time, so a read-only install works.
+After a change to the XML or to the pinned pymavlink, regenerate it with::
 
-    1. ``$VTOLFTC_MAVLINK_CACHE`` (if set),
-    2. ``protocols/generated/`` next to this file (git-ignored),
-    3. ``$XDG_CACHE_HOME/vtolftc/mavlink`` (default ``~/.cache/vtolftc/mavlink``).
+    python -m vtolftc.protocols.mavlink
 
-    The file is named ``vtolftc_<hash>.py`` where the hash covers the dialect XML, every XML it
-    includes, the pymavlink version and the generator source; any change to one of those
-    regenerates. Generation writes into a private temporary directory and publishes with an atomic
-    :func:`os.replace`, so two processes generating at once both end with the same, complete file.
+and ``tests/test_protocols_dialect.py`` checks that the committed file is exactly what mavgen
+makes from the XML today.
 
 Codecs
     :func:`make_codec` returns the generated ``MAVLink`` object (packer + parser) with a given
@@ -27,12 +24,11 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import importlib.util
+import importlib
 import io
 import os
 import re
 import shutil
-import sys
 import tempfile
 import threading
 import time
@@ -45,15 +41,13 @@ from typing import Any
 __all__ = [
     "DIALECT_NAME",
     "DIALECT_XML",
+    "GENERATED_MODULE",
     "MAVLINK_EPOCH_UNIX_S",
     "SigningConfig",
     "apply_signing",
-    "cache_candidates",
     "dialect",
-    "dialect_hash",
     "dialect_sources",
     "generate_dialect",
-    "locate_or_generate",
     "make_codec",
     "signing_timestamp_now",
 ]
@@ -67,7 +61,7 @@ DIALECT_XML = Path(__file__).resolve().parent / "dialects" / f"{DIALECT_NAME}.xm
 MAVLINK_EPOCH_UNIX_S = 1420070400
 """1 January 2015 00:00 UTC, the origin of MAVLink signing timestamps (unit 10 us)."""
 
-_MODULE_NAME = "protocols._dialect_vtolftc"
+_MODULE_NAME = "vtolftc.protocols.generated.vtolftc"
 _INCLUDE_RE = re.compile(rb"<include>\s*([^<\s]+)\s*</include>")
 _lock = threading.Lock()
 _gen_lock = threading.RLock()  # mavgen prints; stdout redirection is process-global
@@ -75,8 +69,12 @@ _module: ModuleType | None = None
 
 
 # --------------------------------------------------------------------------------------------
-# sources and hash
+# sources and generation
 # --------------------------------------------------------------------------------------------
+GENERATED_MODULE = Path(__file__).resolve().parent / "generated" / f"{DIALECT_NAME}.py"
+"""The committed generated module (see the module docstring)."""
+
+
 def _pymavlink_dialect_dir() -> Path:
     import pymavlink
 
@@ -93,7 +91,18 @@ def _resolve_include(name: str, including: Path) -> Path:
 
 
 def dialect_sources(xml: Path = DIALECT_XML) -> list[Path]:
-    """The dialect XML followed by every XML it includes (transitively), without duplicates."""
+    """The dialect XML followed by every XML it includes (transitively), without duplicates.
+
+    Parameters
+    ----------
+    xml : Path
+        The dialect definition.
+
+    Returns
+    -------
+    list of Path
+        ``xml`` first, then its includes in breadth-first order.
+    """
     xml = Path(xml).resolve()
     seen: dict[str, Path] = {}
     todo = [xml]
@@ -109,138 +118,73 @@ def dialect_sources(xml: Path = DIALECT_XML) -> list[Path]:
     return list(seen.values())
 
 
-def dialect_hash(xml: Path = DIALECT_XML) -> str:
-    """Hex digest identifying the generated code: XML sources, pymavlink version, generator."""
-    import pymavlink
-    from pymavlink.generator import mavgen_python, mavparse
+def generate_dialect(target: Path, xml: Path = DIALECT_XML) -> Path:
+    """Run mavgen (MAVLink 2.0, Python 3) on ``xml`` and write the module to ``target``.
 
-    h = hashlib.sha256()
-    h.update(b"wire=2.0;lang=Python3;")
-    h.update(getattr(pymavlink, "__version__", "?").encode())
-    for mod in (mavgen_python, mavparse):
-        h.update(Path(mod.__file__).read_bytes())
-    for src in dialect_sources(xml):
-        h.update(src.name.encode() + b"\0")
-        h.update(src.read_bytes())
-    return h.hexdigest()
+    The file is written to a temporary directory beside ``target`` and published with an atomic
+    :func:`os.replace`: a reader never sees half a module.
 
+    Parameters
+    ----------
+    target : Path
+        Where the generated module goes (its directory is created).
+    xml : Path
+        The dialect definition; its includes are resolved next to it, then in pymavlink's.
 
-# --------------------------------------------------------------------------------------------
-# generation
-# --------------------------------------------------------------------------------------------
-def cache_candidates() -> list[Path]:
-    """Directories tried, in order, for the generated module (see module docstring)."""
-    dirs: list[Path] = []
-    env = os.environ.get("VTOLFTC_MAVLINK_CACHE")
-    if env:
-        dirs.append(Path(env).expanduser())
-    dirs.append(Path(__file__).resolve().parent / "generated")
-    xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    dirs.append(Path(xdg).expanduser() / "vtolftc" / "mavlink")
-    return dirs
+    Returns
+    -------
+    Path
+        ``target``.
 
-
-def generate_dialect(out_dir: Path, xml: Path = DIALECT_XML) -> Path:
-    """Generate the dialect into ``out_dir`` (if not already there) and return the module path.
-
-    Safe against concurrent generation: each caller works in its own temporary directory inside
-    ``out_dir`` and publishes with an atomic rename; identical inputs give identical files.
-
-    Raises:
-        OSError: ``out_dir`` cannot be created or written.
-        RuntimeError: mavgen rejected the XML (its output is in the message).
+    Raises
+    ------
+    OSError
+        ``target`` cannot be written.
+    RuntimeError
+        mavgen rejected the XML (its output is in the message).
     """
     from pymavlink.generator import mavgen
 
-    out_dir = Path(out_dir)
-    digest = dialect_hash(xml)
-    target = out_dir / f"{DIALECT_NAME}_{digest[:20]}.py"
-    if target.is_file():
-        return target
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
     with _gen_lock:
-        return _generate_locked(out_dir, xml, target, mavgen)
-
-
-def _generate_locked(out_dir: Path, xml: Path, target: Path, mavgen: Any) -> Path:
-    if target.is_file():
-        return target
-    out_dir.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=".gen-", dir=out_dir))
-    try:
-        sources = dialect_sources(xml)
-        for src in sources:  # flat copy: includes are resolved by file name, next to the dialect
-            shutil.copyfile(src, work / src.name)
-        out_py = work / f"{DIALECT_NAME}.py"
-        opts = mavgen.Opts(str(out_py), wire_protocol="2.0", language="Python3", validate=True)
-        log = io.StringIO()
+        work = Path(tempfile.mkdtemp(prefix=".gen-", dir=target.parent))
         try:
-            with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
-                ok = mavgen.mavgen(opts, [str(work / sources[0].name)])
-        except SystemExit as exc:  # mavgen calls exit() on some XML errors
-            raise RuntimeError(f"mavgen failed on {xml}:\n{log.getvalue()}") from exc
-        if not ok or not out_py.is_file():
-            raise RuntimeError(f"mavgen failed on {xml}:\n{log.getvalue()}")
-        os.replace(out_py, target)
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
-    _remove_stale(out_dir, keep=target)
+            sources = dialect_sources(xml)
+            for src in sources:  # flat copy: includes resolve by file name, next to the dialect
+                shutil.copyfile(src, work / src.name)
+            out_py = work / f"{DIALECT_NAME}.py"
+            opts = mavgen.Opts(str(out_py), wire_protocol="2.0", language="Python3",
+                               validate=True)
+            log = io.StringIO()
+            try:
+                with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+                    ok = mavgen.mavgen(opts, [str(work / sources[0].name)])
+            except SystemExit as exc:  # mavgen calls exit() on some XML errors
+                raise RuntimeError(f"mavgen failed on {xml}:\n{log.getvalue()}") from exc
+            if not ok or not out_py.is_file():
+                raise RuntimeError(f"mavgen failed on {xml}:\n{log.getvalue()}")
+            os.replace(out_py, target)
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
     return target
-
-
-def _remove_stale(out_dir: Path, keep: Path, min_age_s: float = 3600.0) -> None:
-    """Best effort: drop generated files of other hashes that nobody touched for an hour."""
-    now = time.time()
-    for old in out_dir.glob(f"{DIALECT_NAME}_*.py"):
-        if old == keep:
-            continue
-        with contextlib.suppress(OSError):
-            if now - old.stat().st_mtime > min_age_s:
-                old.unlink()
-
-
-def _load(path: Path) -> ModuleType:
-    spec = importlib.util.spec_from_file_location(_MODULE_NAME, path)
-    if spec is None or spec.loader is None:  # pragma: no cover - importlib contract
-        raise ImportError(f"cannot import generated dialect {path}")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[_MODULE_NAME] = module
-    try:
-        spec.loader.exec_module(module)
-    except BaseException:
-        sys.modules.pop(_MODULE_NAME, None)
-        raise
-    return module
 
 
 def dialect() -> ModuleType:
     """The generated vtol-ftc dialect module (pymavlink ``MAVLink`` class, messages, enums).
 
-    Generated on first use (see the module docstring for where), then cached for the process.
+    Returns
+    -------
+    module
+        ``vtolftc.protocols.generated.vtolftc``, imported once per process.
     """
     global _module
     if _module is not None:
         return _module
     with _lock:
-        if _module is not None:
-            return _module
-        _module = _load(locate_or_generate())
+        if _module is None:
+            _module = importlib.import_module(_MODULE_NAME)
         return _module
-
-
-def locate_or_generate(candidates: list[Path] | None = None, xml: Path = DIALECT_XML) -> Path:
-    """Path of the generated module in the first usable directory (default
-    :func:`cache_candidates`), generating it there if needed.
-
-    Raises:
-        OSError: no candidate directory is writable.
-    """
-    errors: list[str] = []
-    for out_dir in cache_candidates() if candidates is None else candidates:
-        try:
-            return generate_dialect(out_dir, xml)
-        except OSError as exc:  # read-only or unusable directory: try the next one
-            errors.append(f"{out_dir}: {exc}")
-    raise OSError("no writable directory for the generated MAVLink dialect: " + "; ".join(errors))
 
 
 # --------------------------------------------------------------------------------------------
@@ -318,7 +262,7 @@ def make_codec(
         robust: robust parsing (bad data returned as ``MAVLink_bad_data``, never raised).
 
     The codec's ``file`` is ``None``: pack with ``msg.pack(codec)`` (or let a
-    :class:`protocols.link.Link` do it) rather than ``codec.send``.
+    :class:`vtolftc.protocols.link.Link` do it) rather than ``codec.send``.
     """
     if not 0 <= system_id <= 255 or not 0 <= component_id <= 255:
         raise ValueError(f"system/component id out of range: {system_id}/{component_id}")
@@ -327,3 +271,19 @@ def make_codec(
     if signing is not None:
         apply_signing(codec, signing)
     return codec
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Regenerate the committed dialect module (``python -m vtolftc.protocols.mavlink``)."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m vtolftc.protocols.mavlink",
+                                 description="regenerate protocols/generated/vtolftc.py")
+    ap.add_argument("--out", type=Path, default=GENERATED_MODULE, help="module to write")
+    args = ap.parse_args(argv)
+    print(generate_dialect(args.out))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -26,8 +26,8 @@ import re
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from protocols.link import LinkUrl, Transport
-from protocols.netutil import require_loopback
+from vtolftc.protocols.link import LinkUrl, Transport
+from vtolftc.protocols.netutil import require_loopback
 
 __all__ = [
     "DIRECTIONS",

@@ -1,9 +1,9 @@
 """Baseline attitude controllers of the paper's comparison: LQR (this module) and SHIF (the
-constant multi-model structured H-infinity design, :func:`synthesis.design.design_shif`).
+constant multi-model structured H-infinity design, :func:`vtolftc.synthesis.design.design_shif`).
 
 LQR, per axis, on the hover model (V = 0: the wing terms vanish, the axis is a near-pure
 inertia, quadrotor-like; the model keeps whatever V = 0 damping and stiffness
-:func:`synthesis.models.axis_coefficients` gives, zero for DS-1), augmented with the
+:func:`vtolftc.synthesis.models.axis_coefficients` gives, zero for DS-1), augmented with the
 integral of the angle error:
 
     x = [xi, angle, rate],  xi' = angle_ref - angle,  angle' = rate,
@@ -34,9 +34,8 @@ from dataclasses import dataclass
 import control as ct
 import numpy as np
 from numpy.typing import NDArray
-
-from airframe.loader import Airframe
-from synthesis.models import AXES, Axis, axis_coefficients
+from vtolftc.airframe.loader import Airframe
+from vtolftc.synthesis.models import AXES, Axis, axis_coefficients
 
 __all__ = ["LQR_Q", "LQR_R", "LqrAxis", "lqr_axis", "lqr_design"]
 

@@ -6,13 +6,14 @@ Weights per axis and design point (paper section 3.1.3):
 - ``Ws`` (eq. 5) with the paper's table 2 values of M and omega_b (:data:`TABLE2`) and
   A = 1e-3 (0.1 % steady-state error; A > 0 is required for a finite weighted norm; the
   integral action of the P-PID makes S(0) = 0, so A hardly matters).
-- ``Wt``: the multiplicative uncertainty weight fitted by :func:`synthesis.uncertainty.cover`
+- ``Wt``: the multiplicative uncertainty weight fitted by
+  :func:`vtolftc.synthesis.uncertainty.cover`
   over the point's airspeed range and gamma in [0, 0.6].
 - ``Wr`` (eq. 6) with omega_a = 5 rad/s (paper), r_max = 30 deg (the largest attitude
   reference step the autopilot commands) and u_max = :func:`moment_authority` (the moment the
   airframe can produce about the axis at the nominal airspeed).
 
-Tunable gains (:data:`synthesis.loops.PARAM_NAMES`) with bounds (:func:`parameters`):
+Tunable gains (:data:`vtolftc.synthesis.loops.PARAM_NAMES`) with bounds (:func:`parameters`):
 kp_angle in [0.3, 8] 1/s (outer loop of a few rad/s at most; PX4's default roll P is 6.5);
 kp_rate in [0.5 J, 40 J] N m s/rad (the rate-loop crossover kp_rate/J between 0.5 and
 40 rad/s); ki_rate in [2 J, 40 J] N m/rad; kd_rate in [0, 2 J] N m s^2/rad; tf_rate_s in
@@ -51,19 +52,18 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-
-from airframe.loader import Airframe
-from synthesis.hinfnorm import hinf_norm
-from synthesis.loops import (
+from vtolftc.airframe.loader import Airframe
+from vtolftc.synthesis.hinfnorm import hinf_norm
+from vtolftc.synthesis.loops import (
     PARAM_NAMES,
     CascadeChannel,
     ControlWeight,
     SensitivityWeight,
     closed_loop,
 )
-from synthesis.models import AXES, Axis, attitude_model
-from synthesis.structured import Parameter, TuneResult, TuningProblem, tune
-from synthesis.uncertainty import PAPER_DESIGN_POINTS, DesignPoint, UncertaintyWeight, cover
+from vtolftc.synthesis.models import AXES, Axis, attitude_model
+from vtolftc.synthesis.structured import Parameter, TuneResult, TuningProblem, tune
+from vtolftc.synthesis.uncertainty import PAPER_DESIGN_POINTS, DesignPoint, UncertaintyWeight, cover
 
 __all__ = [
     "A_SENSITIVITY",

@@ -1,7 +1,7 @@
 """Write the designs as files the autopilot reads (it never imports this package).
 
 - GS-SHIF and SHIF: format ``vtolftc-gain-schedule/1`` (specification: the docstring of
-  :mod:`firmware_sim.autopilot.schedule`); SHIF is a schedule with a single breakpoint.
+  :mod:`vtolftc.firmware_sim.autopilot.schedule`); SHIF is a schedule with a single breakpoint.
 - LQR: format ``vtolftc-lqr-gains/1``::
 
     {"format": "vtolftc-lqr-gains/1", "controller": "lqr",
@@ -31,10 +31,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from airframe.loader import Airframe
-from synthesis.loops import PARAM_NAMES
-from synthesis.models import AXES
+from vtolftc.airframe.loader import Airframe
+from vtolftc.synthesis.loops import PARAM_NAMES
+from vtolftc.synthesis.models import AXES
 
 __all__ = [
     "LQR_FORMAT",
@@ -128,7 +127,7 @@ def schedule_document(af: Airframe, controller: str, breakpoints_m_s: Sequence[f
                       metadata: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """A ``vtolftc-gain-schedule/1`` document.
 
-    ``gains[axis][i]`` is the gain dict (keys :data:`synthesis.loops.PARAM_NAMES`) at
+    ``gains[axis][i]`` is the gain dict (keys :data:`vtolftc.synthesis.loops.PARAM_NAMES`) at
     breakpoint i. Values are rounded to 6 significant digits (well below the design's
     sensitivity) so the files stay readable.
     """

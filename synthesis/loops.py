@@ -1,8 +1,8 @@
 """Cascaded P-PID attitude loop of the paper (fig. 5) and its weighted closed-loop functions.
 
-One axis. Plant ``G`` = :func:`synthesis.models.attitude_model` (moment u [N m] -> outputs
+One axis. Plant ``G`` = :func:`vtolftc.synthesis.models.attitude_model` (moment u [N m] -> outputs
 [rate (rad/s); angle (rad)], strictly proper). Controller (gains ``theta`` in the order of
-:data:`PARAM_NAMES`, units as in :mod:`firmware_sim.autopilot.pid`)::
+:data:`PARAM_NAMES`, units as in :mod:`vtolftc.firmware_sim.autopilot.pid`)::
 
     rate_ref = kp_angle (angle_ref - angle)                                   [rad/s]
     u        = K_rate(s) (rate_ref - rate),
@@ -34,8 +34,7 @@ from typing import Any
 import control as ct
 import numpy as np
 from numpy.typing import NDArray
-
-from synthesis.hinfnorm import StateSpaceData, as_state_space
+from vtolftc.synthesis.hinfnorm import StateSpaceData, as_state_space
 
 __all__ = [
     "PARAM_NAMES",

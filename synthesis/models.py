@@ -22,8 +22,7 @@ from typing import Literal
 
 import control as ct
 import numpy as np
-
-from airframe.loader import Airframe
+from vtolftc.airframe.loader import Airframe
 
 Axis = Literal["roll", "pitch", "yaw"]
 AXES: tuple[Axis, ...] = ("roll", "pitch", "yaw")

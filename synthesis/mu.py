@@ -961,7 +961,8 @@ def mu_sweep(
     Parameters
     ----------
     freq_response:
-        Array (nw, n, n) of M(j w) (e.g. from :func:`synthesis.hinfnorm.frequency_response`).
+        Array (nw, n, n) of M(j w) (e.g. from
+        :func:`vtolftc.synthesis.hinfnorm.frequency_response`).
     blocks:
         Block structure.
     omegas:

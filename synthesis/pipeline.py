@@ -20,9 +20,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from airframe.loader import Airframe
-from synthesis.baselines import LQR_Q, LQR_R, LqrAxis, lqr_design
-from synthesis.design import (
+from vtolftc.airframe.loader import Airframe
+from vtolftc.synthesis.baselines import LQR_Q, LQR_R, LqrAxis, lqr_design
+from vtolftc.synthesis.design import (
     A_SENSITIVITY,
     OMEGA_A_RAD_S,
     R_MAX_RAD,
@@ -30,10 +30,10 @@ from synthesis.design import (
     AxisDesign,
     run_designs,
 )
-from synthesis.export import lqr_document, schedule_document, write_json
-from synthesis.models import AXES, Axis, attitude_model
-from synthesis.robustness import AxisRobustness, analyse
-from synthesis.uncertainty import GAMMA_RANGE, PAPER_DESIGN_POINTS, DesignPoint
+from vtolftc.synthesis.export import lqr_document, schedule_document, write_json
+from vtolftc.synthesis.models import AXES, Axis, attitude_model
+from vtolftc.synthesis.robustness import AxisRobustness, analyse
+from vtolftc.synthesis.uncertainty import GAMMA_RANGE, PAPER_DESIGN_POINTS, DesignPoint
 
 __all__ = ["SynthesisResult", "run_synthesis"]
 
@@ -202,7 +202,7 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
             res.files = write_gain_files(res, out)
             times["export"] = time.perf_counter() - t0
         if report:
-            from synthesis.report import write_report
+            from vtolftc.synthesis.report import write_report
 
             t0 = time.perf_counter()
             res.times = times

@@ -11,15 +11,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-
-from synthesis.export import atomic_write_text
-from synthesis.hinfnorm import frequency_response
-from synthesis.loops import PARAM_NAMES, rate_controller
-from synthesis.models import AXES, Axis, attitude_model
-from synthesis.uncertainty import GAMMA_RANGE, relative_error
+from vtolftc.synthesis.export import atomic_write_text
+from vtolftc.synthesis.hinfnorm import frequency_response
+from vtolftc.synthesis.loops import PARAM_NAMES, rate_controller
+from vtolftc.synthesis.models import AXES, Axis, attitude_model
+from vtolftc.synthesis.uncertainty import GAMMA_RANGE, relative_error
 
 if TYPE_CHECKING:
-    from synthesis.pipeline import SynthesisResult
+    from vtolftc.synthesis.pipeline import SynthesisResult
 
 __all__ = ["PAPER_TABLE3", "crossovers", "write_report"]
 
@@ -183,7 +182,7 @@ def write_report(res: SynthesisResult, out_dir: str | Path) -> Path:
            f"(s + omega_a), r_max = {math.degrees(res.gs['roll'][0].weights[0].Wr.r_max_rad):g}"
            " deg, omega_a = 5 rad/s, u_max = moment authority of the airframe about the axis "
            "at the nominal airspeed (lift rotors around their hover share + surfaces at full "
-           "deflection; `synthesis.design.moment_authority`). W_t = gain prod (s/z + 1)/"
+           "deflection; `vtolftc.synthesis.design.moment_authority`). W_t = gain prod (s/z + 1)/"
            "(s/p + 1), fitted over the relative errors (fig. 3 plots).", ""]
     rows = []
     for k, p in enumerate(res.points):
@@ -290,7 +289,7 @@ def write_report(res: SynthesisResult, out_dir: str | Path) -> Path:
 
     md += ["", "## Baseline: LQR (hover model, integral augmented)", ""]
     if res.lqr:
-        from synthesis.baselines import LQR_Q, LQR_R
+        from vtolftc.synthesis.baselines import LQR_Q, LQR_R
 
         md += [f"Q = diag{tuple(LQR_Q)}, R = {LQR_R}; law tau = k_int int(angle_ref - angle) "
                "+ k_angle (angle_ref - angle) - k_rate rate (see `synthesis/baselines.py`).",

@@ -1,7 +1,7 @@
 """Robust stability and robust performance of a designed axis loop by mu analysis
 (paper section 4, eqs. 12-14, table 3).
 
-Interconnection (one axis; signals as in :mod:`synthesis.loops`). The perturbed plant is
+Interconnection (one axis; signals as in :mod:`vtolftc.synthesis.loops`). The perturbed plant is
 G_p = G (1 + W_t Delta) (eq. 11) with the uncertainty at the plant input: the plant sees
 u + d with d = Delta z, z = W_t u. The exogenous input is the angle reference r, the
 weighted performance outputs are p = [Ws e; Wr u] (the two requirements of eq. 8 that are
@@ -16,11 +16,11 @@ so the matrix seen by the augmented perturbation diag(Delta, Delta_P) is
         [ Wr u ]   [ -Wr T_u       Wr R   ]
 
 - robust stability (eq. 13): M = N_11 = -W_t T_u with one complex scalar block (1 x 1), so
-  mu_Delta(M(jw)) = |W_t T_u(jw)| exactly; it is computed with :func:`synthesis.mu.mu_sweep`
+  mu_Delta(M(jw)) = |W_t T_u(jw)| exactly; it is computed with :func:`vtolftc.synthesis.mu.mu_sweep`
   anyway and cross-checked against the closed form (:attr:`AxisRobustness.rs_check`).
 - robust performance (eq. 14): mu of N with blocks Delta (1 x 1, complex) and the
   fictitious full performance block Delta_P (1 x 2: two performance outputs back to the
-  one reference input). :func:`synthesis.mu.mu_sweep` wants a square matrix, so N is padded
+  one reference input). :func:`vtolftc.synthesis.mu.mu_sweep` wants a square matrix, so N is padded
   with a zero column and Delta_P taken 2 x 2: the extra row of Delta_P only feeds the zero
   column, so mu is unchanged (:func:`square_rp`). For a plain unity-feedback SISO loop
   without Wr the structure is the textbook one and mu_hat = |Ws S| + |Wt T| at every
@@ -39,10 +39,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-
-from synthesis.hinfnorm import frequency_response
-from synthesis.loops import closed_loop
-from synthesis.mu import Block, MuSweep, mu_sweep
+from vtolftc.synthesis.hinfnorm import frequency_response
+from vtolftc.synthesis.loops import closed_loop
+from vtolftc.synthesis.mu import Block, MuSweep, mu_sweep
 
 __all__ = [
     "RP_BLOCKS",
@@ -71,8 +70,8 @@ def rp_matrix(G: Any, theta: Any, Ws: Any, Wt: Any, Wr: Any | None,
     """N(j w) of the module docstring, shape (nw, 3, 2) (or (nw, 2, 2) if ``Wr`` is None).
 
     ``G``: moment -> [rate; angle] plant; ``theta``: the P-PID gains; weights: objects with
-    ``response`` (:class:`synthesis.loops.SensitivityWeight`, ``ControlWeight``), an
-    :class:`synthesis.uncertainty.UncertaintyWeight` or any SISO LTI.
+    ``response`` (:class:`vtolftc.synthesis.loops.SensitivityWeight`, ``ControlWeight``), an
+    :class:`vtolftc.synthesis.uncertainty.UncertaintyWeight` or any SISO LTI.
     """
     w = np.asarray(omegas, float)
     cl = closed_loop(G, theta)

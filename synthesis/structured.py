@@ -11,7 +11,7 @@ f is nonsmooth (max over channels and frequencies) and +inf where a channel is u
 The local solver is a frequency-exchange / nonsmooth-aware trust-region method:
 
 1. at the iterate theta_k the exact norms are computed with
-   :func:`synthesis.hinfnorm.hinf_norm`; each channel's peak frequency (and secondary local
+   :func:`vtolftc.synthesis.hinfnorm.hinf_norm`; each channel's peak frequency (and secondary local
    maxima of sigma_max on a coarse grid) is added to a growing frequency set Omega_i;
 2. the local minimax sub-problem over (channels x Omega_i)
 
@@ -48,8 +48,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize
-
-from synthesis.hinfnorm import StateSpaceData, as_state_space, hinf_norm
+from vtolftc.synthesis.hinfnorm import StateSpaceData, as_state_space, hinf_norm
 
 __all__ = [
     "Channel",
@@ -716,7 +715,7 @@ def pid(kp: float, ki: float, kd: float, tf: float) -> StateSpaceData:
     States: integrator and derivative filter (always present, so the state dimension does
     not depend on the gains). ``tf`` > 0 (s). Note: with ki = 0 the integrator state is
     unobservable and gives a closed-loop eigenvalue at 0, i.e. an infinite norm under the
-    internal-stability convention of :func:`synthesis.hinfnorm.hinf_norm`; keep ki > 0 or
+    internal-stability convention of :func:`vtolftc.synthesis.hinfnorm.hinf_norm`; keep ki > 0 or
     use a PD structure of your own.
     """
     if not tf > 0:

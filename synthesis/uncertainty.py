@@ -23,9 +23,8 @@ from dataclasses import dataclass
 import control as ct
 import numpy as np
 from scipy.optimize import minimize
-
-from airframe.loader import Airframe
-from synthesis.models import Axis, axis_coefficients
+from vtolftc.airframe.loader import Airframe
+from vtolftc.synthesis.models import Axis, axis_coefficients
 
 
 @dataclass(frozen=True)

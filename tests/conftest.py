@@ -5,8 +5,7 @@ from __future__ import annotations
 import json
 
 import pytest
-
-from airframe.loader import Airframe, load_airframe
+from vtolftc.airframe.loader import Airframe, load_airframe
 
 
 @pytest.fixture(scope="session")
@@ -16,14 +15,14 @@ def ds1() -> Airframe:
 
 @pytest.fixture(scope="session")
 def hover_trim(ds1):
-    from firmware_sim.vehicle.trim import trim_hover
+    from vtolftc.firmware_sim.vehicle.trim import trim_hover
 
     return trim_hover(ds1, altitude_m=30.0)
 
 
 @pytest.fixture(scope="session")
 def cruise_trim(ds1):
-    from firmware_sim.vehicle.trim import trim_level_flight
+    from vtolftc.firmware_sim.vehicle.trim import trim_level_flight
 
     return trim_level_flight(ds1, 18.0, altitude_m=30.0)
 

@@ -10,8 +10,7 @@ import tomllib
 
 import numpy as np
 import pytest
-
-from airframe.loader import DS1_PATH, AirframeError, airframe_from_dict, load_airframe
+from vtolftc.airframe.loader import DS1_PATH, AirframeError, airframe_from_dict, load_airframe
 
 
 def _doc() -> dict:

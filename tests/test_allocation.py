@@ -1,4 +1,4 @@
-"""Tests of the control allocators (``firmware_sim.autopilot.allocation``).
+"""Tests of the control allocators (``vtolftc.firmware_sim.autopilot.allocation``).
 
 The effectiveness matrix is a synthetic DS-1-like one built here (the airframe file is not
 used): 8 lift rotors at (x, y) = (±0.6, {-1.05, -0.4, 0.4, 1.05}) m, 35 N each, yaw torque
@@ -12,8 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
-
-from firmware_sim.autopilot.allocation import (
+from vtolftc.firmware_sim.autopilot.allocation import (
     AllocationStatus,
     PseudoInverseAllocator,
     QPAllocator,

@@ -6,15 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from firmware_sim.autopilot.allocation import AllocationStatus, PseudoInverseAllocator
-from firmware_sim.autopilot.autopilot import ALLOCATION_WEIGHTS
-from firmware_sim.autopilot.effectiveness import EffectivenessModel
+from vtolftc.firmware_sim.autopilot.allocation import AllocationStatus, PseudoInverseAllocator
+from vtolftc.firmware_sim.autopilot.autopilot import ALLOCATION_WEIGHTS
+from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
 
 
 @pytest.fixture
 def alloc(ds1):
-    from firmware_sim.autopilot.allocation import QPAllocator
+    from vtolftc.firmware_sim.autopilot.allocation import QPAllocator
 
     u_min = np.r_[np.zeros(10), -np.ones(5)]
     u_max = np.ones(15)
@@ -77,7 +76,7 @@ def test_fixed_wing_excludes_the_lift_rotors(ds1, alloc):
 
 
 def test_compiled_step_bounds_match_the_reference_functions():
-    from firmware_sim.autopilot.allocation import (
+    from vtolftc.firmware_sim.autopilot.allocation import (
         QPAllocator,
         _step_bounds,
         rate_limited_bounds,

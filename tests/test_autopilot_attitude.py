@@ -8,16 +8,15 @@ import math
 
 import numpy as np
 import pytest
-
-from firmware_sim.autopilot.attitude import (
+from vtolftc.firmware_sim.autopilot.attitude import (
     ControllerError,
     LQRAttitudeController,
     ScheduledPPIDController,
     make_controller,
 )
-from firmware_sim.autopilot.lqr import LQRGains, LQRGainsError
-from firmware_sim.autopilot.pid import CascadedPPID
-from firmware_sim.autopilot.schedule import GainSchedule
+from vtolftc.firmware_sim.autopilot.lqr import LQRGains, LQRGainsError
+from vtolftc.firmware_sim.autopilot.pid import CascadedPPID
+from vtolftc.firmware_sim.autopilot.schedule import GainSchedule
 
 SHA = "ab" * 32
 NO = np.zeros(3, dtype=bool)

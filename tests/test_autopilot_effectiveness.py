@@ -8,10 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from firmware_sim.autopilot.effectiveness import EffectivenessModel
-from firmware_sim.vehicle import dynamics as dyn
-from firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
+from vtolftc.firmware_sim.vehicle import dynamics as dyn
+from vtolftc.firmware_sim.vehicle.model import Vehicle
 
 AUTOPILOT_DIR = Path(__file__).resolve().parents[1] / "firmware_sim" / "autopilot"
 
@@ -84,17 +83,18 @@ def test_autopilot_never_imports_vehicle_or_synthesis():
     bad = []
     for f in files:
         for name in _imports(f):
-            if name.startswith(("firmware_sim.vehicle", "synthesis")) or name in (
-                    "firmware_sim", "firmware_sim.vehicle"):
+            if name.startswith(("vtolftc.firmware_sim.vehicle", "synthesis")) or name in (
+                    "firmware_sim", "vtolftc.firmware_sim.vehicle"):
                 bad.append(f"{f.name}: {name}")
     assert not bad, f"passive FTC: the autopilot must not import the vehicle/synthesis: {bad}"
 
 
 def test_isolation_scan_detects_a_forbidden_import(tmp_path):
     p = tmp_path / "x.py"
-    p.write_text("from firmware_sim.vehicle.model import Vehicle\nimport synthesis.mu\n")
+    p.write_text("from vtolftc.firmware_sim.vehicle.model import Vehicle\n"
+                 "import vtolftc.synthesis.mu\n")
     names = _imports(p)
-    assert "firmware_sim.vehicle.model" in names and "synthesis.mu" in names
+    assert "vtolftc.firmware_sim.vehicle.model" in names and "vtolftc.synthesis.mu" in names
 
 
 def test_matrix_on_grid_is_cached_and_rounded(ds1):

@@ -7,8 +7,7 @@ import math
 
 import numpy as np
 import pytest
-
-from firmware_sim.autopilot.autopilot import (
+from vtolftc.firmware_sim.autopilot.autopilot import (
     CMD_COMPONENT_ARM_DISARM,
     CMD_DO_SET_MODE,
     CMD_DO_VTOL_TRANSITION,
@@ -16,7 +15,7 @@ from firmware_sim.autopilot.autopilot import (
     CMD_NAV_TAKEOFF,
     Autopilot,
 )
-from firmware_sim.autopilot.interface import (
+from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotAPI,
     CommandResult,
     FlightMode,
@@ -26,7 +25,7 @@ from firmware_sim.autopilot.interface import (
     ParamType,
     VtolState,
 )
-from firmware_sim.autopilot.modes import ModeMachine, px4_custom_mode
+from vtolftc.firmware_sim.autopilot.modes import ModeMachine, px4_custom_mode
 
 NAN = float("nan")
 A = CommandResult.ACCEPTED

@@ -11,10 +11,9 @@ from typing import Any
 
 import numpy as np
 import pytest
-
-from dashboard.geometry import aircraft_geometry, rotor_grid
-from dashboard.model import DashboardModel, euler_to_quaternion, ned_to_display
-from gcs.client import CommandOutcome, VehicleSnapshot
+from vtolftc.dashboard.geometry import aircraft_geometry, rotor_grid
+from vtolftc.dashboard.model import DashboardModel, euler_to_quaternion, ned_to_display
+from vtolftc.gcs.client import CommandOutcome, VehicleSnapshot
 
 
 def Snap(**fields: Any) -> VehicleSnapshot:
@@ -216,8 +215,8 @@ def _wait(pred, timeout_s: float, what: str):
 
 @pytest.fixture
 def dash_and_ap(ds1):
-    from dashboard.fake_autopilot import FakeAutopilot
-    from dashboard.web import Dashboard
+    from vtolftc.dashboard.fake_autopilot import FakeAutopilot
+    from vtolftc.dashboard.web import Dashboard
 
     udp = _free_port(socket.SOCK_DGRAM)
     dash = Dashboard(f"udp-server://127.0.0.1:{udp}", port=_free_port(socket.SOCK_STREAM),
@@ -279,7 +278,7 @@ def test_dashboard_reports_dropout_and_refuses_offline(dash_and_ap):
 
 
 def test_dashboard_without_autopilot_says_so(ds1):
-    from dashboard.web import Dashboard
+    from vtolftc.dashboard.web import Dashboard
 
     udp = _free_port(socket.SOCK_DGRAM)
     with Dashboard(f"udp-server://127.0.0.1:{udp}", port=_free_port(socket.SOCK_STREAM),

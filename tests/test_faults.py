@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from firmware_sim.vehicle import dynamics as dyn
-from firmware_sim.vehicle.faults import (
+from vtolftc.firmware_sim.vehicle import dynamics as dyn
+from vtolftc.firmware_sim.vehicle.faults import (
     Fault,
     FaultError,
     FaultKind,
@@ -14,7 +13,7 @@ from firmware_sim.vehicle.faults import (
     faults_from_records,
     parse_fault_spec,
 )
-from firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle.model import Vehicle
 
 
 def test_fault_starts_exactly_at_its_time_whatever_the_batch(ds1, hover_trim):

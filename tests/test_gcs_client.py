@@ -9,22 +9,22 @@ import threading
 import time
 
 import pytest
-
-from firmware_sim.autopilot.autopilot import Autopilot
-from firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
-from firmware_sim.autopilot.hil_bridge import HilBridge
-from gcs.actuators import default_table
-from gcs.client import GcsError, GcsTimeout, GroundStation, command_name, result_name
-from protocols import SigningConfig, open_link
-from protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
-from protocols.netutil import free_udp_port
-from protocols.px4 import (
+from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
+from vtolftc.firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
+from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
+from vtolftc.gcs.actuators import default_table
+from vtolftc.gcs.client import GcsError, GcsTimeout, GroundStation, command_name, result_name
+from vtolftc.protocols import SigningConfig, open_link
+from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
+from vtolftc.protocols.netutil import free_udp_port
+from vtolftc.protocols.px4 import (
     custom_mode,
     decode_param_value,
     encode_param_value,
     mode_from_name,
     mode_name,
 )
+
 from vtolftc.cli import run as cli_run
 
 

@@ -1,4 +1,4 @@
-"""Tests of synthesis.hinfnorm (exact H-infinity norm, Hamiltonian two-step algorithm)."""
+"""Tests of vtolftc.synthesis.hinfnorm (exact H-infinity norm, Hamiltonian two-step algorithm)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,7 @@ import math
 import control
 import numpy as np
 import pytest
-
-from synthesis.hinfnorm import (
+from vtolftc.synthesis.hinfnorm import (
     HinfNorm,
     frequency_response,
     hinf_norm,

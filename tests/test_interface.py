@@ -6,8 +6,7 @@ import math
 
 import numpy as np
 import pytest
-
-from firmware_sim.autopilot.interface import (
+from vtolftc.firmware_sim.autopilot.interface import (
     HilState,
     NavState,
     ParamError,
@@ -17,7 +16,7 @@ from firmware_sim.autopilot.interface import (
     encode_hil_state,
     wire_commands,
 )
-from protocols.mavlink import make_codec
+from vtolftc.protocols.mavlink import make_codec
 
 HOME = (45.5027, 9.1566, 120.0)
 

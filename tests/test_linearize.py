@@ -12,10 +12,9 @@ import math
 
 import numpy as np
 import pytest
-
-from firmware_sim.vehicle.linearize import linearize
-from firmware_sim.vehicle.model import Vehicle
-from firmware_sim.vehicle.trim import trim_hover, trim_level_flight
+from vtolftc.firmware_sim.vehicle.linearize import linearize
+from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle.trim import trim_hover, trim_level_flight
 
 
 def _closed_form(af, V):

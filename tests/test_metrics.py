@@ -6,14 +6,14 @@ import math
 
 import numpy as np
 import pytest
-
-from firmware_sim.autopilot.interface import (
+from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotStatus,
     FlightMode,
     LandedState,
     NavState,
     VtolState,
 )
+
 from vtolftc.metrics import MetricsAccumulator, compute_metrics
 from vtolftc.telemetry import TelemetrySample
 

@@ -1,4 +1,4 @@
-"""Tests of synthesis.mu (structured singular value bounds, paper eqs. 12-14)."""
+"""Tests of vtolftc.synthesis.mu (structured singular value bounds, paper eqs. 12-14)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,15 @@ import time
 import control
 import numpy as np
 import pytest
-
-from synthesis.hinfnorm import frequency_response
-from synthesis.mu import Block, MuBounds, mu_bounds, mu_lower_bound, mu_sweep, mu_upper_bound
+from vtolftc.synthesis.hinfnorm import frequency_response
+from vtolftc.synthesis.mu import (
+    Block,
+    MuBounds,
+    mu_bounds,
+    mu_lower_bound,
+    mu_sweep,
+    mu_upper_bound,
+)
 
 
 def _crandn(rng: np.random.Generator, *shape: int) -> np.ndarray:

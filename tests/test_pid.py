@@ -1,4 +1,4 @@
-"""Tests of the discrete cascaded P-PID (``firmware_sim.autopilot.pid``) against the
+"""Tests of the discrete cascaded P-PID (``vtolftc.firmware_sim.autopilot.pid``) against the
 continuous transfer function K_rate(s) = kp + ki/s + kd s/(tf s + 1) (scipy.signal)."""
 
 from __future__ import annotations
@@ -8,8 +8,7 @@ import math
 import numpy as np
 import pytest
 import scipy.signal as sg
-
-from firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, wrap_angle
+from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, wrap_angle
 
 DT = 1.0 / 250.0
 G = PPIDGains(kp_angle=4.0, kp_rate=0.8, ki_rate=0.5, kd_rate=0.05, tf_rate_s=0.05)

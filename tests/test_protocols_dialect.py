@@ -9,9 +9,8 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from protocols import mavlink as pm
-from protocols.mavlink import SigningConfig, dialect, make_codec
+from vtolftc.protocols import mavlink as pm
+from vtolftc.protocols.mavlink import SigningConfig, dialect, make_codec
 
 KEY = bytes(range(32))
 WRONG_KEY = bytes(range(1, 33))
@@ -35,12 +34,33 @@ def _roundtrip(msg, sender=None, receiver=None):
 
 
 # ------------------------------------------------------------------------------ generation
-def test_dialect_is_generated_and_cached(d):
+def test_dialect_is_the_committed_module_and_cached(d):
     assert dialect() is d
     assert d.WIRE_PROTOCOL_VERSION == "2.0"
-    path = Path(d.__file__)
-    assert path.is_file() and path.name.startswith("vtolftc_")
-    assert pm.dialect_hash()[:20] in path.name
+    assert Path(d.__file__).resolve() == pm.GENERATED_MODULE
+    assert d.__name__ == "vtolftc.protocols.generated.vtolftc"
+
+
+def test_committed_dialect_is_current(tmp_path):
+    """The committed module is byte for byte what mavgen makes from the XML today."""
+    fresh = pm.generate_dialect(tmp_path / "vtolftc.py")
+    assert fresh.read_bytes() == pm.GENERATED_MODULE.read_bytes(), (
+        "protocols/generated/vtolftc.py is stale: run `python -m vtolftc.protocols.mavlink`")
+    assert [p.name for p in tmp_path.iterdir()] == ["vtolftc.py"]  # no temporary leftovers
+
+
+def test_importing_the_dialect_writes_nothing(tmp_path):
+    """A read-only install: importing and using the dialect creates no file anywhere."""
+    code = ("from vtolftc.protocols.mavlink import make_codec; "
+            "c = make_codec(1, 1); print(len(c.heartbeat_encode(1, 12, 0, 0, 0).pack(c)))")
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", HOME=str(tmp_path),
+               XDG_CACHE_HOME=str(tmp_path / "cache"))
+    before = {p.stat().st_mtime_ns for p in pm.GENERATED_MODULE.parent.iterdir()}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env=env, cwd=tmp_path, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert list(tmp_path.iterdir()) == []
+    assert {p.stat().st_mtime_ns for p in pm.GENERATED_MODULE.parent.iterdir()} == before
 
 
 def test_dialect_contains_common_messages(d):
@@ -82,33 +102,12 @@ def test_extension_ids_do_not_collide_with_registered_dialects(d):
         assert d.mavlink_map[msgid].crc_extra == cls.crc_extra
 
 
-def test_generation_into_fresh_dir_is_idempotent(tmp_path):
-    path = pm.generate_dialect(tmp_path)
-    assert path.parent == tmp_path and path.is_file()
-    mtime = path.stat().st_mtime_ns
-    assert pm.generate_dialect(tmp_path) == path
-    assert path.stat().st_mtime_ns == mtime
-    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".gen-")]
-
-
-def test_changed_xml_regenerates(tmp_path):
+def test_changed_xml_changes_the_generated_module(tmp_path):
     xml = tmp_path / "vtolftc.xml"
     text = pm.DIALECT_XML.read_text()
-    xml.write_text(text)
-    first = pm.generate_dialect(tmp_path / "out", xml)
     xml.write_text(text.replace("vtol-ftc: actuator faults", "vtol-ftc: the actuator faults"))
-    second = pm.generate_dialect(tmp_path / "out", xml)
-    assert first != second and first.is_file() and second.is_file()
-    assert pm.dialect_hash(xml) != pm.dialect_hash(pm.DIALECT_XML)
-
-
-def test_unwritable_candidate_falls_back(tmp_path):
-    blocker = tmp_path / "not_a_dir"
-    blocker.write_text("x")
-    path = pm.locate_or_generate([blocker / "sub", tmp_path / "cache"])
-    assert path.parent == tmp_path / "cache"
-    with pytest.raises(OSError, match="no writable directory"):
-        pm.locate_or_generate([blocker / "sub"])
+    out = pm.generate_dialect(tmp_path / "out" / "vtolftc.py", xml)
+    assert out.is_file() and out.read_bytes() != pm.GENERATED_MODULE.read_bytes()
 
 
 def test_bad_xml_gives_clear_error(tmp_path):
@@ -119,30 +118,7 @@ def test_bad_xml_gives_clear_error(tmp_path):
         '<field type="uint8_t" name="a">a</field></message></messages></mavlink>'
     )
     with pytest.raises(RuntimeError, match="mavgen failed"):
-        pm.generate_dialect(tmp_path / "out", xml)
-
-
-def test_concurrent_generation_two_processes(tmp_path):
-    out = tmp_path / "shared"
-    code = (
-        "import sys; from pathlib import Path; from protocols import mavlink as pm; "
-        "print(pm.generate_dialect(Path(sys.argv[1])))"
-    )
-    env = dict(os.environ)
-    procs = [
-        subprocess.Popen([sys.executable, "-c", code, str(out)], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, env=env)
-        for _ in range(2)
-    ]
-    results = []
-    for p in procs:
-        stdout, stderr = p.communicate(timeout=60)
-        assert p.returncode == 0, stderr
-        results.append(stdout.strip())
-    assert results[0] == results[1]
-    files = [p.name for p in out.iterdir()]
-    assert files == [Path(results[0]).name]  # one module, no temp leftovers
-    compile(Path(results[0]).read_text(), results[0], "exec")
+        pm.generate_dialect(tmp_path / "out" / "vtolftc.py", xml)
 
 
 # ------------------------------------------------------------------------------ pack/unpack

@@ -7,10 +7,9 @@ import time
 from collections.abc import Iterator
 
 import pytest
-
-from protocols.link import Link, open_link, parse_link_url
-from protocols.mavlink import SigningConfig, dialect, make_codec
-from protocols.netutil import free_tcp_port, is_loopback_host, require_loopback
+from vtolftc.protocols.link import Link, open_link, parse_link_url
+from vtolftc.protocols.mavlink import SigningConfig, dialect, make_codec
+from vtolftc.protocols.netutil import free_tcp_port, is_loopback_host, require_loopback
 
 KEY = bytes(range(32))
 TIMEOUT = 2.0

@@ -9,10 +9,10 @@ import math
 
 import numpy as np
 import pytest
+from vtolftc.firmware_sim.autopilot.attitude import default_gains_dir
+from vtolftc.firmware_sim.autopilot.interface import FlightMode
+from vtolftc.firmware_sim.vehicle.faults import Fault
 
-from firmware_sim.autopilot.attitude import default_gains_dir
-from firmware_sim.autopilot.interface import FlightMode
-from firmware_sim.vehicle.faults import Fault
 from vtolftc.runfolder import RunFolderWriter
 from vtolftc.scenario import paper_scenario, run_scenario
 
@@ -276,7 +276,11 @@ def test_full_flight_back_transition_and_landing(hand_gains):
 
 
 def _python_roundtrip(x, air, home):
-    from firmware_sim.autopilot.interface import NavState, decode_hil_state, encode_hil_state
+    from vtolftc.firmware_sim.autopilot.interface import (
+        NavState,
+        decode_hil_state,
+        encode_hil_state,
+    )
 
     nav = NavState(0, x[6:10], x[10:13], x[0:3], x[3:6], air)
     out = decode_hil_state(encode_hil_state(nav, *home), *home)

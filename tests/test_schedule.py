@@ -1,4 +1,4 @@
-"""Tests of the gain-schedule reader (``firmware_sim.autopilot.schedule``)."""
+"""Tests of the gain-schedule reader (``vtolftc.firmware_sim.autopilot.schedule``)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,8 @@ import math
 
 import numpy as np
 import pytest
-
-from firmware_sim.autopilot.pid import PPIDGains
-from firmware_sim.autopilot.schedule import (
+from vtolftc.firmware_sim.autopilot.pid import PPIDGains
+from vtolftc.firmware_sim.autopilot.schedule import (
     AXES,
     FORMAT,
     GAIN_FIELDS,

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from firmware_sim.vehicle import dynamics as dyn
-from firmware_sim.vehicle.model import Vehicle
-from firmware_sim.vehicle.sensors import (
+from vtolftc.firmware_sim.vehicle import dynamics as dyn
+from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle.sensors import (
     Home,
     SensorNoise,
     altitude_from_pressure_m,

@@ -4,8 +4,8 @@ URL plan (loopback only, free ports, both transports)."""
 from __future__ import annotations
 
 import pytest
+from vtolftc.protocols import parse_link_url
 
-from protocols import parse_link_url
 from vtolftc.cli import run as cli_run
 from vtolftc.sitl import SitlConfig, SitlRun
 
@@ -47,7 +47,7 @@ def test_link_plan_is_loopback_and_consistent(transport, tmp_path):
 def test_sitl_dashboard_flag_serves_the_page_and_follows_the_run(tmp_path, monkeypatch, capsys):
     """``vtolftc sitl --dashboard``: the dashboard gets its own ground-station link, sees the
     flight's telemetry, and is closed with the run."""
-    import dashboard.web as web
+    import vtolftc.dashboard.web as web
 
     made: list[web.Dashboard] = []
 

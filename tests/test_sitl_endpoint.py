@@ -15,10 +15,10 @@ import time
 
 import pytest
 from pymavlink import mavutil
+from vtolftc.gcs.client import GroundStation
+from vtolftc.protocols import open_link
+from vtolftc.protocols.netutil import free_tcp_port, free_udp_port
 
-from gcs.client import GroundStation
-from protocols import open_link
-from protocols.netutil import free_tcp_port, free_udp_port
 from vtolftc.sitl import SitlConfig, SitlRun
 
 pytestmark = pytest.mark.slow
@@ -166,7 +166,7 @@ def test_plain_pymavlink_client_flies_the_vehicle(sitl):
 
 
 def _px4_mode(custom_mode: int) -> str:
-    from protocols.px4 import mode_name
+    from vtolftc.protocols.px4 import mode_name
 
     return mode_name(custom_mode)
 

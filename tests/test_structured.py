@@ -1,4 +1,4 @@
-"""Tests of synthesis.structured (structured H-infinity tuning, paper eqs. 4-8)."""
+"""Tests of vtolftc.synthesis.structured (structured H-infinity tuning, paper eqs. 4-8)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,8 @@ import warnings
 import control
 import numpy as np
 import pytest
-
-from synthesis.hinfnorm import hinf_norm
-from synthesis.structured import (
+from vtolftc.synthesis.hinfnorm import hinf_norm
+from vtolftc.synthesis.structured import (
     Parameter,
     TuningProblem,
     closed_loops,

@@ -13,23 +13,28 @@ import control as ct
 import numpy as np
 import pytest
 import scipy.linalg
-
-from firmware_sim.autopilot.schedule import GainSchedule
-from synthesis.baselines import LQR_Q, LQR_R, lqr_design
-from synthesis.design import R_MAX_RAD, design_point, moment_authority, weights_for
-from synthesis.export import LQR_FORMAT, jsonable, lqr_document, schedule_document, write_json
-from synthesis.hinfnorm import frequency_response, hinf_norm
-from synthesis.loops import (
+from vtolftc.firmware_sim.autopilot.schedule import GainSchedule
+from vtolftc.synthesis.baselines import LQR_Q, LQR_R, lqr_design
+from vtolftc.synthesis.design import R_MAX_RAD, design_point, moment_authority, weights_for
+from vtolftc.synthesis.export import (
+    LQR_FORMAT,
+    jsonable,
+    lqr_document,
+    schedule_document,
+    write_json,
+)
+from vtolftc.synthesis.hinfnorm import frequency_response, hinf_norm
+from vtolftc.synthesis.loops import (
     PARAM_NAMES,
     CascadeChannel,
     ControlWeight,
     SensitivityWeight,
     closed_loop,
 )
-from synthesis.models import AXES, attitude_model
-from synthesis.mu import mu_bounds
-from synthesis.robustness import RP_BLOCKS, analyse, rp_matrix, square_rp
-from synthesis.uncertainty import PAPER_DESIGN_POINTS
+from vtolftc.synthesis.models import AXES, attitude_model
+from vtolftc.synthesis.mu import mu_bounds
+from vtolftc.synthesis.robustness import RP_BLOCKS, analyse, rp_matrix, square_rp
+from vtolftc.synthesis.uncertainty import PAPER_DESIGN_POINTS
 
 GAINS_DIR = Path(__file__).resolve().parents[1] / "firmware_sim" / "autopilot" / "gains"
 
@@ -252,7 +257,7 @@ def test_cli_rejects_bad_input(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_full_synthesis_end_to_end(ds1, tmp_path):
-    from synthesis.pipeline import run_synthesis
+    from vtolftc.synthesis.pipeline import run_synthesis
 
     res = run_synthesis(ds1, tmp_path, n_starts=1, jobs=2, seed=0, report=True)
     for name in ("gs-shif.json", "shif.json", "lqr.json", "report/README.md",
@@ -277,7 +282,7 @@ def test_atomic_write_gives_ordinary_permissions(tmp_path):
     import os
     import stat
 
-    from synthesis.export import atomic_write_text
+    from vtolftc.synthesis.export import atomic_write_text
 
     umask = os.umask(0o022)
     try:
@@ -295,8 +300,8 @@ def test_shipped_gains_are_what_the_synthesis_gives(ds1, tmp_path):
     record: same achieved norms at every point (the gains themselves may differ where a
     tie-break within 0.1 % picks another start on another machine's round-off). Fails when
     the synthesis code or the airframe changed without regenerating the gain files."""
-    from firmware_sim.autopilot.attitude import default_gains_dir
-    from synthesis.pipeline import run_synthesis
+    from vtolftc.firmware_sim.autopilot.attitude import default_gains_dir
+    from vtolftc.synthesis.pipeline import run_synthesis
 
     shipped = json.loads((default_gains_dir() / "gs-shif.json").read_text())
     st = shipped["settings"]

@@ -5,12 +5,11 @@ from __future__ import annotations
 import control as ct
 import numpy as np
 import pytest
-
-from firmware_sim.vehicle.linearize import linearize
-from firmware_sim.vehicle.model import Vehicle
-from firmware_sim.vehicle.trim import trim_level_flight
-from synthesis.models import attitude_model, axis_coefficients, rate_model
-from synthesis.uncertainty import (
+from vtolftc.firmware_sim.vehicle.linearize import linearize
+from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle.trim import trim_level_flight
+from vtolftc.synthesis.models import attitude_model, axis_coefficients, rate_model
+from vtolftc.synthesis.uncertainty import (
     PAPER_DESIGN_POINTS,
     UncertaintyWeight,
     cover,

@@ -7,9 +7,8 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
-
-from firmware_sim.vehicle import dynamics as dyn
-from firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle import dynamics as dyn
+from vtolftc.firmware_sim.vehicle.model import Vehicle
 
 
 def _state(ds1, pos=(0, 0, -100), vel=(0, 0, 0), euler=(0, 0, 0), omega=(0, 0, 0)):
@@ -74,7 +73,7 @@ def test_hover_trim_holds_still_for_10_s(ds1, hover_trim):
 
 @pytest.mark.parametrize("airspeed", [13.0, 18.0])
 def test_level_flight_trim_holds_altitude_and_airspeed(ds1, airspeed):
-    from firmware_sim.vehicle.trim import trim_level_flight
+    from vtolftc.firmware_sim.vehicle.trim import trim_level_flight
 
     tp = trim_level_flight(ds1, airspeed, altitude_m=30.0)
     assert tp.mode == "wing" and np.all(tp.lift_rotor_fractions == 0.0)
@@ -87,7 +86,7 @@ def test_level_flight_trim_holds_altitude_and_airspeed(ds1, airspeed):
 
 
 def test_wing_carries_the_weight_at_13_m_s_and_not_below(ds1):
-    from firmware_sim.vehicle.trim import TrimError, trim_level_flight
+    from vtolftc.firmware_sim.vehicle.trim import TrimError, trim_level_flight
 
     # Stall speed as in the paper: wing-borne level flight trims at 13 m/s ...
     tp = trim_level_flight(ds1, 13.0)
@@ -108,7 +107,8 @@ def test_cruise_trim_within_limits_and_plausible(ds1, cruise_trim):
     assert -1.0 < math.degrees(cruise_trim.pitch_rad) < 4.0
     assert abs(math.degrees(cruise_trim.elevator_rad)) < 10.0
     assert 0.0 < cruise_trim.pusher_thrust_fraction < 0.8
-    tp13 = __import__("firmware_sim.vehicle.trim", fromlist=["x"]).trim_level_flight(ds1, 13.0)
+    from vtolftc.firmware_sim.vehicle.trim import trim_level_flight
+    tp13 = trim_level_flight(ds1, 13.0)
     assert abs(tp13.elevator_rad) < ds1.surfaces.max_deflection_rad
 
 
@@ -175,7 +175,7 @@ def test_actuator_moves_the_aircraft_with_the_designed_sign(ds1, hover_trim, cru
 @pytest.mark.parametrize("name", ["rotor_2b", "pusher_left", "aileron_left", "elevator",
                                   "rudder_right"])
 def test_half_loss_halves_the_actuators_force_and_moment(ds1, cruise_trim, hover_trim, name):
-    from firmware_sim.vehicle.faults import Fault
+    from vtolftc.firmware_sim.vehicle.faults import Fault
 
     trim = hover_trim if name.startswith("rotor_") else cruise_trim
     i = dyn.N_RIGID + ds1.actuator_index(name)

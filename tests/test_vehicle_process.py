@@ -12,12 +12,16 @@ import time
 
 import numpy as np
 import pytest
-
-from firmware_sim.autopilot.interface import HilState, NavState, decode_hil_state, encode_hil_state
-from firmware_sim.vehicle.model import Vehicle
-from firmware_sim.vehicle.process import VehicleProcess
-from protocols import open_link
-from protocols.netutil import free_udp_port
+from vtolftc.firmware_sim.autopilot.interface import (
+    HilState,
+    NavState,
+    decode_hil_state,
+    encode_hil_state,
+)
+from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle.process import VehicleProcess
+from vtolftc.protocols import open_link
+from vtolftc.protocols.netutil import free_udp_port
 
 
 class _Harness:
@@ -160,7 +164,7 @@ def test_run_folder_written_on_stop(harness, tmp_path):
 
 def test_process_exits_when_the_autopilot_vanishes():
     port = free_udp_port()
-    p = subprocess.Popen([sys.executable, "-m", "firmware_sim.vehicle.process", "--link",
+    p = subprocess.Popen([sys.executable, "-m", "vtolftc.firmware_sim.vehicle.process", "--link",
                           f"udp-server://127.0.0.1:{port}", "--peer-timeout", "1",
                           "--connect-timeout", "20"], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE)
@@ -183,7 +187,7 @@ def test_process_exits_when_the_autopilot_vanishes():
 
 
 def test_bad_arguments_exit_2():
-    r = subprocess.run([sys.executable, "-m", "firmware_sim.vehicle.process", "--link",
+    r = subprocess.run([sys.executable, "-m", "vtolftc.firmware_sim.vehicle.process", "--link",
                         "udp-server://8.8.8.8:4560"], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 2 and "loopback" in r.stderr and "Traceback" not in r.stderr

@@ -14,8 +14,8 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from airframe.loader import AirframeError, load_airframe
-from firmware_sim.vehicle.faults import FaultError
+from vtolftc.airframe.loader import AirframeError, load_airframe
+from vtolftc.firmware_sim.vehicle.faults import FaultError
 
 
 class UsageError(Exception):
@@ -40,7 +40,7 @@ def _fmt(v: float, nd: int = 2) -> str:
 
 def cmd_trim(args: argparse.Namespace) -> int:
     """Trim table of the airframe at the paper's airspeeds (hover, transition, cruise)."""
-    from firmware_sim.vehicle.trim import trim_table
+    from vtolftc.firmware_sim.vehicle.trim import trim_table
 
     af = load_airframe(args.airframe)
     speeds = [float(s) for s in args.airspeeds.split(",")] if args.airspeeds else [

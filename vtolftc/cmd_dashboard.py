@@ -36,13 +36,13 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
     if not 0.5 <= args.rate <= 60.0:
         raise UsageError(f"--rate {args.rate:g}: expected 0.5 .. 60 updates per second")
     try:
-        from protocols.link import parse_link_url
+        from vtolftc.protocols.link import parse_link_url
 
         parse_link_url(args.url)
     except ValueError as exc:
         raise UsageError(f"--url: {exc}") from None
-    from airframe.loader import load_airframe
-    from dashboard.web import Dashboard
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.dashboard.web import Dashboard
 
     af = load_airframe(args.airframe)
     dash = Dashboard(args.url, host=args.host, port=args.port, rate_hz=args.rate, airframe=af,

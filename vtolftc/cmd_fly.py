@@ -26,7 +26,7 @@ _PAPER_TABLE4 = {
 def default_observers(run_dir: Path, args: argparse.Namespace) -> list[Any]:
     """The observers of a run: the run-folder writer (telemetry, events, metrics, plots) and
     the rerun recorder (``run.rrd`` always; a live viewer too with ``--rerun``)."""
-    from dashboard.recording import RerunRecorder
+    from vtolftc.dashboard.recording import RerunRecorder
     from vtolftc.runfolder import RunFolderWriter
 
     return [RunFolderWriter(run_dir, plots=not getattr(args, "no_plots", False)),
@@ -54,7 +54,7 @@ def _check_common(args: argparse.Namespace) -> None:
 
 def _fly_one(case: str, controller: str, args: argparse.Namespace, run_dir: Path,
              extra_faults: list[Any]) -> Any:
-    from airframe.loader import load_airframe
+    from vtolftc.airframe.loader import load_airframe
     from vtolftc.scenario import paper_scenario, run_scenario
 
     af = load_airframe(getattr(args, "airframe", None))
@@ -76,9 +76,9 @@ def _fly_one(case: str, controller: str, args: argparse.Namespace, run_dir: Path
 def _check_controller(controller: str, args: argparse.Namespace) -> None:
     """Load the controller's gain file once, so that a missing or invalid file is reported
     (exit 2) before anything is flown or written."""
-    from airframe.loader import load_airframe
-    from firmware_sim.autopilot.attitude import ControllerError, make_controller
+    from vtolftc.airframe.loader import load_airframe
     from vtolftc.cli import UsageError
+    from vtolftc.firmware_sim.autopilot.attitude import ControllerError, make_controller
 
     af = load_airframe(getattr(args, "airframe", None))
     try:
@@ -118,8 +118,8 @@ def _summary_lines(res: Any) -> list[str]:
 
 def cmd_fly(args: argparse.Namespace) -> int:
     """Fly one of the paper's cases in-process and write a run folder."""
-    from airframe.loader import load_airframe
-    from firmware_sim.vehicle.faults import parse_fault_spec
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.firmware_sim.vehicle.faults import parse_fault_spec
     from vtolftc.runfolder import default_run_dir
 
     _check_common(args)

@@ -83,9 +83,9 @@ def _status_line(s: Any) -> str:
 
 def cmd_gcs(args: argparse.Namespace) -> int:
     """Connect, run one action, print the result."""
-    from gcs.client import GcsError, GroundStation
-    from protocols import SigningConfig, parse_link_url
     from vtolftc.cli import UsageError
+    from vtolftc.gcs.client import GcsError, GroundStation
+    from vtolftc.protocols import SigningConfig, parse_link_url
 
     try:
         parse_link_url(args.url)
@@ -101,7 +101,7 @@ def cmd_gcs(args: argparse.Namespace) -> int:
             math.isfinite(args.altitude) and args.altitude > 0):
         raise UsageError(f"takeoff altitude {args.altitude!r}: expected a height > 0 in m")
     if op == "mode":
-        from protocols.px4 import mode_from_name
+        from vtolftc.protocols.px4 import mode_from_name
 
         try:
             mode_from_name(args.name)
@@ -119,7 +119,7 @@ def cmd_gcs(args: argparse.Namespace) -> int:
                              "(0.5 = 50 %), not a percentage")
         if kind != "loss" and args.loss is not None:
             raise UsageError(f"--kind {kind} takes no --loss")
-        from gcs.actuators import default_table
+        from vtolftc.gcs.actuators import default_table
 
         try:
             default_table().expand(args.actuator)
@@ -144,7 +144,7 @@ def cmd_gcs(args: argparse.Namespace) -> int:
 
 
 def _run_op(gs: Any, args: argparse.Namespace, kind: str | None) -> int:
-    from gcs.client import GcsError
+    from vtolftc.gcs.client import GcsError
 
     op = args.gcs_command
     try:

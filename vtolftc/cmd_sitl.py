@@ -3,7 +3,8 @@
     vtolftc sitl --case 1 --controller gs-shif [--transport udp|zenoh] [--realtime]
                  [--duration 40] [--out DIR] [--compare]
 
-Starts ``firmware_sim.vehicle.process`` and ``firmware_sim.autopilot.process`` on free
+Starts ``vtolftc.firmware_sim.vehicle.process`` and ``vtolftc.firmware_sim.autopilot.process`` on
+free
 loopback ports (UDP, or embedded zenoh peers on tcp/127.0.0.1), flies the case through a
 ground station with the real MAVLink commands (arm, takeoff, transition, fault injection with
 SYS_FAILURE_EN = 1) at the scenario's simulated times, stops both processes (also on Ctrl-C)
@@ -74,12 +75,12 @@ def _fmt(v: Any) -> str:
 def _start_dashboard(args: argparse.Namespace, cfg: Any, af: Any) -> Any:
     """Serve the dashboard on its own ground-station link (a free loopback UDP port that the
     autopilot is told to stream to), before the processes start."""
-    from protocols.netutil import free_udp_port
     from vtolftc.cli import UsageError
+    from vtolftc.protocols.netutil import free_udp_port
 
     if not 0 <= args.dashboard_port <= 65535:
         raise UsageError(f"--dashboard-port {args.dashboard_port}: expected 0..65535")
-    from dashboard.web import Dashboard
+    from vtolftc.dashboard.web import Dashboard
 
     port = free_udp_port()
     cfg.extra_autopilot_args += ["--gcs-link", f"udp-client://127.0.0.1:{port}"]
@@ -99,7 +100,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.duration) and 0 < args.duration <= 3600):
         raise UsageError(f"--duration {args.duration!r}: expected 0 < seconds <= 3600")
     case = str(args.case).removeprefix("case")
-    from firmware_sim.vehicle.faults import FaultError, load_cases
+    from vtolftc.firmware_sim.vehicle.faults import FaultError, load_cases
 
     if f"case{case}" not in load_cases():
         raise UsageError(f"--case {args.case!r}: expected one of "
@@ -110,7 +111,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
 
     af = None
     if args.airframe is not None:
-        from airframe.loader import load_airframe
+        from vtolftc.airframe.loader import load_airframe
 
         af = load_airframe(args.airframe)
     try:
@@ -141,7 +142,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
         print(line + (f" ({o['detail']})" if o["result"] != "ACCEPTED" and o["detail"] else ""))
     ref = None
     if args.compare:
-        from firmware_sim.autopilot.process import make_deterministic
+        from vtolftc.firmware_sim.autopilot.process import make_deterministic
         from vtolftc.scenario import run_scenario
 
         ref = run_scenario(scenario, args.controller, airframe=af, gains_dir=args.gains_dir,

@@ -43,13 +43,13 @@ def _check(args: argparse.Namespace) -> None:
 
 def cmd_synth(args: argparse.Namespace) -> int:
     """Structured H-infinity GS-SHIF and SHIF designs, LQR baseline, mu analysis, report."""
-    from airframe.loader import load_airframe
+    from vtolftc.airframe.loader import load_airframe
 
     _check(args)
     af = load_airframe(args.airframe)
     from tqdm import tqdm
 
-    from synthesis.pipeline import run_synthesis, work_units
+    from vtolftc.synthesis.pipeline import run_synthesis, work_units
 
     t0 = time.perf_counter()
     bar = tqdm(total=work_units(mu=not args.no_mu, report=not args.no_report),
@@ -77,7 +77,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
 
 def _summary(res: Any, total: float) -> None:
-    from synthesis.models import AXES
+    from vtolftc.synthesis.models import AXES
 
     print(f"Synthesis of {res.airframe.name} ({res.airframe.sha256[:12]}...), "
           f"{len(res.points)} design points x 3 axes.")

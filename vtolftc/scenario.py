@@ -31,14 +31,14 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from airframe.loader import Airframe, load_airframe
-from firmware_sim.autopilot.autopilot import (
+from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.firmware_sim.autopilot.autopilot import (
     CMD_COMPONENT_ARM_DISARM,
     CMD_DO_VTOL_TRANSITION,
     CMD_NAV_TAKEOFF,
     Autopilot,
 )
-from firmware_sim.autopilot.interface import (
+from vtolftc.firmware_sim.autopilot.interface import (
     EARTH_RADIUS_M,
     CommandResult,
     NavState,
@@ -46,8 +46,8 @@ from firmware_sim.autopilot.interface import (
     encode_hil_state,
     wire_commands,
 )
-from firmware_sim.vehicle.faults import Fault, case_description, case_faults
-from firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle.faults import Fault, case_description, case_faults
+from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.metrics import MetricsAccumulator
 from vtolftc.telemetry import RunObserver, TelemetrySample, VehicleTruth
 

@@ -1,9 +1,9 @@
 """SITL runner: the vehicle and the autopilot as separate processes, flown by a ground station.
 
-:class:`SitlRun` starts ``python -m firmware_sim.vehicle.process`` and ``python -m
-firmware_sim.autopilot.process`` (each in its own process group, output in log files of the
+:class:`SitlRun` starts ``python -m vtolftc.firmware_sim.vehicle.process`` and ``python -m
+vtolftc.firmware_sim.autopilot.process`` (each in its own process group, output in log files of the
 run folder) on free loopback ports, over UDP or zenoh (embedded peers, explicit
-``tcp/127.0.0.1`` endpoints, no scouting), connects a :class:`gcs.client.GroundStation` and
+``tcp/127.0.0.1`` endpoints, no scouting), connects a :class:`vtolftc.gcs.client.GroundStation` and
 flies a :class:`vtolftc.scenario.Scenario` by sending the real MAVLink commands: arming,
 NAV_TAKEOFF, DO_VTOL_TRANSITION, and the faults as MAV_CMD_INJECT_PARTIAL_LOSS /
 INJECT_FAILURE after setting SYS_FAILURE_EN = 1. The autopilot forwards the faults to the
@@ -12,7 +12,8 @@ vehicle process; the controller never sees them.
 Timing (lockstep, the default): the ground station is not in the lockstep loop, so a command
 sent "when the telemetry says t" would land some steps late, by an amount that depends on the
 machine's load. The runner therefore uses the autopilot's simulation hold (parameter
-``SIM_HOLD_MS``, see :mod:`firmware_sim.autopilot.gcs_endpoint`): the autopilot starts held at
+``SIM_HOLD_MS``, see :mod:`vtolftc.firmware_sim.autopilot.gcs_endpoint`): the autopilot starts held
+at
 t = 0; for each action time T the runner sets SIM_HOLD_MS = T (releasing the previous hold),
 waits for the autopilot's ``SIM_HOLD`` notice (NAMED_VALUE_INT) that it stopped before the
 control step at T, sends the commands (each acknowledged) and moves on. Commands then act at
@@ -22,7 +23,8 @@ step as the in-process ``Vehicle.inject`` (fault magnitudes travel as float32 an
 as the decimal they stand for: 0.2, not 0.200000003). The autopilot's inputs are bit-identical
 to the in-process run's (same HIL_STATE_QUATERNION encoding, float32 commands both ways), so
 with ``deterministic=True`` (and the in-process run given
-:func:`firmware_sim.autopilot.process.make_deterministic`) every metric is *equal*, tested over
+:func:`vtolftc.firmware_sim.autopilot.process.make_deterministic`) every metric is *equal*, tested
+over
 UDP and zenoh. Without it, the allocator's OSQP ``time_limit`` (1 ms of wall clock) lets the
 machine's load change a QP solution now and then: two in-process runs then already differ
 around the 6th significant digit, and so does SITL against in-process.
@@ -52,8 +54,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gcs.client import CommandOutcome, GcsError, GroundStation
-from protocols.netutil import free_tcp_port, free_udp_port
+from vtolftc.gcs.client import CommandOutcome, GcsError, GroundStation
+from vtolftc.protocols.netutil import free_tcp_port, free_udp_port
 
 __all__ = ["SitlConfig", "SitlError", "SitlResult", "SitlRun", "run_sitl"]
 
@@ -85,7 +87,7 @@ class SitlConfig:
     hold_timeout_s: float = 5.0
     deterministic: bool = False
     """Autopilot without the QP solver's wall-clock time limit (see
-    :func:`firmware_sim.autopilot.process.make_deterministic`)."""
+    :func:`vtolftc.firmware_sim.autopilot.process.make_deterministic`)."""
     plots: bool = True
     hold_at_start: bool = True
     """Lockstep: start held at t = 0 (needed by :meth:`SitlRun.fly`); False = free-running."""
@@ -186,12 +188,13 @@ class SitlRun:
         common += ["--parent-pid", str(os.getpid())]  # no orphans if this process is killed
         if cfg.spin_us > 0:
             common += ["--spin-us", f"{cfg.spin_us:g}"]
-        self._spawn("vehicle", ["-m", "firmware_sim.vehicle.process", "--link", v_url, *mode,
-                                *common, "--out", str(self.out / "vehicle"),
+        self._spawn("vehicle", ["-m", "vtolftc.firmware_sim.vehicle.process", "--link", v_url,
+                                *mode, *common, "--out", str(self.out / "vehicle"),
                                 "--peer-timeout", "30", "--connect-timeout",
                                 str(cfg.startup_timeout_s), *cfg.extra_vehicle_args])
-        ap_args = ["-m", "firmware_sim.autopilot.process", "--hil-link", a_hil, "--gcs-link",
-                   a_gcs, "--no-default-gcs", *mode, *common, "--controller", cfg.controller,
+        ap_args = ["-m", "vtolftc.firmware_sim.autopilot.process", "--hil-link", a_hil,
+                   "--gcs-link", a_gcs, "--no-default-gcs", *mode, *common,
+                   "--controller", cfg.controller,
                    "--out", str(self.out / "autopilot"), "--case", str(cfg.case),
                    "--vehicle-timeout", "30",
                    "--param", f"SYS_FAILURE_EN={1 if cfg.failure_injection else 0}"]
@@ -245,7 +248,7 @@ class SitlRun:
     # ------------------------------------------------------------------ flight
     def fly(self, scenario: Any) -> SitlResult:
         """Fly ``scenario`` (a :class:`vtolftc.scenario.Scenario`) and return the metrics."""
-        from airframe.loader import load_airframe
+        from vtolftc.airframe.loader import load_airframe
 
         assert self.gs is not None
         cfg = self.cfg

@@ -16,7 +16,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from firmware_sim.autopilot.interface import AutopilotStatus, NavState
+from vtolftc.firmware_sim.autopilot.interface import AutopilotStatus, NavState
 
 __all__ = ["RunObserver", "TelemetrySample", "VehicleTruth"]
 

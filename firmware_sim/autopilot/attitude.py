@@ -1,11 +1,11 @@
 """Attitude controllers behind one interface, selectable by name.
 
 - ``gs-shif``: the paper's gain-scheduled cascaded P-PID per axis (``gains/gs-shif.json``,
-  a :class:`~firmware_sim.autopilot.schedule.GainSchedule`), gains interpolated in the
+  a :class:`~vtolftc.firmware_sim.autopilot.schedule.GainSchedule`), gains interpolated in the
   measured airspeed every step;
 - ``shif``: the same class with the constant-gain schedule ``gains/shif.json``;
 - ``lqr``: state feedback with integral action per axis (``gains/lqr.json``, see
-  :mod:`firmware_sim.autopilot.lqr`).
+  :mod:`vtolftc.firmware_sim.autopilot.lqr`).
 
 All take the attitude reference and the measured attitude (roll, pitch, yaw; ZYX Euler, rad),
 the body rates (rad/s) and the airspeed (m/s), and return the moment command [L, M, N] (N m,
@@ -26,10 +26,9 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
-
-from firmware_sim.autopilot.lqr import LQRGains, LQRGainsError
-from firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, wrap_angle
-from firmware_sim.autopilot.schedule import AXES, GainSchedule, GainScheduleError
+from vtolftc.firmware_sim.autopilot.lqr import LQRGains, LQRGainsError
+from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, wrap_angle
+from vtolftc.firmware_sim.autopilot.schedule import AXES, GainSchedule, GainScheduleError
 
 __all__ = [
     "CONTROLLERS",

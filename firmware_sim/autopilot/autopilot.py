@@ -1,6 +1,6 @@
 """The autopilot: modes, altitude/position/airspeed loops, attitude control, QP allocation.
 
-:class:`Autopilot` implements :class:`~firmware_sim.autopilot.interface.AutopilotAPI`. Each
+:class:`Autopilot` implements :class:`~vtolftc.firmware_sim.autopilot.interface.AutopilotAPI`. Each
 ``step(nav)`` (250 Hz):
 
 1. the mode machine (:mod:`.modes`) takes its automatic transitions;
@@ -40,13 +40,12 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-
-from airframe.loader import Airframe, load_airframe
-from firmware_sim.autopilot.allocation import AllocationStatus, QPAllocator
-from firmware_sim.autopilot.altitude import FixedWingAltitudeHold, MulticopterAltitudeHold
-from firmware_sim.autopilot.attitude import AttitudeController, make_controller
-from firmware_sim.autopilot.effectiveness import EffectivenessModel
-from firmware_sim.autopilot.interface import (
+from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.firmware_sim.autopilot.allocation import AllocationStatus, QPAllocator
+from vtolftc.firmware_sim.autopilot.altitude import FixedWingAltitudeHold, MulticopterAltitudeHold
+from vtolftc.firmware_sim.autopilot.attitude import AttitudeController, make_controller
+from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
+from vtolftc.firmware_sim.autopilot.interface import (
     N_ACTUATORS,
     AutopilotStatus,
     CommandResult,
@@ -55,7 +54,7 @@ from firmware_sim.autopilot.interface import (
     ParameterStore,
     ParamType,
 )
-from firmware_sim.autopilot.modes import ModeMachine, landed_state, vtol_state
+from vtolftc.firmware_sim.autopilot.modes import ModeMachine, landed_state, vtol_state
 
 __all__ = [
     "CMD_COMPONENT_ARM_DISARM",

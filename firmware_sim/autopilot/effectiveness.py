@@ -25,7 +25,8 @@ evaluated in wings-level flight with the velocity along the body x axis, alpha =
 
 This is the NOMINAL model from the airframe file: it knows nothing of injected faults
 (passive FTC) and is evaluated at the measured airspeed. It must stay consistent with
-``firmware_sim.vehicle.dynamics`` (tested there by finite differences), without importing it.
+``vtolftc.firmware_sim.vehicle.dynamics`` (tested there by finite differences), without importing
+it.
 """
 
 from __future__ import annotations
@@ -34,8 +35,7 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-
-from airframe.loader import Airframe
+from vtolftc.airframe.loader import Airframe
 
 __all__ = ["AXES", "EffectivenessModel"]
 

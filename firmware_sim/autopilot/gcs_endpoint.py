@@ -56,9 +56,8 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
-
-from firmware_sim.autopilot.hil_bridge import HilBridge
-from firmware_sim.autopilot.interface import (
+from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
+from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotAPI,
     AutopilotStatus,
     CommandResult,
@@ -69,10 +68,10 @@ from firmware_sim.autopilot.interface import (
     ParamType,
     VtolState,
 )
-from firmware_sim.autopilot.modes import px4_custom_mode
-from protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
-from protocols.link import Link
-from protocols.px4 import (
+from vtolftc.firmware_sim.autopilot.modes import px4_custom_mode
+from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
+from vtolftc.protocols.link import Link
+from vtolftc.protocols.px4 import (
     MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
     MAV_MODE_FLAG_SAFETY_ARMED,
     decode_param_value,
@@ -123,7 +122,7 @@ SIM_HOLD_PARAM = "SIM_HOLD_MS"
 
 def px4_mode_of(mode: FlightMode) -> tuple[int, int]:
     """PX4 (main, sub) custom mode reported for a flight mode (see
-    :func:`firmware_sim.autopilot.modes.px4_custom_mode`)."""
+    :func:`vtolftc.firmware_sim.autopilot.modes.px4_custom_mode`)."""
     cm = px4_custom_mode(FlightMode(mode))
     return (cm >> 16) & 0xFF, (cm >> 24) & 0xFF
 

@@ -26,9 +26,13 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-
-from firmware_sim.autopilot.interface import HilState, NavState, decode_hil_state, wire_commands
-from protocols.link import Link
+from vtolftc.firmware_sim.autopilot.interface import (
+    HilState,
+    NavState,
+    decode_hil_state,
+    wire_commands,
+)
+from vtolftc.protocols.link import Link
 
 __all__ = ["HilBridge"]
 

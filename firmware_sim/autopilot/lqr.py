@@ -37,7 +37,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
-from firmware_sim.autopilot.schedule import read_json_file
+from vtolftc.firmware_sim.autopilot.schedule import read_json_file
 
 __all__ = ["AXES", "FORMAT", "LQR_FIELDS", "LQRAxisGains", "LQRGains", "LQRGainsError"]
 

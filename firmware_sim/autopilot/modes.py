@@ -1,6 +1,6 @@
 """Flight-mode state machine of the autopilot (no control law here, only the logic).
 
-Modes (:class:`~firmware_sim.autopilot.interface.FlightMode`) and how they change:
+Modes (:class:`~vtolftc.firmware_sim.autopilot.interface.FlightMode`) and how they change:
 
 =================== ==================================================================
 IDLE                on the ground, disarmed or armed (rotors idle). ``arm`` / ``disarm``;
@@ -28,7 +28,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from firmware_sim.autopilot.interface import CommandResult, FlightMode, LandedState, VtolState
+from vtolftc.firmware_sim.autopilot.interface import (
+    CommandResult,
+    FlightMode,
+    LandedState,
+    VtolState,
+)
 
 __all__ = [
     "MC_MODES",

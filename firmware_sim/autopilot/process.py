@@ -1,6 +1,6 @@
 """The autopilot as a process: HIL link to the vehicle, MAVLink links to ground stations.
 
-    python -m firmware_sim.autopilot.process --hil-link udp-client://127.0.0.1:4560
+    python -m vtolftc.firmware_sim.autopilot.process --hil-link udp-client://127.0.0.1:4560
         [--gcs-link URL ...] [--no-default-gcs] [--lockstep|--realtime]
         [--controller gs-shif|shif|lqr] [--airframe FILE] [--gains-dir DIR]
         [--hold-ms MS] [--param NAME=VALUE ...] [--signing-passphrase TEXT]
@@ -10,7 +10,7 @@ Ground-station links: by default, like PX4 SITL, it sends to UDP 127.0.0.1:14550
 stations: QGroundControl, ``vtolftc gcs``) and 127.0.0.1:14540 (API clients: MAVSDK), as a UDP
 client of those ports; ``--gcs-link`` adds any link (UDP or zenoh, several allowed) and
 ``--no-default-gcs`` drops the two defaults. What it says on those links is documented in
-:mod:`firmware_sim.autopilot.gcs_endpoint`; the HIL side in :mod:`.hil_bridge`.
+:mod:`vtolftc.firmware_sim.autopilot.gcs_endpoint`; the HIL side in :mod:`.hil_bridge`.
 
 Main loop (one thread; the link receivers only queue): take the vehicle's messages; handle the
 queued ground-station messages; when a HIL_SENSOR / HIL_STATE_QUATERNION pair has arrived,
@@ -44,13 +44,12 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
-
-from firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
-from firmware_sim.autopilot.hil_bridge import HilBridge
-from firmware_sim.autopilot.interface import AutopilotAPI, ParamError
-from protocols import SigningConfig, open_link
-from protocols.failure_units import ActuatorTable
-from protocols.link import Link
+from vtolftc.firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
+from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
+from vtolftc.firmware_sim.autopilot.interface import AutopilotAPI, ParamError
+from vtolftc.protocols import SigningConfig, open_link
+from vtolftc.protocols.failure_units import ActuatorTable
+from vtolftc.protocols.link import Link
 
 __all__ = ["DEFAULT_GCS_LINKS", "AutopilotProcess", "main", "make_deterministic"]
 
@@ -277,7 +276,7 @@ def _jsonable(x: Any) -> Any:
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(
-        prog="python -m firmware_sim.autopilot.process",
+        prog="python -m vtolftc.firmware_sim.autopilot.process",
         description="vtol-ftc autopilot: HIL link to the simulated vehicle, MAVLink to ground "
                     "stations (PX4 conventions).")
     ap.add_argument("--hil-link", required=True,
@@ -329,8 +328,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def _make_autopilot(args: argparse.Namespace) -> tuple[AutopilotAPI, Any]:
-    from airframe.loader import load_airframe
-    from firmware_sim.autopilot.autopilot import Autopilot
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 
     af = load_airframe(args.airframe) if args.airframe else load_airframe()
     return Autopilot(af, controller=args.controller, gains_dir=args.gains_dir), af
@@ -411,7 +410,8 @@ def make_deterministic(autopilot: Any) -> None:
 def _run_observers(out: Path, plots: bool = True) -> list[Any]:
     """The run folder of the autopilot's own view (telemetry, events, metrics, plots) and its
     rerun recording ``run.rrd`` (no vehicle truth here: commands, not effective outputs)."""
-    from dashboard.recording import RerunRecorder
+    from vtolftc.dashboard.recording import RerunRecorder
+
     from vtolftc.runfolder import RunFolderWriter
 
     return [RunFolderWriter(out, plots=plots), RerunRecorder(out / "run.rrd")]

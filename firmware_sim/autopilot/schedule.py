@@ -37,7 +37,7 @@ Fields (all required unless said otherwise):
   ``metadata`` value (anything). Gains are finite numbers >= 0; ``tf_rate_s`` must be > 0
   wherever ``kd_rate`` > 0 (a proper derivative filter).
 
-Gains and units (SI; see ``firmware_sim.autopilot.pid``): the inner loop maps the body-rate
+Gains and units (SI; see ``vtolftc.firmware_sim.autopilot.pid``): the inner loop maps the body-rate
 error [rad/s] to a moment [N m] about the FRD body axis of that channel::
 
     rate_ref = kp_angle (angle_ref - angle)                      kp_angle  [1/s]
@@ -65,7 +65,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
-from firmware_sim.autopilot.pid import PPIDGains
+from vtolftc.firmware_sim.autopilot.pid import PPIDGains
 
 __all__ = [
     "AXES",

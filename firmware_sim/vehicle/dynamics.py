@@ -25,7 +25,7 @@ actuator position freezes). Integration: classical RK4 at a fixed step, the quat
 renormalised after each step.
 
 Everything here takes flat arrays (see :func:`pack`) so that one compiled step costs a few
-microseconds; the Python-level API is :class:`firmware_sim.vehicle.model.Vehicle`.
+microseconds; the Python-level API is :class:`vtolftc.firmware_sim.vehicle.model.Vehicle`.
 """
 
 from __future__ import annotations
@@ -35,8 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
-
-from airframe.loader import Airframe
+from vtolftc.airframe.loader import Airframe
 
 N_RIGID = 13
 

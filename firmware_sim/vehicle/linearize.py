@@ -6,7 +6,7 @@ axes (``q = q0 * [1, d/2]``; at a level trim its components are roll, pitch and 
 deviations) and the body rates. The inputs are the actuator *positions* (normalised as the
 commands), i.e. the actuator lags are left out: add them in series when needed. Derivatives by
 central differences of the compiled equations of motion. Valid about steady trims (zero body
-rates), which is what :mod:`firmware_sim.vehicle.trim` produces.
+rates), which is what :mod:`vtolftc.firmware_sim.vehicle.trim` produces.
 """
 
 from __future__ import annotations
@@ -14,9 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from firmware_sim.vehicle import dynamics as dyn
-from firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle import dynamics as dyn
+from vtolftc.firmware_sim.vehicle.model import Vehicle
 
 STATE_NAMES = ("pn", "pe", "pd", "vn", "ve", "vd", "dphi", "dtheta", "dpsi", "p", "q", "r")
 

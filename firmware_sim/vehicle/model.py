@@ -1,6 +1,6 @@
 """The simulated vehicle: state, fixed-step integration, faults, sensors.
 
-:class:`Vehicle` owns the state vector of :mod:`firmware_sim.vehicle.dynamics` and advances
+:class:`Vehicle` owns the state vector of :mod:`vtolftc.firmware_sim.vehicle.dynamics` and advances
 it at 1 kHz (RK4) with the actuator commands held between calls. Simulated time is an integer
 number of microseconds (``time_usec``). Faults become active at the first physics step that
 starts at or after their start time, exactly, whatever the caller's batch size.
@@ -13,11 +13,10 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-
-from airframe.loader import Airframe, load_airframe
-from firmware_sim.vehicle import dynamics as dyn
-from firmware_sim.vehicle.faults import Fault, FaultError, FaultKind
-from firmware_sim.vehicle.sensors import Home, SensorModel, SensorNoise, SensorSample
+from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.firmware_sim.vehicle import dynamics as dyn
+from vtolftc.firmware_sim.vehicle.faults import Fault, FaultError, FaultKind
+from vtolftc.firmware_sim.vehicle.sensors import Home, SensorModel, SensorNoise, SensorSample
 
 _F64 = np.dtype(np.float64)
 
@@ -99,7 +98,7 @@ class Vehicle:
 
     @property
     def state(self) -> np.ndarray:
-        """A copy of the full state vector (see :mod:`firmware_sim.vehicle.dynamics`)."""
+        """A copy of the full state vector (see :mod:`vtolftc.firmware_sim.vehicle.dynamics`)."""
         return self.x.copy()
 
     def set_state(self, state: np.ndarray) -> None:

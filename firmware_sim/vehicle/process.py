@@ -1,6 +1,6 @@
 """The simulated vehicle as a process: a :class:`Vehicle` behind a MAVLink HIL link.
 
-    python -m firmware_sim.vehicle.process --link udp-server://127.0.0.1:4560 [--lockstep]
+    python -m vtolftc.firmware_sim.vehicle.process --link udp-server://127.0.0.1:4560 [--lockstep]
         [--realtime] [--airframe FILE] [--seed N] [--noise] [--duration S] [--out DIR]
 
 Physics runs at 1 kHz (the vehicle's RK4 step); every 4 ms of simulated time (one control
@@ -10,7 +10,7 @@ period) the process sends, in one datagram, PX4-SITL style:
   ``fields_updated`` = 0x1FFF (accel, gyro, mag, baro, diff pressure, pressure alt, temp);
 - HIL_GPS at 10 Hz (fix 3D, degE7, mm, cm/s), as PX4's simulators do;
 - HIL_STATE_QUATERNION: the ground truth through
-  :func:`firmware_sim.autopilot.interface.encode_hil_state` (true airspeed in both airspeed
+  :func:`vtolftc.firmware_sim.autopilot.interface.encode_hil_state` (true airspeed in both airspeed
   fields), the very encoding the in-process runner uses, so the autopilot sees bit-identical
   inputs in both;
 - GPS_GLOBAL_ORIGIN (first datagram, then at 1 Hz): the geodetic origin of the NED frame, from
@@ -31,7 +31,7 @@ Faults: COMMAND_LONG INJECT_FAILURE (420: OK 0 / OFF 1 / STUCK 2) and the dialec
 MAV_CMD_INJECT_PARTIAL_LOSS (59900, loss 0..1) forwarded by the autopilot (never sent to the
 controller) act from the next physics step (in lockstep: exactly at the time of the step the
 autopilot was answering). Units and instances map to actuators as
-:mod:`protocols.failure_units` documents (MOTOR 1-8 lift rotors in airframe order, 9-10
+:mod:`vtolftc.protocols.failure_units` documents (MOTOR 1-8 lift rotors in airframe order, 9-10
 pushers; SERVO 1-5 aileron_left, aileron_right, elevator, rudder_left, rudder_right; instance 0
 = every instance of the unit). A new fault on an actuator replaces its previous one. Every
 fault command is answered with COMMAND_ACK and FAULT_INJECTION_STATUS (also sent at 1 Hz).
@@ -56,16 +56,15 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
-
-from airframe.loader import Airframe, AirframeError, load_airframe
-from firmware_sim.autopilot.interface import NavState, encode_hil_state
-from firmware_sim.vehicle.dynamics import N_RIGID
-from firmware_sim.vehicle.dynamics import quat_to_euler as dyn_quat_to_euler
-from firmware_sim.vehicle.faults import Fault, FaultKind
-from firmware_sim.vehicle.model import Vehicle
-from firmware_sim.vehicle.sensors import SensorNoise
-from protocols import open_link
-from protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
+from vtolftc.airframe.loader import Airframe, AirframeError, load_airframe
+from vtolftc.firmware_sim.autopilot.interface import NavState, encode_hil_state
+from vtolftc.firmware_sim.vehicle.dynamics import N_RIGID
+from vtolftc.firmware_sim.vehicle.dynamics import quat_to_euler as dyn_quat_to_euler
+from vtolftc.firmware_sim.vehicle.faults import Fault, FaultKind
+from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle.sensors import SensorNoise
+from vtolftc.protocols import open_link
+from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
 
 __all__ = ["VehicleProcess", "main"]
 
@@ -478,7 +477,7 @@ class VehicleProcess:
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(
-        prog="python -m firmware_sim.vehicle.process",
+        prog="python -m vtolftc.firmware_sim.vehicle.process",
         description="Simulated vehicle behind a MAVLink HIL link (PX4 SITL style).")
     ap.add_argument("--link", required=True,
                     help="HIL link URL, e.g. udp-server://127.0.0.1:4560 or "

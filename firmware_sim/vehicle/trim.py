@@ -1,7 +1,7 @@
 """Trim of the nonlinear vehicle: hover, and straight level flight at a given airspeed.
 
 Every trim is solved on the nonlinear equations of motion themselves (the compiled
-:func:`firmware_sim.vehicle.dynamics.derivatives`), so a trimmed state stays still when
+:func:`vtolftc.firmware_sim.vehicle.dynamics.derivatives`), so a trimmed state stays still when
 simulated. Two level-flight variants:
 
 - ``wing``: the wing carries the weight; unknowns pitch, elevator, pusher thrust; the lift
@@ -18,10 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
-
-from airframe.loader import Airframe, load_airframe
-from firmware_sim.vehicle import dynamics as dyn
-from firmware_sim.vehicle.model import Vehicle
+from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.firmware_sim.vehicle import dynamics as dyn
+from vtolftc.firmware_sim.vehicle.model import Vehicle
 
 
 class TrimError(RuntimeError):
