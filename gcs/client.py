@@ -127,6 +127,8 @@ class VehicleSnapshot:
     connected: bool = False
     heartbeat_age_s: float = math.inf
     armed: bool = False
+    system_status: int = 0
+    """MAV_STATE of the last HEARTBEAT (1 BOOT, 3 STANDBY, 4 ACTIVE, 5 CRITICAL, 6 EMERGENCY)."""
     mode_name: str = "UNKNOWN"
     vtol_state: int = 0
     vtol_state_name: str = "UNDEFINED"
@@ -555,6 +557,7 @@ class GroundStation:
             if t == "HEARTBEAT":
                 self._last_heartbeat = time.monotonic()
                 s.armed = bool(m.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
+                s.system_status = int(m.system_status)
                 s.mode_name = mode_name(m.custom_mode)
                 self._heartbeat_event.set()
             elif t == "ATTITUDE":

@@ -45,7 +45,7 @@ from types import TracebackType
 from typing import Any
 from urllib.parse import urlsplit
 
-from vtolftc.protocols.mavlink import SigningConfig, dialect, make_codec
+from vtolftc.protocols.mavlink import SigningConfig, StreamTimestamps, dialect, make_codec
 
 __all__ = [
     "Link",
@@ -93,6 +93,19 @@ class Transport(ABC):
         """Datagrams dropped by the transport's own receive queue (if it has one)."""
         return 0
 
+    foreign_drops: int = 0
+    """Datagrams dropped because they came from another address than the pinned peer."""
+
+    def recv_datagrams_from(self, timeout_s: float | None) -> list[tuple[bytes, object]]:
+        """:meth:`recv_datagrams` with each datagram's source address (None where the
+        transport has no addresses, e.g. zenoh)."""
+        return [(d, None) for d in self.recv_datagrams(timeout_s)]
+
+    def pin(self, addr: object) -> None:
+        """Talk to ``addr`` only (see :meth:`vtolftc.protocols.udp.UdpServerTransport.pin`).
+        Transports without addresses ignore it."""
+        return None
+
     def describe(self) -> str:
         """Human-readable endpoint description."""
         return self.kind
@@ -123,6 +136,8 @@ class LinkStats:
     """Well-framed messages whose id is not in the dialect (their CRC cannot be checked)."""
     dropped_overflow: int = 0
     """Datagrams dropped because the transport's receive queue was full."""
+    dropped_foreign: int = 0
+    """Datagrams dropped because they came from another address than the pinned peer."""
 
     @property
     def dropped(self) -> int:
@@ -134,6 +149,7 @@ class LinkStats:
             + self.dropped_signature
             + self.dropped_unknown
             + self.dropped_overflow
+            + self.dropped_foreign
         )
 
     def as_dict(self) -> dict[str, int]:
@@ -154,6 +170,10 @@ class Link:
             instead of dropping them.
         codec: use this generated ``MAVLink`` object instead of making one (ids and signing
             arguments are then ignored).
+        track_source: remember each message's source address (:meth:`source_of`), so that a
+            server can :meth:`pin` its peer.
+        stream_table: the signing replay window, shared with other links (see
+            :class:`vtolftc.protocols.mavlink.StreamTimestamps`).
 
     One thread may send while another receives (the counters are then approximate, and with
     signing a send racing a receive may very rarely reuse a signing timestamp).
@@ -168,11 +188,14 @@ class Link:
         signing: SigningConfig | None = None,
         keep_unknown: bool = False,
         codec: Any = None,
+        track_source: bool = False,
+        stream_table: StreamTimestamps | None = None,
     ) -> None:
         mod = dialect()
+        self._track_source = track_source
         self._transport = transport
         self._codec = codec if codec is not None else make_codec(
-            system_id, component_id, signing=signing
+            system_id, component_id, signing=signing, stream_table=stream_table
         )
         self._codec.robust_parsing = True
         self._bad_data_cls = mod.MAVLink_bad_data
@@ -207,6 +230,7 @@ class Link:
     def stats(self) -> LinkStats:
         """Live counters (the same object is updated as traffic flows)."""
         self._stats.dropped_overflow = self._transport.overflow_drops
+        self._stats.dropped_foreign = self._transport.foreign_drops
         return self._stats
 
     @property
@@ -238,7 +262,29 @@ class Link:
         st.send_dropped += 1
         return 0
 
+    # ---------------------------------------------------------------- peers
+    @staticmethod
+    def source_of(msg: Any) -> object:
+        """Source address of a message received with ``track_source`` (None if unknown)."""
+        return getattr(msg, "_vtolftc_source", None)
+
+    def pin(self, addr: object) -> None:
+        """Talk to ``addr`` only from now on (UDP server); see :meth:`Transport.pin`."""
+        self._transport.pin(addr)
+
     # ---------------------------------------------------------------- receiving
+    def _read(self, timeout_s: float | None, out: list[Any]) -> None:
+        """One transport read, parsed into ``out``."""
+        if self._track_source:
+            for datagram, src in self._transport.recv_datagrams_from(timeout_s):
+                n = len(out)
+                self._parse_datagram(datagram, out)
+                for m in out[n:]:
+                    m._vtolftc_source = src
+        else:
+            for datagram in self._transport.recv_datagrams(timeout_s):
+                self._parse_datagram(datagram, out)
+
     def recv(self, timeout_s: float | None = 0.0) -> list[Any]:
         """Messages received, waiting up to ``timeout_s`` for the first one.
 
@@ -250,17 +296,14 @@ class Link:
             self._pending.clear()
             return out
         out: list[Any] = []
-        transport = self._transport
         if timeout_s is None:  # wait in slices so that close() from another thread ends it
             while not out and not self._closed:
-                for datagram in transport.recv_datagrams(0.25):
-                    self._parse_datagram(datagram, out)
+                self._read(0.25, out)
             return out
         deadline = time.monotonic() + max(0.0, timeout_s)
         remaining = max(0.0, timeout_s)
         while True:
-            for datagram in transport.recv_datagrams(remaining):
-                self._parse_datagram(datagram, out)
+            self._read(remaining, out)
             if out:
                 return out
             remaining = deadline - time.monotonic()
@@ -306,8 +349,7 @@ class Link:
             if remaining <= 0.0:
                 return False
             batch: list[Any] = []
-            for datagram in self._transport.recv_datagrams(min(remaining, 0.005)):
-                self._parse_datagram(datagram, batch)
+            self._read(min(remaining, 0.005), batch)
             self._pending.extend(batch)
         return True
 
@@ -469,6 +511,8 @@ def open_link(
     signing: SigningConfig | None = None,
     allow_remote: bool = False,
     keep_unknown: bool = False,
+    track_source: bool = False,
+    stream_table: StreamTimestamps | None = None,
 ) -> Link:
     """Open a :class:`Link` from a URL (see the module docstring for the scheme).
 
@@ -478,6 +522,8 @@ def open_link(
         signing: MAVLink 2 signing configuration, None = no signing.
         allow_remote: permit non-loopback addresses (never settable from the URL).
         keep_unknown: deliver messages of ids unknown to the dialect instead of dropping them.
+        track_source: remember source addresses (see :meth:`Link.source_of`, :meth:`Link.pin`).
+        stream_table: signing replay window shared by several links.
 
     Raises:
         ValueError: malformed URL, or a non-loopback address without ``allow_remote``.
@@ -512,6 +558,8 @@ def open_link(
             component_id=component_id,
             signing=signing,
             keep_unknown=keep_unknown,
+            track_source=track_source,
+            stream_table=stream_table,
         )
     except BaseException:
         transport.close()

@@ -3,7 +3,7 @@
     vtolftc sitl --case 1 --controller gs-shif [--transport udp|zenoh] [--realtime]
                  [--duration 40] [--out DIR] [--compare]
 
-Starts ``vtolftc.firmware_sim.vehicle.process`` and ``vtolftc.firmware_sim.autopilot.process`` on
+Starts ``vtolftc.processes.vehicle`` and ``vtolftc.processes.autopilot`` on
 free
 loopback ports (UDP, or embedded zenoh peers on tcp/127.0.0.1), flies the case through a
 ground station with the real MAVLink commands (arm, takeoff, transition, fault injection with
