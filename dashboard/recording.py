@@ -107,6 +107,9 @@ class RerunRecorder:
         rate_hz: logging rate in simulated time; samples in between are skipped.
         chunk_rows: rows buffered before they are sent to rerun.
         live_flush_s: with ``live``, the longest wall-clock wait before buffered rows are sent.
+        file_flush_s: the longest wall-clock wait before buffered rows are sent to the file
+            (rerun's own batcher then writes them within its flush tick), so that a killed
+            process loses at most about this much of the recording.
         web_port, grpc_port: ports of the web viewer and of its data server (live, headless).
         airframe: airframe for the aircraft shape (default: the shipped DS-1).
     """
@@ -114,7 +117,7 @@ class RerunRecorder:
     def __init__(self, path: Path, *, live: bool = False, application_id: str = "vtolftc",
                  recording_id: str | None = None, rate_hz: float = 50.0, chunk_rows: int = 500,
                  live_flush_s: float = 0.2, web_port: int = 9090, grpc_port: int = 9876,
-                 airframe: Any = None) -> None:
+                 airframe: Any = None, file_flush_s: float = 0.5) -> None:
         import rerun as rr
 
         if not rate_hz > 0:
@@ -126,7 +129,7 @@ class RerunRecorder:
         self.viewer_url: str | None = None
         self._period_usec = max(1, round(1e6 / rate_hz))
         self._chunk = max(1, int(chunk_rows))
-        self._live_flush_s = live_flush_s
+        self._flush_s = min(live_flush_s, file_flush_s) if live else file_flush_s
         self._airframe = airframe
         self._rec = rr.RecordingStream(application_id,
                                        recording_id=recording_id or str(uuid.uuid4()))
@@ -315,8 +318,7 @@ class RerunRecorder:
         if mode != self._last_mode:
             self._last_mode = mode
             self._log_mode(t, mode)
-        if self._n >= self._chunk or (
-                self.live and time.monotonic() - self._last_flush_wall > self._live_flush_s):
+        if self._n >= self._chunk or time.monotonic() - self._last_flush_wall > self._flush_s:
             self._flush()
 
     def on_event(self, time_usec: int, kind: str, text: str) -> None:

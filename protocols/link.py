@@ -138,6 +138,8 @@ class LinkStats:
     """Datagrams dropped because the transport's receive queue was full."""
     dropped_foreign: int = 0
     """Datagrams dropped because they came from another address than the pinned peer."""
+    dropped_rate: int = 0
+    """Datagrams dropped unparsed by the link's receive rate limit (``rate_limit_hz``)."""
 
     @property
     def dropped(self) -> int:
@@ -150,6 +152,7 @@ class LinkStats:
             + self.dropped_unknown
             + self.dropped_overflow
             + self.dropped_foreign
+            + self.dropped_rate
         )
 
     def as_dict(self) -> dict[str, int]:
@@ -174,6 +177,9 @@ class Link:
             server can :meth:`pin` its peer.
         stream_table: the signing replay window, shared with other links (see
             :class:`vtolftc.protocols.mavlink.StreamTimestamps`).
+        rate_limit_hz, rate_burst: receive at most this many datagrams per second (token
+            bucket, ``rate_burst`` default twice the rate); the excess is dropped before it is
+            parsed (counted as ``dropped_rate``), so a flood costs little more than the read.
 
     One thread may send while another receives (the counters are then approximate, and with
     signing a send racing a receive may very rarely reuse a signing timestamp).
@@ -190,8 +196,14 @@ class Link:
         codec: Any = None,
         track_source: bool = False,
         stream_table: StreamTimestamps | None = None,
+        rate_limit_hz: float | None = None,
+        rate_burst: float | None = None,
     ) -> None:
         mod = dialect()
+        self._rate = rate_limit_hz
+        self._burst = float(rate_burst if rate_burst is not None else 2.0 * (rate_limit_hz or 0))
+        self._tokens = self._burst
+        self._tokens_t = time.monotonic()
         self._track_source = track_source
         self._transport = transport
         self._codec = codec if codec is not None else make_codec(
@@ -273,16 +285,32 @@ class Link:
         self._transport.pin(addr)
 
     # ---------------------------------------------------------------- receiving
+    def _admit(self) -> bool:
+        """Receive rate limit: take a token (False = drop the datagram unparsed)."""
+        now = time.monotonic()
+        self._tokens = min(self._burst, self._tokens + (now - self._tokens_t) * self._rate)
+        self._tokens_t = now
+        if self._tokens < 1.0:
+            self._stats.dropped_rate += 1
+            return False
+        self._tokens -= 1.0
+        return True
+
     def _read(self, timeout_s: float | None, out: list[Any]) -> None:
         """One transport read, parsed into ``out``."""
+        limited = self._rate is not None
         if self._track_source:
             for datagram, src in self._transport.recv_datagrams_from(timeout_s):
+                if limited and datagram and not self._admit():
+                    continue
                 n = len(out)
                 self._parse_datagram(datagram, out)
                 for m in out[n:]:
                     m._vtolftc_source = src
         else:
             for datagram in self._transport.recv_datagrams(timeout_s):
+                if limited and datagram and not self._admit():
+                    continue
                 self._parse_datagram(datagram, out)
 
     def recv(self, timeout_s: float | None = 0.0) -> list[Any]:
@@ -513,6 +541,8 @@ def open_link(
     keep_unknown: bool = False,
     track_source: bool = False,
     stream_table: StreamTimestamps | None = None,
+    rate_limit_hz: float | None = None,
+    rate_burst: float | None = None,
 ) -> Link:
     """Open a :class:`Link` from a URL (see the module docstring for the scheme).
 
@@ -524,6 +554,7 @@ def open_link(
         keep_unknown: deliver messages of ids unknown to the dialect instead of dropping them.
         track_source: remember source addresses (see :meth:`Link.source_of`, :meth:`Link.pin`).
         stream_table: signing replay window shared by several links.
+        rate_limit_hz, rate_burst: receive rate limit in datagrams/s (see :class:`Link`).
 
     Raises:
         ValueError: malformed URL, or a non-loopback address without ``allow_remote``.
@@ -560,6 +591,8 @@ def open_link(
             keep_unknown=keep_unknown,
             track_source=track_source,
             stream_table=stream_table,
+            rate_limit_hz=rate_limit_hz,
+            rate_burst=rate_burst,
         )
     except BaseException:
         transport.close()

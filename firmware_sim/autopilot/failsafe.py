@@ -10,11 +10,12 @@ Parameters (registered in the autopilot's store, so ground stations read and set
 
 ``COM_DL_LOSS_T`` (s, default 10, 1..300), ``NAV_DLL_ACT`` (default 0)
     Data-link loss: armed and in the air, once a ground station was heard, no ground-station
-    HEARTBEAT (signed, when signing is on) for COM_DL_LOSS_T wall seconds. Action NAV_DLL_ACT:
-    0 none (report only), 1 hold (AUTO.LOITER: TAKEOFF / LAND stop and hover, hover and
-    fixed-wing go on), 2 return (*this autopilot has no return mode yet: it lands, and says
-    so*), 3 land (from fixed-wing: back transition first). PX4 allows COM_DL_LOSS_T from 5 s;
-    1 s is allowed here so that tests stay short. Regained: reported, the action stays.
+    HEARTBEAT or command (signed, when signing is on) for COM_DL_LOSS_T wall seconds.
+    Action NAV_DLL_ACT: 0 none (report only), 1 hold (AUTO.LOITER: TAKEOFF / LAND stop and
+    hover, hover and fixed-wing go on), 2 return (*this autopilot has no return mode yet: it
+    lands, and says so*), 3 land (from fixed-wing: back transition first). PX4 allows
+    COM_DL_LOSS_T from 5 s; 1 s is allowed here so that tests stay short. Regained: reported,
+    the action stays.
 ``COM_HIL_LOSS_T`` (s, default 0.5, 0.05..10), a vtol-ftc parameter in PX4's style
     HIL / sensor data loss: no HIL_SENSOR + HIL_STATE_QUATERNION step for COM_HIL_LOSS_T wall
     seconds while armed. MAV_STATE_EMERGENCY, STATUSTEXT, action land (back transition first

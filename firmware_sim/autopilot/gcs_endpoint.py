@@ -52,7 +52,8 @@ zenoh link). It is system 1, component 1 (MAV_COMP_ID_AUTOPILOT1) and does what
 
 Threads (the control step never waits for a ground station):
 
-- one receiver per link parses frames (bad ones dropped and counted by the link) into a
+- one receiver per link parses frames (bad ones dropped and counted by the link; the process
+  opens the links with a datagram rate limit, so a flood is dropped before it is parsed) into a
   bounded per-link queue; when it is full the oldest message is dropped (counted in
   :meth:`GcsEndpoint.link_stats` as ``queue_dropped``);
 - one worker thread handles the queues: at most :attr:`GcsEndpoint.budget_per_cycle` messages
@@ -204,8 +205,8 @@ class GcsEndpoint:
                  actuators: ActuatorTable, signing_required: bool = False,
                  lockstep: bool = True, hold_ms: int = -1,
                  on_event: Callable[[str, str], None] | None = None,
-                 version: tuple[int, int, int] = (0, 1, 0), rate_limit_hz: float = 100.0,
-                 rate_burst: float = 200.0, queue_len: int = 512,
+                 version: tuple[int, int, int] = (0, 1, 0), rate_limit_hz: float = 50.0,
+                 rate_burst: float = 100.0, queue_len: int = 512,
                  budget_per_cycle: int = 32, control_queue_len: int = 32,
                  start: bool = True) -> None:
         self.ap = autopilot
@@ -266,7 +267,8 @@ class GcsEndpoint:
         self.mav_state: int | None = None
         """MAV_STATE set by a failsafe (CRITICAL / EMERGENCY), None = normal."""
         self.last_gcs_heartbeat = -math.inf
-        """monotonic time of the last (signed, if signing is on) ground-station HEARTBEAT."""
+        """monotonic time of the last (signed, if signing is on) ground-station HEARTBEAT or
+        command addressed to this autopilot."""
         self.handlers: dict[str, Callable[[int, Link, Any], None]] = {
             "HEARTBEAT": self._on_heartbeat,
             "COMMAND_LONG": self._on_command_long,
@@ -723,9 +725,15 @@ class GcsEndpoint:
         if int(msg.type) == MAV_TYPE_GCS and (not self.signing_required or msg.get_signed()):
             self.last_gcs_heartbeat = time.monotonic()
 
+    def _seen_gcs(self, msg: Any) -> None:
+        """A command from a ground station proves the link as its heartbeat does."""
+        if not self.signing_required or msg.get_signed():
+            self.last_gcs_heartbeat = time.monotonic()
+
     def _on_command_long(self, index: int, link: Link, msg: Any) -> None:
         if msg.target_system not in (0, 1) or msg.target_component not in (0, 1):
             return
+        self._seen_gcs(msg)
         params = [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
                   msg.param7]
         self._dispatch(index, link, msg, int(msg.command), [float(x) for x in params])
@@ -733,6 +741,7 @@ class GcsEndpoint:
     def _on_command_int(self, index: int, link: Link, msg: Any) -> None:
         if msg.target_system not in (0, 1) or msg.target_component not in (0, 1):
             return
+        self._seen_gcs(msg)
         params = [msg.param1, msg.param2, msg.param3, msg.param4, msg.x, msg.y, msg.z]
         self._dispatch(index, link, msg, int(msg.command), [float(x) for x in params])
 
@@ -758,6 +767,9 @@ class GcsEndpoint:
                       "busy: too many requests")
 
         if cmd in FLIGHT_COMMANDS:
+            if cmd == CMD_ARM_DISARM and params[0] not in (0.0, 1.0):
+                self._ack(link, msg, cmd, CommandResult.DENIED, "param1 must be 0 or 1")
+                return
             if cmd == CMD_ARM_DISARM and params[0] == 1.0 and not self.ready:
                 self._ack(link, msg, cmd, CommandResult.TEMPORARILY_REJECTED,
                           "autopilot still starting (compiling)")

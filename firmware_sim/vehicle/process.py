@@ -524,6 +524,7 @@ class VehicleProcess:
         v = self.vehicle
         period = CONTROL_PERIOD_USEC * 1e-6
         next_tick = time.monotonic()
+        prev = next_tick
         while self.running and not self._done():
             link.send(self.state_datagram())
             next_tick += period
@@ -534,6 +535,11 @@ class VehicleProcess:
                 if remaining <= 0:
                     break
             now = time.monotonic()
+            if now - prev > 0.1:  # this process was not running (suspended, starved): the
+                # autopilot could not have answered meanwhile; do not count it as silence
+                self._last_controls_wall += now - prev
+                self._last_peer += now - prev
+            prev = now
             if now - self._last_peer > self.peer_timeout_s or self._orphaned():
                 print("vehicle: autopilot silent: stopping", file=self.log, flush=True)
                 return EXIT_PEER_LOST

@@ -56,6 +56,9 @@ from vtolftc.protocols.link import Link
 __all__ = ["DEFAULT_GCS_LINKS", "main", "make_deterministic", "run_observers"]
 
 DEFAULT_GCS_LINKS = ("udp-client://127.0.0.1:14550", "udp-client://127.0.0.1:14540")
+GCS_LINK_RATE_HZ = 200.0
+"""Datagrams per second a ground-station link reads (burst twice that); the excess is
+dropped unparsed. A ground station sends a few tens per second."""
 
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -212,7 +215,8 @@ def main(argv: list[str] | None = None) -> int:
         gcs_links = []
         for url in urls:
             gl = open_link(url, system_id=1, component_id=1, signing=signing,
-                           allow_remote=args.allow_remote, stream_table=table)
+                           allow_remote=args.allow_remote, stream_table=table,
+                           rate_limit_hz=GCS_LINK_RATE_HZ)
             links.append(gl)
             gcs_links.append(gl)
     except (ValueError, OSError) as exc:
