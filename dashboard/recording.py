@@ -51,6 +51,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import uuid
 import warnings
@@ -151,6 +152,12 @@ class RerunRecorder:
         self._rows_total = 0
         self._last_flush_wall = time.monotonic()
         self._alloc(N_ACTUATORS)
+        # rerun writes the file from its own threads; this one asks it to every 0.25 s, so a
+        # killed process loses at most about file_flush_s + 0.25 s of the recording
+        self._flusher_stop = threading.Event()
+        self._flusher = threading.Thread(target=self._flush_loop, daemon=True,
+                                         name="rerun-flush")
+        self._flusher.start()
 
     # -- setup ---------------------------------------------------------------------------
     def _live_sink(self, web_port: int, grpc_port: int) -> Any:
@@ -341,6 +348,7 @@ class RerunRecorder:
         """Send what is buffered, the metrics and the path; flush and close the file."""
         if self._finished:
             return
+        self._stop_flusher()
         try:
             self._flush()
             rr = self._rr
@@ -363,9 +371,23 @@ class RerunRecorder:
             except Exception as exc:
                 print(f"rerun recorder: on_finish: {exc}", file=sys.stderr)
 
+    def _flush_loop(self) -> None:
+        timeout = _flush_takes_timeout(self._rec)
+        while not self._flusher_stop.wait(0.25):
+            try:
+                self._rec.flush(timeout_sec=1.0) if timeout else self._rec.flush()
+            except Exception:
+                return
+
+    def _stop_flusher(self) -> None:
+        self._flusher_stop.set()
+        if self._flusher.is_alive() and self._flusher is not threading.current_thread():
+            self._flusher.join(timeout=2.0)
+
     def close(self) -> None:
         """Disconnect from every sink (the file is complete afterwards) and stop the web
         viewer server started for ``live`` (a spawned native viewer stays open). Idempotent."""
+        self._stop_flusher()
         try:
             self._rec.disconnect()
         except Exception as exc:

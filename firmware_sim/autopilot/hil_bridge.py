@@ -17,7 +17,8 @@ autopilot's outputs into HIL_ACTUATOR_CONTROLS:
 A 1 Hz HEARTBEAT on this link (from system 1, component 1) tells the vehicle the autopilot is
 alive (also while it holds the simulation); the vehicle pins the address of the first one and
 talks to that address only (:mod:`vtolftc.firmware_sim.vehicle.process`). The first heartbeat
-goes out at once (:meth:`HilBridge.tick`), before the control loop runs.
+goes out once the autopilot is warm (:meth:`HilBridge.tick`), just before the control loop
+runs.
 
 :meth:`drain` reads everything the link has (not one bounded batch): after a stall in real
 time the autopilot steps on the newest state, never on one queued seconds ago.

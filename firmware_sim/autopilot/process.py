@@ -18,7 +18,8 @@ the control step never waits for a ground station.
 Start-up. ``warmup`` (if given) runs first, while the ground-station worker already sends
 HEARTBEATs with MAV_STATE_BOOT and refuses arming; it compiles (or loads from numba's cache)
 every compiled path, so that the first real-time flight does not stall at the first
-allocation. Then the HEARTBEAT says STANDBY.
+allocation. Then the HEARTBEAT says STANDBY and the first HIL-link heartbeat goes out, on which
+the vehicle pins this autopilot and starts its clock.
 
 Failsafes (:mod:`vtolftc.firmware_sim.autopilot.failsafe`): checked every control step
 (attitude failure, crash) and every 20 ms of wall clock (data-link loss, HIL data loss),
@@ -186,13 +187,13 @@ class AutopilotProcess:
         """Serve until stopped (signal, ``max_wall_s``, lost vehicle). Exit status."""
         hil, gcs, ap = self.hil, self.gcs, self.ap
         try:
-            hil.tick(time.monotonic())  # the vehicle pins us on this heartbeat
             if self.warmup is not None:
                 t0 = time.monotonic()
                 self.warmup()
                 print(f"autopilot: warm in {time.monotonic() - t0:.1f} s", file=self.log,
                       flush=True)
             gcs.ready = True
+            hil.tick(time.monotonic())  # the vehicle pins us on this heartbeat and starts
             for o in self.observers:
                 with contextlib.suppress(Exception):
                     o.on_start(self.info)
