@@ -312,3 +312,25 @@ def test_autopilot_silent_vehicle_safe_output_then_crash_reported(rt):
     after = [r for r in rows if float(r["time_s"]) > t_trip + 0.005]
     assert after and all(float(after[0][k]) == 0.0 for k in cmd_cols)
     assert math.isfinite(t_frozen)
+
+
+def test_fresh_install_first_real_time_flight_takes_off_and_transitions(tmp_path,
+                                                                        monkeypatch):
+    """An empty numba cache (a fresh install): the processes compile before they report
+    ready, and the first real-time flight takes off and completes a front transition."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "empty_numba_cache"))
+    cfg = SitlConfig(out_dir=tmp_path / "run", realtime=True, plots=False,
+                     failure_injection=False, startup_timeout_s=600.0,
+                     vehicle_timeout_s=5.0)  # the processes' default: a 5 s stall ends it
+    with SitlRun(cfg) as run:
+        run.start()  # returns once the autopilot says MAV_STATE_STANDBY
+        gs = run.gs
+        gs.wait_for(lambda s: s.connected and s.landed_state == 1, 60.0)
+        assert gs.arm().accepted
+        assert gs.takeoff(10.0).accepted
+        gs.wait_for(lambda s: s.mode_name == "AUTO.LOITER" and s.altitude_m > 9.0, 90.0)
+        assert gs.transition("fw").accepted
+        gs.wait_for(lambda s: s.vtol_state_name == "FW", 60.0)
+        assert gs.snapshot().altitude_m > 5.0
+    log = (tmp_path / "run" / "autopilot.log").read_text()
+    assert "warm in" in log and "silent" not in log

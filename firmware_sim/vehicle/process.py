@@ -405,6 +405,14 @@ class VehicleProcess:
                 return True
         return False
 
+    def warm_up(self) -> None:
+        """Compile (or load from numba's cache) the physics and sensor kernels on a throwaway
+        vehicle before the autopilot is pinned, so that a real-time run does not stall at its
+        first step on a fresh install."""
+        v = Vehicle(self.airframe)
+        v.step(np.zeros(self.airframe.n_actuators), CONTROL_PERIOD_USEC // v.dt_usec)
+        v.sensors()
+
     def _apply_due(self) -> None:
         """Delay line: the controls whose time has come (the newest of them wins)."""
         line = self._delay_line
@@ -459,6 +467,7 @@ class VehicleProcess:
         """Run until the duration, a stop signal or the loss of the autopilot. Exit status."""
         self._event("start", f"vehicle process, {'lockstep' if self.lockstep else 'real time'}")
         try:
+            self.warm_up()
             if not self.wait_for_peer():
                 print(f"vehicle: no autopilot on {self.link!r} within "
                       f"{self.connect_timeout_s:g} s", file=self.log, flush=True)
