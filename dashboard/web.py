@@ -31,8 +31,9 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from vtolftc.dashboard.geometry import aircraft_geometry, rotor_grid
+
 from vtolftc.dashboard.model import DashboardModel, DashboardView
+from vtolftc.telemetry.geometry import aircraft_geometry, rotor_grid
 
 __all__ = ["FAULT_GROUPS", "Dashboard"]
 
@@ -83,6 +84,7 @@ class Dashboard:
                  ground_station: Any = None, plot_hz: float = 4.0,
                  verbose: bool = False, allow_remote: bool = False) -> None:
         import viser
+
         from vtolftc.gcs.client import GcsError, GroundStation
 
         if airframe is None:

@@ -26,8 +26,8 @@ import re
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from vtolftc.protocols.link import LinkUrl, Transport
 from vtolftc.protocols.netutil import require_loopback
+from vtolftc.protocols.transport import LinkUrl, Transport
 
 __all__ = [
     "DIRECTIONS",

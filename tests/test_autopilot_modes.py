@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.autopilot.autopilot import (
     CMD_COMPONENT_ARM_DISARM,
     CMD_DO_SET_MODE,

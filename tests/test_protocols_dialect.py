@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from vtolftc.protocols import mavlink as pm
 from vtolftc.protocols.mavlink import SigningConfig, dialect, make_codec
 

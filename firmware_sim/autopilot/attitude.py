@@ -26,6 +26,7 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.firmware_sim.autopilot.lqr import LQRGains, LQRGainsError
 from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, wrap_angle
 from vtolftc.firmware_sim.autopilot.schedule import AXES, GainSchedule, GainScheduleError
