@@ -248,16 +248,22 @@ def signing_timestamp_now() -> int:
 class SigningConfig:
     """MAVLink 2 message signing parameters.
 
-    Attributes:
-        secret_key: the 32-byte shared secret (see :meth:`from_passphrase`).
-        link_id: signing link id (0..255) written into outgoing signatures.
-        timestamp: initial signing timestamp (10 us units since 2015-01-01); ``None`` = now.
-        sign_outgoing: sign every outgoing frame.
-        allow_unsigned: what to do with incoming frames that are unsigned *or* carry a bad
-            signature: ``False`` rejects them all (the link drops and counts them), ``True``
-            accepts them all, a callable ``f(msgid) -> bool`` decides per message id. Accepted
-            frames report ``msg.get_signed()``: ``True`` only for a verified signature, so an
-            application can accept unsigned telemetry yet demand signed arm/fault commands.
+    Attributes
+    ----------
+    secret_key
+        the 32-byte shared secret (see :meth:`from_passphrase`).
+    link_id
+        signing link id (0..255) written into outgoing signatures.
+    timestamp
+        initial signing timestamp (10 us units since 2015-01-01); ``None`` = now.
+    sign_outgoing
+        sign every outgoing frame.
+    allow_unsigned
+        what to do with incoming frames that are unsigned *or* carry a bad
+        signature: ``False`` rejects them all (the link drops and counts them), ``True``
+        accepts them all, a callable ``f(msgid) -> bool`` decides per message id. Accepted
+        frames report ``msg.get_signed()``: ``True`` only for a verified signature, so an
+        application can accept unsigned telemetry yet demand signed arm/fault commands.
     """
 
     secret_key: bytes
@@ -303,12 +309,17 @@ def make_codec(
 ) -> Any:
     """A generated ``MAVLink`` object (encoder + parser) of the vtol-ftc dialect.
 
-    Args:
-        system_id: source system id of packed frames (255 = ground-station convention; the
-            autopilot is 1).
-        component_id: source component id (190 = MAV_COMP_ID_MISSIONPLANNER; autopilot 1).
-        signing: enable MAVLink 2 signing with these parameters.
-        robust: robust parsing (bad data returned as ``MAVLink_bad_data``, never raised).
+    Parameters
+    ----------
+    system_id
+        source system id of packed frames (255 = ground-station convention; the
+        autopilot is 1).
+    component_id
+        source component id (190 = MAV_COMP_ID_MISSIONPLANNER; autopilot 1).
+    signing
+        enable MAVLink 2 signing with these parameters.
+    robust
+        robust parsing (bad data returned as ``MAVLink_bad_data``, never raised).
 
     The codec's ``file`` is ``None``: pack with ``msg.pack(codec)`` (or let a
     :class:`vtolftc.protocols.link.Link` do it) rather than ``codec.send``.
