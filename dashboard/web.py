@@ -143,6 +143,7 @@ class Dashboard:
 
     @property
     def page_url(self) -> str:
+        """The page's URL (``http://HOST:PORT/``)."""
         return f"http://{self.host}:{self.port}/"
 
     # -- scene ---------------------------------------------------------------------------
