@@ -27,9 +27,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 from vtolftc.protocols import make_codec
 from vtolftc.protocols.netutil import free_udp_port
-
 from vtolftc.sitl import SitlConfig, SitlRun, run_sitl
 
 

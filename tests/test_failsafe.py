@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.autopilot.failsafe import (
     MAV_STATE_CRITICAL,
     MAV_STATE_EMERGENCY,

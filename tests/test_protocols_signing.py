@@ -8,6 +8,7 @@ import hashlib
 import struct
 
 import pytest
+
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import UNSIGNED_ALLOWED
 from vtolftc.protocols import Link, SigningConfig, StreamTimestamps, Transport, make_codec
 from vtolftc.protocols.mavlink import signing_timestamp_now

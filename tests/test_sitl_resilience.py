@@ -20,10 +20,10 @@ import time
 from pathlib import Path
 
 import pytest
+
 from vtolftc.gcs.client import GroundStation
 from vtolftc.protocols import make_codec, open_link
 from vtolftc.protocols.netutil import free_udp_port
-
 from vtolftc.sitl import SitlConfig, SitlRun
 
 pytestmark = pytest.mark.slow

@@ -9,10 +9,10 @@ import struct
 import time
 
 import pytest
+
 from vtolftc.protocols import SigningConfig, open_link
 from vtolftc.protocols.mavlink import signing_timestamp_now
 from vtolftc.protocols.netutil import free_udp_port
-
 from vtolftc.sitl import SitlConfig, SitlRun
 
 pytestmark = pytest.mark.slow

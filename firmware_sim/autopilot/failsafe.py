@@ -27,9 +27,10 @@ Parameters (registered in the autopilot's store, so ground stations read and set
     (s, default 0.3): attitude failure (PX4's failure detector): |roll| or |pitch| beyond the
     limit for longer than the trigger time, in the air. MAV_STATE_EMERGENCY and STATUSTEXT;
     no action (PX4's default without flight termination).
-Crash detection (no parameter; the criterion of :mod:`vtolftc.metrics`): ground contact in a
-    flying mode (hover, transitions, fixed-wing), i.e. less than 0.5 m above the altitude at
-    arming after having been more than 2 m above it, or a non-finite navigation state.
+Crash detection (no parameter; the criterion of :mod:`vtolftc.telemetry.metrics`): ground
+    contact in a flying mode (hover, transitions, fixed-wing), i.e. less than 0.5 m above the
+    altitude at arming after having been more than 2 m above it, or a non-finite navigation
+    state.
     MAV_STATE_EMERGENCY, STATUSTEXT, action ``disarm`` (the motors are stopped on the ground).
 
 The HEARTBEAT reports MAV_STATE_EMERGENCY while an emergency condition holds (HIL data lost,

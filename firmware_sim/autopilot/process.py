@@ -45,6 +45,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, TextIO
 
 import numpy as np
+
 from vtolftc.firmware_sim.autopilot.failsafe import FailsafeEvent, FailsafeMonitor
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
@@ -55,7 +56,6 @@ from vtolftc.firmware_sim.autopilot.interface import (
 )
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.link import Link
-
 from vtolftc.telemetry import TelemetrySample
 
 __all__ = ["EXIT_VEHICLE_LOST", "AutopilotProcess", "make_deterministic"]

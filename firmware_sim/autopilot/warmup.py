@@ -16,6 +16,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+
 from vtolftc.firmware_sim.autopilot.interface import AutopilotAPI, NavState
 
 __all__ = ["warm_up"]

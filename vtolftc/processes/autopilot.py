@@ -21,9 +21,10 @@ incoming frames need a valid signature except the few of
 table for all ground-station links.
 
 Run folder (``--out DIR``), wired here and passed into the flight software: ``metrics.json``
-(:class:`vtolftc.metrics.MetricsAccumulator` over the autopilot's own samples, the very
-function of the in-process runner), the telemetry of the autopilot's view
-(:class:`vtolftc.runfolder.RunFolderWriter`: ``telemetry.csv``, events, plots), its rerun
+(:class:`vtolftc.telemetry.metrics.MetricsAccumulator` over the autopilot's own samples, the
+very function of the in-process runner), the telemetry of the autopilot's view
+(:class:`vtolftc.telemetry.runfolder.RunFolderWriter`: ``telemetry.csv``, events, plots), its
+rerun
 recording ``run.rrd``, ``autopilot_events.jsonl`` and ``autopilot_summary.json`` (link
 counters incl. dropped garbage / CRC / truncated / signature / rate-limited frames, steps,
 control-step periods, failsafes, wall time). Written on every exit: end of run, SIGTERM,
@@ -36,19 +37,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import signal
 import sys
 from pathlib import Path
 from typing import Any, TextIO
 
-import numpy as np
-
 from vtolftc.firmware_sim.autopilot.failsafe import register_failsafe_params
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import UNSIGNED_ALLOWED
 from vtolftc.firmware_sim.autopilot.interface import AutopilotAPI, ParamError
 from vtolftc.firmware_sim.autopilot.process import AutopilotProcess, make_deterministic
+from vtolftc.jsonio import json_safe
 from vtolftc.protocols import SigningConfig, StreamTimestamps, open_link
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.link import Link
@@ -153,8 +152,8 @@ class EventLog:
 def run_observers(out: Path, plots: bool = True) -> list[Any]:
     """The run folder of the autopilot's own view (telemetry, events, metrics, plots) and its
     rerun recording ``run.rrd`` (no vehicle truth here: commands, not effective outputs)."""
-    from vtolftc.dashboard.recording import RerunRecorder
-    from vtolftc.runfolder import RunFolderWriter
+    from vtolftc.telemetry.recording import RerunRecorder
+    from vtolftc.telemetry.runfolder import RunFolderWriter
 
     return [RunFolderWriter(out, plots=plots), RerunRecorder(out / "run.rrd"),
             EventLog(out / "autopilot_events.jsonl")]
@@ -163,22 +162,8 @@ def run_observers(out: Path, plots: bool = True) -> list[Any]:
 def _write_json(path: Path, data: Any) -> None:
     """Write JSON atomically (a crash never leaves half a file)."""
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(_jsonable(data), indent=2))
+    tmp.write_text(json.dumps(json_safe(data), indent=2))
     os.replace(tmp, path)
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -229,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
             "case": args.case, "scenario": f"sitl-{args.case}" if args.case else "sitl",
             "hil_link": args.hil_link, "gcs_links": urls, "lockstep": args.lockstep,
             "run_folder": str(args.out) if args.out else None}
-    from vtolftc.metrics import MetricsAccumulator
+    from vtolftc.telemetry.metrics import MetricsAccumulator
 
     observers: list[Any] = []
     on_finish = None
