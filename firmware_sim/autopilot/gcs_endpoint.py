@@ -25,8 +25,9 @@ zenoh link). It is system 1, component 1 (MAV_COMP_ID_AUTOPILOT1) and does what
   the PARAM_VALUE echo on every link; INT32 values travel bytewise in the float (PX4,
   MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE). A refused PARAM_SET is echoed with the value
   kept and explained in a STATUSTEXT.
-- Every COMMAND_LONG addressed to (1, 1) or broadcast gets one COMMAND_ACK from (1, 1) on the
-  link it came from, as soon as the main loop sees it (well under 0.5 s): flight commands
+- Every COMMAND_LONG (and COMMAND_INT: params 1-4, x, y, z) addressed to (1, 1) or broadcast
+  and not dropped by a rate limit gets one COMMAND_ACK from (1, 1) on the link it came from,
+  well under 0.5 s (TEMPORARILY_REJECTED if the control thread's queue was full): flight commands
   (400, 22, 176, 3000, 21) go to :meth:`AutopilotAPI.command`; INJECT_FAILURE (420) and
   MAV_CMD_INJECT_PARTIAL_LOSS (59900) are DENIED unless SYS_FAILURE_EN == 1, checked against
   the airframe's actuators (bad unit UNSUPPORTED, bad instance or loss DENIED, no vehicle
