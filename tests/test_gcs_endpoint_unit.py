@@ -51,7 +51,6 @@ def ep():
     hil = HilBridge(Link(_Capture(), system_id=1, component_id=1))
     e = GcsEndpoint(ap, hil, links, actuators=ActuatorTable.from_names(af.actuator_names),
                     start=False)
-    e.ready = True
     yield e
     e.close()
 

@@ -193,6 +193,7 @@ class GcsEndpoint:
         rate_limit_hz, rate_burst: per-client token bucket (messages per second, burst).
         queue_len: per-link receive queue (drop-oldest).
         budget_per_cycle: messages the worker handles per cycle.
+        ready: the autopilot is warm (else BOOT and no arming until :attr:`ready` is set).
         start: start the threads (tests may drive :meth:`serve_once` by hand).
     """
 
@@ -203,7 +204,7 @@ class GcsEndpoint:
                  version: tuple[int, int, int] = (0, 1, 0), rate_limit_hz: float = 50.0,
                  rate_burst: float = 100.0, queue_len: int = 512,
                  budget_per_cycle: int = 32, control_queue_len: int = 32,
-                 start: bool = True) -> None:
+                 ready: bool = True, start: bool = True) -> None:
         self.ap = autopilot
         self.hil = hil
         self.links = list(links)
@@ -257,7 +258,7 @@ class GcsEndpoint:
         self._hold_announce_wall = 0.0
         self._last_fault_status: Any = None
         self.commands_answered = 0
-        self.ready = False
+        self.ready = ready
         """True once the autopilot is warm (HEARTBEAT says STANDBY/ACTIVE, not BOOT)."""
         self.mav_state: int | None = None
         """MAV_STATE set by a failsafe (CRITICAL / EMERGENCY), None = normal."""

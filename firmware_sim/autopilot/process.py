@@ -114,7 +114,7 @@ class AutopilotProcess:
         self.failsafe = FailsafeMonitor(autopilot.params, realtime=not lockstep)
         self.gcs = GcsEndpoint(autopilot, self.hil, gcs_links, actuators=actuators,
                                signing_required=signing_required, lockstep=lockstep,
-                               hold_ms=hold_ms, on_event=self._event)
+                               hold_ms=hold_ms, on_event=self._event, ready=False)
         self.steps = 0
         self.running = True
         self.vehicle_lost = False
