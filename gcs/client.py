@@ -140,6 +140,8 @@ class VehicleSnapshot:
     position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     altitude_m: float = 0.0
     """Height above home (m), from GLOBAL_POSITION_INT.relative_alt."""
+    home_amsl_m: float = math.nan
+    """Altitude of home above mean sea level (m), from HOME_POSITION (NaN until heard)."""
     airspeed_m_s: float = 0.0
     groundspeed_m_s: float = 0.0
     heading_deg: float = 0.0
@@ -333,10 +335,21 @@ class GroundStation:
         return self.command_long(CMD_ARM_DISARM, [0.0, ARM_FORCE_MAGIC if force else 0.0])
 
     def takeoff(self, altitude_m: float | None = None) -> CommandOutcome:
-        """NAV_TAKEOFF; ``altitude_m`` in param7 (None = NaN = the autopilot's default)."""
+        """NAV_TAKEOFF to ``altitude_m`` above home (None = NaN = the autopilot's default,
+        ``MIS_TAKEOFF_ALT``). param7 is AMSL, as PX4 reads it and QGroundControl sends it:
+        home's altitude (HOME_POSITION, requested if not heard yet) plus ``altitude_m``."""
         alt = math.nan if altitude_m is None else float(altitude_m)
         if altitude_m is not None and not (math.isfinite(alt) and alt > 0.0):
             raise GcsError(f"takeoff altitude {altitude_m!r}: expected a positive height in m")
+        if altitude_m is not None:
+            if not math.isfinite(self.snapshot.home_amsl_m):
+                self.command_long(512, [242.0])  # REQUEST_MESSAGE HOME_POSITION
+                try:
+                    self.wait_for(lambda s: math.isfinite(s.home_amsl_m), 2.0)
+                except GcsTimeout:
+                    raise GcsError("takeoff: no HOME_POSITION from the vehicle yet (param7 is "
+                                   "AMSL); wait for a position fix and try again") from None
+            alt += self.snapshot.home_amsl_m
         return self.command_long(CMD_NAV_TAKEOFF, [math.nan] * 6 + [alt])
 
     def land(self) -> CommandOutcome:
@@ -564,6 +577,8 @@ class GroundStation:
             elif t == "LOCAL_POSITION_NED":
                 s.position_ned_m = (float(m.x), float(m.y), float(m.z))
                 self._time_ms(s, m.time_boot_ms)
+            elif t == "HOME_POSITION":
+                s.home_amsl_m = m.altitude * 1e-3
             elif t == "GLOBAL_POSITION_INT":
                 s.altitude_m = m.relative_alt * 1e-3
                 self._time_ms(s, m.time_boot_ms)

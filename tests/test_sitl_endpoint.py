@@ -67,7 +67,7 @@ def test_every_command_answered_in_time_with_the_true_result(sitl):
     deadline = time.monotonic() + 2.0
     while not got and time.monotonic() < deadline:
         time.sleep(0.02)
-    assert got and got[0].capabilities & (1 << 17)  # PARAM_ENCODE_BYTEWISE, as PX4
+    assert got and got[0].capabilities & (1 << 4)  # PARAM_ENCODE_BYTEWISE, as PX4
 
 
 def test_health_and_vtol_state_streams(sitl):

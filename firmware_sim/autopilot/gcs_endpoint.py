@@ -56,6 +56,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+from vtolftc.firmware_sim.autopilot.gcs_services import STREAM_RATES_HZ, Px4Services
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
 from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotAPI,
@@ -92,7 +93,9 @@ CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE = 511, 512
 CMD_REQUEST_AUTOPILOT_CAPABILITIES = 520
 CMD_INJECT_PARTIAL_LOSS = 59900
 FLIGHT_COMMANDS = (CMD_ARM_DISARM, CMD_NAV_TAKEOFF, CMD_DO_SET_MODE, CMD_DO_VTOL_TRANSITION,
-                   CMD_NAV_LAND)
+                   CMD_NAV_LAND, 20, 178, 192, 224, 300)
+# 20 NAV_RETURN_TO_LAUNCH, 178 DO_CHANGE_SPEED, 192 DO_REPOSITION, 224 DO_SET_MISSION_CURRENT,
+# 300 MISSION_START (the navigator's, see navigator.py)
 FAULT_COMMANDS = (CMD_INJECT_FAILURE, CMD_INJECT_PARTIAL_LOSS)
 SIGNED_COMMANDS = (CMD_ARM_DISARM, *FAULT_COMMANDS)
 
@@ -107,7 +110,9 @@ DEFAULT_RATES_HZ: dict[int, float] = {
     MSG["GLOBAL_POSITION_INT"]: 5.0, MSG["VFR_HUD"]: 4.0, MSG["HIL_STATE_QUATERNION"]: 10.0,
     MSG["HOME_POSITION"]: 0.2, MSG["EXTENDED_SYS_STATE"]: 2.0,
     MSG["ACTUATOR_OUTPUT_STATUS"]: 10.0, MSG["FAULT_INJECTION_STATUS"]: 1.0,
+    **STREAM_RATES_HZ,  # GPS_RAW_INT, MISSION_CURRENT, BATTERY_STATUS (gcs_services.py)
 }
+MSG.update({"GPS_RAW_INT": 24, "MISSION_CURRENT": 42, "BATTERY_STATUS": 147})
 """Stream rates in Hz of simulated time (PX4-like, a little lower to spare the CPU)."""
 
 # SYS_STATUS sensor bits (MAV_SYS_STATUS_SENSOR)
@@ -196,6 +201,7 @@ class GcsEndpoint:
                          for i, link in enumerate(self.links)]
         for th in self._threads:
             th.start()
+        self.services = Px4Services(self)
         self.refresh_status()
 
     # ------------------------------------------------------------------ threads
@@ -321,6 +327,7 @@ class GcsEndpoint:
         self._last_step_wall = time.monotonic()
         self.held_at_ms = None
         self._observe(status)
+        self.services.on_step()
         fs = self.hil.fault_status
         if fs is not None and fs is not self._last_fault_status:
             self._last_fault_status = fs
@@ -345,6 +352,7 @@ class GcsEndpoint:
         """Wall-clock duties: 1 Hz HEARTBEAT, SYS_STATUS, EXTENDED_SYS_STATE while simulated
         time does not advance."""
         now = time.monotonic()
+        self.services.tick()
         if now >= self._wall_next and now - self._last_step_wall > 0.5:
             self._wall_next = now + 1.0
             self.refresh_status()
@@ -373,8 +381,9 @@ class GcsEndpoint:
             armed = bool(st and st.armed)
             base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | MAV_MODE_FLAG_AUTO | (
                 MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-            return c.heartbeat_encode(MAV_TYPE_VTOL_FIXEDROTOR, MAV_AUTOPILOT_PX4, base,
-                                      px4_custom_mode(st.mode if st else FlightMode.IDLE),
+            cm = st.px4_custom_mode if st and st.px4_custom_mode >= 0 else px4_custom_mode(
+                st.mode if st else FlightMode.IDLE)
+            return c.heartbeat_encode(MAV_TYPE_VTOL_FIXEDROTOR, MAV_AUTOPILOT_PX4, base, cm,
                                       MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY)
         if msg_id == MSG["SYS_STATUS"]:
             healthy = _ANGULAR_RATE_CTRL | _ATTITUDE_CTRL | _MOTOR_OUTPUTS
@@ -385,9 +394,12 @@ class GcsEndpoint:
                 healthy |= _GPS
             if self.hil.connected and self.hil.home is not None and nav is not None:
                 healthy |= _PREARM
-            # no battery: voltage UINT16_MAX, current and remaining -1 ("not sent")
-            return c.sys_status_encode(_SENSORS_PRESENT, _SENSORS_PRESENT, healthy, 0, 65535,
-                                       -1, -1, 0, 0, 0, 0, 0, 0)
+            # battery: voltage UINT16_MAX, current and remaining -1 until the first reading
+            present, enabled, more_healthy = self.services.sensor_bits()
+            mv, ca, pct = self.services.sys_status_battery()
+            return c.sys_status_encode(_SENSORS_PRESENT | present, _SENSORS_PRESENT | enabled,
+                                       healthy | more_healthy, 0, mv, ca, pct, 0, 0, 0, 0, 0,
+                                       0)
         if msg_id == MSG["EXTENDED_SYS_STATE"]:
             vtol = int(st.vtol_state) if st else 0
             landed = int(st.landed_state) if st else 0
@@ -396,9 +408,10 @@ class GcsEndpoint:
         if msg_id == MSG["AUTOPILOT_VERSION"]:
             major, minor, patch = self.version
             sw = (major << 24) | (minor << 16) | (patch << 8) | 255
-            caps = (1 << 0) | (1 << 2) | (1 << 3) | (1 << 8) | (1 << 15) | (1 << 17)
-            # MISSION_FLOAT | PARAM_FLOAT | MISSION_INT | COMMAND_INT | MAVLINK2 |
-            # PARAM_ENCODE_BYTEWISE
+            # exactly what is served (MAV_PROTOCOL_CAPABILITY): MISSION_FLOAT 1, PARAM_FLOAT
+            # 2, MISSION_INT 4, COMMAND_INT 8, PARAM_ENCODE_BYTEWISE 16, MAVLINK2 8192,
+            # MISSION_FENCE 16384, MISSION_RALLY 32768
+            caps = 1 | 2 | 4 | 8 | 16 | 8192 | 16384 | 32768
             return c.autopilot_version_encode(caps, sw, sw, 0, 0, [0] * 8, [0] * 8, [0] * 8,
                                               0, 0, 1)
         if msg_id == MSG["HOME_POSITION"]:
@@ -415,6 +428,8 @@ class GcsEndpoint:
             return c.fault_injection_status_encode(
                 fs.time_usec, fs.change_count, fs.motor_count, fs.servo_count,
                 fs.motor_failure, fs.motor_loss, fs.servo_failure, fs.servo_loss)
+        if msg_id in STREAM_RATES_HZ:
+            return self.services.build(msg_id)
         if msg_id == MSG["ACTUATOR_OUTPUT_STATUS"]:
             out = [0.0] * 32
             out[: self.commands.size] = [float(x) for x in self.commands]
@@ -482,6 +497,8 @@ class GcsEndpoint:
                 self._param_read(link, msg)
         elif t == "PARAM_SET" and msg.target_system in (0, 1):
             self._param_set(link, msg)
+        elif t in self.services.HANDLES:  # missions, COMMAND_INT, TIMESYNC, PING
+            self.services.handle(link, msg)
 
     def _command(self, link: Link, msg: Any) -> tuple[int, str]:
         cmd = int(msg.command)

@@ -51,6 +51,7 @@ class HilBridge:
         self.last_sensor: Any = None
         self.last_gps: Any = None
         self.last_state: Any = None
+        self.last_battery: Any = None
         self.last_rx_wall = -np.inf
         self.fault_status: Any = None
         self.vehicle_acks: collections.deque[Any] = collections.deque(maxlen=32)
@@ -89,6 +90,8 @@ class HilBridge:
                 self.decode_errors += 1
         elif t == "HIL_GPS":
             self.last_gps = msg
+        elif t == "BATTERY_STATUS":
+            self.last_battery = msg
         elif t == "GPS_GLOBAL_ORIGIN":
             self.home = (float(f"{msg.latitude * 1e-7:.7f}"),
                          float(f"{msg.longitude * 1e-7:.7f}"),
