@@ -387,7 +387,7 @@ def main(argv: list[str] | None = None) -> int:
         parent_pid=args.parent_pid)
     proc.spin_s = max(0.0, args.spin_us) * 1e-6
     if args.out is not None:
-        for obs in _run_observers(args.out, plots=not args.no_plots):
+        for obs in _run_observers(args.out, plots=not args.no_plots, autopilot=autopilot):
             proc.add_observer(obs)
 
     def stop(_sig: int, _frame: Any) -> None:
@@ -407,14 +407,17 @@ def make_deterministic(autopilot: Any) -> None:
         settings["time_limit"] = 1e6  # s: never reached (0 is rejected by OSQP 1.x)
 
 
-def _run_observers(out: Path, plots: bool = True) -> list[Any]:
-    """The run folder of the autopilot's own view (telemetry, events, metrics, plots) and its
-    rerun recording ``run.rrd`` (no vehicle truth here: commands, not effective outputs)."""
+def _run_observers(out: Path, plots: bool = True, autopilot: Any = None) -> list[Any]:
+    """The run folder of the autopilot's own view (telemetry, events, metrics, plots), its
+    rerun recording ``run.rrd`` (no vehicle truth here: commands, not effective outputs) and
+    the PX4 ULog ``flight.ulg`` (:mod:`vtolftc.firmware_sim.autopilot.ulog`)."""
     from vtolftc.dashboard.recording import RerunRecorder
+    from vtolftc.firmware_sim.autopilot.ulog import ULogWriter
 
     from vtolftc.runfolder import RunFolderWriter
 
-    return [RunFolderWriter(out, plots=plots), RerunRecorder(out / "run.rrd")]
+    return [RunFolderWriter(out, plots=plots), RerunRecorder(out / "run.rrd"),
+            ULogWriter(out / "flight.ulg", autopilot)]
 
 
 if __name__ == "__main__":
