@@ -342,14 +342,14 @@ class GroundStation:
         if altitude_m is not None and not (math.isfinite(alt) and alt > 0.0):
             raise GcsError(f"takeoff altitude {altitude_m!r}: expected a positive height in m")
         if altitude_m is not None:
-            if not math.isfinite(self.snapshot.home_amsl_m):
+            if not math.isfinite(self.snapshot().home_amsl_m):
                 self.command_long(512, [242.0])  # REQUEST_MESSAGE HOME_POSITION
                 try:
                     self.wait_for(lambda s: math.isfinite(s.home_amsl_m), 2.0)
                 except GcsTimeout:
                     raise GcsError("takeoff: no HOME_POSITION from the vehicle yet (param7 is "
                                    "AMSL); wait for a position fix and try again") from None
-            alt += self.snapshot.home_amsl_m
+            alt += self.snapshot().home_amsl_m
         return self.command_long(CMD_NAV_TAKEOFF, [math.nan] * 6 + [alt])
 
     def land(self) -> CommandOutcome:

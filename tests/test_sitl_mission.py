@@ -19,7 +19,9 @@ import time
 import numpy as np
 import pytest
 from pymavlink import mavutil
+from pyulog import ULog
 from vtolftc.firmware_sim.autopilot.mission import MissionItem
+from vtolftc.firmware_sim.autopilot.ulog import TOPICS
 from vtolftc.firmware_sim.vehicle.faults import case_faults
 from vtolftc.firmware_sim.vehicle.sensors import Home
 from vtolftc.protocols.netutil import free_udp_port
@@ -71,9 +73,10 @@ def download(conn) -> list[MissionItem]:
     return out
 
 
-def fly(tmp_path, inject_case: int | None = None):
+def fly(tmp_path, inject_case: int | None = None, transport: str = "udp"):
     port = free_udp_port()
-    cfg = SitlConfig(out_dir=tmp_path, hold_at_start=False, failure_injection=True,
+    cfg = SitlConfig(out_dir=tmp_path, transport=transport, hold_at_start=False,
+                     failure_injection=True,
                      plots=False, extra_autopilot_args=[
                          "--gcs-link", f"udp-client://127.0.0.1:{port}"])
     run = SitlRun(cfg)
@@ -185,6 +188,7 @@ def _check(rec):
 def test_vtol_mission_over_udp(tmp_path):
     rec = fly(tmp_path)
     errs = _check(rec)
+    _check_ulog(tmp_path / "autopilot" / "flight.ulg", rec)
     bat = rec["battery"]
     assert len(bat) > 20
     v_ground = rec["v_ground"]
@@ -194,8 +198,35 @@ def test_vtol_mission_over_udp(tmp_path):
     print("cross-track per leg:", errs)
 
 
-def test_vtol_mission_with_case1_faults_in_the_first_fixed_wing_leg(tmp_path):
-    rec = fly(tmp_path, inject_case=1)
+def _check_ulog(path, rec):
+    """The autopilot's ULog of the flight, read by pyulog."""
+    log = ULog(str(path))
+    names = {d.name for d in log.data_list}
+    assert set(TOPICS) <= names, set(TOPICS) - names
+    t = log.get_dataset("vehicle_attitude").data["timestamp"] * 1e-6
+    flight_s = rec["t"][-1] - rec["t"][0]
+    assert t[-1] - t[0] >= flight_s - 1.0              # the whole flight, at 50 Hz
+    assert len(t) == pytest.approx(50 * (t[-1] - t[0]), rel=0.01)
+    items = log.get_dataset("navigator_mission_item").data
+    assert list(items["nav_cmd"]) == [it.command for it in rec["items"]]
+    res = log.get_dataset("mission_result").data
+    assert res["finished"][-1] == 1 and res["seq_reached"][-1] == len(rec["items"]) - 1
+    st = log.get_dataset("vehicle_status").data
+    ns = set(st["nav_state"])
+    assert 3 in ns and 4 in ns and 2 not in ns          # MISSION, LOITER (ground), no POSCTL
+    assert set(st["vehicle_type"]) == {1, 2}            # rotary wing and fixed wing
+    p = log.initial_parameters
+    assert p["MIS_TAKEOFF_ALT"] == pytest.approx(30.0) and p["SYS_FAILURE_EN"] == 1
+    assert "NAV_ACC_RAD" in p and "COM_LOW_BAT_ACT" in p
+    texts = [m.message for m in log.logged_messages]
+    assert any("mission complete" in x for x in texts), texts[-5:]
+    bat = log.get_dataset("battery_status").data
+    assert bat["remaining"][-1] < bat["remaining"][0]
+
+
+def test_vtol_mission_with_case1_faults_in_the_first_fixed_wing_leg_over_zenoh(tmp_path):
+    """The HIL and ground-station links over zenoh (the pymavlink client stays on UDP)."""
+    rec = fly(tmp_path, inject_case=1, transport="zenoh")
     assert rec["injected"]
     errs = _check(rec)
     print("cross-track per leg with faults:", errs)

@@ -7,9 +7,11 @@ zenoh link). It is system 1, component 1 (MAV_COMP_ID_AUTOPILOT1) and does what
 
 - HEARTBEAT at 1 Hz: type MAV_TYPE_VTOL_FIXEDROTOR (22, PX4's standard VTOL: separate lift
   and cruise propulsion), autopilot MAV_AUTOPILOT_PX4 (12), PX4 custom mode
-  ``main << 16 | sub << 24`` (flight modes: IDLE = AUTO.READY, TAKEOFF = AUTO.TAKEOFF,
-  HOVER / transitions / FIXED_WING = AUTO.LOITER, LAND = AUTO.LAND), armed bit 128 in
-  base_mode, system_status STANDBY / ACTIVE.
+  ``main << 16 | sub << 24`` as the navigator reports it (AUTO.LOITER = Hold on the ground and
+  in hover, AUTO.TAKEOFF, AUTO.LAND, AUTO.MISSION, AUTO.RTL, POSCTL for fixed-wing course
+  hold after a commanded transition; :meth:`.navigator.Navigator.custom_mode`), armed bit 128
+  in base_mode, system_status STANDBY / ACTIVE. Missions, COMMAND_INT, TIMESYNC, PING,
+  BATTERY_STATUS, GPS_RAW_INT and the geofence bits: :mod:`.gcs_services`.
 - Streams (default rates in :data:`DEFAULT_RATES_HZ`, on simulated time; SET_MESSAGE_INTERVAL
   changes them for every link): ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED,
   GLOBAL_POSITION_INT, HOME_POSITION, VFR_HUD, SYS_STATUS (present / enabled / healthy bits for

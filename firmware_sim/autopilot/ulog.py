@@ -17,6 +17,7 @@ vehicle_type, is_vtol, in_transition_mode, in_transition_to_fw) at 10 Hz and on 
 (seq_current, seq_reached, seq_total, finished) on change and ``navigator_mission_item`` (one
 message per stored mission item, whenever the plan changes).
 
+No padding fields (pyulog, like PX4's logger, leaves trailing padding out of the data).
 Writes go to the file at once and are flushed once per simulated second and at the end, so a
 crash or SIGTERM loses at most the last second.
 """
@@ -51,20 +52,18 @@ TOPICS: dict[str, list[tuple[str, str]]] = {
     "vehicle_status": [("uint64_t", "timestamp"), ("uint8_t", "nav_state"),
                        ("uint8_t", "arming_state"), ("uint8_t", "vehicle_type"),
                        ("bool", "is_vtol"), ("bool", "in_transition_mode"),
-                       ("bool", "in_transition_to_fw"), ("uint8_t[2]", "_padding0")],
+                       ("bool", "in_transition_to_fw")],
     "battery_status": [("uint64_t", "timestamp"), ("float", "voltage_v"),
                        ("float", "current_a"), ("float", "discharged_mah"),
-                       ("float", "remaining"), ("uint8_t", "warning"),
-                       ("uint8_t[3]", "_padding0")],
+                       ("float", "remaining"), ("uint8_t", "warning")],
     "mission_result": [("uint64_t", "timestamp"), ("int32_t", "seq_current"),
                        ("int32_t", "seq_reached"), ("uint16_t", "seq_total"),
-                       ("bool", "finished"), ("uint8_t", "_padding0")],
+                       ("bool", "finished")],
     "navigator_mission_item": [("uint64_t", "timestamp"), ("double", "latitude"),
                                ("double", "longitude"), ("float", "altitude"),
                                ("float", "param1"), ("float", "param2"), ("float", "param3"),
                                ("float", "param4"), ("uint16_t", "sequence"),
-                               ("uint16_t", "nav_cmd"), ("uint8_t", "frame"),
-                               ("uint8_t[3]", "_padding0")],
+                               ("uint16_t", "nav_cmd"), ("uint8_t", "frame")],
 }
 
 # PX4 vehicle_status.nav_state of the (main, sub) custom modes
@@ -191,8 +190,7 @@ class ULogWriter:
         if key != self._status_key or self._due("vehicle_status", t, 100_000):
             self._status_key = key
             self._data("vehicle_status", t, _NAV_STATE.get((main, sub), 4),
-                       2 if st.armed else 1, 2 if vt == 4 else 1, True, vt in (1, 2), vt == 1,
-                       0, 0)
+                       2 if st.armed else 1, 2 if vt == 4 else 1, True, vt in (1, 2), vt == 1)
         self._mission(t)
         self._battery(t)
         self._param_changes(t)
@@ -230,13 +228,13 @@ class ULogWriter:
             for it in items:
                 self._data("navigator_mission_item", t, it.lat_deg, it.lon_deg, it.z,
                            it.param1, it.param2, it.param3, it.param4, it.seq, it.command,
-                           it.frame, 0, 0, 0)
+                           it.frame)
         reached = nav.reached_log[-1][1] if nav.reached_log else -1
         key = (nav.store.current, reached, len(items), nav.mission_state)
         if key != self._mission_key:
             self._mission_key = key
             self._data("mission_result", t, nav.store.current, reached, len(items),
-                       nav.mission_state == 5, 0)
+                       nav.mission_state == 5)
 
     def _battery(self, t: int) -> None:
         bat = getattr(self.ap, "battery", None)
@@ -244,7 +242,7 @@ class ULogWriter:
                                                                              t, 500_000):
             return
         self._data("battery_status", t, bat.voltage_v, bat.current_a, bat.consumed_mah,
-                   bat.remaining, bat.level, 0, 0, 0)
+                   bat.remaining, bat.level)
 
     def _param_changes(self, t: int) -> None:
         if self.ap is None or not self._due("_params", t, 1_000_000):
