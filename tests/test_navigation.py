@@ -199,3 +199,62 @@ def test_ulog_of_a_flight_read_by_pyulog(tmp_path):
     texts = [m.message for m in log.logged_messages]
     assert any("takeoff" in x for x in texts), texts
     assert log.msg_info_dict["sys_name"] == "vtol-ftc"
+
+
+@pytest.mark.slow
+def test_vtol_takeoff_loiter_speed_change_and_vtol_land_in_process():
+    """NAV_VTOL_TAKEOFF (climb, align, transition), DO_CHANGE_SPEED, NAV_LOITER_TIME in
+    fixed-wing, NAV_VTOL_LAND (back transition at the braking distance, land at the point)."""
+    from vtolftc.firmware_sim.autopilot.mission import MissionItem
+
+    from vtolftc.mission_run import _latlon, run_mission
+
+    h = Home()
+    rel = 6
+    hx, hy = _latlon(h, 0.0, 0.0)
+
+    def at(n, e):
+        return _latlon(h, n, e)
+
+    nan = math.nan
+    items = [
+        MissionItem(0, rel, 84, 1, 0.0, 0.0, 0.0, nan, *at(0.0, 0.0), 30.0),  # VTOL takeoff
+        MissionItem(1, rel, 16, 1, 0.0, 0.0, 0.0, nan, *at(0.0, 400.0), 30.0),
+        MissionItem(2, 2, 178, 1, 0.0, 16.0, -1.0, 0.0, 0, 0, 0.0),          # 16 m/s
+        MissionItem(3, rel, 19, 1, 40.0, 0.0, 80.0, nan, *at(300.0, 400.0), 35.0),
+        MissionItem(4, rel, 85, 1, 0.0, 0.0, 0.0, nan, hx, hy, 0.0),          # VTOL land
+    ]
+    r = run_mission(items, timeout_s=500.0)
+    assert [s for _, s in r.reached] == [0, 1, 2, 3, 4]
+    assert r.landed_disarmed and math.hypot(*r.final_position[:2]) < 5.0
+    t_reached = dict((s, t) for t, s in r.reached)
+    assert t_reached[3] - t_reached[2] > 40.0            # the loiter time, plus the approach
+    sel = (r.seq == 3) & (r.mode == int(FlightMode.FIXED_WING))
+    d = np.hypot(r.pos_ned[sel, 0] - 300.0, r.pos_ned[sel, 1] - 400.0)
+    assert np.median(np.abs(d[-100:] - 80.0)) < 5.0      # on the 80 m circle at the end
+    assert -r.pos_ned[sel, 2][-1] == pytest.approx(35.0, abs=2.0)
+
+
+def test_low_battery_failsafe_returns_and_lands(flying):
+    """COM_LOW_BAT_ACT = 3: at the critical level the autopilot returns home and lands."""
+    ap, veh = flying
+    home_alt = Home().alt_m
+    ap.params.set("COM_LOW_BAT_ACT", 3)
+    ap.params.set("BAT1_CAPACITY", 200.0)     # a small pack: minutes become seconds
+    ap.command(400, [1.0])
+    ap.command(22, [math.nan] * 6 + [home_alt + 10.0])
+    _fly(ap, veh, 30.0, until=lambda a, v: a.modes.mode == FlightMode.HOVER)
+    lat, lon = ap.navigator.to_global(15.0, 0.0)
+    ap.command(192, [-1, 1, 0, math.nan, lat, lon, math.nan])
+    _fly(ap, veh, 15.0)
+    t = veh.time_usec
+    bat = BatteryModel()
+    while ap.status().px4_custom_mode != (4 << 16 | 5 << 24):
+        t += 200_000
+        bat.step(0.2, 1100.0)
+        ap.battery_update(t, bat.voltage_v, bat.current_a)
+        assert ap.battery.remaining > 0.0
+    assert 0.05 <= ap.battery.remaining < 0.07 and ap.battery.level == 2
+    assert any("battery critical" in e for _, e in ap.event_log)
+    _fly(ap, veh, 90.0, until=lambda a, v: not a.modes.armed)
+    assert not ap.modes.armed and math.hypot(veh.x[0], veh.x[1]) < 1.0

@@ -42,6 +42,7 @@ from vtolftc.firmware_sim.autopilot.mission import (
     NAV_WAYPOINT,
     MissionItem,
 )
+from vtolftc.firmware_sim.vehicle.battery import BatteryModel, vehicle_power_w
 from vtolftc.firmware_sim.vehicle.faults import Fault
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import EARTH_RADIUS_M, Home
@@ -95,6 +96,7 @@ class MissionRun:
     wall_time_s: float
     events: list[tuple[int, str]] = field(default_factory=list)
     battery: list[tuple[float, float, float, float]] = field(default_factory=list)
+    """(time_s, pack voltage V, current A, the autopilot's remaining estimate) at 5 Hz."""
 
     @property
     def final_position(self) -> np.ndarray:
@@ -109,11 +111,14 @@ def run_mission(items: Sequence[MissionItem], *, airframe: Airframe | None = Non
 
     ``faults_at_item`` = (seq, delay_s, faults): the faults act ``delay_s`` after item ``seq``
     became current (their own start times are replaced). Samples every ``sample_every``
-    control steps (default 10 Hz).
+    control steps (default 10 Hz). The vehicle's battery (:mod:`.firmware_sim.vehicle.battery`)
+    feeds the autopilot's battery monitor at 5 Hz, as the power module over the HIL link.
     """
     af = airframe if airframe is not None else load_airframe()
     ap = Autopilot(af, controller=controller)
     veh = Vehicle(af)
+    battery = BatteryModel(rho=af.air_density_kg_m3)
+    bat_rows: list[tuple[float, float, float, float]] = []
     home = veh.sensor_model.home
     h = (float(home.lat_deg), float(home.lon_deg), float(home.alt_m))
     ap.set_home(*h)
@@ -144,6 +149,11 @@ def run_mission(items: Sequence[MissionItem], *, airframe: Airframe | None = Non
                 veh.inject(Fault(f.actuator, f.kind, f.loss, now * 1e-6))
             fault_due = -1
         veh.step(wire_commands(u), n_sub)
+        battery.step(n_sub * veh.dt_usec * 1e-6, vehicle_power_w(battery, veh))
+        if step % 50 == 0:  # the power module at 5 Hz, as over the HIL link
+            ap.battery_update(veh.time_usec, battery.voltage_v, battery.current_a)
+            bat_rows.append((veh.time_usec * 1e-6, battery.voltage_v, battery.current_a,
+                             ap.battery.remaining))
         if step % sample_every == 0:
             rows_t.append(now * 1e-6)
             rows_p.append(veh.x[0:3].copy())
@@ -160,7 +170,7 @@ def run_mission(items: Sequence[MissionItem], *, airframe: Airframe | None = Non
         reached=[(t * 1e-6, s) for t, s in ap.navigator.reached_log],
         t=np.array(rows_t), pos_ned=np.array(rows_p), mode=np.array(rows_m),
         seq=np.array(rows_s), landed_disarmed=landed, sim_time_s=veh.time_usec * 1e-6,
-        wall_time_s=time.perf_counter() - wall0, events=list(ap.event_log))
+        wall_time_s=time.perf_counter() - wall0, events=list(ap.event_log), battery=bat_rows)
 
 
 def _nav_of(veh: Vehicle, now: int):

@@ -745,7 +745,9 @@ class Navigator:
         if mode == FlightMode.IDLE:
             return self.phase in ("descend", "reposition")
         if self.phase == "approach":
-            if math.isfinite(g.alt) and g.command != NAV_LAND:
+            if math.isfinite(g.alt) and g.seq < 0:
+                # RTL: the return altitude; a land item's altitude is the ground's: the
+                # approach and back transition stay at the current altitude (PX4)
                 ap._alt_ref = g.alt
             if mode == FlightMode.FIXED_WING:
                 self._fw = ("segment", self._seg_a, tgt)
@@ -776,8 +778,7 @@ class Navigator:
                 return False
             if mode != FlightMode.HOVER:
                 return False
-            if math.isfinite(g.alt) and g.command == NAV_VTOL_LAND and self.nav_mode == \
-                    NavMode.RTL:
+            if math.isfinite(g.alt) and g.seq < 0:
                 ap._alt_ref = g.alt
             self._mc_goto(tgt, nav)
             v = math.hypot(float(nav.vel_ned_m_s[0]), float(nav.vel_ned_m_s[1]))
