@@ -23,9 +23,9 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+
 from vtolftc.airframe.loader import load_airframe
 from vtolftc.firmware_sim.vehicle.faults import case_faults
-
 from vtolftc.mission_run import path_errors, rectangle_mission, run_mission
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import pytest
+
 from vtolftc.firmware_sim.autopilot.mission import (
     FENCE,
     MAX_ITEMS,
@@ -17,9 +18,8 @@ from vtolftc.firmware_sim.autopilot.mission import (
     MissionStore,
     Result,
 )
-from vtolftc.protocols.mavlink import make_codec
-
 from vtolftc.mission_run import rectangle_mission
+from vtolftc.protocols.mavlink import make_codec
 
 GCS = (255, 190)
 

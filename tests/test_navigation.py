@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 from pyulog import ULog
+
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 from vtolftc.firmware_sim.autopilot.failsafe import BatteryMonitor
 from vtolftc.firmware_sim.autopilot.guidance import L1Guidance, cross_track
@@ -26,7 +27,6 @@ from vtolftc.firmware_sim.vehicle.battery import BatteryModel, propeller_power_w
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import Home
 from vtolftc.protocols.px4 import mode_name
-
 from vtolftc.scenario import Action, Scenario, run_scenario
 
 G = 9.80665
@@ -206,7 +206,6 @@ def test_vtol_takeoff_loiter_speed_change_and_vtol_land_in_process():
     """NAV_VTOL_TAKEOFF (climb, align, transition), DO_CHANGE_SPEED, NAV_LOITER_TIME in
     fixed-wing, NAV_VTOL_LAND (back transition at the braking distance, land at the point)."""
     from vtolftc.firmware_sim.autopilot.mission import MissionItem
-
     from vtolftc.mission_run import _latlon, run_mission
 
     h = Home()

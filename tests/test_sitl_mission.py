@@ -18,9 +18,9 @@ import math
 import numpy as np
 import pytest
 from pyulog import ULog
+
 from vtolftc.firmware_sim.autopilot.ulog import TOPICS
 from vtolftc.firmware_sim.vehicle.sensors import Home
-
 from vtolftc.mission_run import path_errors
 from vtolftc.mission_sitl import fly_sitl_mission
 

@@ -51,7 +51,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
 from vtolftc.firmware_sim.autopilot.guidance import L1Guidance, roll_for_lateral_accel, wrap_pi
 from vtolftc.firmware_sim.autopilot.interface import (
@@ -79,9 +79,6 @@ from vtolftc.firmware_sim.autopilot.mission import (
     MissionItem,
     MissionStore,
 )
-
-if TYPE_CHECKING:
-    from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 
 __all__ = ["NAV_PARAMS", "Goal", "NavMode", "Navigator"]
 
@@ -152,11 +149,12 @@ class Navigator:
     """Mission, RTL, loiter and reposition (see the module docstring).
 
     Args:
-        ap: the autopilot it steers (its mode machine, references and parameters).
+        ap: the :class:`~vtolftc.firmware_sim.autopilot.autopilot.Autopilot` it steers (its
+            mode machine, references and parameters; not imported here: no import cycle).
         on_text: ``f(text)`` for events worth a STATUSTEXT.
     """
 
-    def __init__(self, ap: Autopilot, on_text: Callable[[str], None] | None = None) -> None:
+    def __init__(self, ap: Any, on_text: Callable[[str], None] | None = None) -> None:
         self.ap = ap
         self.on_text = on_text or (lambda text: None)
         for name, default, typ, lo, hi, desc in NAV_PARAMS:
