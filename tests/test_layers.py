@@ -27,7 +27,8 @@ LAYERS: list[tuple[int, str, tuple[str, ...]]] = [
     (3, "vehicle", ("vtolftc.firmware_sim.vehicle",)),
     (3, "synthesis", ("vtolftc.synthesis",)),
     (3, "gcs", ("vtolftc.gcs",)),
-    (4, "runners", ("vtolftc.scenario", "vtolftc.sitl", "vtolftc.campaign",
+    (4, "runners", ("vtolftc.scenario", "vtolftc.sitl", "vtolftc.campaign", "vtolftc.mission_run",
+                    "vtolftc.mission_sitl",
                     "vtolftc.processes")),
     (5, "top", ("vtolftc.cli", "vtolftc.cmd_*", "vtolftc.dashboard", "vtolftc.__main__")),
 ]

@@ -7,9 +7,11 @@ zenoh link). It is system 1, component 1 (MAV_COMP_ID_AUTOPILOT1) and does what
 
 - HEARTBEAT at 1 Hz: type MAV_TYPE_VTOL_FIXEDROTOR (22, PX4's standard VTOL: separate lift
   and cruise propulsion), autopilot MAV_AUTOPILOT_PX4 (12), PX4 custom mode
-  ``main << 16 | sub << 24`` (flight modes: IDLE = AUTO.READY, TAKEOFF = AUTO.TAKEOFF,
-  HOVER / transitions / FIXED_WING = AUTO.LOITER, LAND = AUTO.LAND), armed bit 128 in
-  base_mode, system_status STANDBY / ACTIVE.
+  ``main << 16 | sub << 24`` as the navigator reports it (AUTO.LOITER = Hold on the ground and
+  in hover, AUTO.TAKEOFF, AUTO.LAND, AUTO.MISSION, AUTO.RTL, POSCTL for fixed-wing course
+  hold after a commanded transition; :meth:`.navigator.Navigator.custom_mode`), armed bit 128
+  in base_mode, system_status STANDBY / ACTIVE. Missions, COMMAND_INT, TIMESYNC, PING,
+  BATTERY_STATUS, GPS_RAW_INT and the geofence bits: :mod:`.gcs_services`.
 - Streams (default rates in :data:`DEFAULT_RATES_HZ`, on simulated time; SET_MESSAGE_INTERVAL
   changes them for the link it came on only): ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED,
   GLOBAL_POSITION_INT, HOME_POSITION, VFR_HUD, SYS_STATUS (present / enabled / healthy bits for
@@ -83,6 +85,11 @@ from typing import Any
 
 import numpy as np
 
+from vtolftc.firmware_sim.autopilot.gcs_services import (
+    STREAM_RATES_HZ,
+    Px4Services,
+    command_int_params,
+)
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
 from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotAPI,
@@ -122,7 +129,9 @@ CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE = 511, 512
 CMD_REQUEST_AUTOPILOT_CAPABILITIES = 520
 CMD_INJECT_PARTIAL_LOSS = 59900
 FLIGHT_COMMANDS = (CMD_ARM_DISARM, CMD_NAV_TAKEOFF, CMD_DO_SET_MODE, CMD_DO_VTOL_TRANSITION,
-                   CMD_NAV_LAND)
+                   CMD_NAV_LAND, 20, 178, 192, 224, 300)
+# 20 NAV_RETURN_TO_LAUNCH, 178 DO_CHANGE_SPEED, 192 DO_REPOSITION, 224 DO_SET_MISSION_CURRENT,
+# 300 MISSION_START (the navigator's, see navigator.py)
 FAULT_COMMANDS = (CMD_INJECT_FAILURE, CMD_INJECT_PARTIAL_LOSS)
 
 UNSIGNED_ALLOWED = frozenset({0, 109, 20, 21})
@@ -142,7 +151,9 @@ DEFAULT_RATES_HZ: dict[int, float] = {
     MSG["GLOBAL_POSITION_INT"]: 5.0, MSG["VFR_HUD"]: 4.0, MSG["HIL_STATE_QUATERNION"]: 10.0,
     MSG["HOME_POSITION"]: 0.2, MSG["EXTENDED_SYS_STATE"]: 2.0,
     MSG["ACTUATOR_OUTPUT_STATUS"]: 10.0, MSG["FAULT_INJECTION_STATUS"]: 1.0,
+    **STREAM_RATES_HZ,  # GPS_RAW_INT, MISSION_CURRENT, BATTERY_STATUS (gcs_services.py)
 }
+MSG.update({"GPS_RAW_INT": 24, "MISSION_CURRENT": 42, "BATTERY_STATUS": 147})
 """Stream rates in Hz of simulated time (PX4-like, a little lower to spare the CPU)."""
 
 # SYS_STATUS sensor bits (MAV_SYS_STATUS_SENSOR)
@@ -278,6 +289,9 @@ class GcsEndpoint:
         self._status0 = autopilot.status()
         self._snap = (None, self._status0)
         self._snap_seq = 0
+        self.services = Px4Services(self)
+        for name in self.services.HANDLES - {"COMMAND_INT"}:  # missions, TIMESYNC, PING
+            self.handlers.setdefault(name, self._on_service)
         self._threads: list[threading.Thread] = []
         if start:
             self._threads = [threading.Thread(target=self._rx, args=(i, link), daemon=True,
@@ -458,6 +472,7 @@ class GcsEndpoint:
         with self._snap_lock:
             self._snap = (nav, status)
             self._snap_seq += 1
+        self.services.on_step(nav)
         self._hold_notice_ms = None
         self._wake.set()
 
@@ -590,6 +605,7 @@ class GcsEndpoint:
         """1 Hz HEARTBEAT, SYS_STATUS, EXTENDED_SYS_STATE while simulated time does not
         advance; the SIM_HOLD notice."""
         now = time.monotonic()
+        self.services.tick()
         if now >= self._wall_next and now - self._last_step_wall > 0.5:
             self._wall_next = now + 1.0
             for name in ("HEARTBEAT", "SYS_STATUS", "EXTENDED_SYS_STATE"):
@@ -632,8 +648,9 @@ class GcsEndpoint:
             armed = bool(st and st.armed)
             base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | MAV_MODE_FLAG_AUTO | (
                 MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-            return c.heartbeat_encode(MAV_TYPE_VTOL_FIXEDROTOR, MAV_AUTOPILOT_PX4, base,
-                                      px4_custom_mode(st.mode if st else FlightMode.IDLE),
+            cm = st.px4_custom_mode if st and st.px4_custom_mode >= 0 else px4_custom_mode(
+                st.mode if st else FlightMode.IDLE)
+            return c.heartbeat_encode(MAV_TYPE_VTOL_FIXEDROTOR, MAV_AUTOPILOT_PX4, base, cm,
                                       self.system_status())
         if msg_id == MSG["SYS_STATUS"]:
             healthy = _ANGULAR_RATE_CTRL | _ATTITUDE_CTRL | _MOTOR_OUTPUTS
@@ -644,9 +661,12 @@ class GcsEndpoint:
                 healthy |= _GPS
             if self.hil.connected and self.hil.home is not None and nav is not None:
                 healthy |= _PREARM
-            # no battery: voltage UINT16_MAX, current and remaining -1 ("not sent")
-            return c.sys_status_encode(_SENSORS_PRESENT, _SENSORS_PRESENT, healthy, 0, 65535,
-                                       -1, -1, 0, 0, 0, 0, 0, 0)
+            # battery: voltage UINT16_MAX, current and remaining -1 until the first reading
+            present, enabled, more_healthy = self.services.sensor_bits()
+            mv, ca, pct = self.services.sys_status_battery()
+            return c.sys_status_encode(_SENSORS_PRESENT | present, _SENSORS_PRESENT | enabled,
+                                       healthy | more_healthy, 0, mv, ca, pct, 0, 0, 0, 0, 0,
+                                       0)
         if msg_id == MSG["EXTENDED_SYS_STATE"]:
             vtol = int(st.vtol_state) if st else 0
             landed = int(st.landed_state) if st else 0
@@ -655,9 +675,10 @@ class GcsEndpoint:
         if msg_id == MSG["AUTOPILOT_VERSION"]:
             major, minor, patch = self.version
             sw = (major << 24) | (minor << 16) | (patch << 8) | 255
-            caps = (1 << 0) | (1 << 2) | (1 << 3) | (1 << 8) | (1 << 15) | (1 << 17)
-            # MISSION_FLOAT | PARAM_FLOAT | MISSION_INT | COMMAND_INT | MAVLINK2 |
-            # PARAM_ENCODE_BYTEWISE
+            # exactly what is served (MAV_PROTOCOL_CAPABILITY): MISSION_FLOAT 1, PARAM_FLOAT
+            # 2, MISSION_INT 4, COMMAND_INT 8, PARAM_ENCODE_BYTEWISE 16, MAVLINK2 8192,
+            # MISSION_FENCE 16384, MISSION_RALLY 32768
+            caps = 1 | 2 | 4 | 8 | 16 | 8192 | 16384 | 32768
             return c.autopilot_version_encode(caps, sw, sw, 0, 0, [0] * 8, [0] * 8, [0] * 8,
                                               0, 0, 1)
         if msg_id == MSG["HOME_POSITION"]:
@@ -674,6 +695,8 @@ class GcsEndpoint:
             return c.fault_injection_status_encode(
                 fs.time_usec, fs.change_count, fs.motor_count, fs.servo_count,
                 fs.motor_failure, fs.motor_loss, fs.servo_failure, fs.servo_loss)
+        if msg_id in STREAM_RATES_HZ:
+            return self.services.build(msg_id)
         if msg_id == MSG["ACTUATOR_OUTPUT_STATUS"]:
             out = [0.0] * 32
             out[: self.commands.size] = [float(x) for x in self.commands]
@@ -717,6 +740,10 @@ class GcsEndpoint:
         return None
 
     # ------------------------------------------------------------------ handlers (worker)
+    def _on_service(self, index: int, link: Link, msg: Any) -> None:
+        """Missions, TIMESYNC, PING (:mod:`.gcs_services`), answered in the worker."""
+        self.services.handle(link, msg)
+
     def _on_heartbeat(self, index: int, link: Link, msg: Any) -> None:
         if int(msg.type) == MAV_TYPE_GCS and (not self.signing_required or msg.get_signed()):
             self.last_gcs_heartbeat = time.monotonic()
@@ -735,11 +762,13 @@ class GcsEndpoint:
         self._dispatch(index, link, msg, int(msg.command), [float(x) for x in params])
 
     def _on_command_int(self, index: int, link: Link, msg: Any) -> None:
+        """COMMAND_INT, converted as PX4 does (:func:`.gcs_services.command_int_params`) and
+        answered like COMMAND_LONG."""
         if msg.target_system not in (0, 1) or msg.target_component not in (0, 1):
             return
         self._seen_gcs(msg)
-        params = [msg.param1, msg.param2, msg.param3, msg.param4, msg.x, msg.y, msg.z]
-        self._dispatch(index, link, msg, int(msg.command), [float(x) for x in params])
+        self._dispatch(index, link, msg, int(msg.command),
+                       command_int_params(msg, self.services.home_alt_m()))
 
     def _ack(self, link: Link, msg: Any, cmd: int, result: int, reason: str) -> None:
         """Worker: STATUSTEXT with the reason (if any) and the COMMAND_ACK on ``link``."""

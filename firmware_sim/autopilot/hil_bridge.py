@@ -58,6 +58,7 @@ class HilBridge:
         self.last_sensor: Any = None
         self.last_gps: Any = None
         self.last_state: Any = None
+        self.last_battery: Any = None
         self.last_rx_wall = -np.inf
         self.last_step_wall = -np.inf
         """monotonic time at which the last complete HIL step (sensor + state pair) came."""
@@ -105,6 +106,8 @@ class HilBridge:
             self.last_step_wall = self.last_rx_wall
         elif t == "HIL_GPS":
             self.last_gps = msg
+        elif t == "BATTERY_STATUS":
+            self.last_battery = msg
         elif t == "GPS_GLOBAL_ORIGIN":
             self.home = (float(f"{msg.latitude * 1e-7:.7f}"),
                          float(f"{msg.longitude * 1e-7:.7f}"),

@@ -80,6 +80,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.firmware_sim.vehicle.battery import BatteryModel, vehicle_power_w
 from vtolftc.firmware_sim.vehicle.dynamics import N_RIGID
 from vtolftc.firmware_sim.vehicle.faults import Fault, FaultKind
 from vtolftc.firmware_sim.vehicle.model import Vehicle
@@ -135,6 +136,8 @@ class VehicleProcess:
         self.vehicle = Vehicle(self.airframe, state=initial_state, seed=seed,
                                noise=SensorNoise.typical() if noise else None)
         self.table = ActuatorTable.from_names(self.airframe.actuator_names)
+        self.battery = BatteryModel(rho=self.airframe.air_density_kg_m3)
+        self._next_battery = 0
         self.home = self.vehicle.sensor_model.home
         self.lockstep = lockstep
         self.duration_usec = None if duration_s is None else round(duration_s * 1e6)
@@ -261,7 +264,23 @@ class VehicleProcess:
         if t >= self._next_status:
             self._next_status = t + 1_000_000
             parts.append(self._pack(self._fault_status_msg()))
+        if t >= self._next_battery:  # the power module, 5 Hz
+            self._next_battery = t + 200_000
+            parts.append(self._pack(self._battery_msg()))
         return b"".join(parts)
+
+    def _battery_msg(self) -> Any:
+        """BATTERY_STATUS of the power module: cell voltages (mV), current (cA), consumed
+        (mAh); no charge estimate (-1): the autopilot makes its own."""
+        b = self.battery
+        cells = [min(65534, round(1000 * b.voltage_v / b.spec.cells))] * b.spec.cells
+        cells += [65535] * (10 - len(cells))
+        return self.codec.battery_status_encode(
+            0, 1, 3, 32767, cells, round(100 * b.current_a), round(b.consumed_mah), -1, -1)
+
+    def _step_battery(self) -> None:
+        self.battery.step(CONTROL_PERIOD_USEC * 1e-6, vehicle_power_w(self.battery,
+                                                                      self.vehicle))
 
     def _fault_status_msg(self) -> Any:
         motor_f, motor_l = [0] * 16, [0.0] * 16
@@ -514,6 +533,7 @@ class VehicleProcess:
                 self._apply_due()
             self._record(flush=False)
             v.step(self.commands, CONTROL_PERIOD_USEC // v.dt_usec)
+            self._step_battery()
             self.steps += 1
             if self._done():
                 break
@@ -561,6 +581,7 @@ class VehicleProcess:
             self._watchdog(now)
             self._record()
             v.step(self.commands, CONTROL_PERIOD_USEC // v.dt_usec)
+            self._step_battery()
             self.steps += 1
         return 0
 

@@ -149,14 +149,20 @@ class EventLog:
             self._f = None
 
 
-def run_observers(out: Path, plots: bool = True) -> list[Any]:
-    """The run folder of the autopilot's own view (telemetry, events, metrics, plots) and its
-    rerun recording ``run.rrd`` (no vehicle truth here: commands, not effective outputs)."""
+def run_observers(out: Path, plots: bool = True, autopilot: Any = None) -> list[Any]:
+    """The run folder of the autopilot's own view (telemetry, events, metrics, plots), its
+    rerun recording ``run.rrd`` (no vehicle truth here: commands, not effective outputs), the
+    event log and, given the autopilot (for its parameters and mission), the PX4 ULog
+    ``flight.ulg`` (:mod:`vtolftc.firmware_sim.autopilot.ulog`)."""
+    from vtolftc.firmware_sim.autopilot.ulog import ULogWriter
     from vtolftc.telemetry.recording import RerunRecorder
     from vtolftc.telemetry.runfolder import RunFolderWriter
 
-    return [RunFolderWriter(out, plots=plots), RerunRecorder(out / "run.rrd"),
-            EventLog(out / "autopilot_events.jsonl")]
+    obs: list[Any] = [RunFolderWriter(out, plots=plots), RerunRecorder(out / "run.rrd"),
+                      EventLog(out / "autopilot_events.jsonl")]
+    if autopilot is not None:
+        obs.append(ULogWriter(out / "flight.ulg", autopilot))
+    return obs
 
 
 def _write_json(path: Path, data: Any) -> None:
@@ -221,7 +227,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.out is not None:
         try:
             args.out.mkdir(parents=True, exist_ok=True)
-            observers = run_observers(args.out, plots=not args.no_plots)
+            observers = run_observers(args.out, plots=not args.no_plots,
+                                      autopilot=autopilot)
         except OSError as exc:
             for link in links:
                 link.close()
