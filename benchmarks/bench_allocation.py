@@ -6,8 +6,6 @@ plus small attitude-moment oscillations and a pusher force ramp) through
 
 - ``QPAllocator`` with ``B`` changing every step (P updated in place + KKT refactorisation),
 - ``QPAllocator`` with ``B`` held constant (only q and bounds updated),
-- ``QPAllocator`` through the public OSQP Python API (``fast_path=False``), to show the
-  wrapper's per-call overhead,
 - the PX4-style ``PseudoInverseAllocator`` baseline,
 
 and prints median / p99 wall-clock time per step, OSQP's own solve time, iterations and the
@@ -115,9 +113,6 @@ def main() -> None:
     qp = QPAllocator(5, U_MIN, U_MAX, w_v=W_V, u_pref=U_PREF, rate_limit=RATE)
     B_const = [Bs[len(Bs) // 2]] * len(Bs)
     report("QP, B constant", run(qp, v, B_const), qp.stats)
-
-    qp = QPAllocator(5, U_MIN, U_MAX, w_v=W_V, u_pref=U_PREF, rate_limit=RATE, fast_path=False)
-    report("QP, public OSQP API (no fast path)", run(qp, v, Bs), qp.stats)
 
     qp = QPAllocator(5, U_MIN, U_MAX, w_v=W_V, u_pref=U_PREF, rate_limit=RATE, polish=False)
     report("QP, no active-set polish", run(qp, v, Bs), qp.stats)

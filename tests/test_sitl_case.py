@@ -1,13 +1,12 @@
 """Case 1 flown by separate vehicle and autopilot processes through a ground station gives the
 metrics of the in-process run, over UDP and over zenoh; Ctrl-C stops everything cleanly.
 
-Tolerance: none. With the QP solver's wall-clock time limit switched off (``deterministic``,
-on both sides) the lockstep SITL run reproduces the in-process run bit for bit: the autopilot
-decodes the same HIL_STATE_QUATERNION encoding, its commands travel as float32 both ways, the
-commands act at the same control step (simulation hold) and the faults from the same physics
-step; fault magnitudes sent as float32 are read back as the decimal they stand for. (With the
-default 1 ms OSQP time limit even two in-process runs differ in the 6th digit, by how loaded the
-machine is.)
+Tolerance: none. The allocator has no wall-clock time limit (its solver stops on its
+tolerance or iteration cap only; ``deterministic`` changes nothing), so the lockstep SITL run
+reproduces the in-process run bit for bit: the autopilot decodes the same HIL_STATE_QUATERNION
+encoding, its commands travel as float32 both ways, the commands act at the same control step
+(simulation hold) and the faults from the same physics step; fault magnitudes sent as float32
+are read back as the decimal they stand for.
 """
 
 from __future__ import annotations
