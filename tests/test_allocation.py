@@ -350,6 +350,21 @@ def test_active_set_alone_matches_osqp_plus_polish_along_a_trajectory():
         assert a.cost(ra.u, v, B) <= a.cost(exact_solution(v, B), v, B) * (1 + 1e-6) + 1e-9
 
 
+def test_active_set_coarse_tolerance_leaves_the_rotor_split_undetermined():
+    """What the KKT test certifies (``active_set`` docstring): at the polish's tolerance 1e-9
+    it passes far from the optimum along the rotor null space (curvature ~eps), with B u
+    exact; at the default 1e-15 the answer is the BVLS one."""
+    B = synth_B(4.0)
+    v = np.array([-130.0, 10.0, 5.0, -4.0, 1.0])
+    ue = exact_solution(v, B)
+    coarse = make_qp("active_set", tol=1e-9).allocate(v, B)
+    assert coarse.polished and np.abs(coarse.u - ue).max() > 0.1
+    np.testing.assert_allclose(coarse.v_achieved, v, atol=1e-5)
+    fine = make_qp("active_set").allocate(v, B)
+    assert fine.polished
+    np.testing.assert_allclose(fine.u, ue, atol=1e-4)
+
+
 def test_active_set_iteration_limit_uses_fallback():
     qp = make_qp("active_set", max_iter=1)
     pinv = make_pinv()
