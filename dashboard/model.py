@@ -149,15 +149,23 @@ def commands_html(commands: Sequence[CommandFeedback]) -> str:
 class DashboardModel:
     """Turns snapshots into :class:`DashboardView` objects and keeps command feedback.
 
-    Args:
-        actuator_names: the vehicle's actuators in output order (ACTUATOR_OUTPUT_STATUS order).
-        rotor_grid: lift-rotor names laid out as seen from above (see
-            :func:`vtolftc.telemetry.geometry.rotor_grid`).
-        url: the ground-station link URL (for messages).
-        history_s: length of the time traces (s of autopilot time).
-        stale_after_s, lost_after_s: heartbeat ages for the link states.
-        max_path_points: the path keeps at most this many points (older ones are thinned).
-        path_step_m: a new path point is added when the aircraft moved this far.
+    Parameters
+    ----------
+    actuator_names
+        the vehicle's actuators in output order (ACTUATOR_OUTPUT_STATUS order).
+    rotor_grid
+        lift-rotor names laid out as seen from above (see
+        :func:`vtolftc.telemetry.geometry.rotor_grid`).
+    url
+        the ground-station link URL (for messages).
+    history_s
+        length of the time traces (s of autopilot time).
+    stale_after_s, lost_after_s
+        heartbeat ages for the link states.
+    max_path_points
+        the path keeps at most this many points (older ones are thinned).
+    path_step_m
+        a new path point is added when the aircraft moved this far.
     """
 
     def __init__(self, actuator_names: Sequence[str], rotor_grid: Sequence[Sequence[str | None]],

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.protocols import protocol_mismatches
 
 from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotStatus,
@@ -76,6 +77,7 @@ def test_recorder_is_a_run_observer(tmp_path):
     rec = RerunRecorder(tmp_path / "r.rrd")
     try:
         assert isinstance(rec, RunObserver)
+        assert protocol_mismatches(rec, RunObserver) == []
     finally:
         rec.close()
 

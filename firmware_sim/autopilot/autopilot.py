@@ -56,6 +56,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
     ParamType,
 )
 from vtolftc.firmware_sim.autopilot.modes import ModeMachine, landed_state, vtol_state
+from vtolftc.protocols.generated import constants as mav
 from vtolftc.rotation import quat_to_euler
 
 __all__ = [
@@ -70,14 +71,14 @@ __all__ = [
     "quat_to_euler",
 ]
 
-CMD_NAV_LAND = 21
-CMD_NAV_TAKEOFF = 22
-CMD_DO_SET_MODE = 176
-CMD_COMPONENT_ARM_DISARM = 400
-CMD_DO_VTOL_TRANSITION = 3000
-FORCE_DISARM_MAGIC = 21196
-MAV_VTOL_STATE_MC = 3
-MAV_VTOL_STATE_FW = 4
+CMD_NAV_LAND = mav.MAV_CMD_NAV_LAND
+CMD_NAV_TAKEOFF = mav.MAV_CMD_NAV_TAKEOFF
+CMD_DO_SET_MODE = mav.MAV_CMD_DO_SET_MODE
+CMD_COMPONENT_ARM_DISARM = mav.MAV_CMD_COMPONENT_ARM_DISARM
+CMD_DO_VTOL_TRANSITION = mav.MAV_CMD_DO_VTOL_TRANSITION
+FORCE_DISARM_MAGIC = 21196  # PX4's force-disarm magic in param2 (not a MAVLink enum)
+MAV_VTOL_STATE_MC = mav.MAV_VTOL_STATE_MC
+MAV_VTOL_STATE_FW = mav.MAV_VTOL_STATE_FW
 ARMED_IDLE_THROTTLE = 0.05
 
 #: ``AutopilotStatus.allocation_status`` text of each allocation status.
