@@ -13,7 +13,10 @@ previous answer:
 - (b) ``ActiveSetAllocator``: the compiled active set alone, warm-started from the previous
   command, at tolerance 1e-9 (the polish's) and 1e-12 (its default),
 - (c) DAQP (dual active set, ``pip install daqp``; skipped when not installed) on the same
-  normalised QP, warm-started from the previous answer's working set,
+  normalised QP, warm-started from the previous answer's working set. With ``eps_prox = 0``
+  DAQP rejects every QP as non-convex (exit -5: the rotor null-space curvature, ~5e-12, is
+  below its singularity tolerance); with its default proximal regularisation it solves them
+  all but stops early along that null space,
 
 and prints the per-QP wall time of ``allocate()`` (median, p99 [us]), the statuses, and the
 largest difference of the answers from a tight reference: scipy's bounded-variable least
