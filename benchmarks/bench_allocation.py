@@ -131,7 +131,7 @@ def report(name: str, r: dict[str, np.ndarray], stats=None) -> None:
     )
     if np.any(r["solve"] > 0):
         line += (
-            f" | OSQP solve median {np.median(r['solve']) * us:5.1f} us, "
+            f" | solver solve median {np.median(r['solve']) * us:5.1f} us, "
             f"iters median {np.median(r['iters']):.0f} p99 {np.percentile(r['iters'], 99):.0f}"
         )
     print(line)
@@ -333,7 +333,7 @@ def main() -> None:
     report("QP, no active-set polish", run(qp, v, Bs), qp.stats)
 
     qp = ActiveSetAllocator(5, U_MIN, U_MAX, w_v=W_V, u_pref=U_PREF, rate_limit=RATE)
-    report("active set alone (tol 1e-12)", run(qp, v, Bs), qp.stats)
+    report("active set alone (tol 1e-15)", run(qp, v, Bs), qp.stats)
 
     pi = PseudoInverseAllocator(U_MIN, U_MAX, u_trim=U_PREF)
     report("PX4-style pseudo-inverse (baseline)", run(pi, v, Bs))
