@@ -21,12 +21,10 @@ exactly the control step at which the in-process runner executes them, and a fau
 to the vehicle arrives before the controls of that step, so it acts from the same physics
 step as the in-process ``Vehicle.inject`` (fault magnitudes travel as float32 and are read back
 as the decimal they stand for: 0.2, not 0.200000003). The autopilot's inputs are bit-identical
-to the in-process run's (same HIL_STATE_QUATERNION encoding, float32 commands both ways), so
-with ``deterministic=True`` (and the in-process run given
-:func:`vtolftc.firmware_sim.autopilot.process.make_deterministic`) every metric is *equal*, tested
-over UDP and zenoh. Without it, the allocator's OSQP ``time_limit`` (1 ms of wall clock) lets the
-machine's load change a QP solution now and then: two in-process runs then already differ
-around the 6th significant digit, and so does SITL against in-process.
+to the in-process run's (same HIL_STATE_QUATERNION encoding, float32 commands both ways), and
+the allocator has no wall-clock time limit (its solver stops on its tolerance or iteration cap
+only), so every metric is *equal* to the in-process run's, tested over UDP and zenoh, whatever
+the machine's load.
 
 Real-time mode (``realtime=True``): no hold; each action is sent when the ground station's
 telemetry shows the simulated time has reached it, so it lands tens of milliseconds (a few
@@ -92,9 +90,6 @@ class SitlConfig:
     vehicle: str = "ds1"
     startup_timeout_s: float = 120.0
     hold_timeout_s: float = 5.0
-    deterministic: bool = False
-    """Autopilot without the QP solver's wall-clock time limit (see
-    :func:`vtolftc.firmware_sim.autopilot.process.make_deterministic`)."""
     plots: bool = True
     hold_at_start: bool = True
     """Lockstep: start held at t = 0 (needed by :meth:`SitlRun.fly`); False = free-running."""
@@ -220,8 +215,6 @@ class SitlRun:
                    "--param", f"SYS_FAILURE_EN={1 if cfg.failure_injection else 0}"]
         if not cfg.realtime and cfg.hold_at_start:
             ap_args += ["--hold-ms", "0"]
-        if cfg.deterministic:
-            ap_args.append("--deterministic")
         if not cfg.plots:
             ap_args.append("--no-plots")
         if cfg.gains_dir is not None:

@@ -58,7 +58,7 @@ from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.link import Link
 from vtolftc.telemetry import TelemetrySample
 
-__all__ = ["EXIT_VEHICLE_LOST", "AutopilotProcess", "make_deterministic"]
+__all__ = ["EXIT_VEHICLE_LOST", "AutopilotProcess"]
 
 EXIT_VEHICLE_LOST = 3
 CMD_NAV_LAND, CMD_DO_SET_MODE, CMD_ARM_DISARM = 21, 176, 400
@@ -354,12 +354,3 @@ def _alive(pid: int) -> bool:
     except PermissionError:
         return True
     return True
-
-
-def make_deterministic(autopilot: Any) -> None:
-    """Switch off the OSQP wall-clock ``time_limit`` of the autopilot's QP allocator (if it
-    has one): the solver then stops on its tolerances or its iteration cap only, so the same
-    inputs give the same commands whatever the machine's load."""
-    settings = getattr(getattr(autopilot, "allocator", None), "settings", None)
-    if isinstance(settings, dict) and "time_limit" in settings:
-        settings["time_limit"] = 1e6  # s: never reached (0 is rejected by OSQP 1.x)

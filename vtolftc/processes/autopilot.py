@@ -46,13 +46,13 @@ from typing import Any, TextIO
 from vtolftc.firmware_sim.autopilot.failsafe import register_failsafe_params
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import UNSIGNED_ALLOWED
 from vtolftc.firmware_sim.autopilot.interface import AutopilotAPI, ParamError
-from vtolftc.firmware_sim.autopilot.process import AutopilotProcess, make_deterministic
+from vtolftc.firmware_sim.autopilot.process import AutopilotProcess
 from vtolftc.jsonio import json_safe
 from vtolftc.protocols import SigningConfig, StreamTimestamps, open_link
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.link import Link
 
-__all__ = ["DEFAULT_GCS_LINKS", "main", "make_deterministic", "run_observers"]
+__all__ = ["DEFAULT_GCS_LINKS", "main", "run_observers"]
 
 DEFAULT_GCS_LINKS = ("udp-client://127.0.0.1:14550", "udp-client://127.0.0.1:14540")
 GCS_LINK_RATE_HZ = 200.0
@@ -92,9 +92,6 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
                          "require a valid signature on every command, parameter change and "
                          "mission message")
     ap.add_argument("--out", type=Path, default=None, help="run folder")
-    ap.add_argument("--deterministic", action="store_true",
-                    help="no wall-clock time limit in the allocation's QP solver, so that the "
-                         "commands do not depend on the CPU load (runs reproduce bit for bit)")
     ap.add_argument("--no-plots", action="store_true",
                     help="no PNG plots in the run folder at the end")
     ap.add_argument("--no-warmup", action="store_true",
@@ -180,8 +177,6 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # bad airframe, unknown controller, missing gains
         print(f"autopilot: error: {exc}", file=err)
         return 2
-    if args.deterministic:
-        make_deterministic(autopilot)
     register_failsafe_params(autopilot.params)
     for item in args.param:
         name, sep, value = item.partition("=")
