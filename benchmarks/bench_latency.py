@@ -5,8 +5,11 @@
 For each delay, the processes run in lockstep (so the figures do not depend on the machine's
 load: the delay is one of simulated time, applied by the vehicle, see
 ``vtolftc.sitl.SitlConfig.hil_delay_ms``); the aircraft takes off to 10 m, hovers
-``--hover-s`` seconds, and the largest |roll|, |pitch| and altitude error of the hover (from the
-autopilot's telemetry) are printed. A growing oscillation means the delay is beyond the margin.
+2 s, then rotor_1a loses 30 % of its thrust (a step disturbance: without one a perfect hover
+is an equilibrium that no delay disturbs) and the largest |roll|, |pitch| and altitude error
+of the next ``--hover-s`` seconds (from the autopilot's telemetry) are printed; "reached hover" no
+means the take-off never settled into AUTO.LOITER (the whole flight is then shown). A growing
+oscillation means the delay is beyond the margin.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from vtolftc.sitl import SitlConfig, SitlRun
 
 def hover(delay_ms: float, hover_s: float) -> dict[str, float]:
     with tempfile.TemporaryDirectory(prefix="bench_latency_") as tmp:
-        cfg = SitlConfig(out_dir=Path(tmp), plots=False, failure_injection=False,
+        cfg = SitlConfig(out_dir=Path(tmp), plots=False, failure_injection=True,
                          hold_at_start=False, hil_delay_ms=delay_ms)
         with SitlRun(cfg) as run:
             run.start()
@@ -33,6 +36,8 @@ def hover(delay_ms: float, hover_s: float) -> dict[str, float]:
             try:
                 snap = gs.wait_for(lambda s: s.mode_name == "AUTO.LOITER", 120.0)
                 t0 = snap.sim_time_s + 2.0
+                gs.wait_for(lambda s: s.sim_time_s > t0, 120.0)
+                gs.inject("rotor_1a", loss=0.3)  # the disturbance: a step in roll and pitch
                 gs.wait_for(lambda s: s.sim_time_s > t0 + hover_s + 1.5, 600.0)
                 ok = True
             except Exception:
