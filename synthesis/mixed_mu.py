@@ -577,10 +577,10 @@ def mixed_mu_upper(
             "method='dg' for repeated scalars or non-square blocks"
         )
     if method != "dg" and spec is not None:
-        x = None
-        if warm_start is not None and warm_start.method == "ab13md":
-            x = warm_start.params
-        res = _ab13md_upper(Mc, spec, x)
+        # never warm-started: a chain of AB13MD warm starts (its x output fed back in) along a
+        # frequency sweep was seen to degenerate and then hang inside the Fortran routine;
+        # a cold call costs ~1 ms
+        res = _ab13md_upper(Mc, spec, None)
         if res is not None:
             return res
     Mp, sq = st.pad(Mc)

@@ -555,11 +555,8 @@ def _upper_any(
     if method in ("auto", "ab13md") and spec is not None:
         from slycot import ab13md
 
-        try:
-            if warm is not None and warm.method == "ab13md" and warm.warm is not None:
-                _, d, g, xo = ab13md(M, spec[0], spec[1], warm.warm)
-            else:
-                _, d, g, xo = ab13md(M, spec[0], spec[1])
+        try:  # cold start only: chained AB13MD warm starts can hang (see mixed_mu)
+            _, d, g, xo = ab13md(M, spec[0], spec[1])
             d = np.asarray(d, float)
             ok = bool(np.all(np.isfinite(d)) and np.all(d > 0))
         except Exception:
