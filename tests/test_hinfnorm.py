@@ -256,7 +256,7 @@ def test_randomized_against_dense_grid() -> None:
         w = np.concatenate([np.geomspace(mags.min() / 100, mags.max() * 100, 4000),
                             np.abs(np.linalg.eigvals(A).imag)])
         grid = sigma_max_response((A, B, C, D), w).max()
-        assert res.value >= grid * (1 - 1e-10)
+        assert res.value >= grid * (1 - 2e-9)  # the rtol=1e-9 contract
 
 
 def test_linf_option_for_unstable_systems() -> None:
