@@ -25,6 +25,7 @@ from typing import Any
 import control
 import numpy as np
 from slycot import ab13dd, ab13md
+
 from vtolftc.synthesis.hinfnorm import frequency_response, hinf_norm
 from vtolftc.synthesis.mixed_mu import mixed_mu_sweep
 from vtolftc.synthesis.mu import Block, mu_sweep

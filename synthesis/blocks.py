@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.synthesis.hinfnorm import StateSpaceData
 from vtolftc.synthesis.lft import GeneralizedPlant, lft
 from vtolftc.synthesis.structured import Parameter, TuningProblem, pid

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.synthesis.hinfnorm import StateSpaceData, as_state_space
 
 __all__ = ["GeneralizedPlant", "lft"]

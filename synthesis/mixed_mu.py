@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize
+
 from vtolftc.synthesis.mu import Block, MuSweep
 
 __all__ = [

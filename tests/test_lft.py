@@ -8,6 +8,7 @@ import math
 import control
 import numpy as np
 import pytest
+
 from vtolftc.synthesis.blocks import (
     ControllerStructure,
     PIDBlock,

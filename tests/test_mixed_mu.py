@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from vtolftc.synthesis.hinfnorm import frequency_response
 from vtolftc.synthesis.mixed_mu import (
     BlockStructure,
