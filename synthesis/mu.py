@@ -42,11 +42,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize, minimize_scalar
+
+from vtolftc.synthesis.mu_blocks import Block
 
 __all__ = [
     "Block",
@@ -59,51 +61,6 @@ __all__ = [
     "mu_upper_bound",
 ]
 
-BlockKind = Literal["full", "repeated_complex", "real"]
-_KINDS: tuple[str, ...] = ("full", "repeated_complex", "real")
-
-
-@dataclass(frozen=True)
-class Block:
-    """One block of the uncertainty structure Delta.
-
-    kind:
-        ``"full"`` (full complex rows x cols block), ``"repeated_complex"`` (delta I_n,
-        delta complex) or ``"real"`` (delta I_n, delta real).
-    rows, cols:
-        Size of the block Delta_k (rows x cols). Repeated blocks are square.
-    """
-
-    kind: BlockKind
-    rows: int
-    cols: int
-
-    def __post_init__(self) -> None:
-        if self.kind not in _KINDS:
-            raise ValueError(f"unknown block kind {self.kind!r}; expected one of {_KINDS}")
-        for name in ("rows", "cols"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
-                raise ValueError(f"Block.{name} must be a positive integer, got {v!r}")
-        if self.kind != "full" and self.rows != self.cols:
-            raise ValueError(
-                f"a {self.kind} block (delta * I_n) must be square, got {self.rows}x{self.cols}"
-            )
-
-    @staticmethod
-    def full(rows: int, cols: int | None = None) -> Block:
-        """Full complex block of size rows x cols (cols defaults to rows)."""
-        return Block("full", int(rows), int(rows if cols is None else cols))
-
-    @staticmethod
-    def repeated_complex(n: int) -> Block:
-        """Repeated complex scalar block delta * I_n."""
-        return Block("repeated_complex", int(n), int(n))
-
-    @staticmethod
-    def real(n: int = 1) -> Block:
-        """Repeated real scalar block delta * I_n (delta real)."""
-        return Block("real", int(n), int(n))
 
 
 @dataclass(frozen=True)
@@ -571,7 +528,7 @@ def _upper_any(
             x = np.log(d[st.row_starts])
             return val, DScaling(Dl, Dl.copy(), x, G, "ab13md", np.asarray(xo, float))
     if st.has_real and method in ("auto", "dg"):
-        from vtolftc.synthesis.mixed_mu import BlockStructure, _dg_upper
+        from vtolftc.synthesis.dg_scaling import BlockStructure, _dg_upper
 
         x0 = warm.warm if warm is not None and warm.method == "dg" else None
         res = _dg_upper(M, BlockStructure(st.blocks), x0, target, rtol, max(maxiter, 100))

@@ -1,0 +1,547 @@
+"""Mixed real/complex mu upper bound by D-G scaling (Young, Newlin & Doyle; MATLAB's mussv),
+and the block structure of possibly non-square M. The analysis functions built on it are in
+:mod:`.mixed_mu`; see there for the theory and the validation.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import minimize
+
+from vtolftc.synthesis.mu_blocks import Block
+
+__all__ = ["BlockStructure", "MixedMuUpper", "mixed_mu_upper"]
+
+
+# ------------------------------------------------------------------------------------------
+# block structure
+# ------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class BlockStructure:
+    """A block-diagonal uncertainty structure and the shape of the M it applies to.
+
+    Parameters
+    ----------
+    blocks:
+        The blocks (:class:`vtolftc.synthesis.mu.Block`) in order. ``Block.full(r, c)`` is an
+        r x c complex block; ``Block.real(n)`` / ``Block.repeated_complex(n)`` are delta I_n.
+
+    Attributes
+    ----------
+    m_shape:
+        (rows, cols) of M = (sum of block cols, sum of block rows).
+    delta_shape:
+        (rows, cols) of Delta = (sum of block rows, sum of block cols).
+    """
+
+    blocks: tuple[Block, ...]
+
+    def __init__(self, blocks: Sequence[Block] | Block | BlockStructure):
+        if isinstance(blocks, BlockStructure):
+            blocks = blocks.blocks
+        if isinstance(blocks, Block):
+            blocks = [blocks]
+        blocks = tuple(blocks)
+        if not blocks:
+            raise ValueError("the block structure is empty; expected a list of Block objects")
+        for b in blocks:
+            if not isinstance(b, Block):
+                raise ValueError(
+                    f"unknown block specification {b!r}; expected Block.full(rows, cols), "
+                    "Block.repeated_complex(n) or Block.real(n)"
+                )
+        object.__setattr__(self, "blocks", blocks)
+
+    @property
+    def m_shape(self) -> tuple[int, int]:
+        return sum(b.cols for b in self.blocks), sum(b.rows for b in self.blocks)
+
+    @property
+    def delta_shape(self) -> tuple[int, int]:
+        return sum(b.rows for b in self.blocks), sum(b.cols for b in self.blocks)
+
+    @property
+    def has_real(self) -> bool:
+        return any(b.kind == "real" for b in self.blocks)
+
+    def ab13md_spec(self) -> tuple[NDArray[np.int64], NDArray[np.int64]] | None:
+        """(nblock, itype) for SLICOT AB13MD, or None if the structure is outside its scope.
+
+        AB13MD takes square full complex blocks and 1 x 1 real blocks only.
+        """
+        nblock, itype = [], []
+        for b in self.blocks:
+            if b.kind == "full" and b.rows == b.cols:
+                nblock.append(b.rows)
+                itype.append(2)
+            elif b.kind == "real" and b.rows == 1:
+                nblock.append(1)
+                itype.append(1)
+            else:
+                return None
+        return np.array(nblock, dtype=np.int64), np.array(itype, dtype=np.int64)
+
+    def check(self, M: Any) -> NDArray[np.complex128]:
+        """M as a complex array, with a one-line error if its shape does not fit."""
+        M = np.asarray(M)
+        if M.ndim != 2:
+            raise ValueError(f"M must be a 2-D matrix, got shape {M.shape}")
+        if M.shape != self.m_shape:
+            raise ValueError(
+                f"M is {M.shape[0]}x{M.shape[1]} but the block structure needs "
+                f"{self.m_shape[0]}x{self.m_shape[1]} (rows = sum of block cols, cols = sum "
+                "of block rows)"
+            )
+        if not np.all(np.isfinite(M)):
+            raise ValueError("M contains NaN or inf entries")
+        return M.astype(complex)
+
+    # padding to square blocks -----------------------------------------------------------
+    def padded(self) -> tuple[BlockStructure, NDArray[np.intp], NDArray[np.intp]]:
+        """Square-block structure and the positions of M's rows/cols in the padded M."""
+        rows_keep: list[int] = []
+        cols_keep: list[int] = []
+        new: list[Block] = []
+        r0 = 0
+        for b in self.blocks:
+            s = max(b.rows, b.cols)
+            rows_keep.extend(range(r0, r0 + b.cols))  # M rows of this block: b.cols
+            cols_keep.extend(range(r0, r0 + b.rows))  # M cols of this block: b.rows
+            new.append(Block.full(s) if b.kind == "full" else b)
+            r0 += s
+        return BlockStructure(new), np.array(rows_keep, np.intp), np.array(cols_keep, np.intp)
+
+    def pad(self, M: NDArray[Any]) -> tuple[NDArray[np.complex128], BlockStructure]:
+        """Zero-padded square M and its square-block structure (mu is unchanged)."""
+        sq, rk, ck = self.padded()
+        if self.m_shape[0] == len(rk) == len(ck) and np.array_equal(rk, ck) and (
+            rk.size == 0 or rk[-1] == rk.size - 1
+        ):
+            return M, sq
+        n = sq.m_shape[0]
+        Mp = np.zeros((n, n), dtype=complex)
+        Mp[np.ix_(rk, ck)] = M
+        return Mp, sq
+
+    def unpad_delta(self, Delta: NDArray[Any]) -> NDArray[np.complex128]:
+        """Delta of the padded problem restricted to this structure (drops padding)."""
+        _, rk, ck = self.padded()
+        return np.asarray(Delta)[np.ix_(ck, rk)]
+
+
+# ------------------------------------------------------------------------------------------
+# D-G upper bound
+# ------------------------------------------------------------------------------------------
+
+
+class _DG:
+    """Parametrisation of the scalings for a square-block structure.
+
+    D = T^H T with T block diagonal: T_k = sqrt(d_k) I (full blocks, x = log d_k) or
+    T_k = L_k^H (repeated blocks, L_k lower triangular, diagonal exp(x), strictly lower
+    entries x_re + j x_im). G enters as G = T^H Ghat T with Ghat_k Hermitian on the real
+    blocks (a bijection), so that with N = T M T^-1
+
+        lambda(M^H D M + j(G M - M^H G), D) = lambda(N^H N + j(Ghat N - N^H Ghat)),
+
+    a standard Hermitian eigenproblem.
+    """
+
+    def __init__(self, st: BlockStructure):
+        self.st = st
+        n = st.m_shape[0]
+        self.n = n
+        self.rep: list[tuple[int, NDArray[np.intp], int, int]] = []  # (x0, idx, m, nl)
+        self.real: list[tuple[int, NDArray[np.intp], int]] = []  # (x0, idx, m)
+        tpos: list[int] = []
+        tpar: list[int] = []
+        tcoef: list[float] = []
+        off_r: list[int] = []
+        off_c: list[int] = []
+        off_re: list[int] = []
+        off_im: list[int] = []
+        p = 0
+        r0 = 0
+        self.block_x0: list[int] = []
+        for b in st.blocks:
+            idx = np.arange(r0, r0 + b.rows)
+            self.block_x0.append(p)
+            if b.kind == "full":  # T_k = exp(x / 2) I
+                tpos.extend(idx)
+                tpar.extend([p] * idx.size)
+                tcoef.extend([0.5] * idx.size)
+                p += 1
+            else:  # T_k = L_k^H
+                m = b.rows
+                nl = m * (m - 1) // 2
+                self.rep.append((p, idx, m, nl))
+                tpos.extend(idx)
+                tpar.extend(range(p, p + m))
+                tcoef.extend([1.0] * m)
+                il, jl = np.tril_indices(m, -1)
+                off_r.extend(idx[jl])  # T[j, i] = conj(L[i, j])
+                off_c.extend(idx[il])
+                off_re.extend(range(p + m, p + m + nl))
+                off_im.extend(range(p + m + nl, p + m + 2 * nl))
+                p += m + 2 * nl
+            r0 += b.rows
+        self.nd = p
+        gd_pos: list[int] = []
+        gd_par: list[int] = []
+        gu_r: list[int] = []
+        gu_c: list[int] = []
+        gu_re: list[int] = []
+        gu_im: list[int] = []
+        for k, b in enumerate(st.blocks):
+            if b.kind == "real":
+                idx = self._block_idx(k)
+                m = b.rows
+                self.real.append((p, idx, m))
+                gd_pos.extend(idx)
+                gd_par.extend(range(p, p + m))
+                iu, ju = np.triu_indices(m, 1)
+                nu = iu.size
+                gu_r.extend(idx[iu])
+                gu_c.extend(idx[ju])
+                gu_re.extend(range(p + m, p + m + nu))
+                gu_im.extend(range(p + m + nu, p + m + 2 * nu))
+                p += m * m  # m diag + m(m-1)/2 re + m(m-1)/2 im
+        self.n_params = p
+
+        def arr(v: list[Any], dt: Any = np.intp) -> NDArray[Any]:
+            return np.array(v, dtype=dt)
+
+        self.tpos, self.tpar, self.tcoef = arr(tpos), arr(tpar), arr(tcoef, float)
+        self.off_r, self.off_c, self.off_re, self.off_im = (
+            arr(off_r), arr(off_c), arr(off_re), arr(off_im))
+        self.gd_pos, self.gd_par = arr(gd_pos), arr(gd_par)
+        self.gu_r, self.gu_c, self.gu_re, self.gu_im = arr(gu_r), arr(gu_c), arr(gu_re), arr(gu_im)
+        self.has_off = self.off_r.size > 0
+        self.has_g = self.gd_pos.size > 0
+
+    def _block_idx(self, k: int) -> NDArray[np.intp]:
+        r0 = sum(b.rows for b in self.st.blocks[:k])
+        return np.arange(r0, r0 + self.st.blocks[k].rows)
+
+    def t_matrix(self, x: NDArray[np.float64]) -> tuple[NDArray[Any], NDArray[Any]]:
+        """T (block upper-triangular within repeated blocks) and its diagonal."""
+        n = self.n
+        tdiag = np.exp(self.tcoef * x[self.tpar])
+        if not self.has_off:
+            return np.diag(tdiag), tdiag
+        T = np.zeros((n, n), dtype=complex)
+        T[self.tpos, self.tpos] = tdiag
+        T[self.off_r, self.off_c] = x[self.off_re] - 1j * x[self.off_im]
+        return T, tdiag
+
+    def g_matrix(self, x: NDArray[np.float64]) -> NDArray[np.complex128] | None:
+        if not self.has_g:
+            return None
+        Gh = np.zeros((self.n, self.n), dtype=complex)
+        Gh[self.gd_pos, self.gd_pos] = x[self.gd_par]
+        z = x[self.gu_re] + 1j * x[self.gu_im]
+        Gh[self.gu_r, self.gu_c] = z
+        Gh[self.gu_c, self.gu_r] = np.conj(z)
+        return Gh
+
+    def matrices(self, x: NDArray[np.float64]) -> tuple[NDArray[Any], NDArray[Any]]:
+        """(D, G) of the LMI certificate M^H D M + j(G M - M^H G) <= beta^2 D."""
+        T, _ = self.t_matrix(x)
+        T = T.astype(complex)
+        Gh = self.g_matrix(x)
+        D = T.conj().T @ T
+        G = np.zeros_like(D) if Gh is None else T.conj().T @ Gh @ T
+        return D, G
+
+    def gradient(self, N: NDArray[Any], Ti: NDArray[Any] | None, tdiag: NDArray[Any],
+                 Gh: NDArray[Any] | None, U: NDArray[Any], w: NDArray[Any],
+                 x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """sum_e w_e d lambda_e / dx, U the eigenvectors (columns) of N^H N + j(Gh N - N^H Gh).
+
+        With Y = N U, R = Y - j Gh U: d lambda = 2 Re tr(dT Z), Z = T^-1 X, X = Y R^H - U R^H N
+        (weighted by w), and d lambda / d Gh = -2 Im(u^H dGh y).
+        """
+        g = np.zeros_like(x)
+        Y = N @ U
+        R = Y if Gh is None else Y - 1j * (Gh @ U)
+        Rw = (R * w).conj().T  # (neig x n): w_e r_e^H
+        X = Y @ Rw - U @ (Rw @ N)
+        if Ti is None:  # diagonal T
+            zdiag = np.real(np.diag(X)) / tdiag
+        else:
+            Z = Ti @ X
+            zdiag = np.real(Z[self.tpos, self.tpos])
+            zo = Z[self.off_c, self.off_r]
+            g[self.off_re] = 2.0 * zo.real
+            g[self.off_im] = 2.0 * zo.imag
+        g += np.bincount(self.tpar, weights=2.0 * self.tcoef * tdiag * zdiag, minlength=x.size)
+        if Gh is not None:
+            C = (np.conj(U) * w) @ Y.T  # C_ij = sum_e w_e conj(u_ie) y_je
+            g[self.gd_par] = -2.0 * np.imag(C[self.gd_pos, self.gd_pos])
+            if self.gu_r.size:
+                c1, c2 = C[self.gu_r, self.gu_c], C[self.gu_c, self.gu_r]
+                g[self.gu_re] = -2.0 * np.imag(c1 + c2)
+                g[self.gu_im] = -2.0 * np.real(c1 - c2)
+        return g
+
+
+class _DGObjective:
+    def __init__(self, M: NDArray[Any], par: _DG):
+        self.M = M
+        self.par = par
+        self.smooth = 0.0
+        self.best = math.inf
+        self.best_x: NDArray[np.float64] | None = None
+        self.nfev = 0
+
+    def _eig(self, x: NDArray[np.float64]) -> tuple[Any, ...]:
+        par = self.par
+        T, tdiag = par.t_matrix(x)
+        if par.has_off:
+            Ti = np.linalg.inv(T)
+            N = T @ self.M @ Ti
+        else:
+            Ti = None
+            N = (tdiag[:, None] * self.M) / tdiag[None, :]
+        H = N.conj().T @ N
+        Gh = par.g_matrix(x)
+        if Gh is not None:
+            GN = Gh @ N
+            H = H + 1j * (GN - GN.conj().T)
+        lam, U = np.linalg.eigh(H)
+        return lam, U, N, Ti, tdiag, Gh
+
+    def value(self, x: NDArray[np.float64]) -> float:
+        try:
+            lam = self._eig(x)[0]
+        except (np.linalg.LinAlgError, ValueError):
+            return math.inf
+        self._record(float(lam[-1]), x)
+        return float(lam[-1])
+
+    def _record(self, val: float, x: NDArray[np.float64]) -> None:
+        if val < self.best and math.isfinite(val):
+            self.best = val
+            self.best_x = np.array(x, dtype=float)
+
+    def __call__(self, x: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
+        self.nfev += 1
+        if not np.all(np.isfinite(x)) or np.max(np.abs(x)) > 300:
+            return 1e300, np.zeros_like(x)
+        try:
+            lam, U, N, Ti, tdiag, Gh = self._eig(x)
+        except (np.linalg.LinAlgError, ValueError):
+            return 1e300, np.zeros_like(x)
+        l1 = float(lam[-1])
+        self._record(l1, x)
+        if self.smooth > 0.0:
+            s = self.smooth * max(abs(l1), 1e-300)
+            e = np.exp((lam - l1) / s)
+            tot = float(e.sum())
+            f = l1 + s * math.log(tot)
+            wts = e / tot
+        else:
+            f = l1
+            wts = np.zeros_like(lam)
+            wts[-1] = 1.0
+        keep = wts > 1e-12
+        g = self.par.gradient(N, Ti, tdiag, Gh, U[:, keep], wts[keep], x)
+        return f, g
+
+
+@dataclass(frozen=True)
+class MixedMuUpper:
+    """A certified mixed-mu upper bound: mu(M) <= value.
+
+    Attributes
+    ----------
+    value:
+        The bound beta (>= 0; 0 means mu = 0 is certified).
+    D, G:
+        The scalings of the certificate, for the square (padded) M: D > 0 commutes with Delta,
+        G Hermitian on the real blocks, M^H D M + j(G M - M^H G) <= value^2 D.
+    method:
+        ``"ab13md"`` or ``"dg"`` (the numpy D-G optimisation).
+    params:
+        Internal parametrisation of (D, G) for ``warm_start`` (``"dg"`` only), or AB13MD's
+        ``x`` vector.
+    """
+
+    value: float
+    D: NDArray[np.complex128] = field(repr=False)
+    G: NDArray[np.complex128] = field(repr=False)
+    method: str = "dg"
+    params: NDArray[np.float64] | None = field(default=None, repr=False)
+
+    def __float__(self) -> float:
+        return float(self.value)
+
+
+def _osborne_x(M: NDArray[Any], par: _DG, sweeps: int = 20) -> NDArray[np.float64]:
+    """Block-Osborne balancing start (log d_k for every block, G = 0)."""
+    st = par.st
+    K = len(st.blocks)
+    idxs = [par._block_idx(k) for k in range(K)]
+    A2 = np.abs(M) ** 2
+    Bn = np.array([[A2[np.ix_(idxs[k], idxs[l_])].sum() for l_ in range(K)] for k in range(K)])
+    np.fill_diagonal(Bn, 0.0)
+    d2 = np.ones(K)
+    for _ in range(sweeps):
+        changed = 0.0
+        for k in range(K):
+            num = float(np.dot(Bn[:, k], d2))
+            den = float(np.dot(Bn[k, :], 1.0 / d2))
+            if num > 0.0 and den > 0.0:
+                new = math.sqrt(num / den)
+                changed = max(changed, abs(math.log(new / d2[k])))
+                d2[k] = new
+        if changed < 1e-3:
+            break
+    logd = np.log(d2)  # D_k ~ d_k^2 I in the "D" (not square-root) convention of the LMI
+    logd -= logd.mean()
+    x = np.zeros(par.n_params)
+    for k, b in enumerate(st.blocks):
+        x0 = par.block_x0[k]
+        if b.kind == "full":
+            x[x0] = logd[k]  # T_k = exp(x/2) = d_k
+        else:
+            x[x0 : x0 + b.rows] = 0.5 * logd[k]  # T_k = L_k^H, L_k = diag(exp(x))
+    return x
+
+
+_WARM_STAGES = (1e-4, 0.0)
+
+
+def _dg_upper(
+    M: NDArray[Any], st: BlockStructure, x0: NDArray[np.float64] | None, target: float,
+    rtol: float, maxiter: int,
+) -> MixedMuUpper:
+    par = _DG(st)
+    obj = _DGObjective(M, par)
+    starts = [np.zeros(par.n_params), _osborne_x(M, par)]
+    if x0 is not None:
+        if x0.shape != (par.n_params,):
+            raise ValueError(
+                f"warm start has {x0.size} parameters, expected {par.n_params} for this "
+                "block structure"
+            )
+        starts.append(np.asarray(x0, dtype=float))
+    vals = [obj.value(s) for s in starts]
+    k0 = int(np.argmin(vals))
+    x = starts[k0].copy()
+    stop2 = (target * (1.0 + rtol)) ** 2 if target > 0 else -math.inf
+    # beta^2 = lambda: a relative rtol on beta is ~2 rtol on lambda
+    warm = x0 is not None and k0 == len(starts) - 1
+
+    def done() -> bool:
+        return obj.best < 0.0 or obj.best <= stop2
+
+    for rel in (_WARM_STAGES if warm else (3e-2, 3e-3, 3e-4, 3e-5, 0.0)):
+        if done():
+            break
+        obj.smooth = rel
+        hist: list[float] = []
+
+        def _cb(intermediate_result: Any, hist: list[float] = hist) -> None:
+            hist.append(obj.best)
+            if done() or (len(hist) > 8 and hist[-9] - hist[-1] <= rtol * abs(hist[-1])):
+                raise StopIteration
+
+        opts: dict[str, Any] = {"maxiter": maxiter, "gtol": 1e-12 * max(abs(obj.best), 1e-300)}
+        res = minimize(obj, x, jac=True, method="BFGS", callback=_cb, options=opts)
+        x = obj.best_x if obj.best_x is not None else np.asarray(res.x)
+    assert obj.best_x is not None
+    D, G = par.matrices(obj.best_x)
+    return MixedMuUpper(math.sqrt(max(obj.best, 0.0)), D, G, "dg", obj.best_x)
+
+
+def _ab13md_upper(
+    M: NDArray[Any], spec: tuple[NDArray[Any], NDArray[Any]], x: NDArray[np.float64] | None
+) -> MixedMuUpper | None:
+    from slycot import ab13md
+
+    try:
+        if x is not None:
+            mu, d, g, xo = ab13md(M, spec[0], spec[1], x)
+        else:
+            mu, d, g, xo = ab13md(M, spec[0], spec[1])
+    except Exception:
+        return None
+    if not math.isfinite(float(mu)):
+        return None
+    d = np.asarray(d, float)
+    g = np.asarray(g, float)
+    return MixedMuUpper(float(mu), np.diag(d**2).astype(complex), np.diag(g).astype(complex),
+                        "ab13md", np.asarray(xo, float))
+
+
+_UPPER_METHODS = ("auto", "ab13md", "dg")
+
+
+def mixed_mu_upper(
+    M: Any,
+    blocks: Sequence[Block] | BlockStructure,
+    *,
+    method: str = "auto",
+    warm_start: MixedMuUpper | None = None,
+    rtol: float = 1e-9,
+    maxiter: int = 200,
+    target: float = 0.0,
+) -> MixedMuUpper:
+    """Mixed real/complex mu upper bound with D-G scaling (module docstring).
+
+    Parameters
+    ----------
+    M:
+        Complex matrix of shape ``BlockStructure(blocks).m_shape`` (non-square allowed).
+    blocks:
+        The uncertainty structure (list of :class:`~vtolftc.synthesis.mu.Block`).
+    method:
+        ``"auto"`` (AB13MD where it applies, else ``"dg"``), ``"ab13md"`` (error if the
+        structure has repeated or non-square blocks) or ``"dg"`` (numpy D-G optimisation).
+    warm_start:
+        A previous result for the same structure (a neighbouring frequency): its scalings
+        start the optimiser.
+    rtol, maxiter:
+        Optimiser tolerance (relative, on beta) and BFGS iterations per continuation stage.
+    target:
+        Stop as soon as the bound is <= target (1 + rtol), e.g. a known lower bound.
+
+    Returns
+    -------
+    MixedMuUpper
+        ``value`` >= mu(M), with the (D, G) certificate.
+    """
+    st = BlockStructure(blocks)
+    Mc = st.check(M)
+    if method not in _UPPER_METHODS:
+        raise ValueError(f"unknown method {method!r}; expected one of {_UPPER_METHODS}")
+    spec = st.ab13md_spec()
+    if method == "ab13md" and spec is None:
+        raise ValueError(
+            "AB13MD only takes square full complex blocks and 1x1 real blocks; use "
+            "method='dg' for repeated scalars or non-square blocks"
+        )
+    if method != "dg" and spec is not None:
+        # never warm-started: a chain of AB13MD warm starts (its x output fed back in) along a
+        # frequency sweep was seen to degenerate and then hang inside the Fortran routine;
+        # a cold call costs ~1 ms
+        res = _ab13md_upper(Mc, spec, None)
+        if res is not None:
+            return res
+    Mp, sq = st.pad(Mc)
+    x0 = warm_start.params if warm_start is not None and warm_start.method == "dg" else None
+    return _dg_upper(Mp, sq, x0, target, rtol, maxiter)
+
+
+# ------------------------------------------------------------------------------------------
+# lower bound, both bounds, sweep
+# ------------------------------------------------------------------------------------------
