@@ -38,12 +38,14 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         return _compare(args.compare)
     if args.spec is None:
         raise _usage("a spec file is needed: vtolftc campaign SPEC.toml (or --compare A B)")
+    if args.batch < 1:
+        raise _usage(f"--batch {args.batch}: expected a number of rows per part >= 1")
     if args.jobs is not None and args.jobs < 1:
         raise _usage(f"--jobs {args.jobs}: expected a number of processes >= 1")
     if args.scheduler is not None and args.jobs is not None:
         raise _usage("--jobs and --scheduler: give one (the cluster sets its own workers)")
     from vtolftc.campaign.results import PartWriter, read_results, write_final
-    from vtolftc.campaign.scenarios import expand
+    from vtolftc.campaign.scenarios import expand, flight_order
     from vtolftc.campaign.spec import SpecError, load_spec
 
     try:
@@ -72,7 +74,8 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         "scenarios": len(scenarios)}, indent=2) + "\n", encoding="utf-8")
     (out / "spec.toml").write_text(spec.text, encoding="utf-8")
     done_ids = set() if done is None else set(done.column("scenario_id").to_pylist())
-    todo = [s for s in scenarios if s.scenario_id not in done_ids]
+    todo = flight_order([s for s in scenarios if s.scenario_id not in done_ids],
+                        len(spec.controllers))
     n_surv = 0 if done is None else sum(done.column("survived").to_pylist())
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler else
              f"{args.jobs or _cpus()} local processes")
@@ -81,7 +84,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
           + f" on {where} -> {out}", flush=True)
 
     old = signal.signal(signal.SIGTERM, _on_sigterm)
-    writer = PartWriter(out)
+    writer = PartWriter(out, batch=args.batch)
     t0 = time.perf_counter()
     try:
         if todo:
@@ -205,5 +208,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="continue a campaign in --out: fly only the missing scenarios")
     p.add_argument("--compare", nargs=2, metavar=("A", "B"), default=None,
                    help="print what changed between two result files or folders")
+    p.add_argument("--batch", type=int, default=8,
+                   help="results per Parquet part (written at least every 10 s; default 8)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_campaign)

@@ -191,7 +191,7 @@ def run_dask(scenarios: Sequence[CampaignScenario], address: str, *,
         futures = client.map(fly_scenario, list(scenarios),
                              key=[f"vtolftc-{tag}-{sc.scenario_id}" for sc in scenarios],
                              pure=False, retries=1)
-        for fut in as_completed(futures):
+        for fut in as_completed(futures, loop=client.loop):
             yield fut.result()
     finally:
         if futures:

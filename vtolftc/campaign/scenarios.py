@@ -1,9 +1,11 @@
 """Expansion of a :class:`~vtolftc.campaign.spec.Spec` into its scenarios.
 
-The order is fixed by the spec (controllers, then fault families and their sets in file order,
-phases, winds, perturbations, seeds, the innermost last), so a spec always expands to the same
-list; ``index`` is the position in it and ``scenario_id`` a short hash of everything that
-defines the flight (stable across machines and Python versions).
+The order is fixed by the spec (fault families and their sets in file order, then phases,
+winds, perturbations, seeds and controllers, the innermost last: the controllers of one flight
+condition are neighbours, so a campaign stopped half-way has compared them on the same
+scenarios), so a spec always expands to the same list; ``index`` is the position in it and
+``scenario_id`` a short hash of everything that defines the flight (stable across machines
+and Python versions).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from typing import Any
 
 from vtolftc.campaign.spec import FaultSet, PerturbationSpec, Spec, SpecError, WindSpec
 
-__all__ = ["CampaignScenario", "expand"]
+__all__ = ["CampaignScenario", "expand", "flight_order"]
 
 
 @dataclass(frozen=True)
@@ -114,8 +116,8 @@ def expand(spec: Spec) -> list[CampaignScenario]:
     out: list[CampaignScenario] = []
     seen: set[str] = set()
     sets = [(fam.name, fs) for fam in spec.families for fs in fam.sets]
-    for ctl, (fam, fs), (ph, t), wind, pert, seed in itertools.product(
-            spec.controllers, sets, spec.phases, spec.winds, spec.perturbations, spec.seeds):
+    for (fam, fs), (ph, t), wind, pert, seed, ctl in itertools.product(
+            sets, spec.phases, spec.winds, spec.perturbations, spec.seeds, spec.controllers):
         values = {"controller": ctl, "family": fam, "phase": ph, "wind": wind.name,
                   "perturbation": pert.name, "seed": seed}
         if _excluded(spec.excludes, values):
@@ -135,3 +137,18 @@ def expand(spec: Spec) -> list[CampaignScenario]:
                         "[[exclude]]): expected at least one controller x fault set x phase "
                         "x wind x perturbation x seed")
     return out
+
+
+def flight_order(scenarios: list[CampaignScenario], n_controllers: int) -> list[CampaignScenario]:
+    """The order scenarios are flown in: flight conditions (the ``n_controllers`` neighbours
+    of the expansion) in a fixed pseudo-random order, each condition's controllers together.
+
+    A campaign stopped half-way has then sampled every family, phase and wind evenly (and
+    compared the controllers on the same conditions); results are stored by ``index``
+    whatever the order, so the order never changes the result file.
+    """
+    def key(sc: CampaignScenario) -> tuple[str, int]:
+        group = sc.index // max(1, n_controllers)
+        return hashlib.sha256(f"order-{group}".encode()).hexdigest(), sc.index
+
+    return sorted(scenarios, key=key)

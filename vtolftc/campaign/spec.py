@@ -350,6 +350,7 @@ def parse_spec(text: str, *, source: str = "<spec>", base_dir: Path | None = Non
     phases: list[tuple[str, float]] = []
     for ph in phase_names:
         at: float
+        raw = ph
         if isinstance(ph, bool):
             at = -1.0
         elif isinstance(ph, int | float):
@@ -366,10 +367,10 @@ def parse_spec(text: str, *, source: str = "<spec>", base_dir: Path | None = Non
             raise r.fail("campaign.phases", ph, "hover, transition, transition+SECONDS, "
                          "cruise or an injection time in s")
         if not (math.isfinite(at) and 0.0 <= at < duration):
-            raise r.fail("campaign.phases", ph, f"an injection time in [0, {duration:g}) s "
+            raise r.fail("campaign.phases", raw, f"an injection time in [0, {duration:g}) s "
                          "(within campaign.duration_s)")
         if any(n == ph for n, _ in phases):
-            raise r.fail("campaign.phases", ph, "each phase once")
+            raise r.fail("campaign.phases", raw, "each phase once")
         phases.append((str(ph), at))
 
     families = [_family(r, f, i, actuator_names) for i, f in enumerate(r.tables(doc, "faults"))]
