@@ -6,11 +6,13 @@ import math
 
 import numpy as np
 import pytest
+
 from vtolftc.airframe.loader import load_airframe
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.model import Perturbation, Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import StateEstimateNoise, StateNoise
 from vtolftc.firmware_sim.vehicle.wind import Gust, WindField
+from vtolftc.rotation import euler_to_quat
 
 
 @pytest.fixture(scope="module")
@@ -22,7 +24,7 @@ def _flying_state(v: Vehicle, speed: float = 12.0) -> np.ndarray:
     x = v.state
     x[2] = -30.0
     x[3] = speed
-    x[6:10] = dyn.euler_to_quat(0.05, 0.08, 0.3)
+    x[6:10] = euler_to_quat(0.05, 0.08, 0.3)
     x[10:13] = (0.1, -0.2, 0.05)
     x[dyn.N_RIGID:] = np.linspace(0.2, 0.6, v.n_actuators)
     return x

@@ -2,9 +2,9 @@
 
 A scenario **survived** when
 
-1. it did not crash (:mod:`vtolftc.metrics`: non-finite state, ground contact in flight after
-   having climbed above 2 m, or roll or pitch beyond 60 deg at any time; a crash ends the
-   run), and
+1. it did not crash (:mod:`vtolftc.telemetry.metrics`: non-finite state, ground contact in
+   flight after having climbed above 2 m, or roll or pitch beyond 60 deg at any time; a
+   crash ends the run), and
 2. at the end of the run the altitude is within ``ALTITUDE_TOLERANCE_M`` = 5 m of its
    reference (the autopilot's altitude setpoint at the last sample), and
 3. roll and pitch, averaged over the last second, are each within ``ATTITUDE_TOLERANCE_DEG``
