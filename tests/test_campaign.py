@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import signal
 import subprocess
@@ -370,7 +371,6 @@ def test_compare_and_gates(small_reference, tmp_path, capsys):
 @pytest.mark.slow
 def test_fly_command_reflies_the_scenario(small_reference, tmp_path):
     """The worst-scenario command re-flies the campaign's very flight (same metrics)."""
-    import json
     import shlex
 
     _, ref = small_reference
@@ -383,3 +383,23 @@ def test_fly_command_reflies_the_scenario(small_reference, tmp_path):
     assert m["max_attitude_excursion_deg"] == row["max_attitude_excursion_deg"]
     assert m["rmse_roll_deg"] == row["rmse_roll_deg"]
     assert m["crashed"] == row["crashed"]
+
+
+@pytest.mark.slow
+def test_report_only_and_partial_folders(small_reference, tmp_path, capsys):
+    spec, ref = small_reference
+    out = tmp_path / "partial"
+    w = PartWriter(out)
+    for r in ref.to_pylist()[:5]:
+        w.add(r)
+    w.close()
+    (out / "campaign.json").write_text(
+        json.dumps({"spec_sha256": load_spec(spec).sha256}), encoding="utf-8")
+    assert run(["campaign", str(spec), "--out", str(out), "--report-only"]) == 0
+    printed = capsys.readouterr().out
+    assert "(partial: 5 of 12 scenarios flown)" in printed
+    assert (out / "report.html").is_file() and (out / "survival_heatmap.png").is_file()
+    assert read_results(out / "results.parquet").num_rows == 5
+    # another spec's folder is refused
+    other = _spec_file(tmp_path, SMALL.replace('name = "small"', 'name = "other"'), "o.toml")
+    assert run(["campaign", str(other), "--out", str(out), "--resume"]) == 2

@@ -65,6 +65,12 @@ def cmd_campaign(args: argparse.Namespace) -> int:
                          f"({meta.get('spec', '?')}); choose another --out")
     done = read_results(out) if out.exists() else None
     n_done = 0 if done is None else done.num_rows
+    if args.report_only:
+        if not n_done:
+            raise _usage(f"--report-only: no results in {out}")
+        print(f"campaign {spec.name}: report of the {n_done} of {len(scenarios)} scenarios "
+              f"flown in {out}")
+        return _finish(spec, write_final(out), out, 0.0, 0, len(scenarios))
     if n_done and not args.resume:
         raise _usage(f"--out {out}: already holds {n_done} results: pass --resume to fly only "
                      "the missing scenarios, or choose another --out")
@@ -99,7 +105,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGTERM, old)
     wall = time.perf_counter() - t0
     table = write_final(out)
-    return _finish(spec, table, out, wall, len(todo))
+    return _finish(spec, table, out, wall, len(todo), len(scenarios))
 
 
 def _cpus() -> int:
@@ -146,20 +152,22 @@ def _chain(first: list[Any], rest: Any) -> Any:
     yield from rest
 
 
-def _finish(spec: Any, table: Any, out: Path, wall: float, n_flown: int) -> int:
+def _finish(spec: Any, table: Any, out: Path, wall: float, n_flown: int, total: int) -> int:
     from vtolftc.campaign.execute import _airframe
     from vtolftc.campaign.report import check_gates, summary_lines, worst, write_report
 
     rows = table.num_rows
     surv = sum(table.column("survived").to_pylist())
     rate = f", {60.0 * n_flown / wall:.1f} scenarios/min" if n_flown and wall > 0 else ""
-    print(f"\n{spec.name}: survived {surv}/{rows}; flew {n_flown} in {wall:.1f} s{rate}")
+    partial = f" (partial: {rows} of {total} scenarios flown)" if rows < total else ""
+    print(f"\n{spec.name}: survived {surv}/{rows}{partial}; flew {n_flown} in {wall:.1f} s{rate}")
     print()
     for line in summary_lines(table):
         print(line)
     failures = check_gates(spec.gates, table)
     report = write_report(out, table, title=f"Campaign {spec.name}",
-                          description=spec.description, airframe=_airframe(spec.airframe_path),
+                          description=spec.description + partial,
+                          airframe=_airframe(spec.airframe_path),
                           gate_failures=failures)
     print("\nworst scenarios (re-fly with the command shown):")
     for r in worst(table, 5):
@@ -208,6 +216,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="continue a campaign in --out: fly only the missing scenarios")
     p.add_argument("--compare", nargs=2, metavar=("A", "B"), default=None,
                    help="print what changed between two result files or folders")
+    p.add_argument("--report-only", action="store_true",
+                   help="fly nothing: summary, gates and report of the results in --out")
     p.add_argument("--batch", type=int, default=8,
                    help="results per Parquet part (written at least every 10 s; default 8)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
