@@ -26,6 +26,7 @@ class UsageError(Exception):
 # ``set_defaults(func=...)``; the functions raise UsageError / RuntimeError as described above.
 # Modules are imported when the parser is built, so keep their top-level imports light.
 _COMMAND_MODULES: tuple[str, ...] = (
+    "vtolftc.cmd_campaign",
     "vtolftc.cmd_dashboard",
     "vtolftc.cmd_fly",
     "vtolftc.cmd_gcs",

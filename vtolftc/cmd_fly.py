@@ -146,19 +146,64 @@ def _fly_one(case: str, controller: str, args: argparse.Namespace, run_dir: Path
     from vtolftc.scenario import paper_scenario, run_scenario
 
     af = load_airframe(getattr(args, "airframe", None))
-    scen = paper_scenario(case, args.duration, airframe=af, extra_faults=extra_faults)
+    scen = paper_scenario(case, args.duration, airframe=af, extra_faults=extra_faults,
+                          window_start_s=getattr(args, "window_start", None))
     _check_controller(controller, args)
-    info = {"seed": 0, "max_deflection_deg": math.degrees(af.surfaces.max_deflection_rad),
+    vopts = _vehicle_options(args)
+    info = {"seed": getattr(args, "noise_seed", 0),
+            "max_deflection_deg": math.degrees(af.surfaces.max_deflection_rad),
+            "vehicle": {k: repr(v) for k, v in vopts.items()},
             "faults": [f.describe() for f in scen.faults],
             "actions": [{"t_s": a.t_s, "kind": a.kind, "label": a.label,
                          "command_id": a.command_id, "params": list(a.params)}
                         for a in scen.actions]}
     observers = default_observers(run_dir, args)
     res = run_scenario(scen, controller, airframe=af, gains_dir=args.gains,
-                       observers=observers, info=info)
+                       observers=observers, info=info, vehicle_options=vopts)
     if getattr(args, "rerun", False):
         _keep_viewer(observers)
     return res
+
+
+def _floats(text: str, n: int, what: str, unit: str) -> tuple[float, ...]:
+    from vtolftc.cli import UsageError
+
+    try:
+        v = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        v = ()
+    if len(v) != n or not all(math.isfinite(x) for x in v):
+        raise UsageError(f"{what} {text!r}: expected {n} comma-separated numbers {unit}")
+    return v
+
+
+def _vehicle_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The physical vehicle and its environment from ``--wind``, ``--gust``, ``--mass-scale``,
+    ``--inertia-scale``, ``--cg-offset``, ``--noise`` and ``--noise-seed`` (as a campaign
+    scenario flies them, see :func:`vtolftc.campaign.execute.vehicle_options`)."""
+    from vtolftc.campaign.execute import vehicle_options
+    from vtolftc.cli import UsageError
+
+    wind = (_floats(args.wind, 3, "--wind", "N,E,D (m/s)")
+            if getattr(args, "wind", None) else (0.0, 0.0, 0.0))
+    gusts = []
+    for g in getattr(args, "gust", None) or []:
+        st, dur, *amp = _floats(g, 5, "--gust", "START_S,DURATION_S,N,E,D (s, s, m/s)")
+        if st < 0 or dur <= 0:
+            raise UsageError(f"--gust {g!r}: expected a start >= 0 s and a duration > 0 s")
+        gusts.append((st, dur, tuple(amp)))
+    ms = getattr(args, "mass_scale", 1.0)
+    js = (_floats(args.inertia_scale, 3, "--inertia-scale", "SX,SY,SZ")
+          if getattr(args, "inertia_scale", None) else (1.0, 1.0, 1.0))
+    cg = (_floats(args.cg_offset, 3, "--cg-offset", "X,Y,Z (m, body FRD)")
+          if getattr(args, "cg_offset", None) else (0.0, 0.0, 0.0))
+    if not (math.isfinite(ms) and 0.5 <= ms <= 2.0) or not all(0.5 <= x <= 2.0 for x in js):
+        raise UsageError(f"--mass-scale {ms:g} / --inertia-scale {js}: expected factors in "
+                         "[0.5, 2]")
+    if not all(abs(x) <= 0.5 for x in cg):
+        raise UsageError(f"--cg-offset {cg}: expected offsets within +-0.5 m")
+    return vehicle_options(wind, gusts, ms, js, cg, getattr(args, "noise", "none"),
+                           getattr(args, "noise_seed", 0))
 
 
 def _check_controller(controller: str, args: argparse.Namespace) -> None:
@@ -348,6 +393,21 @@ def register(sub: Any) -> None:
     p.add_argument("--fault", action="extend", nargs="+", metavar="SPEC",
                    help="extra fault(s) ACTUATOR:KIND[=VALUE][@START_S], e.g. "
                         "rotor_1a:loss=0.5@25 (several allowed)")
+    p.add_argument("--wind", default=None, metavar="N,E,D",
+                   help="steady wind, NED m/s (the velocity of the air), e.g. 0,5,0")
+    p.add_argument("--gust", action="append", default=None, metavar="T,DUR,N,E,D",
+                   help="1 - cosine gust from T s lasting DUR s, peak N,E,D m/s (repeatable)")
+    p.add_argument("--mass-scale", type=float, default=1.0,
+                   help="physical mass / the airframe file's (the autopilot keeps the file's)")
+    p.add_argument("--inertia-scale", default=None, metavar="SX,SY,SZ",
+                   help="physical inertia / the airframe file's, per body axis")
+    p.add_argument("--cg-offset", default=None, metavar="X,Y,Z",
+                   help="CG moved from the airframe file's, body FRD m")
+    p.add_argument("--noise", choices=("none", "typical"), default="none",
+                   help="state-estimate noise fed to the autopilot (default none)")
+    p.add_argument("--noise-seed", type=int, default=0, help="seed of that noise")
+    p.add_argument("--window-start", type=float, default=None, metavar="S",
+                   help="metrics window start, s (default: the transition command, 20 s)")
     p.add_argument("--rerun", action="store_true",
                    help="also show the run live in rerun (a native viewer if there is a "
                         "display, else a web viewer on 127.0.0.1 whose URL is printed)")

@@ -22,7 +22,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -91,6 +91,7 @@ class Scenario:
     actions: tuple[Action, ...]
     description: str = ""
     transition_start_s: float = 20.0
+    window_start_s: float | None = None  # metrics window start; None: transition_start_s
 
     @property
     def faults(self) -> list[Fault]:
@@ -105,12 +106,14 @@ def _cmd(t: float, label: str, cid: int, *params: float) -> Action:
 def paper_scenario(case: int | str = 1, duration_s: float = 40.0, *,
                    airframe: Airframe | None = None, extra_faults: Iterable[Fault] = (),
                    takeoff_alt_m: float = 30.0, arm_s: float = 1.0,
-                   transition_s: float = 20.0) -> Scenario:
+                   transition_s: float = 20.0, window_start_s: float | None = None,
+                   ) -> Scenario:
     """The paper's timeline for fault case ``case`` (0 = nominal, 1, 2), see module docstring.
 
     ``extra_faults`` are added (each injected at its own start time). The takeoff altitude is
     sent as NAV_TAKEOFF param7 AMSL, as PX4 reads it: the vehicle's home altitude
-    (:class:`~vtolftc.firmware_sim.vehicle.sensors.Home`) plus ``takeoff_alt_m``.
+    (:class:`~vtolftc.firmware_sim.vehicle.sensors.Home`) plus ``takeoff_alt_m``. The metrics'
+    window starts at ``window_start_s`` (default: the transition command).
     """
     af = airframe if airframe is not None else load_airframe()
     if not (math.isfinite(duration_s) and duration_s > 0):
@@ -127,7 +130,7 @@ def paper_scenario(case: int | str = 1, duration_s: float = 40.0, *,
     key = str(case).removeprefix("case")
     return Scenario(name=f"case{key}", case=key, duration_s=float(duration_s),
                     actions=tuple(actions), description=case_description(key),
-                    transition_start_s=transition_s)
+                    transition_start_s=transition_s, window_start_s=window_start_s)
 
 
 @dataclass
@@ -152,7 +155,8 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                  observers: Sequence[RunObserver] = (), physics_hz: int = 1000,
                  control_hz: int = 250, stop_on_crash: bool = True,
                  autopilot_setup: Callable[[Autopilot], None] | None = None,
-                 info: dict[str, Any] | None = None) -> RunResult:
+                 info: dict[str, Any] | None = None,
+                 vehicle_options: Mapping[str, Any] | None = None) -> RunResult:
     """Fly ``scenario`` in-process with ``controller``; see the module docstring.
 
     Observers get ``on_start``, every sample, every event and exactly one ``on_finish``
@@ -160,6 +164,11 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
     ``stop_on_crash`` the run ends at the first crashed sample. ``autopilot_setup`` may
     change parameters before the flight. ``RunResult.timing_s`` holds the
     wall time of each part (physics, encode/decode, autopilot, observers).
+    ``vehicle_options`` are passed to :class:`Vehicle` (``perturbation``, ``wind``,
+    ``state_noise``, ``seed``): the physical vehicle and its environment, never the
+    autopilot's airframe (passive FTC). With ``state_noise`` the autopilot is fed the
+    vehicle's noisy :meth:`Vehicle.estimated_state` (and the metrics, computed from what the
+    autopilot flew on, see that too).
     """
     af = airframe if airframe is not None else load_airframe()
     if physics_hz % control_hz:
@@ -169,11 +178,13 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
     ap = Autopilot(af, controller=controller, gains_dir=gains_dir, dt_s=1.0 / control_hz)
     if autopilot_setup is not None:
         autopilot_setup(ap)
-    veh = Vehicle(af, dt_usec=1_000_000 // physics_hz)
+    veh = Vehicle(af, dt_usec=1_000_000 // physics_hz, **dict(vehicle_options or {}))
+    noisy = veh.state_noise is not None
     home = veh.sensor_model.home
     home_lat, home_lon, home_alt = float(home.lat_deg), float(home.lon_deg), float(home.alt_m)
     ap.set_home(home_lat, home_lon, home_alt)
-    acc = MetricsAccumulator(window_start_s=scenario.transition_start_s)
+    acc = MetricsAccumulator(window_start_s=scenario.transition_start_s
+                             if scenario.window_start_s is None else scenario.window_start_s)
     result = RunResult(metrics={})
     obs = list(observers)
 
@@ -218,9 +229,12 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
             t0 = pc()
             x = veh.x
             # views of the state: encode_hil_state only reads them
-            air = float(veh.fm[6])
+            if noisy:
+                xe, air = veh.estimated_state()
+            else:
+                xe, air = x, float(veh.fm[6])
             # views of the state: encode_hil_state only reads them
-            truth_nav = NavState(now, x[6:10], x[10:13], x[0:3], x[3:6], air)
+            truth_nav = NavState(now, xe[6:10], xe[10:13], xe[0:3], xe[3:6], air)
             nav = decode_hil_state(encode_hil_state(truth_nav, home_lat, home_lon, home_alt),
                                    home_lat, home_lon, home_alt)
             t1 = pc()
@@ -263,6 +277,7 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
         m["controller"] = controller
         m["case"] = scenario.case
         m["allocation"] = ap.allocation_stats
+        m["allocation_saturated_share"] = ap.saturated_steps / max(acc.n, 1)
         if result.interrupted:
             m["interrupted"] = True
         result.metrics = m

@@ -243,6 +243,8 @@ class Autopilot:
         self._att = np.zeros(3)
         self._sat_hi = np.zeros(3, dtype=bool)
         self._sat_lo = np.zeros(3, dtype=bool)
+        # control steps whose allocation fell short of a commanded moment (any axis)
+        self.saturated_steps = 0
         self._time_usec = 0
         self._airspeed = 0.0
         self._alt_ref = 0.0
@@ -667,6 +669,8 @@ class Autopilot:
         tol = 0.02 + 0.02 * abs(w2)
         hi_[2] = w2 > g2 + tol
         lo_[2] = w2 < g2 - tol
+        if hi_[0] or lo_[0] or hi_[1] or lo_[1] or hi_[2] or lo_[2]:
+            self.saturated_steps += 1
 
     # ------------------------------------------------------------------------------------
     def status(self) -> AutopilotStatus:

@@ -51,8 +51,11 @@ ALL_PHYSICS = GRAVITY | AERODYNAMICS | GROUND | PROPULSION
 (P_MASS, P_G, P_RHO, P_S, P_B, P_C, P_CL0, P_CLA, P_CLMAX, P_STALL_RND, P_STALL_M, P_CLQ,
  P_CLDE, P_CD0, P_K, P_CYB, P_CYP, P_CYR, P_CYDA, P_CYDR, P_CLB, P_CLR, P_CLDA, P_CLDR,
  P_CM0, P_CMDE, P_CNP, P_CNDA, P_CNDR, P_ALIN, P_ASAT, P_DEFL, P_GK, P_GC, P_GF,
- P_GMU) = range(36)
-N_PARAMS = 36
+ P_GMU, P_ARM_X, P_ARM_Y, P_ARM_Z) = range(39)
+N_PARAMS = 39
+# P_ARM_*: position of the aerodynamic reference point relative to the CG, body FRD (m). Zero
+# for the airframe as designed (the coefficients are about the CG); a perturbed CG (see
+# :func:`perturb`) moves it, and the aerodynamic force then also acts through this arm.
 
 # Derivative table rows.
 T_CLP, T_CMQ, T_CMA, T_CNR, T_CNB = range(5)
@@ -128,6 +131,36 @@ def pack(af: Airframe) -> Packed:
         tab=np.array([d.C_lp, d.C_mq, d.C_malpha, d.C_nr, d.C_nbeta], dtype=float),
         gear=np.array(af.landing_gear.points_m, dtype=float),
     )
+
+
+def perturb(pk: Packed, mass_scale: float = 1.0,
+            inertia_scale: tuple[float, float, float] = (1.0, 1.0, 1.0),
+            cg_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Packed:
+    """A copy of ``pk`` describing the physical vehicle off its design values.
+
+    ``mass_scale`` multiplies the mass; ``inertia_scale`` multiplies the rows and columns of
+    the inertia tensor (``J' = S J S`` with ``S = diag(sqrt(s))``, so the diagonal scales by
+    ``s`` and the products of inertia consistently); ``cg_offset_m`` moves the CG by ``d``
+    (body FRD, m) from the design point: every rotor and landing-gear point moves by ``-d``
+    relative to the CG and the aerodynamic force acts at ``-d`` (``P_ARM_*``). The state's
+    position then tracks the perturbed CG. The identity perturbation returns equal arrays.
+    """
+    s = np.asarray(inertia_scale, dtype=float)
+    d = np.asarray(cg_offset_m, dtype=float)
+    if not (math.isfinite(mass_scale) and mass_scale > 0.0):
+        raise ValueError(f"mass_scale = {mass_scale!r}: expected a positive factor")
+    if s.shape != (3,) or not np.all(np.isfinite(s)) or not np.all(s > 0.0):
+        raise ValueError(f"inertia_scale = {inertia_scale!r}: expected three positive factors")
+    if d.shape != (3,) or not np.all(np.isfinite(d)):
+        raise ValueError(f"cg_offset_m = {cg_offset_m!r}: expected three finite numbers (m)")
+    P = pk.P.copy()
+    P[P_MASS] = pk.P[P_MASS] * mass_scale
+    P[P_ARM_X], P[P_ARM_Y], P[P_ARM_Z] = -d
+    root = np.sqrt(s)
+    J = pk.J * np.outer(root, root) if np.any(s != 1.0) else pk.J.copy()
+    return pk._replace(
+        P=P, J=J, Jinv=np.linalg.inv(J) if np.any(s != 1.0) else pk.Jinv.copy(),
+        rotor_pos=pk.rotor_pos - d, gear=pk.gear - d)
 
 
 # --------------------------------------------------------------------------------------------
@@ -295,9 +328,19 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
                 + k_rate * b * (P[P_CYP] * p + P[P_CYR] * r))
         sa = math.sin(alpha)
         ca = math.cos(alpha)
-        Fx += -drag * ca + lift * sa
+        fax = -drag * ca + lift * sa
+        faz = -drag * sa - lift * ca
+        Fx += fax
         Fy += side
-        Fz += -drag * sa - lift * ca
+        Fz += faz
+        ax_ = P[P_ARM_X]
+        ay_ = P[P_ARM_Y]
+        az_ = P[P_ARM_Z]
+        if ax_ != 0.0 or ay_ != 0.0 or az_ != 0.0:
+            # aerodynamic force through the reference point, off the (perturbed) CG
+            Mx += ay_ * faz - az_ * side
+            My += az_ * fax - ax_ * faz
+            Mz += ax_ * side - ay_ * fax
 
         am = saturate_angle(alpha, P[P_ALIN], P[P_ASAT])
         bm = saturate_angle(beta, P[P_ALIN], P[P_ASAT])

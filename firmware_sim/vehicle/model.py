@@ -4,6 +4,12 @@
 it at 1 kHz (RK4) with the actuator commands held between calls. Simulated time is an integer
 number of microseconds (``time_usec``). Faults become active at the first physics step that
 starts at or after their start time, exactly, whatever the caller's batch size.
+
+The physical vehicle may differ from the airframe file (``perturbation``: mass, inertia, CG
+offset), fly in a :class:`~vtolftc.firmware_sim.vehicle.wind.WindField` (steady wind and
+gusts, evaluated at every physics step) and report a noisy state estimate
+(``state_noise``). None of this reaches the autopilot except through the state it is sent:
+it keeps flying on the nominal airframe (passive FTC).
 """
 
 from __future__ import annotations
@@ -17,7 +23,15 @@ import numpy as np
 from vtolftc.airframe.loader import Airframe, load_airframe
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.faults import Fault, FaultError, FaultKind
-from vtolftc.firmware_sim.vehicle.sensors import Home, SensorModel, SensorNoise, SensorSample
+from vtolftc.firmware_sim.vehicle.sensors import (
+    Home,
+    SensorModel,
+    SensorNoise,
+    SensorSample,
+    StateEstimateNoise,
+    StateNoise,
+)
+from vtolftc.firmware_sim.vehicle.wind import WindField
 from vtolftc.rotation import dcm, quat_to_euler
 
 _F64 = np.dtype(np.float64)
@@ -30,6 +44,22 @@ def _all_finite(a: np.ndarray) -> bool:
         if not np.isfinite(a[i]):
             return False
     return True
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """The physical vehicle off the airframe file: ``mass_scale`` x mass, ``inertia_scale`` x
+    the principal inertias (per body axis), CG moved by ``cg_offset_m`` (body FRD, m); see
+    :func:`vtolftc.firmware_sim.vehicle.dynamics.perturb`."""
+
+    mass_scale: float = 1.0
+    inertia_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    cg_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def is_identity(self) -> bool:
+        return (self.mass_scale == 1.0 and tuple(self.inertia_scale) == (1.0, 1.0, 1.0)
+                and tuple(self.cg_offset_m) == (0.0, 0.0, 0.0))
 
 
 @dataclass(frozen=True)
@@ -58,9 +88,18 @@ class Vehicle:
         home: Home | None = None,
         dt_usec: int = 1000,
         physics: int = dyn.ALL_PHYSICS,
+        perturbation: Perturbation | None = None,
+        wind: WindField | None = None,
+        state_noise: StateNoise | None = None,
     ) -> None:
         self.airframe = airframe if airframe is not None else load_airframe()
         self.packed = dyn.pack(self.airframe)
+        self.perturbation = perturbation
+        if perturbation is not None and not perturbation.is_identity:
+            self.packed = dyn.perturb(self.packed, perturbation.mass_scale,
+                                      tuple(perturbation.inertia_scale),
+                                      tuple(perturbation.cg_offset_m))
+        self.mass_kg = float(self.packed.P[dyn.P_MASS])
         self.n_actuators = self.airframe.n_actuators
         if dt_usec <= 0:
             raise ValueError(f"dt_usec = {dt_usec}: expected a positive step in microseconds")
@@ -79,6 +118,14 @@ class Vehicle:
         self.wind = np.array(wind_ned_m_s, dtype=float)
         if self.wind.shape != (3,) or not np.all(np.isfinite(self.wind)):
             raise ValueError(f"wind_ned_m_s = {wind_ned_m_s!r}: expected three finite numbers")
+        # a wind field replaces the constant wind; gusts make it time-varying
+        self.wind_field = wind
+        self._gusty = wind is not None and bool(wind.gusts)
+        if wind is not None:
+            wind.at(0.0, self.wind)
+        self.state_noise = state_noise
+        self._estimate_noise = (StateEstimateNoise(state_noise, seed)
+                                if state_noise is not None else None)
         self.fm = np.zeros(9)
         self._pending: list[ActiveFault] = []
         self.active_faults: list[ActiveFault] = []
@@ -95,8 +142,8 @@ class Vehicle:
     def rest_height_m(self) -> float:
         """Height of the CG above the ground when resting level on the landing gear (m)."""
         gear = self.airframe.landing_gear
-        load = self.airframe.weight_N / len(gear.points_m)
-        return float(np.max(gear.points_m[:, 2])) - load / gear.stiffness_N_m
+        load = self.mass_kg * self.airframe.gravity_m_s2 / len(gear.points_m)
+        return float(np.max(self.packed.gear[:, 2])) - load / gear.stiffness_N_m
 
     @property
     def state(self) -> np.ndarray:
@@ -213,6 +260,9 @@ class Vehicle:
         remaining = int(n)
         pk = self.packed
         dt = self.dt_usec * 1e-6
+        if self._gusty:
+            self._step_gusty(remaining, dt)
+            return
         if not self._pending and remaining > 0:
             # common case: no fault due, one compiled call for the whole batch
             dyn.step_n(self.x, self.u, self.eff, self.stuck, remaining, dt, pk.P, pk.J, pk.Jinv,
@@ -234,6 +284,31 @@ class Vehicle:
             self.time_usec += batch * self.dt_usec
             remaining -= batch
         self._apply_due_faults()
+
+    def _step_gusty(self, n: int, dt: float) -> None:
+        """``n`` physics steps one at a time, the wind field evaluated at the start of each."""
+        pk = self.packed
+        wf = self.wind_field
+        assert wf is not None
+        for _ in range(n):
+            self._apply_due_faults()
+            wf.at(self.time_usec * 1e-6, self.wind)
+            dyn.step_n(self.x, self.u, self.eff, self.stuck, 1, dt, pk.P, pk.J, pk.Jinv,
+                       pk.rotor_pos, pk.rotor_axis, pk.rotor_torque, pk.rotor_tmax,
+                       pk.rotor_inv_v0, pk.act_tau, pk.act_rate, pk.act_min, pk.act_max,
+                       pk.tab_v, pk.tab, pk.gear, self.wind, self.physics, self.fm)
+            self.time_usec += self.dt_usec
+        self._apply_due_faults()
+        wf.at(self.time_usec * 1e-6, self.wind)
+
+    def estimated_state(self) -> tuple[np.ndarray, float]:
+        """The state as reported to the autopilot: (rigid-body state (13,) or the full state,
+        airspeed m/s). Without ``state_noise`` this is the truth itself (``self.x``, no copy);
+        with it, a noisy copy (see :class:`~vtolftc.firmware_sim.vehicle.sensors.StateNoise`)
+        drawn from the vehicle's seeded generator."""
+        if self._estimate_noise is None:
+            return self.x, float(self.fm[6])
+        return self._estimate_noise.apply(self.x, float(self.fm[6]))
 
     def derivatives(self, state: np.ndarray | None = None,
                     commands: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -261,4 +336,4 @@ class Vehicle:
         R = dcm(self.x[6:10])
         return self.sensor_model.sample(
             self.time_usec, self.x[0:3], self.x[3:6], R, self.x[10:13],
-            self.fm[0:3] / self.airframe.mass_kg, float(self.fm[6]))
+            self.fm[0:3] / self.mass_kg, float(self.fm[6]))

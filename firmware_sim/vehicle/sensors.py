@@ -144,3 +144,65 @@ class SensorModel:
             gps_alt_m=self.home.alt_m - pd,
             gps_vel_ned_m_s=np.asarray(vel_ned, dtype=float) + self._n(n.gps_vel_m_s, 3),
         )
+
+
+@dataclass(frozen=True)
+class StateNoise:
+    """One-sigma white errors of the state estimate the vehicle reports (HIL_STATE_QUATERNION).
+
+    The in-process runner and the HIL link hand the autopilot the vehicle's state as an
+    estimator would: with this noise, the reported attitude is the truth rotated by a small
+    random rotation (``attitude_rad`` per body axis), rates, NED position and velocity and
+    airspeed get additive errors. Levels of :meth:`typical` are those of a small autopilot's
+    EKF output (not of the raw sensors, which it filters).
+    """
+
+    attitude_rad: float = 0.0
+    rate_rad_s: float = 0.0
+    position_m: float = 0.0
+    velocity_m_s: float = 0.0
+    airspeed_m_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("attitude_rad", "rate_rad_s", "position_m", "velocity_m_s",
+                     "airspeed_m_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"StateNoise.{name} = {v!r}: expected a sigma >= 0")
+
+    @classmethod
+    def typical(cls) -> StateNoise:
+        """0.2 deg attitude, 0.004 rad/s rates (the gyro), 0.1 m, 0.05 m/s, 0.3 m/s airspeed."""
+        return cls(attitude_rad=math.radians(0.2), rate_rad_s=0.004, position_m=0.1,
+                   velocity_m_s=0.05, airspeed_m_s=0.3)
+
+
+class StateEstimateNoise:
+    """Seeded generator of noisy state estimates (see :class:`StateNoise`)."""
+
+    def __init__(self, noise: StateNoise, seed: int = 0) -> None:
+        self.noise = noise
+        self.rng = np.random.default_rng(seed)
+
+    def apply(self, x: np.ndarray, airspeed_m_s: float) -> tuple[np.ndarray, float]:
+        """A noisy copy of the rigid-body part of ``x`` (13,) and of the airspeed [m/s].
+
+        Draws 13 normal numbers per call, always in the same order (position, velocity,
+        attitude, rates, airspeed), so the sequence depends only on the seed and the number
+        of calls.
+        """
+        n = self.noise
+        z = self.rng.standard_normal(13)
+        out = np.array(x[:13], dtype=float)
+        out[0:3] += n.position_m * z[0:3]
+        out[3:6] += n.velocity_m_s * z[3:6]
+        # small body-axis rotation: q_est = q (x) [1, dtheta / 2], renormalised
+        d = 0.5 * n.attitude_rad * z[6:9]
+        w, a, b, c = out[6:10]
+        q = np.array([w - a * d[0] - b * d[1] - c * d[2],
+                      a + w * d[0] + b * d[2] - c * d[1],
+                      b + w * d[1] + c * d[0] - a * d[2],
+                      c + w * d[2] + a * d[1] - b * d[0]])
+        out[6:10] = q / np.linalg.norm(q)
+        out[10:13] += n.rate_rad_s * z[9:12]
+        return out, max(0.0, float(airspeed_m_s) + n.airspeed_m_s * float(z[12]))

@@ -11,6 +11,8 @@ commanded):
 - ``rmse_roll_deg``, ``rmse_pitch_deg``, ``rmse_yaw_deg``: RMSE of the attitude tracking error
   ``reference - measured`` (ZYX Euler; yaw error wrapped to (-180, 180] deg);
 - ``max_abs_{roll,pitch,yaw}_error_deg``: largest absolute tracking error;
+- ``max_attitude_excursion_deg``: largest ``max(|roll|, |pitch|)`` (away from level);
+- ``max_altitude_lost_m``: largest ``altitude_ref - altitude`` (0 if never below);
 
 and over the whole run:
 
@@ -80,6 +82,8 @@ class MetricsAccumulator:
         self.n_win = 0
         self._se = [0.0, 0.0, 0.0, 0.0]          # altitude, roll, pitch, yaw squared errors
         self._max = [0.0, 0.0, 0.0]
+        self._max_tilt = 0.0
+        self._max_lost = 0.0
         self.transition_start_s: float | None = None
         self.transition_complete_s: float | None = None
         self.quad_chute = False
@@ -143,6 +147,11 @@ class MetricsAccumulator:
             a = abs(e2)
             if a > mx[2]:
                 mx[2] = a
+            a = abs(roll) if abs(roll) > abs(pitch) else abs(pitch)
+            if a > self._max_tilt:
+                self._max_tilt = a
+            if e_h > self._max_lost:
+                self._max_lost = e_h
         self._last = (h, e_h, float(nav.airspeed_m_s))
         tail = self._tail
         tail.append((t, roll * _RAD_TO_DEG, pitch * _RAD_TO_DEG, yaw * _RAD_TO_DEG))
@@ -169,6 +178,8 @@ class MetricsAccumulator:
             "max_abs_roll_error_deg": self._max[0],
             "max_abs_pitch_error_deg": self._max[1],
             "max_abs_yaw_error_deg": self._max[2],
+            "max_attitude_excursion_deg": self._max_tilt * _RAD_TO_DEG,
+            "max_altitude_lost_m": self._max_lost,
             "transition_start_s": self.transition_start_s,
             "transition_complete_s": self.transition_complete_s,
             "transition_duration_s": dur,

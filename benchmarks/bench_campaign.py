@@ -1,0 +1,142 @@
+"""Campaign throughput: scenarios per minute on this machine's cores, the campaign's own
+overhead per scenario, and a Dask LocalCluster next to the local process pool.
+
+The scenarios are 60 s flights of the paper's timeline that all fly to the end (a 10 % loss
+of one lift rotor at t = 40 s in cruise, each rotor, the three controllers: up to 24
+scenarios, 12 by default), so each one costs a full 60 s of simulation. Figures printed:
+
+- the in-process run alone (``run_scenario``): wall time and real-time factor per scenario;
+- the campaign's fixed costs: ``vtolftc`` start-up (imports), airframe load, autopilot and
+  gain-file construction, first-flight compilation (numba cache load), Parquet part writes;
+- the local pool (``--jobs N``) and a Dask ``LocalCluster`` (N workers, loopback): wall time,
+  scenarios per minute, and overhead = (wall x workers / scenarios - mean run time) / mean
+  run time, i.e. what the campaign adds to a scenario.
+
+Targets (issue 10): >= 100 scenarios/min on 2 cores, overhead < 5 % of a scenario.
+
+    .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+SPEC = """
+[campaign]
+name = "bench"
+duration_s = 60.0
+controllers = ["gs-shif", "shif", "lqr"]
+phases = ["cruise"]
+[[faults]]
+family = "rotor-loss-10"
+generate = "each"
+actuators = ["lift_rotors"]
+kinds = ["loss"]
+magnitudes = [0.1]
+"""
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--scenarios", type=int, default=12, help="at most 24")
+    ap.add_argument("--no-dask", action="store_true")
+    args = ap.parse_args()
+
+    from vtolftc.campaign.execute import fly_scenario, run_dask, run_local
+    from vtolftc.campaign.results import PartWriter
+    from vtolftc.campaign.scenarios import expand
+    from vtolftc.campaign.spec import parse_spec
+
+    scen = expand(parse_spec(SPEC))[: args.scenarios]
+    n = len(scen)
+    print(f"load average at start: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; "
+          f"{n} scenarios of 60 s")
+
+    # fixed costs
+    t = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "import vtolftc.cli; vtolftc.cli.build_parser()"],
+                   check=True)
+    t_start = time.perf_counter() - t
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
+
+    t = time.perf_counter()
+    af = load_airframe()
+    t_af = time.perf_counter() - t
+    t = time.perf_counter()
+    for ctl in ("gs-shif", "shif", "lqr"):
+        Autopilot(af, controller=ctl)
+    t_ap = (time.perf_counter() - t) / 3
+    t = time.perf_counter()
+    first = fly_scenario(scen[0])
+    t_first = time.perf_counter() - t
+    t_compile = t_first - first["run_wall_time_s"]
+
+    # the run alone, in this process (warm)
+    rows = [fly_scenario(sc) for sc in scen[: min(n, 3)]]
+    run_s = statistics.mean(r["run_wall_time_s"] for r in rows)
+    task_s = statistics.mean(r["wall_time_s"] for r in rows)
+    with tempfile.TemporaryDirectory() as d:
+        w = PartWriter(Path(d), batch=8)
+        t = time.perf_counter()
+        for _ in range(3):
+            for r in rows:
+                w.add(r)
+            w.flush()
+        t_write = (time.perf_counter() - t) / (3 * len(rows))
+    print(f"\nin-process run (warm, mean of {len(rows)}): {run_s:.2f} s per 60 s scenario "
+          f"= {60.0 / run_s:.1f}x real time; task incl. set-up {task_s:.2f} s")
+    print(f"fixed costs: vtolftc start-up {t_start:.2f} s (once per campaign), airframe load "
+          f"{t_af * 1e3:.1f} ms (once per worker), autopilot + gains {t_ap * 1e3:.1f} ms per "
+          f"scenario, first flight compile/cache load {t_compile:.2f} s (once per worker), "
+          f"Parquet write {t_write * 1e3:.2f} ms per row")
+
+    def report(label: str, wall: float, workers: int, got: list[dict]) -> None:
+        mean_run = statistics.mean(r["run_wall_time_s"] for r in got)
+        per = wall * workers / len(got)
+        print(f"{label}: {len(got)} scenarios in {wall:.1f} s = {60.0 * len(got) / wall:.1f} "
+              f"scenarios/min; per scenario {per:.2f} s of a worker vs {mean_run:.2f} s of "
+              f"flight -> overhead {100 * (per - mean_run) / mean_run:+.1f} % "
+              f"(target >= 100 scenarios/min, < 5 %)")
+
+    with tempfile.TemporaryDirectory() as d:
+        t = time.perf_counter()
+        w = PartWriter(Path(d))
+        got = []
+        for r in run_local(scen, args.jobs):
+            w.add(r)
+            got.append(r)
+        w.close()
+        report(f"local pool ({args.jobs} processes, start-up included)",
+               time.perf_counter() - t, args.jobs, got)
+
+    if not args.no_dask:
+        from distributed import LocalCluster
+
+        t0 = time.perf_counter()
+        with LocalCluster(n_workers=args.jobs, threads_per_worker=1, processes=True,
+                          host="127.0.0.1", dashboard_address=None) as cluster:
+            t_cluster = time.perf_counter() - t0
+            with tempfile.TemporaryDirectory() as d:
+                t = time.perf_counter()
+                w = PartWriter(Path(d))
+                got = []
+                for r in run_dask(scen, cluster.scheduler_address, tag="bench"):
+                    w.add(r)
+                    got.append(r)
+                w.close()
+                report(f"Dask LocalCluster ({args.jobs} workers; cluster start {t_cluster:.1f} s "
+                       "not included)", time.perf_counter() - t, args.jobs, got)
+    print(f"load average at end: {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
