@@ -100,6 +100,7 @@ class Wing:
 
     @property
     def aspect_ratio(self) -> float:
+        """Wing aspect ratio b^2 / S [-]."""
         return self.span_m**2 / self.area_m2
 
     @property
@@ -140,6 +141,9 @@ class Surfaces:
 
 @dataclass(frozen=True)
 class LandingGear:
+    """Ground contact: spring-damper points in body FRD [m] with stiffness [N/m] and
+    damping [N s/m] per point."""
+
     points_m: np.ndarray  # (n, 3) body FRD
     stiffness_N_m: float
     damping_N_s_m: float
@@ -169,6 +173,7 @@ class Airframe:
 
     @property
     def weight_N(self) -> float:
+        """Weight m g [N]."""
         return self.mass_kg * self.gravity_m_s2
 
     @property
@@ -178,6 +183,7 @@ class Airframe:
 
     @property
     def n_actuators(self) -> int:
+        """Number of actuators (lift rotors, pushers, surfaces) in the command order."""
         return len(self.actuator_names)
 
     def actuator_index(self, name: str) -> int:

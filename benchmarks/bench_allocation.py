@@ -23,6 +23,7 @@ import argparse
 import time
 
 import numpy as np
+
 from vtolftc.firmware_sim.autopilot.allocation import PseudoInverseAllocator, QPAllocator
 
 N_U = 15

@@ -20,10 +20,10 @@ import tempfile
 import time
 
 import numpy as np
-from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 
-from vtolftc.runfolder import RunFolderWriter
+from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 from vtolftc.scenario import paper_scenario, run_scenario
+from vtolftc.telemetry.runfolder import RunFolderWriter
 
 
 class _Timed:

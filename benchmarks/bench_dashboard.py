@@ -38,7 +38,8 @@ def _free_port(kind: int) -> int:
 
 def bench_recorder(tmp: Path, repeats: int = 3) -> dict[str, Any]:
     from test_recording import _sample
-    from vtolftc.dashboard.recording import RerunRecorder
+
+    from vtolftc.telemetry.recording import RerunRecorder
 
     out: dict[str, Any] = {}
     for truth in (True, False):
@@ -59,9 +60,8 @@ def bench_recorder(tmp: Path, repeats: int = 3) -> dict[str, Any]:
 
 def bench_case_run(tmp: Path) -> dict[str, Any]:
     from vtolftc.airframe.loader import load_airframe
-    from vtolftc.dashboard.recording import RerunRecorder
-
     from vtolftc.scenario import paper_scenario, run_scenario
+    from vtolftc.telemetry.recording import RerunRecorder
 
     af = load_airframe()
     scen = paper_scenario(1, 40.0, airframe=af)
@@ -89,7 +89,6 @@ class _Null:
 
 def _sitl_once(tmp: Path, name: str, dashboard: bool, browser: bool) -> dict[str, Any]:
     from vtolftc.airframe.loader import load_airframe
-
     from vtolftc.scenario import paper_scenario
     from vtolftc.sitl import SitlConfig, SitlRun
 
@@ -110,7 +109,7 @@ def _sitl_once(tmp: Path, name: str, dashboard: bool, browser: bool) -> dict[str
                                  port=_free_port(socket.SOCK_STREAM), rate_hz=10.0, airframe=af)
             run.start()
             if browser and dash is not None:
-                from vtolftc.dashboard.browser import DashboardPage
+                from support.browser import DashboardPage
 
                 page = DashboardPage(dash.page_url)
                 page.wait(lambda s: s["link"] == "ok", 30, "the link")
@@ -137,8 +136,9 @@ def _sitl_once(tmp: Path, name: str, dashboard: bool, browser: bool) -> dict[str
 
 def bench_browser_fake(tmp: Path, seconds: float = 10.0) -> dict[str, Any]:
     """Update rate in the browser with a light (kinematic) autopilot: the page's own limit."""
-    from vtolftc.dashboard.browser import DashboardPage
-    from vtolftc.dashboard.fake_autopilot import FakeAutopilot
+    from support.browser import DashboardPage
+    from support.fake_autopilot import FakeAutopilot
+
     from vtolftc.dashboard.web import Dashboard
 
     udp = _free_port(socket.SOCK_DGRAM)
@@ -165,7 +165,7 @@ def main() -> int:
     ap.add_argument("--skip-browser", action="store_true")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
-    from vtolftc.dashboard.browser import find_chromedriver, find_chromium
+    from support.browser import find_chromedriver, find_chromium
 
     browser = not args.skip_browser and find_chromium() and find_chromedriver()
     results: dict[str, Any] = {}

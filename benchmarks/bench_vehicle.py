@@ -15,6 +15,7 @@ import platform
 import time
 
 import numpy as np
+
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.trim import trim_level_flight
 

@@ -30,40 +30,17 @@ from typing import Any
 
 import numpy as np
 
+from vtolftc.rotation import euler_to_quat, quat_mul
+
 __all__ = [
     "CommandFeedback",
     "DashboardModel",
     "DashboardView",
     "commands_html",
-    "euler_to_quaternion",
     "ned_to_display",
 ]
 
 _Q_FLIP = np.array([0.0, 1.0, 0.0, 0.0])      # 180 deg about x (w, x, y, z)
-
-
-def euler_to_quaternion(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """Quaternion (w, x, y, z) rotating body FRD into NED for ZYX Euler angles (rad)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array([
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    ])
-
-
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array([
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-    ])
 
 
 def ned_to_display(p: Sequence[float] | np.ndarray) -> np.ndarray:
@@ -172,15 +149,23 @@ def commands_html(commands: Sequence[CommandFeedback]) -> str:
 class DashboardModel:
     """Turns snapshots into :class:`DashboardView` objects and keeps command feedback.
 
-    Args:
-        actuator_names: the vehicle's actuators in output order (ACTUATOR_OUTPUT_STATUS order).
-        rotor_grid: lift-rotor names laid out as seen from above (see
-            :func:`vtolftc.dashboard.geometry.rotor_grid`).
-        url: the ground-station link URL (for messages).
-        history_s: length of the time traces (s of autopilot time).
-        stale_after_s, lost_after_s: heartbeat ages for the link states.
-        max_path_points: the path keeps at most this many points (older ones are thinned).
-        path_step_m: a new path point is added when the aircraft moved this far.
+    Parameters
+    ----------
+    actuator_names
+        the vehicle's actuators in output order (ACTUATOR_OUTPUT_STATUS order).
+    rotor_grid
+        lift-rotor names laid out as seen from above (see
+        :func:`vtolftc.telemetry.geometry.rotor_grid`).
+    url
+        the ground-station link URL (for messages).
+    history_s
+        length of the time traces (s of autopilot time).
+    stale_after_s, lost_after_s
+        heartbeat ages for the link states.
+    max_path_points
+        the path keeps at most this many points (older ones are thinned).
+    path_step_m
+        a new path point is added when the aircraft moved this far.
     """
 
     def __init__(self, actuator_names: Sequence[str], rotor_grid: Sequence[Sequence[str | None]],
@@ -313,7 +298,7 @@ class DashboardModel:
             path_changed = True
             if len(self._path) > self.max_path_points:
                 self._path = self._path[::2]
-        q = _qmul(_Q_FLIP, euler_to_quaternion(snap.roll, snap.pitch, snap.yaw))
+        q = quat_mul(_Q_FLIP, euler_to_quat(snap.roll, snap.pitch, snap.yaw))
         outs = list(getattr(snap, "actuator_outputs", []) or [])
         acts: dict[str, float | None] = {
             n: (float(outs[i]) if i < len(outs) and math.isfinite(outs[i]) else None)

@@ -31,8 +31,9 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from vtolftc.dashboard.geometry import aircraft_geometry, rotor_grid
+
 from vtolftc.dashboard.model import DashboardModel, DashboardView
+from vtolftc.telemetry.geometry import aircraft_geometry, rotor_grid
 
 __all__ = ["FAULT_GROUPS", "Dashboard"]
 
@@ -64,18 +65,28 @@ def _quat_from_z_to(axis: np.ndarray) -> tuple[float, float, float, float]:
 class Dashboard:
     """The web dashboard (see the module docstring).
 
-    Args:
-        url: the ground-station link URL (where the autopilot sends its GCS stream).
-        host, port: where the page is served (127.0.0.1 unless told otherwise).
-        rate_hz: page updates per second (status, pose, actuator bars).
-        plot_hz: trace (uPlot) updates per second, at most ``rate_hz``.
-        airframe: the airframe (default: the shipped DS-1) for geometry and actuator names.
-        ground_station: an already open ground station to use instead of opening ``url``
-            (it is not closed by :meth:`close`).
-        allow_remote: allow a non-loopback address in ``url`` (autopilot on another host).
+    Parameters
+    ----------
+    url
+        the ground-station link URL (where the autopilot sends its GCS stream).
+    host, port
+        where the page is served (127.0.0.1 unless told otherwise).
+    rate_hz
+        page updates per second (status, pose, actuator bars).
+    plot_hz
+        trace (uPlot) updates per second, at most ``rate_hz``.
+    airframe
+        the airframe (default: the shipped DS-1) for geometry and actuator names.
+    ground_station
+        an already open ground station to use instead of opening ``url``
+        (it is not closed by :meth:`close`).
+    allow_remote
+        allow a non-loopback address in ``url`` (autopilot on another host).
 
-    Raises:
-        RuntimeError: the ground-station link or the web port cannot be opened.
+    Raises
+    ------
+    RuntimeError
+        the ground-station link or the web port cannot be opened.
     """
 
     def __init__(self, url: str = "udp-server://127.0.0.1:14550", *, host: str = "127.0.0.1",
@@ -83,6 +94,7 @@ class Dashboard:
                  ground_station: Any = None, plot_hz: float = 4.0,
                  verbose: bool = False, allow_remote: bool = False) -> None:
         import viser
+
         from vtolftc.gcs.client import GcsError, GroundStation
 
         if airframe is None:
@@ -131,6 +143,7 @@ class Dashboard:
 
     @property
     def page_url(self) -> str:
+        """The page's URL (``http://HOST:PORT/``)."""
         return f"http://{self.host}:{self.port}/"
 
     # -- scene ---------------------------------------------------------------------------

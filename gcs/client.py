@@ -34,6 +34,7 @@ from typing import Any
 
 from vtolftc.gcs.actuators import ActuatorTable, default_table
 from vtolftc.protocols import SigningConfig, dialect, open_link
+from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.px4 import (
     MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
     MAV_MODE_FLAG_SAFETY_ARMED,
@@ -59,20 +60,27 @@ __all__ = [
     "result_name",
 ]
 
-CMD_NAV_TAKEOFF = 22
-CMD_NAV_LAND = 21
-CMD_DO_SET_MODE = 176
-CMD_ARM_DISARM = 400
-CMD_INJECT_FAILURE = 420
-CMD_DO_VTOL_TRANSITION = 3000
-CMD_INJECT_PARTIAL_LOSS = 59900
-ARM_FORCE_MAGIC = 21196.0
+CMD_NAV_TAKEOFF = mav.MAV_CMD_NAV_TAKEOFF
+CMD_NAV_LAND = mav.MAV_CMD_NAV_LAND
+CMD_DO_SET_MODE = mav.MAV_CMD_DO_SET_MODE
+CMD_ARM_DISARM = mav.MAV_CMD_COMPONENT_ARM_DISARM
+CMD_INJECT_FAILURE = mav.MAV_CMD_INJECT_FAILURE
+CMD_DO_VTOL_TRANSITION = mav.MAV_CMD_DO_VTOL_TRANSITION
+CMD_INJECT_PARTIAL_LOSS = mav.MAV_CMD_INJECT_PARTIAL_LOSS
+ARM_FORCE_MAGIC = 21196.0  # PX4's force-arm/disarm magic in param2 (not a MAVLink enum)
 
-FAILURE_TYPE = {"ok": 0, "off": 1, "stuck": 2}
-VTOL_STATE_NAMES = {0: "UNDEFINED", 1: "TRANSITION_TO_FW", 2: "TRANSITION_TO_MC", 3: "MC",
-                    4: "FW"}
-LANDED_STATE_NAMES = {0: "UNDEFINED", 1: "ON_GROUND", 2: "IN_AIR", 3: "TAKEOFF", 4: "LANDING"}
-_RESULT_IN_PROGRESS = 5
+FAILURE_TYPE = {"ok": mav.FAILURE_TYPE_OK, "off": mav.FAILURE_TYPE_OFF,
+                "stuck": mav.FAILURE_TYPE_STUCK}
+VTOL_STATE_NAMES = {mav.MAV_VTOL_STATE_UNDEFINED: "UNDEFINED",
+                    mav.MAV_VTOL_STATE_TRANSITION_TO_FW: "TRANSITION_TO_FW",
+                    mav.MAV_VTOL_STATE_TRANSITION_TO_MC: "TRANSITION_TO_MC",
+                    mav.MAV_VTOL_STATE_MC: "MC", mav.MAV_VTOL_STATE_FW: "FW"}
+LANDED_STATE_NAMES = {mav.MAV_LANDED_STATE_UNDEFINED: "UNDEFINED",
+                      mav.MAV_LANDED_STATE_ON_GROUND: "ON_GROUND",
+                      mav.MAV_LANDED_STATE_IN_AIR: "IN_AIR",
+                      mav.MAV_LANDED_STATE_TAKEOFF: "TAKEOFF",
+                      mav.MAV_LANDED_STATE_LANDING: "LANDING"}
+_RESULT_IN_PROGRESS = mav.MAV_RESULT_IN_PROGRESS
 _HEARTBEAT_LOST_S = 3.0
 
 
@@ -345,7 +353,7 @@ class GroundStation:
 
     def transition(self, to: str) -> CommandOutcome:
         """DO_VTOL_TRANSITION to ``"fw"`` (fixed wing, MAV_VTOL_STATE_FW 4) or ``"mc"`` (3)."""
-        states = {"fw": 4.0, "mc": 3.0}
+        states = {"fw": float(mav.MAV_VTOL_STATE_FW), "mc": float(mav.MAV_VTOL_STATE_MC)}
         key = str(to).strip().lower()
         if key not in states:
             raise GcsError(f"transition target {to!r}: expected 'fw' or 'mc'")

@@ -83,6 +83,7 @@ class ActuatorTable:
         return names[instance - 1]
 
     def groups(self) -> dict[str, tuple[str, ...]]:
+        """Named actuator groups (``lift_rotors``, ``pushers``, surfaces ...) -> actuator names."""
         g = dict(GROUPS)
         g["lift_rotors"] = tuple(n for n in self.motors if n.startswith("rotor_"))
         g["pushers"] = tuple(n for n in self.motors if n.startswith("pusher_"))

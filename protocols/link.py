@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import collections
 import time
-from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, fields
 from types import TracebackType
@@ -46,6 +45,7 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from vtolftc.protocols.mavlink import SigningConfig, dialect, make_codec
+from vtolftc.protocols.transport import LinkUrl, Transport
 
 __all__ = [
     "Link",
@@ -59,43 +59,6 @@ __all__ = [
 _HEADER_LEN_V1_PLUS_CRC = 8  # parser's "expected length" reset value (generated code: V1 + 2)
 _BAD_PREFIX = "Bad prefix"
 _BAD_SIGNATURE = "Invalid signature"
-
-
-class Transport(ABC):
-    """Moves whole datagrams; knows nothing about MAVLink. Subclasses: UDP, zenoh."""
-
-    kind: str = "?"
-
-    @abstractmethod
-    def send_bytes(self, data: bytes) -> bool:
-        """Hand one datagram to the network. False if there is nowhere to send it (dropped)."""
-
-    @abstractmethod
-    def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
-        """Wait up to ``timeout_s`` (None = forever, 0 = poll) for at least one datagram, then
-        return every datagram already available (bounded batch); ``[]`` on timeout."""
-
-    @abstractmethod
-    def ready(self) -> bool:
-        """True if a datagram sent now has a destination (peer known / subscriber matched)."""
-
-    @abstractmethod
-    def close(self) -> None:
-        """Release sockets / sessions. Idempotent."""
-
-    @property
-    def local_address(self) -> tuple[str, int] | None:
-        """Bound address for socket transports, None otherwise."""
-        return None
-
-    @property
-    def overflow_drops(self) -> int:
-        """Datagrams dropped by the transport's own receive queue (if it has one)."""
-        return 0
-
-    def describe(self) -> str:
-        """Human-readable endpoint description."""
-        return self.kind
 
 
 @dataclass
@@ -400,21 +363,6 @@ class Link:
 # ------------------------------------------------------------------------------------------
 # URLs
 # ------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class LinkUrl:
-    """A parsed link URL (see the module docstring for the scheme)."""
-
-    scheme: str
-    host: str = ""
-    port: int = 0
-    vehicle: str = ""
-    link: str = ""
-    direction: str = ""
-    listen: tuple[str, ...] = ()
-    connect: tuple[str, ...] = ()
-    mode: str = "peer"
-
-
 _SCHEMES = ("udp-server", "udp-client", "zenoh")
 
 

@@ -66,8 +66,10 @@ def mode_name(custom: int) -> str:
 def mode_from_name(name: str) -> tuple[int, int]:
     """(main, sub) of a PX4 mode name such as ``"AUTO.LOITER"`` or ``"POSCTL"``.
 
-    Raises:
-        ValueError: unknown name (the message lists the known ones).
+    Raises
+    ------
+    ValueError
+        unknown name (the message lists the known ones).
     """
     text = name.strip().upper()
     main_txt, _, sub_txt = text.partition(".")

@@ -16,8 +16,8 @@ import contextlib
 import select
 import socket
 
-from vtolftc.protocols.link import Transport
 from vtolftc.protocols.netutil import require_loopback, resolve_host
+from vtolftc.protocols.transport import Transport
 
 __all__ = ["MAX_BATCH", "UdpClientTransport", "UdpServerTransport"]
 

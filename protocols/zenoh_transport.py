@@ -26,8 +26,8 @@ import re
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from vtolftc.protocols.link import LinkUrl, Transport
 from vtolftc.protocols.netutil import require_loopback
+from vtolftc.protocols.transport import LinkUrl, Transport
 
 __all__ = [
     "DIRECTIONS",
@@ -82,9 +82,11 @@ def zenoh_config(
 ) -> Any:
     """Build a ``zenoh.Config`` with explicit endpoints only (no multicast, no gossip, no shm).
 
-    Raises:
-        ValueError: bad endpoint, non-loopback endpoint without ``allow_remote``, no endpoint
-            at all, or a mode other than peer/client.
+    Raises
+    ------
+    ValueError
+        bad endpoint, non-loopback endpoint without ``allow_remote``, no endpoint
+        at all, or a mode other than peer/client.
     """
     import zenoh
 
@@ -171,17 +173,27 @@ def parse_zenoh_url(url: str) -> LinkUrl:
 class ZenohTransport(Transport):
     """Publishes on ``vtolftc/<vehicle>/<link>/<direction>``, subscribes to the opposite one.
 
-    Args:
-        vehicle, link: key-expression chunks ([A-Za-z0-9_-]+).
-        direction: ``up`` or ``down``, the direction this end publishes.
-        listen, connect: zenoh endpoints (loopback unless ``allow_remote``).
-        mode: ``peer`` (embedded, default) or ``client`` (through a router).
-        allow_remote: permit non-loopback endpoints.
-        queue_max: received samples kept before new ones are dropped (counted).
+    Parameters
+    ----------
+    vehicle, link
+        key-expression chunks ([A-Za-z0-9_-]+).
+    direction
+        ``up`` or ``down``, the direction this end publishes.
+    listen, connect
+        zenoh endpoints (loopback unless ``allow_remote``).
+    mode
+        ``peer`` (embedded, default) or ``client`` (through a router).
+    allow_remote
+        permit non-loopback endpoints.
+    queue_max
+        received samples kept before new ones are dropped (counted).
 
-    Raises:
-        ValueError: bad names or endpoints.
-        OSError: the session could not be opened (e.g. listen port in use).
+    Raises
+    ------
+    ValueError
+        bad names or endpoints.
+    OSError
+        the session could not be opened (e.g. listen port in use).
     """
 
     kind = "zenoh"

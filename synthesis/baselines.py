@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import control as ct
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.airframe.loader import Airframe
 from vtolftc.synthesis.models import AXES, Axis, axis_coefficients
 

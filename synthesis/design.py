@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.airframe.loader import Airframe
 from vtolftc.synthesis.hinfnorm import hinf_norm
 from vtolftc.synthesis.loops import (

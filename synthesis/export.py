@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from vtolftc.airframe.loader import Airframe
 from vtolftc.synthesis.loops import PARAM_NAMES
 from vtolftc.synthesis.models import AXES

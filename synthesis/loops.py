@@ -34,6 +34,7 @@ from typing import Any
 import control as ct
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.synthesis.hinfnorm import StateSpaceData, as_state_space
 
 __all__ = [

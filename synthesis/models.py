@@ -22,6 +22,7 @@ from typing import Literal
 
 import control as ct
 import numpy as np
+
 from vtolftc.airframe.loader import Airframe
 
 Axis = Literal["roll", "pitch", "yaw"]

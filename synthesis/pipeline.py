@@ -16,22 +16,21 @@ import signal
 import time
 from collections.abc import Callable
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from vtolftc.airframe.loader import Airframe
-from vtolftc.synthesis.baselines import LQR_Q, LQR_R, LqrAxis, lqr_design
+from vtolftc.synthesis.baselines import LQR_Q, LQR_R, lqr_design
 from vtolftc.synthesis.design import (
     A_SENSITIVITY,
     OMEGA_A_RAD_S,
     R_MAX_RAD,
     TABLE2,
-    AxisDesign,
     run_designs,
 )
 from vtolftc.synthesis.export import lqr_document, schedule_document, write_json
 from vtolftc.synthesis.models import AXES, Axis, attitude_model
+from vtolftc.synthesis.result import SynthesisResult
 from vtolftc.synthesis.robustness import AxisRobustness, analyse
 from vtolftc.synthesis.uncertainty import GAMMA_RANGE, PAPER_DESIGN_POINTS, DesignPoint
 
@@ -40,29 +39,6 @@ __all__ = ["METHODS", "SynthesisResult", "run_synthesis"]
 #: ``paper``: the paper's design as published (table 2 weights, healthy nominal at the
 #: nominal airspeed, six points); ``robust``: :mod:`vtolftc.synthesis.robust`.
 METHODS: tuple[str, ...] = ("robust", "paper")
-
-
-@dataclass
-class SynthesisResult:
-    """Everything the synthesis produced (in memory), plus per-stage wall times [s]."""
-
-    airframe: Airframe
-    points: tuple[DesignPoint, ...]
-    gs: dict[Axis, list[AxisDesign]]
-    shif: dict[Axis, AxisDesign]
-    lqr: dict[Axis, LqrAxis]
-    mu_gs: dict[Axis, list[AxisRobustness]] = field(default_factory=dict)
-    mu_shif: dict[Axis, list[AxisRobustness]] = field(default_factory=dict)
-    times: dict[str, float] = field(default_factory=dict)
-    files: dict[str, Path] = field(default_factory=dict)
-    settings: dict[str, Any] = field(default_factory=dict)
-    method: str = "paper"
-    #: robust method: loop margins (``LoopMargins``) per axis and point, GS-SHIF and SHIF
-    margins_gs: dict[Axis, list[Any]] = field(default_factory=dict)
-    margins_shif: dict[Axis, list[Any]] = field(default_factory=dict)
-
-    def nominal_stable(self) -> dict[Axis, list[bool]]:
-        return {ax: [d.stable for d in self.gs[ax]] for ax in AXES}
 
 
 def _mu_job(args: tuple[Any, ...]) -> AxisRobustness:

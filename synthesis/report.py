@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
 from vtolftc.synthesis.export import atomic_write_text
 from vtolftc.synthesis.hinfnorm import frequency_response
 from vtolftc.synthesis.loops import PARAM_NAMES, rate_controller
@@ -18,7 +19,7 @@ from vtolftc.synthesis.models import AXES, Axis, attitude_model
 from vtolftc.synthesis.uncertainty import GAMMA_RANGE, relative_error
 
 if TYPE_CHECKING:
-    from vtolftc.synthesis.pipeline import SynthesisResult
+    from vtolftc.synthesis.result import SynthesisResult
 
 __all__ = ["PAPER_TABLE3", "crossovers", "write_report"]
 

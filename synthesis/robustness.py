@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.synthesis.hinfnorm import frequency_response
 from vtolftc.synthesis.loops import closed_loop
 from vtolftc.synthesis.mu import Block, MuSweep, mu_sweep

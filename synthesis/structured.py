@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize
+
 from vtolftc.synthesis.hinfnorm import StateSpaceData, as_state_space, hinf_norm
 
 __all__ = [

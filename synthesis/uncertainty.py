@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import control as ct
 import numpy as np
 from scipy.optimize import minimize
+
 from vtolftc.airframe.loader import Airframe
 from vtolftc.synthesis.models import Axis, axis_coefficients
 

@@ -10,6 +10,7 @@ import tomllib
 
 import numpy as np
 import pytest
+
 from vtolftc.airframe.loader import DS1_PATH, AirframeError, airframe_from_dict, load_airframe
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
+
 from vtolftc.firmware_sim.autopilot.allocation import (
     AllocationStatus,
     PseudoInverseAllocator,

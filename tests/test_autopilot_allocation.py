@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.autopilot.allocation import AllocationStatus, PseudoInverseAllocator
 from vtolftc.firmware_sim.autopilot.autopilot import ALLOCATION_WEIGHTS
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel

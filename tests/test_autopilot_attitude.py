@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.autopilot.attitude import (
     ControllerError,
     LQRAttitudeController,

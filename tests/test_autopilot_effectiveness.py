@@ -3,11 +3,11 @@ and the passive-FTC import isolation of the autopilot package."""
 
 from __future__ import annotations
 
-import ast
 from pathlib import Path
 
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.model import Vehicle
@@ -63,38 +63,6 @@ def test_effectiveness_structure(ds1):
     np.testing.assert_array_equal(m.matrix(float("nan")), B0)
     out = np.empty((5, 15))
     assert m.matrix(7.0, out=out) is out
-
-
-def _imports(path: Path) -> list[str]:
-    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
-    names: list[str] = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            names += [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.module:
-            names.append(node.module)
-            names += [f"{node.module}.{a.name}" for a in node.names]
-    return names
-
-
-def test_autopilot_never_imports_vehicle_or_synthesis():
-    files = sorted(AUTOPILOT_DIR.glob("*.py"))
-    assert len(files) >= 8
-    bad = []
-    for f in files:
-        for name in _imports(f):
-            if name.startswith(("vtolftc.firmware_sim.vehicle", "synthesis")) or name in (
-                    "firmware_sim", "vtolftc.firmware_sim.vehicle"):
-                bad.append(f"{f.name}: {name}")
-    assert not bad, f"passive FTC: the autopilot must not import the vehicle/synthesis: {bad}"
-
-
-def test_isolation_scan_detects_a_forbidden_import(tmp_path):
-    p = tmp_path / "x.py"
-    p.write_text("from vtolftc.firmware_sim.vehicle.model import Vehicle\n"
-                 "import vtolftc.synthesis.mu\n")
-    names = _imports(p)
-    assert "vtolftc.firmware_sim.vehicle.model" in names and "vtolftc.synthesis.mu" in names
 
 
 def test_matrix_on_grid_is_cached_and_rounded(ds1):

@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from support.protocols import protocol_mismatches
+
 from vtolftc.firmware_sim.autopilot.autopilot import (
     CMD_COMPONENT_ARM_DISARM,
     CMD_DO_SET_MODE,
@@ -53,6 +55,15 @@ def ap(ds1, gains_dir):
 
 def test_autopilot_implements_the_api(ap):
     assert isinstance(ap, AutopilotAPI)
+    assert protocol_mismatches(ap, AutopilotAPI) == []
+
+
+def test_the_protocol_check_sees_a_wrong_signature():
+    class Wrong:
+        def step(self, state, extra): ...
+
+    assert any(m.startswith("step") for m in protocol_mismatches(Wrong(), AutopilotAPI))
+    assert any("missing" in m for m in protocol_mismatches(Wrong(), AutopilotAPI))
 
 
 def test_ground_commands_and_denials(ap):

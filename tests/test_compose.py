@@ -13,11 +13,10 @@ import pytest
 
 yaml = pytest.importorskip("yaml", reason="pyyaml is in the [test] extra")
 
+from vtolftc.cli import build_parser  # noqa: E402
 from vtolftc.firmware_sim.autopilot import process as ap_process  # noqa: E402
 from vtolftc.firmware_sim.vehicle import process as veh_process  # noqa: E402
 from vtolftc.protocols import parse_link_url  # noqa: E402
-
-from vtolftc.cli import build_parser  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 COMPOSE = ROOT / "docker" / "compose.yaml"

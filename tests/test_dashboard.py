@@ -11,9 +11,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from vtolftc.dashboard.geometry import aircraft_geometry, rotor_grid
-from vtolftc.dashboard.model import DashboardModel, euler_to_quaternion, ned_to_display
+
+from vtolftc.dashboard.model import DashboardModel, ned_to_display
 from vtolftc.gcs.client import CommandOutcome, VehicleSnapshot
+from vtolftc.rotation import euler_to_quat as euler_to_quaternion
+from vtolftc.telemetry.geometry import aircraft_geometry, rotor_grid
 
 
 def Snap(**fields: Any) -> VehicleSnapshot:
@@ -215,7 +217,8 @@ def _wait(pred, timeout_s: float, what: str):
 
 @pytest.fixture
 def dash_and_ap(ds1):
-    from vtolftc.dashboard.fake_autopilot import FakeAutopilot
+    from support.fake_autopilot import FakeAutopilot
+
     from vtolftc.dashboard.web import Dashboard
 
     udp = _free_port(socket.SOCK_DGRAM)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from vtolftc.dashboard.browser import find_chromedriver, find_chromium
+from support.browser import find_chromedriver, find_chromium
 
 pytestmark = pytest.mark.slow
 
@@ -43,7 +43,6 @@ def chromium():
 def sitl(tmp_path, ds1):
     """Vehicle + autopilot processes in real time, a ground station, and the dashboard."""
     from vtolftc.dashboard.web import Dashboard
-
     from vtolftc.sitl import SitlConfig, SitlRun
 
     run = SitlRun(SitlConfig(realtime=True, out_dir=tmp_path / "sitl", duration_s=120.0,
@@ -68,7 +67,7 @@ def _scene_change(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_transition_from_the_browser(chromium, sitl, tmp_path):
-    from vtolftc.dashboard.browser import DashboardPage
+    from support.browser import DashboardPage
 
     _run, dash = sitl
     with DashboardPage(dash.page_url) as page:

@@ -9,6 +9,8 @@ import threading
 import time
 
 import pytest
+
+from vtolftc.cli import run as cli_run
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
@@ -24,8 +26,6 @@ from vtolftc.protocols.px4 import (
     mode_from_name,
     mode_name,
 )
-
-from vtolftc.cli import run as cli_run
 
 
 # ------------------------------------------------------------------------------ conventions

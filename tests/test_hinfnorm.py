@@ -7,6 +7,7 @@ import math
 import control
 import numpy as np
 import pytest
+
 from vtolftc.synthesis.hinfnorm import (
     HinfNorm,
     frequency_response,

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.autopilot.interface import (
     HilState,
     NavState,

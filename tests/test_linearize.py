@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.vehicle.linearize import linearize
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.trim import trim_hover, trim_level_flight

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotStatus,
     FlightMode,
@@ -13,9 +14,8 @@ from vtolftc.firmware_sim.autopilot.interface import (
     NavState,
     VtolState,
 )
-
-from vtolftc.metrics import MetricsAccumulator, compute_metrics
 from vtolftc.telemetry import TelemetrySample
+from vtolftc.telemetry.metrics import MetricsAccumulator, compute_metrics
 
 
 def quat(roll, pitch, yaw):

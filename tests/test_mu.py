@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import time
-
 import control
 import numpy as np
 import pytest
+
 from vtolftc.synthesis.hinfnorm import frequency_response
 from vtolftc.synthesis.mu import (
     Block,
@@ -140,17 +139,14 @@ def test_separate_functions_and_gap_reported() -> None:
     assert res.relative_gap < 0.05
 
 
-def test_sweep_speed_and_peak() -> None:
+def test_sweep_peak() -> None:
     np.random.seed(7)
     for n in (2, 4):
         sys = control.rss(6, n, n)
         w = np.logspace(-2, 2, 200)
         F = frequency_response(sys, w)
         blocks = [Block.full(1)] * n
-        t0 = time.perf_counter()
-        sw = mu_sweep(F, blocks, w)
-        elapsed = time.perf_counter() - t0
-        assert elapsed < 2.0  # typically 0.1-0.5 s; generous for shared CI machines
+        sw = mu_sweep(F, blocks, w)  # speed: benchmarks/, never a wall-clock test
         assert sw.lower.shape == sw.upper.shape == (200,)
         assert np.all(sw.lower <= sw.upper * (1 + 1e-9))
         assert sw.peak_upper == pytest.approx(sw.upper.max())

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 import scipy.signal as sg
+
 from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, wrap_angle
 
 DT = 1.0 / 250.0

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from vtolftc.protocols import mavlink as pm
 from vtolftc.protocols.mavlink import SigningConfig, dialect, make_codec
 
@@ -45,8 +46,19 @@ def test_committed_dialect_is_current(tmp_path):
     """The committed module is byte for byte what mavgen makes from the XML today."""
     fresh = pm.generate_dialect(tmp_path / "vtolftc.py")
     assert fresh.read_bytes() == pm.GENERATED_MODULE.read_bytes(), (
-        "protocols/generated/vtolftc.py is stale: run `python -m vtolftc.protocols.mavlink`")
+        "protocols/generated/vtolftc.py is stale: run `python -m vtolftc.protocols.regenerate`")
     assert [p.name for p in tmp_path.iterdir()] == ["vtolftc.py"]  # no temporary leftovers
+
+
+def test_committed_constants_are_current(tmp_path, d):
+    fresh = pm.generate_constants(tmp_path / "constants.py", d)
+    assert fresh.read_bytes() == pm.GENERATED_CONSTANTS.read_bytes(), (
+        "protocols/generated/constants.py is stale: run `python -m vtolftc.protocols.regenerate`")
+    from vtolftc.protocols.generated import constants as c
+
+    assert (c.MAV_CMD_NAV_TAKEOFF, c.MAV_CMD_INJECT_PARTIAL_LOSS, c.MAV_RESULT_DENIED) == (
+        d.MAV_CMD_NAV_TAKEOFF, 59900, d.MAV_RESULT_DENIED)
+    assert c.MAVLINK_MSG_ID_FAULT_INJECTION_STATUS == 59900
 
 
 def test_importing_the_dialect_writes_nothing(tmp_path):

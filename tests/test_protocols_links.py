@@ -7,6 +7,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
+
 from vtolftc.protocols.link import Link, open_link, parse_link_url
 from vtolftc.protocols.mavlink import SigningConfig, dialect, make_codec
 from vtolftc.protocols.netutil import free_tcp_port, is_loopback_host, require_loopback

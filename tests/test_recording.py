@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from vtolftc.dashboard.recording import RerunRecorder, actuator_entity, read_recording
+from support.protocols import protocol_mismatches
+
 from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotStatus,
     FlightMode,
@@ -20,8 +21,8 @@ from vtolftc.firmware_sim.autopilot.interface import (
     NavState,
     VtolState,
 )
-
 from vtolftc.telemetry import RunObserver, TelemetrySample, VehicleTruth
+from vtolftc.telemetry.recording import RerunRecorder, actuator_entity, read_recording
 
 NAMES = ("rotor_1a", "rotor_1b", "rotor_2a", "rotor_2b", "rotor_3a", "rotor_3b", "rotor_4a",
          "rotor_4b", "pusher_left", "pusher_right", "aileron_left", "aileron_right", "elevator",
@@ -76,6 +77,7 @@ def test_recorder_is_a_run_observer(tmp_path):
     rec = RerunRecorder(tmp_path / "r.rrd")
     try:
         assert isinstance(rec, RunObserver)
+        assert protocol_mismatches(rec, RunObserver) == []
     finally:
         rec.close()
 
@@ -146,7 +148,7 @@ def test_interrupted_run_leaves_a_readable_file(tmp_path):
         import os, sys
         sys.path.insert(0, {str(Path(__file__).parent)!r})
         from test_recording import _sample
-        from vtolftc.dashboard.recording import RerunRecorder
+        from vtolftc.telemetry.recording import RerunRecorder
         rec = RerunRecorder({str(path)!r}, chunk_rows=100)
         rec.on_start({{}})
         for k in range(2600):          # 520 rows: 5 chunks sent, 20 rows buffered
@@ -188,7 +190,6 @@ def test_live_web_viewer_on_loopback(tmp_path, monkeypatch):
 def test_case_run_recording(tmp_path, ds1):
     """A short real in-process run (takeoff, a rotor fault at 2 s, a refused transition)."""
     from vtolftc.firmware_sim.vehicle.faults import parse_fault_spec
-
     from vtolftc.scenario import paper_scenario, run_scenario
 
     scen = paper_scenario(0, 4.0, airframe=ds1, arm_s=0.2, transition_s=3.0,

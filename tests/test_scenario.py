@@ -9,12 +9,12 @@ import math
 
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.autopilot.attitude import default_gains_dir
 from vtolftc.firmware_sim.autopilot.interface import FlightMode
 from vtolftc.firmware_sim.vehicle.faults import Fault
-
-from vtolftc.runfolder import RunFolderWriter
 from vtolftc.scenario import paper_scenario, run_scenario
+from vtolftc.telemetry.runfolder import RunFolderWriter
 
 CONTROLLERS = ("gs-shif", "shif", "lqr")
 CRUISE_TRIM_PITCH_DEG = 0.6
@@ -273,58 +273,3 @@ def test_full_flight_back_transition_and_landing(hand_gains):
     assert not m["crashed"] and not last.status.armed
     assert -last.nav.pos_ned_m[2] < 0.5
     assert np.all(last.status.actuator_commands == 0.0)
-
-
-def _python_roundtrip(x, air, home):
-    from vtolftc.firmware_sim.autopilot.interface import (
-        NavState,
-        decode_hil_state,
-        encode_hil_state,
-    )
-
-    nav = NavState(0, x[6:10], x[10:13], x[0:3], x[3:6], air)
-    out = decode_hil_state(encode_hil_state(nav, *home), *home)
-    return np.concatenate((out.q_wxyz, out.omega_body_rad_s, out.pos_ned_m, out.vel_ned_m_s,
-                           [out.airspeed_m_s]))
-
-
-def test_fused_hil_roundtrip_is_bit_identical_to_the_python_pair():
-    """The runner's compiled encode+decode gives the very bits of decode(encode(.)) (what SITL
-    receives), including round-half-even ties, clipping and float32 rounding; it declines
-    (returns False) whenever the Python pair could raise."""
-    from vtolftc.scenario import _hil_roundtrip
-
-    home = (45.5027, -73.5673, 35.0)
-    cos_lat = math.cos(math.radians(home[0]))
-    rng = np.random.default_rng(7)
-    cases = []
-    for _ in range(3000):
-        x = np.empty(13)
-        x[0:3] = rng.normal(0.0, 300.0, 3)
-        x[3:6] = rng.normal(0.0, 20.0, 3)
-        q = rng.normal(size=4)
-        x[6:10] = q / np.linalg.norm(q)
-        x[10:13] = rng.normal(0.0, 2.0, 3)
-        cases.append((x, abs(float(rng.normal(0.0, 20.0)))))
-    # ties of the integer rounding (x.5 cm/s, x.5 cm/s airspeed) and fields beyond their range
-    tie = np.array([0.0, 0.0, -30.0, 0.125, -0.375, 2.5, 1.0, 0.0, 0.0, 0.0, 0.1, 0.2, 0.3])
-    cases += [(tie, 12.345), (tie, 0.005), (tie, 0.015)]
-    big = tie.copy()
-    big[3:6] = (400.0, -400.0, 1e6)
-    cases += [(big, 1000.0), (big, -3.0)]
-    out = np.empty(14)
-    for x, air in cases:
-        assert _hil_roundtrip(x, air, *home, cos_lat, out)
-        ref = _python_roundtrip(x, air, home)
-        assert out.tobytes() == ref.tobytes()
-    # the Python pair raises on these: the compiled one declines so that the runner calls it
-    for k, bad in ((0, math.nan), (4, math.inf), (11, math.nan), (7, 1e39)):
-        x = tie.copy()
-        x[k] = bad
-        assert not _hil_roundtrip(x, 1.0, *home, cos_lat, out)
-    zero_q = tie.copy()
-    zero_q[6:10] = 0.0
-    assert not _hil_roundtrip(zero_q, 1.0, *home, cos_lat, out)
-    with pytest.raises(ValueError):
-        _python_roundtrip(zero_q, 1.0, home)
-    assert not _hil_roundtrip(tie, math.nan, *home, cos_lat, out)

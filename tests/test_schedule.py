@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.autopilot.pid import PPIDGains
 from vtolftc.firmware_sim.autopilot.schedule import (
     AXES,

@@ -24,12 +24,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from vtolftc.dashboard.recording import read_recording
+
 from vtolftc.firmware_sim.autopilot.process import make_deterministic
 from vtolftc.protocols import open_link, parse_link_url
-
 from vtolftc.scenario import paper_scenario, run_scenario
 from vtolftc.sitl import SitlConfig, SitlRun, run_sitl
+from vtolftc.telemetry.recording import read_recording
 
 pytestmark = pytest.mark.slow
 

@@ -4,9 +4,9 @@ URL plan (loopback only, free ports, both transports)."""
 from __future__ import annotations
 
 import pytest
-from vtolftc.protocols import parse_link_url
 
 from vtolftc.cli import run as cli_run
+from vtolftc.protocols import parse_link_url
 from vtolftc.sitl import SitlConfig, SitlRun
 
 

@@ -8,6 +8,7 @@ import warnings
 import control
 import numpy as np
 import pytest
+
 from vtolftc.synthesis.hinfnorm import hinf_norm
 from vtolftc.synthesis.structured import (
     Parameter,

@@ -13,6 +13,7 @@ import control as ct
 import numpy as np
 import pytest
 import scipy.linalg
+
 from vtolftc.firmware_sim.autopilot.schedule import GainSchedule
 from vtolftc.synthesis.baselines import LQR_Q, LQR_R, lqr_design
 from vtolftc.synthesis.design import R_MAX_RAD, design_point, moment_authority, weights_for

@@ -5,6 +5,7 @@ from __future__ import annotations
 import control as ct
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.vehicle.linearize import linearize
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.trim import trim_level_flight

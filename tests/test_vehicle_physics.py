@@ -7,14 +7,16 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.rotation import dcm, euler_to_quat
 
 
 def _state(ds1, pos=(0, 0, -100), vel=(0, 0, 0), euler=(0, 0, 0), omega=(0, 0, 0)):
     x = np.zeros(dyn.N_RIGID + ds1.n_actuators)
     x[0:3], x[3:6], x[10:13] = pos, vel, omega
-    x[6:10] = dyn.euler_to_quat(*euler)
+    x[6:10] = euler_to_quat(*euler)
     return x
 
 
@@ -41,7 +43,7 @@ def test_torque_free_rotation_conserves_energy_and_momentum(ds1):
 
     def invariants():
         w = v.omega_body_rad_s
-        R = dyn.dcm(v.quaternion)
+        R = dcm(v.quaternion)
         return 0.5 * w @ J @ w, R @ (J @ w)
 
     e0, h0 = invariants()

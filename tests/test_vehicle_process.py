@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 import pytest
+
 from vtolftc.firmware_sim.autopilot.interface import (
     HilState,
     NavState,

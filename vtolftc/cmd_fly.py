@@ -26,8 +26,8 @@ _PAPER_TABLE4 = {
 def default_observers(run_dir: Path, args: argparse.Namespace) -> list[Any]:
     """The observers of a run: the run-folder writer (telemetry, events, metrics, plots) and
     the rerun recorder (``run.rrd`` always; a live viewer too with ``--rerun``)."""
-    from vtolftc.dashboard.recording import RerunRecorder
-    from vtolftc.runfolder import RunFolderWriter
+    from vtolftc.telemetry.recording import RerunRecorder
+    from vtolftc.telemetry.runfolder import RunFolderWriter
 
     return [RunFolderWriter(run_dir, plots=not getattr(args, "no_plots", False)),
             RerunRecorder(run_dir / "run.rrd", live=bool(getattr(args, "rerun", False)))]
@@ -124,7 +124,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
     """Fly one of the paper's cases in-process and write a run folder."""
     from vtolftc.airframe.loader import load_airframe
     from vtolftc.firmware_sim.vehicle.faults import parse_fault_spec
-    from vtolftc.runfolder import default_run_dir
+    from vtolftc.telemetry.runfolder import default_run_dir
 
     _check_common(args)
     af = load_airframe(getattr(args, "airframe", None))
@@ -147,7 +147,8 @@ def cmd_fly(args: argparse.Namespace) -> int:
 
 def cmd_compare(args: argparse.Namespace) -> int:
     """Fly a case with the three controllers and print a table like the paper's table 4."""
-    from vtolftc.runfolder import default_run_dir, json_safe
+    from vtolftc.jsonio import json_safe
+    from vtolftc.telemetry.runfolder import default_run_dir
 
     _check_common(args)
     for ctrl in CONTROLLER_NAMES:

@@ -105,9 +105,9 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     if f"case{case}" not in load_cases():
         raise UsageError(f"--case {args.case!r}: expected one of "
                          f"{', '.join(k.removeprefix('case') for k in load_cases())}")
-    from vtolftc.runfolder import default_run_dir
     from vtolftc.scenario import paper_scenario
     from vtolftc.sitl import SitlConfig, SitlError, run_sitl
+    from vtolftc.telemetry.runfolder import default_run_dir
 
     af = None
     if args.airframe is not None:

@@ -12,13 +12,13 @@ t = 22 s the case's faults (``fault_cases.toml``) injected into the vehicle; end
 The in-process runner is deterministic: vehicle at 1 kHz (RK4), autopilot at 250 Hz (4
 physics steps per control step), the autopilot fed ``decode_hil_state(encode_hil_state(...))``
 of the vehicle truth (bit-identical to what it receives over MAVLink HIL_STATE_QUATERNION),
-its output passed through ``wire_commands`` (float32) before the vehicle. ``hil_delay_s``
-adds a one-way transport delay on the HIL state path: the autopilot gets the state of
+its output passed through ``wire_commands`` (float32) before the vehicle: the very functions
+of the SITL processes (:mod:`vtolftc.protocols.hil`). ``hil_delay_s`` adds a one-way
+transport delay on the HIL state path: the autopilot gets the state of
 ceil(hil_delay_s x control rate) control steps earlier (a FIFO; 25 ms at 250 Hz = 7 steps =
-28 ms; the first steps of the run see the oldest state there is). The encode/decode
-pair runs as one compiled call (``_hil_roundtrip``, bit-identical to the Python pair, which
-it falls back to on values the pair would reject). Actions due at a
-control step are executed before that step's ``Autopilot.step``.
+28 ms; the first steps of the run see the oldest state there is; telemetry and metrics keep
+the current state). Actions due at a control step are executed before that step's
+``Autopilot.step``.
 """
 
 from __future__ import annotations
@@ -33,7 +33,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from vtolftc.airframe.loader import Airframe, load_airframe
 from vtolftc.firmware_sim.autopilot.autopilot import (
@@ -43,7 +42,6 @@ from vtolftc.firmware_sim.autopilot.autopilot import (
     Autopilot,
 )
 from vtolftc.firmware_sim.autopilot.interface import (
-    EARTH_RADIUS_M,
     CommandResult,
     NavState,
     decode_hil_state,
@@ -52,8 +50,8 @@ from vtolftc.firmware_sim.autopilot.interface import (
 )
 from vtolftc.firmware_sim.vehicle.faults import Fault, case_description, case_faults
 from vtolftc.firmware_sim.vehicle.model import Vehicle
-from vtolftc.metrics import MetricsAccumulator
 from vtolftc.telemetry import RunObserver, TelemetrySample, VehicleTruth
+from vtolftc.telemetry.metrics import MetricsAccumulator
 
 __all__ = [
     "Action",
@@ -152,77 +150,6 @@ class RunResult:
         return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else math.inf
 
 
-_RAD_TO_DEG = math.degrees(1.0)   # the constants math.degrees / math.radians multiply by
-_DEG_TO_RAD = math.radians(1.0)
-
-
-@njit(cache=True)
-def _hil_roundtrip(x: np.ndarray, airspeed: float, home_lat: float, home_lon: float,
-                   home_alt: float, cos_lat: float, out: np.ndarray) -> bool:
-    """``decode_hil_state(encode_hil_state(nav))`` of the vehicle state ``x`` fused into one
-    compiled call, bit-identical to the Python pair (the SITL path's answer).
-
-    Same operations in the same order: float32 rounding of the quaternion and rates (C cast,
-    as ``struct`` packs), round-half-even to integers (``np.rint`` == ``round``), clipping to
-    the wire fields' ranges, then the decode. ``cos_lat`` is ``math.cos(math.radians(
-    home_lat))`` computed by the caller (CPython's libm call). Writes q (4), omega (3),
-    position NED [m] (3), velocity NED [m/s] (3) and airspeed [m/s] into ``out`` (14,) and
-    returns True; returns False (``out`` undefined) whenever the Python pair could raise
-    (non-finite values, float32 overflow, degenerate quaternion): the caller then runs it.
-    """
-    R = EARTH_RADIUS_M
-    pn = x[0]
-    pe = x[1]
-    pd = x[2]
-    lat = home_lat + (pn / R) * _RAD_TO_DEG
-    lon = home_lon + (pe / (R * cos_lat)) * _RAD_TO_DEG
-    for k in range(7):
-        v = x[6 + k]
-        f = np.float32(v)
-        if not np.isfinite(f) or not np.isfinite(v):
-            return False
-        out[k] = np.float64(f)
-    a_air = 100.0 * airspeed
-    a_lat = lat * 1e7
-    a_lon = lon * 1e7
-    a_alt = 1000.0 * (home_alt - pd)
-    a_vn = 100.0 * x[3]
-    a_ve = 100.0 * x[4]
-    a_vd = 100.0 * x[5]
-    if not (np.isfinite(a_air) and np.isfinite(a_lat) and np.isfinite(a_lon)
-            and np.isfinite(a_alt) and np.isfinite(a_vn) and np.isfinite(a_ve)
-            and np.isfinite(a_vd)):
-        return False
-    # ``+ 0.0``: an integer has no sign of zero (round(-0.3) == 0, np.rint(-0.3) == -0.0)
-    air = min(max(np.rint(a_air), 0.0), 65535.0) + 0.0
-    lat_i = min(max(np.rint(a_lat), -2147483648.0), 2147483647.0) + 0.0
-    lon_i = min(max(np.rint(a_lon), -2147483648.0), 2147483647.0) + 0.0
-    alt_i = min(max(np.rint(a_alt), -2147483648.0), 2147483647.0) + 0.0
-    vx = min(max(np.rint(a_vn), -32768.0), 32767.0) + 0.0
-    vy = min(max(np.rint(a_ve), -32768.0), 32767.0) + 0.0
-    vz = min(max(np.rint(a_vd), -32768.0), 32767.0) + 0.0
-    # decode
-    qw = out[0]
-    qx = out[1]
-    qy = out[2]
-    qz = out[3]
-    n = np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-    if not (n > 0.0 and np.isfinite(n)):
-        return False
-    out[0] = qw / n
-    out[1] = qx / n
-    out[2] = qy / n
-    out[3] = qz / n
-    out[7] = ((lat_i * 1e-7 - home_lat) * _DEG_TO_RAD) * R
-    out[8] = ((lon_i * 1e-7 - home_lon) * _DEG_TO_RAD) * R * cos_lat
-    out[9] = home_alt - alt_i * 1e-3
-    out[10] = vx * 0.01
-    out[11] = vy * 0.01
-    out[12] = vz * 0.01
-    out[13] = air * 0.01
-    return True
-
-
 def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                  airframe: Airframe | None = None, gains_dir: str | Path | None = None,
                  observers: Sequence[RunObserver] = (), physics_hz: int = 1000,
@@ -252,7 +179,6 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
     veh = Vehicle(af, dt_usec=1_000_000 // physics_hz)
     home = veh.sensor_model.home
     home_lat, home_lon, home_alt = float(home.lat_deg), float(home.lon_deg), float(home.alt_m)
-    cos_lat = math.cos(math.radians(home_lat))
     acc = MetricsAccumulator(window_start_s=scenario.transition_start_s)
     result = RunResult(metrics={})
     obs = list(observers)
@@ -300,15 +226,10 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
             x = veh.x
             # views of the state: encode_hil_state only reads them
             air = float(veh.fm[6])
-            hil = np.empty(14)
-            if _hil_roundtrip(x, air, home_lat, home_lon, home_alt, cos_lat, hil):
-                nav = NavState(now, hil[0:4], hil[4:7], hil[7:10], hil[10:13], float(hil[13]))
-            else:  # whatever the Python pair does (e.g. raise) on unusual values
-                # views of the state: encode_hil_state only reads them
-                truth_nav = NavState(now, x[6:10], x[10:13], x[0:3], x[3:6], air)
-                nav = decode_hil_state(encode_hil_state(truth_nav, home_lat, home_lon,
-                                                        home_alt),
-                                       home_lat, home_lon, home_alt)
+            # views of the state: encode_hil_state only reads them
+            truth_nav = NavState(now, x[6:10], x[10:13], x[0:3], x[3:6], air)
+            nav = decode_hil_state(encode_hil_state(truth_nav, home_lat, home_lon, home_alt),
+                                   home_lat, home_lon, home_alt)
             nav_ap = nav
             if n_delay:  # the autopilot sees the delayed state, telemetry the current one
                 fifo.append(nav)

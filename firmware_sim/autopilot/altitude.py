@@ -31,10 +31,14 @@ __all__ = ["FixedWingAltitudeHold", "MulticopterAltitudeHold"]
 class MulticopterAltitudeHold:
     """Constant-gain altitude / climb-rate loop giving an upward acceleration command.
 
-    Args:
-        dt: control period [s].
-        a_up_max, a_dn_max: limits of the acceleration command [m/s^2] (both > 0).
-        i_limit: limit of the integral term [m/s^2].
+    Parameters
+    ----------
+    dt
+        control period [s].
+    a_up_max, a_dn_max
+        limits of the acceleration command [m/s^2] (both > 0).
+    i_limit
+        limit of the integral term [m/s^2].
     """
 
     def __init__(self, dt: float, a_up_max: float = 5.0, a_dn_max: float = 4.0,

@@ -26,6 +26,7 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.firmware_sim.autopilot.lqr import LQRGains, LQRGainsError
 from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, wrap_angle
 from vtolftc.firmware_sim.autopilot.schedule import AXES, GainSchedule, GainScheduleError
@@ -92,11 +93,16 @@ def _sha256(path: Path) -> str:
 class ScheduledPPIDController:
     """Cascaded P-PID per axis with gains from a :class:`GainSchedule` at the airspeed.
 
-    Args:
-        schedule: the gain schedule (one breakpoint = constant gains, SHIF).
-        dt: control period [s].
-        rate_limits: limits of the rate references (roll, pitch, yaw) [rad/s].
-        name: controller name for reports.
+    Parameters
+    ----------
+    schedule
+        the gain schedule (one breakpoint = constant gains, SHIF).
+    dt
+        control period [s].
+    rate_limits
+        limits of the rate references (roll, pitch, yaw) [rad/s].
+    name
+        controller name for reports.
     """
 
     def __init__(self, schedule: GainSchedule, dt: float = 0.004, *,

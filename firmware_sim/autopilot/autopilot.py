@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.airframe.loader import Airframe, load_airframe
 from vtolftc.firmware_sim.autopilot.allocation import AllocationStatus, QPAllocator
 from vtolftc.firmware_sim.autopilot.altitude import FixedWingAltitudeHold, MulticopterAltitudeHold
@@ -61,6 +62,8 @@ from vtolftc.firmware_sim.autopilot.interface import (
     ParamType,
 )
 from vtolftc.firmware_sim.autopilot.modes import ModeMachine, landed_state, vtol_state
+from vtolftc.protocols.generated import constants as mav
+from vtolftc.rotation import quat_to_euler
 
 __all__ = [
     "CMD_COMPONENT_ARM_DISARM",
@@ -74,14 +77,14 @@ __all__ = [
     "quat_to_euler",
 ]
 
-CMD_NAV_LAND = 21
-CMD_NAV_TAKEOFF = 22
-CMD_DO_SET_MODE = 176
-CMD_COMPONENT_ARM_DISARM = 400
-CMD_DO_VTOL_TRANSITION = 3000
-FORCE_DISARM_MAGIC = 21196
-MAV_VTOL_STATE_MC = 3
-MAV_VTOL_STATE_FW = 4
+CMD_NAV_LAND = mav.MAV_CMD_NAV_LAND
+CMD_NAV_TAKEOFF = mav.MAV_CMD_NAV_TAKEOFF
+CMD_DO_SET_MODE = mav.MAV_CMD_DO_SET_MODE
+CMD_COMPONENT_ARM_DISARM = mav.MAV_CMD_COMPONENT_ARM_DISARM
+CMD_DO_VTOL_TRANSITION = mav.MAV_CMD_DO_VTOL_TRANSITION
+FORCE_DISARM_MAGIC = 21196  # PX4's force-disarm magic in param2 (not a MAVLink enum)
+MAV_VTOL_STATE_MC = mav.MAV_VTOL_STATE_MC
+MAV_VTOL_STATE_FW = mav.MAV_VTOL_STATE_FW
 ARMED_IDLE_THROTTLE = 0.05
 
 #: ``AutopilotStatus.allocation_status`` text of each allocation status.
@@ -105,18 +108,6 @@ ALLOCATION_WEIGHTS = np.array([1.0, 0.5, 10.0, 10.0, 5.0])
 #: pushers 1): the rotors are a reserve the QP reaches for only when the surfaces cannot
 #: deliver (the primary, tracking, objective is ~1e5 times heavier per N m).
 FW_ROTOR_RESERVE_WEIGHT = 30.0
-
-
-def quat_to_euler(q: NDArray[np.float64]) -> tuple[float, float, float]:
-    """ZYX Euler angles (roll, pitch, yaw) [rad] of a quaternion (w, x, y, z)."""
-    if type(q) is np.ndarray and q.shape == (4,):
-        w, x, y, z = q.tolist()
-    else:
-        w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return roll, pitch, yaw
 
 
 def _body_velocity(q: NDArray[np.float64], v: NDArray[np.float64]) -> tuple[float, float, float]:

@@ -35,6 +35,7 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.airframe.loader import Airframe
 
 __all__ = ["AXES", "EffectivenessModel"]

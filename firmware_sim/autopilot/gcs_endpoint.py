@@ -56,6 +56,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
 from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotAPI,
@@ -77,6 +78,7 @@ from vtolftc.protocols.px4 import (
     decode_param_value,
     encode_param_value,
 )
+from vtolftc.rotation import quat_to_euler
 
 __all__ = ["DEFAULT_RATES_HZ", "GcsEndpoint", "px4_mode_of"]
 
@@ -125,14 +127,6 @@ def px4_mode_of(mode: FlightMode) -> tuple[int, int]:
     :func:`vtolftc.firmware_sim.autopilot.modes.px4_custom_mode`)."""
     cm = px4_custom_mode(FlightMode(mode))
     return (cm >> 16) & 0xFF, (cm >> 24) & 0xFF
-
-
-def _euler(q: np.ndarray) -> tuple[float, float, float]:
-    w, x, y, z = (float(v) for v in q)
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return roll, pitch, yaw
 
 
 def _text(s: Any) -> str:
@@ -425,7 +419,7 @@ class GcsEndpoint:
         w = nav.omega_body_rad_s
         p = nav.pos_ned_m
         v = nav.vel_ned_m_s
-        roll, pitch, yaw = _euler(q)
+        roll, pitch, yaw = quat_to_euler(q)
         if msg_id == MSG["ATTITUDE"]:
             return c.attitude_encode(ms, roll, pitch, yaw, w[0], w[1], w[2])
         if msg_id == MSG["ATTITUDE_QUATERNION"]:

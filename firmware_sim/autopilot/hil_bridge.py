@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.firmware_sim.autopilot.interface import (
     HilState,
     NavState,

@@ -26,13 +26,25 @@ from __future__ import annotations
 
 import enum
 import math
-import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
+
+# The boundary types live in the layers below (wire forms in protocols, status in telemetry);
+# they are re-exported here so the autopilot's whole boundary reads from one place.
+from vtolftc.protocols.hil import (
+    EARTH_RADIUS_M,
+    N_ACTUATORS,
+    HilState,
+    NavState,
+    decode_hil_state,
+    encode_hil_state,
+    wire_commands,
+)
+from vtolftc.telemetry.samples import AutopilotStatus, FlightMode, LandedState, VtolState
 
 __all__ = [
     "EARTH_RADIUS_M",
@@ -54,8 +66,6 @@ __all__ = [
     "wire_commands",
 ]
 
-N_ACTUATORS = 15
-EARTH_RADIUS_M = 6_378_137.0
 
 
 class CommandResult(enum.IntEnum):
@@ -67,167 +77,6 @@ class CommandResult(enum.IntEnum):
     UNSUPPORTED = 3
     FAILED = 4
     IN_PROGRESS = 5
-
-
-class FlightMode(enum.IntEnum):
-    """Flight modes of the autopilot's state machine."""
-
-    IDLE = 0              # on the ground (armed or not), rotors at idle or off
-    TAKEOFF = 1           # multicopter climb to the takeoff altitude
-    HOVER = 2             # multicopter position and altitude hold
-    FRONT_TRANSITION = 3  # pusher ramps up, lift rotors hold altitude, wing takes over
-    FIXED_WING = 4        # wing-borne cruise, altitude hold by pitch
-    BACK_TRANSITION = 5   # pusher off, decelerate, lift rotors take over again
-    LAND = 6              # multicopter descent to touchdown, then IDLE
-
-
-class VtolState(enum.IntEnum):
-    """MAV_VTOL_STATE."""
-
-    UNDEFINED = 0
-    TRANSITION_TO_FW = 1
-    TRANSITION_TO_MC = 2
-    MC = 3
-    FW = 4
-
-
-class LandedState(enum.IntEnum):
-    """MAV_LANDED_STATE."""
-
-    UNDEFINED = 0
-    ON_GROUND = 1
-    IN_AIR = 2
-    TAKEOFF = 3
-    LANDING = 4
-
-
-@dataclass(slots=True)
-class NavState:
-    """The autopilot's view of the vehicle at ``time_usec`` (simulated microseconds).
-
-    ``q_wxyz``: attitude quaternion (body FRD -> NED, scalar first); ``omega_body_rad_s``:
-    body rates p, q, r (rad/s); ``pos_ned_m``: position relative to home (m);
-    ``vel_ned_m_s``: ground velocity in NED (m/s); ``airspeed_m_s``: indicated airspeed.
-    """
-
-    time_usec: int
-    q_wxyz: NDArray[np.float64]
-    omega_body_rad_s: NDArray[np.float64]
-    pos_ned_m: NDArray[np.float64]
-    vel_ned_m_s: NDArray[np.float64]
-    airspeed_m_s: float
-
-
-@dataclass(slots=True)
-class HilState:
-    """HIL_STATE_QUATERNION's fields, in the wire's own types and units."""
-
-    time_usec: int
-    attitude_quaternion: tuple[float, float, float, float]  # float32, w x y z
-    rollspeed: float                                         # float32, rad/s
-    pitchspeed: float
-    yawspeed: float
-    lat: int                                                 # degE7
-    lon: int                                                 # degE7
-    alt: int                                                 # mm above MSL
-    vx: int                                                  # cm/s north (int16)
-    vy: int                                                  # cm/s east
-    vz: int                                                  # cm/s down
-    ind_airspeed: int                                        # cm/s (uint16)
-    true_airspeed: int                                       # cm/s (uint16)
-    xacc: int = 0                                            # mG (int16)
-    yacc: int = 0
-    zacc: int = 0
-
-
-_F32X7 = struct.Struct("<7f")
-
-
-def _clip_int(x: float, lo: int, hi: int) -> int:
-    return int(min(max(round(x), lo), hi))
-
-
-def encode_hil_state(nav: NavState, home_lat_deg: float, home_lon_deg: float,
-                     home_alt_m: float) -> HilState:
-    """Encode ``nav`` as HIL_STATE_QUATERNION fields (flat-earth projection about home).
-
-    Floats are rounded to float32 exactly as the wire does (``struct`` packing, as pymavlink),
-    integers rounded to nearest (ties to even, as ``round``) and clipped to their field's
-    range. The in-process runner (``vtolftc.scenario``) uses a compiled fusion of this and
-    :func:`decode_hil_state` that must return the very same bits: change both together.
-    """
-    pn, pe, pd = nav.pos_ned_m.tolist()
-    lat = home_lat_deg + math.degrees(pn / EARTH_RADIUS_M)
-    lon = home_lon_deg + math.degrees(
-        pe / (EARTH_RADIUS_M * math.cos(math.radians(home_lat_deg))))
-    qw, qx, qy, qz, p, q, r = _F32X7.unpack(
-        _F32X7.pack(*nav.q_wxyz.tolist(), *nav.omega_body_rad_s.tolist()))
-    vn, ve, vd = nav.vel_ned_m_s.tolist()
-    air = _clip_int(100.0 * nav.airspeed_m_s, 0, 65535)
-    return HilState(
-        time_usec=int(nav.time_usec),
-        attitude_quaternion=(qw, qx, qy, qz),
-        rollspeed=p, pitchspeed=q, yawspeed=r,
-        lat=_clip_int(lat * 1e7, -2**31, 2**31 - 1),
-        lon=_clip_int(lon * 1e7, -2**31, 2**31 - 1),
-        alt=_clip_int(1000.0 * (home_alt_m - pd), -2**31, 2**31 - 1),
-        vx=_clip_int(100.0 * vn, -32768, 32767),
-        vy=_clip_int(100.0 * ve, -32768, 32767),
-        vz=_clip_int(100.0 * vd, -32768, 32767),
-        ind_airspeed=air, true_airspeed=air,
-    )
-
-
-def decode_hil_state(h: HilState, home_lat_deg: float, home_lon_deg: float,
-                     home_alt_m: float) -> NavState:
-    """Inverse of :func:`encode_hil_state` (up to the wire's resolution: about 1 cm, 1 cm/s)."""
-    pn = math.radians(h.lat * 1e-7 - home_lat_deg) * EARTH_RADIUS_M
-    pe = (math.radians(h.lon * 1e-7 - home_lon_deg) * EARTH_RADIUS_M
-          * math.cos(math.radians(home_lat_deg)))
-    pd = home_alt_m - h.alt * 1e-3
-    qw, qx, qy, qz = h.attitude_quaternion
-    n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-    if not (n > 0.0 and math.isfinite(n)):
-        raise ValueError(f"HIL_STATE_QUATERNION attitude {h.attitude_quaternion}: "
-                         "not a rotation quaternion")
-    return NavState(
-        time_usec=int(h.time_usec),
-        q_wxyz=np.array((qw / n, qx / n, qy / n, qz / n)),
-        omega_body_rad_s=np.array((h.rollspeed, h.pitchspeed, h.yawspeed)),
-        pos_ned_m=np.array((pn, pe, pd)),
-        vel_ned_m_s=np.array((h.vx * 0.01, h.vy * 0.01, h.vz * 0.01)),
-        airspeed_m_s=h.ind_airspeed * 0.01,
-    )
-
-
-def wire_commands(u: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:
-    """Commands as HIL_ACTUATOR_CONTROLS carries them: float32, 16 slots (ours are 0..14)."""
-    arr = np.asarray(u, dtype=np.float64)
-    if arr.shape == (N_ACTUATORS,):  # the usual case: same float32 rounding, 1 us less
-        return arr.astype(np.float32).astype(np.float64)
-    out = np.zeros(16, dtype=np.float32)
-    out[: arr.size] = arr
-    return out[:N_ACTUATORS].astype(np.float64)
-
-
-@dataclass(slots=True)
-class AutopilotStatus:
-    """A snapshot of the autopilot for telemetry, logs and ground stations."""
-
-    time_usec: int
-    mode: FlightMode
-    armed: bool
-    vtol_state: VtolState
-    landed_state: LandedState
-    attitude_ref_rad: NDArray[np.float64]       # roll, pitch, yaw references
-    attitude_rad: NDArray[np.float64]           # roll, pitch, yaw measured
-    altitude_ref_m: float                       # above home
-    airspeed_m_s: float
-    virtual_command: NDArray[np.float64]        # [Fz (N, NED down), Fx (N, forward), L, M, N (N m)]
-    actuator_commands: NDArray[np.float64]      # 15 normalised commands
-    allocation_status: str
-    controller: str                             # "gs-shif", "shif" or "lqr"
-    message: str = ""                           # last event worth a STATUSTEXT
 
 
 class ParamType(enum.IntEnum):

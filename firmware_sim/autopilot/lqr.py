@@ -91,6 +91,8 @@ class LQRGains:
 
     @classmethod
     def load(cls, path: str | PathLike[str]) -> LQRGains:
+        """Read and validate an LQR gain file (``vtolftc-lqr-gains/1``); raises
+        :class:`LQRGainsError` naming the field that is wrong."""
         data = read_json_file(path, LQRGainsError, "LQR gains")
         try:
             return cls.from_dict(data)
@@ -99,6 +101,7 @@ class LQRGains:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> LQRGains:
+        """Validate an already parsed gain document (see :meth:`load`)."""
         if not isinstance(d, Mapping):
             raise LQRGainsError(f"top level: expected a JSON object, got {type(d).__name__}")
         fmt = d.get("format")

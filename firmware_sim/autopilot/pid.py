@@ -70,12 +70,18 @@ def wrap_angle(x: float) -> float:
 class PPIDGains:
     """Gains of one P-PID axis (SI; rate error in rad/s to moment in N m).
 
-    Attributes:
-        kp_angle: outer P gain [1/s] (rate reference per angle error).
-        kp_rate: inner proportional gain [N m s/rad].
-        ki_rate: inner integral gain [N m/rad].
-        kd_rate: inner derivative gain [N m s²/rad].
-        tf_rate_s: derivative filter time constant [s].
+    Attributes
+    ----------
+    kp_angle
+        outer P gain [1/s] (rate reference per angle error).
+    kp_rate
+        inner proportional gain [N m s/rad].
+    ki_rate
+        inner integral gain [N m/rad].
+    kd_rate
+        inner derivative gain [N m s²/rad].
+    tf_rate_s
+        derivative filter time constant [s].
     """
 
     kp_angle: float
@@ -115,13 +121,20 @@ class ContinuousPPID:
 class CascadedPPID:
     """Discrete cascaded P-PID for one attitude axis.
 
-    Args:
-        gains: initial gains (may be replaced every step, see ``update``).
-        dt: sample time [s] (default 1/250).
-        wrap: wrap the angle error to (-pi, pi] (yaw).
-        rate_limit: limit of the rate reference [rad/s] (None = none).
-        output_limit: moment limits [N m]: a scalar ``m`` means ``(-m, m)``; None = none.
-        method: ``"tustin"`` or ``"backward_euler"`` (see module docstring).
+    Parameters
+    ----------
+    gains
+        initial gains (may be replaced every step, see ``update``).
+    dt
+        sample time [s] (default 1/250).
+    wrap
+        wrap the angle error to (-pi, pi] (yaw).
+    rate_limit
+        limit of the rate reference [rad/s] (None = none).
+    output_limit
+        moment limits [N m]: a scalar ``m`` means ``(-m, m)``; None = none.
+    method
+        ``"tustin"`` or ``"backward_euler"`` (see module docstring).
     """
 
     def __init__(
@@ -242,14 +255,21 @@ class CascadedPPID:
     ) -> float:
         """One control step.
 
-        Args:
-            angle_ref, angle: reference and measured angle [rad].
-            rate: measured body rate of this axis [rad/s].
-            gains: gains for this step (e.g. ``GainSchedule.gains_at(V)[axis]``); None keeps
-                the current ones.
-            rate_ff: rate feed-forward added to the outer loop output [rad/s].
+        Parameters
+        ----------
+        angle_ref, angle
+            reference and measured angle [rad].
+        rate
+            measured body rate of this axis [rad/s].
+        gains
+            gains for this step (e.g. ``GainSchedule.gains_at(V)[axis]``); None keeps
+            the current ones.
+        rate_ff
+            rate feed-forward added to the outer loop output [rad/s].
 
-        Returns:
+        Returns
+        -------
+        float
             Moment command [N m], within the output limits.
         """
         if gains is not None:

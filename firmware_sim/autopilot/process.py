@@ -20,9 +20,10 @@ then ground-station messages are served until the hold moves on). Commands there
 the next control step, exactly as in the in-process runner (:mod:`vtolftc.scenario`), which
 executes actions due at a step before that step.
 
-Run folder (``--out DIR``): ``metrics.json`` (:class:`vtolftc.metrics.MetricsAccumulator` over
-the autopilot's own samples, the very function of the in-process runner), the telemetry of the
-autopilot's view (:class:`vtolftc.runfolder.RunFolderWriter`: ``telemetry.csv``, events, plots),
+Run folder (``--out DIR``): ``metrics.json``
+(:class:`~vtolftc.telemetry.metrics.MetricsAccumulator` over the autopilot's own samples, the
+very function of the in-process runner), the telemetry of the autopilot's view
+(:class:`~vtolftc.telemetry.runfolder.RunFolderWriter`: ``telemetry.csv``, events, plots),
 its rerun recording ``run.rrd``, ``autopilot_events.jsonl`` and ``autopilot_summary.json`` (link
 counters incl. dropped garbage / CRC / truncated frames, steps, wall time). Written on every
 exit: end of run, SIGTERM, Ctrl-C, lost vehicle.
@@ -35,7 +36,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import math
 import os
 import signal
 import sys
@@ -44,9 +44,11 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
+
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
 from vtolftc.firmware_sim.autopilot.interface import AutopilotAPI, ParamError
+from vtolftc.jsonio import json_safe
 from vtolftc.protocols import SigningConfig, open_link
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.link import Link
@@ -87,7 +89,7 @@ class AutopilotProcess:
         self.gcs = GcsEndpoint(autopilot, self.hil, gcs_links, actuators=actuators,
                                signing_required=signing_required, lockstep=lockstep,
                                hold_ms=hold_ms, on_event=self._event)
-        from vtolftc.metrics import MetricsAccumulator
+        from vtolftc.telemetry.metrics import MetricsAccumulator
 
         self.metrics = MetricsAccumulator(window_start_s=window_start_s)
         self.steps = 0
@@ -235,9 +237,9 @@ class AutopilotProcess:
         if self.out_dir is not None:
             with contextlib.suppress(OSError):
                 (self.out_dir / "metrics.json").write_text(
-                    json.dumps(_jsonable(m), indent=2))
+                    json.dumps(json_safe(m), indent=2))
                 (self.out_dir / "autopilot_summary.json").write_text(
-                    json.dumps(_jsonable(summary), indent=2))
+                    json.dumps(json_safe(summary), indent=2))
         if self._events_file is not None:
             self._events_file.close()
             self._events_file = None
@@ -258,20 +260,6 @@ def _alive(pid: int) -> bool:
     except PermissionError:
         return True
     return True
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
 
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -410,9 +398,8 @@ def make_deterministic(autopilot: Any) -> None:
 def _run_observers(out: Path, plots: bool = True) -> list[Any]:
     """The run folder of the autopilot's own view (telemetry, events, metrics, plots) and its
     rerun recording ``run.rrd`` (no vehicle truth here: commands, not effective outputs)."""
-    from vtolftc.dashboard.recording import RerunRecorder
-
-    from vtolftc.runfolder import RunFolderWriter
+    from vtolftc.telemetry.recording import RerunRecorder
+    from vtolftc.telemetry.runfolder import RunFolderWriter
 
     return [RunFolderWriter(out, plots=plots), RerunRecorder(out / "run.rrd")]
 

@@ -116,13 +116,19 @@ class GainSchedule:
     Build with ``GainSchedule.load(path)`` or ``GainSchedule.from_dict(d)``; query with
     ``gains_at(airspeed_m_s)``.
 
-    Attributes:
-        controller: design name from the file.
-        airframe_name, airframe_sha256: airframe the schedule was designed for.
-        breakpoints_m_s: airspeed breakpoints [m/s] (tuple, strictly increasing).
-        table: ``{axis: {gain: tuple of values per breakpoint}}``.
-        metadata: the top-level keys that are not part of the schema, plus per-axis
-            ``metadata`` under ``metadata["axes_metadata"][axis]`` when present.
+    Attributes
+    ----------
+    controller
+        design name from the file.
+    airframe_name, airframe_sha256
+        airframe the schedule was designed for.
+    breakpoints_m_s
+        airspeed breakpoints [m/s] (tuple, strictly increasing).
+    table
+        ``{axis: {gain: tuple of values per breakpoint}}``.
+    metadata
+        the top-level keys that are not part of the schema, plus per-axis
+        ``metadata`` under ``metadata["axes_metadata"][axis]`` when present.
     """
 
     def __init__(

@@ -35,6 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+
 from vtolftc.airframe.loader import Airframe
 
 N_RIGID = 13
@@ -437,30 +438,3 @@ def step_n(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax, rin
 # --------------------------------------------------------------------------------------------
 
 
-def euler_to_quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """Quaternion (w, x, y, z) body -> NED from ZYX Euler angles (rad)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array([
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    ])
-
-
-def quat_to_euler(q: np.ndarray) -> tuple[float, float, float]:
-    """ZYX Euler angles (roll, pitch, yaw) in rad of a quaternion (w, x, y, z)."""
-    w, x, y, z = (float(v) for v in q)
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return roll, pitch, yaw
-
-
-def dcm(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix body -> NED of a quaternion (w, x, y, z)."""
-    R = np.empty((3, 3))
-    quat_to_dcm(float(q[0]), float(q[1]), float(q[2]), float(q[3]), R)
-    return R

@@ -14,8 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.rotation import quat_mul
 
 STATE_NAMES = ("pn", "pe", "pd", "vn", "ve", "vd", "dphi", "dtheta", "dpsi", "p", "q", "r")
 
@@ -40,17 +42,6 @@ class LinearModel:
         return float(self.B[self.state_names.index(row), self.input_names.index(col)])
 
 
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array([
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-    ])
-
-
 def linearize(vehicle: Vehicle, x0: np.ndarray, u0: np.ndarray | None = None,
               eps: float = 1e-6) -> LinearModel:
     """Jacobians of the rigid-body dynamics about ``x0`` with actuator positions ``u0``
@@ -66,13 +57,13 @@ def linearize(vehicle: Vehicle, x0: np.ndarray, u0: np.ndarray | None = None,
         x = x0.copy()
         x[0:6] += xe[0:6]
         dq = np.concatenate([[1.0], 0.5 * xe[6:9]])
-        q = _qmul(q0, dq)
+        q = quat_mul(q0, dq)
         x[6:10] = q / np.linalg.norm(q)
         x[10:13] += xe[9:12]
         x[n:] = u0 + du
         dx, _ = vehicle.derivatives(x, x[n:])
         # Attitude-error rate in body axes: 2 vec(q0^* q').
-        datt = 2.0 * _qmul(q0c, dx[6:10])[1:]
+        datt = 2.0 * quat_mul(q0c, dx[6:10])[1:]
         return np.concatenate([dx[0:6], datt, dx[10:13]])
 
     A = np.empty((12, 12))

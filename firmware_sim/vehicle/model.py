@@ -13,10 +13,12 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+
 from vtolftc.airframe.loader import Airframe, load_airframe
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.faults import Fault, FaultError, FaultKind
 from vtolftc.firmware_sim.vehicle.sensors import Home, SensorModel, SensorNoise, SensorSample
+from vtolftc.rotation import dcm, quat_to_euler
 
 _F64 = np.dtype(np.float64)
 
@@ -132,7 +134,7 @@ class Vehicle:
 
     @property
     def euler_rad(self) -> tuple[float, float, float]:
-        return dyn.quat_to_euler(self.x[6:10])
+        return quat_to_euler(self.x[6:10])
 
     @property
     def altitude_m(self) -> float:
@@ -256,7 +258,7 @@ class Vehicle:
 
     def sensors(self) -> SensorSample:
         """Sensor readings at the current time (noise per the vehicle's SensorNoise)."""
-        R = dyn.dcm(self.x[6:10])
+        R = dcm(self.x[6:10])
         return self.sensor_model.sample(
             self.time_usec, self.x[0:3], self.x[3:6], R, self.x[10:13],
             self.fm[0:3] / self.airframe.mass_kg, float(self.fm[6]))

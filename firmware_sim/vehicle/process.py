@@ -56,15 +56,16 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
+
 from vtolftc.airframe.loader import Airframe, AirframeError, load_airframe
-from vtolftc.firmware_sim.autopilot.interface import NavState, encode_hil_state
 from vtolftc.firmware_sim.vehicle.dynamics import N_RIGID
-from vtolftc.firmware_sim.vehicle.dynamics import quat_to_euler as dyn_quat_to_euler
 from vtolftc.firmware_sim.vehicle.faults import Fault, FaultKind
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import SensorNoise
 from vtolftc.protocols import open_link
 from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
+from vtolftc.protocols.hil import NavState, encode_hil_state
+from vtolftc.rotation import quat_to_euler as dyn_quat_to_euler
 
 __all__ = ["VehicleProcess", "main"]
 

@@ -96,6 +96,28 @@ class SensorModel:
     def sample(self, time_usec: int, pos_ned: np.ndarray, vel_ned: np.ndarray,
                R_body_to_ned: np.ndarray, omega_body: np.ndarray,
                specific_force_body: np.ndarray, airspeed_m_s: float) -> SensorSample:
+        """One sensor sample of the true state (noise from the model's seeded generator).
+
+        Parameters
+        ----------
+        time_usec : int
+            Simulated time [us].
+        pos_ned, vel_ned : ndarray, shape (3,)
+            Position about home [m] and ground velocity [m/s], NED.
+        R_body_to_ned : ndarray, shape (3, 3)
+            Attitude as a rotation matrix body FRD -> NED.
+        omega_body : ndarray, shape (3,)
+            Body rates p, q, r [rad/s], FRD.
+        specific_force_body : ndarray, shape (3,)
+            Specific force the accelerometer measures [m/s^2], FRD.
+        airspeed_m_s : float
+            True airspeed [m/s].
+
+        Returns
+        -------
+        SensorSample
+            What HIL_SENSOR and HIL_GPS carry, in SI units.
+        """
         n = self.noise
         alt = self.home.alt_m - float(pos_ned[2])
         p_abs = pressure_at_altitude_hpa(alt) + float(self._n(n.baro_hpa))

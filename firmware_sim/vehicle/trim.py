@@ -18,9 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
+
 from vtolftc.airframe.loader import Airframe, load_airframe
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.rotation import euler_to_quat
 
 
 class TrimError(RuntimeError):
@@ -50,7 +52,7 @@ def _base_state(af: Airframe, altitude_m: float, airspeed_m_s: float, pitch: flo
     x = np.zeros(dyn.N_RIGID + af.n_actuators)
     x[2] = -altitude_m
     x[3] = airspeed_m_s
-    x[6:10] = dyn.euler_to_quat(0.0, pitch, 0.0)
+    x[6:10] = euler_to_quat(0.0, pitch, 0.0)
     return x
 
 

@@ -22,16 +22,16 @@ from __future__ import annotations
 import csv
 import datetime as _dt
 import json
-import math
 import platform
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from vtolftc.telemetry import TelemetrySample
+from vtolftc.jsonio import json_safe
+from vtolftc.telemetry.samples import TelemetrySample
 
-__all__ = ["RunFolderWriter", "default_run_dir", "json_safe"]
+__all__ = ["RunFolderWriter", "default_run_dir"]
 
 _NEEDS_QUOTES = frozenset(',"\r\n')  # characters csv.writer would quote a field for
 
@@ -40,19 +40,6 @@ def default_run_dir(case: str, controller: str, root: str | Path = "runs") -> Pa
     """``runs/<case>-<controller>-<UTC timestamp>`` (not created)."""
     stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S.%fZ")
     return Path(root) / f"case{case}-{controller}-{stamp}"
-
-
-def json_safe(x: Any) -> Any:
-    """Replace NaN/inf by None and numpy types by Python ones, recursively."""
-    if isinstance(x, dict):
-        return {str(k): json_safe(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [json_safe(v) for v in x]
-    if isinstance(x, np.generic):
-        x = x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
 
 
 def _versions() -> dict[str, str]:

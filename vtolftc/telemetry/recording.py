@@ -59,9 +59,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from vtolftc.firmware_sim.autopilot.interface import N_ACTUATORS, FlightMode
 
-from vtolftc.telemetry import TelemetrySample
+from vtolftc.protocols.hil import N_ACTUATORS
+from vtolftc.telemetry.samples import FlightMode, TelemetrySample
 
 __all__ = ["DEFAULT_ACTUATOR_NAMES", "RerunRecorder", "actuator_entity", "read_recording"]
 
@@ -208,7 +208,7 @@ class RerunRecorder:
         rec = self._rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)   # NED
         try:
-            from vtolftc.dashboard.geometry import aircraft_geometry
+            from vtolftc.telemetry.geometry import aircraft_geometry
 
             af = self._airframe
             if af is None:

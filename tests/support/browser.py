@@ -73,8 +73,10 @@ def find_chromedriver() -> str | None:
 class DashboardPage:
     """A headless Chromium showing the dashboard at ``url``.
 
-    Raises:
-        RuntimeError: chromium or chromedriver missing (the message says what to install).
+    Raises
+    ------
+    RuntimeError
+        chromium or chromedriver missing (the message says what to install).
     """
 
     def __init__(self, url: str, *, width: int = 1400, height: int = 900,

@@ -33,9 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from vtolftc.firmware_sim.autopilot.autopilot import quat_to_euler
-from vtolftc.firmware_sim.autopilot.interface import FlightMode
-from vtolftc.telemetry import TelemetrySample
+from vtolftc.rotation import quat_to_euler
+from vtolftc.telemetry.samples import FlightMode, TelemetrySample
 
 __all__ = ["CRASH_ATTITUDE_DEG", "MetricsAccumulator", "compute_metrics", "is_crash"]
 

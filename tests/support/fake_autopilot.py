@@ -35,10 +35,14 @@ _AUTO, _TAKEOFF, _LOITER, _READY = 4, 2, 3, 1
 class FakeAutopilot:
     """Kinematic MAVLink autopilot sending to a ground station at ``gcs_url``.
 
-    Args:
-        gcs_url: where the ground station listens, e.g. ``udp-client://127.0.0.1:14550``.
-        rate_hz: telemetry rate (HEARTBEAT is always 1 Hz).
-        speed: simulated seconds per wall second.
+    Parameters
+    ----------
+    gcs_url
+        where the ground station listens, e.g. ``udp-client://127.0.0.1:14550``.
+    rate_hz
+        telemetry rate (HEARTBEAT is always 1 Hz).
+    speed
+        simulated seconds per wall second.
     """
 
     def __init__(self, gcs_url: str, *, rate_hz: float = 20.0, speed: float = 1.0) -> None:

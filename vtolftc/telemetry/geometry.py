@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from vtolftc.airframe.loader import Airframe
 
 __all__ = ["Box", "Disc", "aircraft_geometry", "rotor_grid"]

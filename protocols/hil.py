@@ -1,0 +1,150 @@
+"""The HIL wire forms shared by the simulated vehicle and the autopilot.
+
+- :class:`NavState`: the navigation solution the autopilot flies on (attitude, rates, position,
+  velocity, airspeed), and :class:`HilState`, HIL_STATE_QUATERNION's fields in the wire's own
+  types; :func:`encode_hil_state` / :func:`decode_hil_state` convert between them with a
+  flat-earth projection about home. The vehicle encodes its state with them; the autopilot
+  decodes what it receives; the in-process runner passes the vehicle state through the *same*
+  pair, so an in-process run and a lockstep SITL run see bit-identical inputs.
+- :func:`wire_commands`: the 15 normalised actuator commands rounded to float32 exactly as
+  HIL_ACTUATOR_CONTROLS carries them.
+
+Frames and units: NED world frame with its origin at home (metres), FRD body frame,
+quaternion scalar-first rotating body vectors into NED, SI units, radians. This module knows
+no flight logic and no physics.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "EARTH_RADIUS_M",
+    "N_ACTUATORS",
+    "HilState",
+    "NavState",
+    "decode_hil_state",
+    "encode_hil_state",
+    "wire_commands",
+]
+
+N_ACTUATORS = 15
+"""Actuators carried in HIL_ACTUATOR_CONTROLS slots 0..14 (8 lift rotors, 2 pushers, 5 surfaces)."""
+
+EARTH_RADIUS_M = 6_378_137.0
+"""Radius of the flat-earth projection about home [m] (WGS-84 equatorial radius)."""
+
+
+@dataclass(slots=True)
+class NavState:
+    """The autopilot's view of the vehicle at ``time_usec`` (simulated microseconds).
+
+    ``q_wxyz``: attitude quaternion (body FRD -> NED, scalar first); ``omega_body_rad_s``:
+    body rates p, q, r (rad/s); ``pos_ned_m``: position relative to home (m);
+    ``vel_ned_m_s``: ground velocity in NED (m/s); ``airspeed_m_s``: indicated airspeed.
+    """
+
+    time_usec: int
+    q_wxyz: NDArray[np.float64]
+    omega_body_rad_s: NDArray[np.float64]
+    pos_ned_m: NDArray[np.float64]
+    vel_ned_m_s: NDArray[np.float64]
+    airspeed_m_s: float
+
+
+@dataclass(slots=True)
+class HilState:
+    """HIL_STATE_QUATERNION's fields, in the wire's own types and units."""
+
+    time_usec: int
+    attitude_quaternion: tuple[float, float, float, float]  # float32, w x y z
+    rollspeed: float                                         # float32, rad/s
+    pitchspeed: float
+    yawspeed: float
+    lat: int                                                 # degE7
+    lon: int                                                 # degE7
+    alt: int                                                 # mm above MSL
+    vx: int                                                  # cm/s north (int16)
+    vy: int                                                  # cm/s east
+    vz: int                                                  # cm/s down
+    ind_airspeed: int                                        # cm/s (uint16)
+    true_airspeed: int                                       # cm/s (uint16)
+    xacc: int = 0                                            # mG (int16)
+    yacc: int = 0
+    zacc: int = 0
+
+
+_F32X7 = struct.Struct("<7f")
+
+
+def _clip_int(x: float, lo: int, hi: int) -> int:
+    return int(min(max(round(x), lo), hi))
+
+
+def encode_hil_state(nav: NavState, home_lat_deg: float, home_lon_deg: float,
+                     home_alt_m: float) -> HilState:
+    """Encode ``nav`` as HIL_STATE_QUATERNION fields (flat-earth projection about home).
+
+    Floats are rounded to float32 exactly as the wire does (``struct`` packing, as pymavlink),
+    integers rounded to nearest (ties to even, as ``round``) and clipped to their field's
+    range. The in-process runner and the SITL processes both use this pair, so they see the
+    same bits.
+    """
+    pn, pe, pd = nav.pos_ned_m.tolist()
+    lat = home_lat_deg + math.degrees(pn / EARTH_RADIUS_M)
+    lon = home_lon_deg + math.degrees(
+        pe / (EARTH_RADIUS_M * math.cos(math.radians(home_lat_deg))))
+    qw, qx, qy, qz, p, q, r = _F32X7.unpack(
+        _F32X7.pack(*nav.q_wxyz.tolist(), *nav.omega_body_rad_s.tolist()))
+    vn, ve, vd = nav.vel_ned_m_s.tolist()
+    air = _clip_int(100.0 * nav.airspeed_m_s, 0, 65535)
+    return HilState(
+        time_usec=int(nav.time_usec),
+        attitude_quaternion=(qw, qx, qy, qz),
+        rollspeed=p, pitchspeed=q, yawspeed=r,
+        lat=_clip_int(lat * 1e7, -2**31, 2**31 - 1),
+        lon=_clip_int(lon * 1e7, -2**31, 2**31 - 1),
+        alt=_clip_int(1000.0 * (home_alt_m - pd), -2**31, 2**31 - 1),
+        vx=_clip_int(100.0 * vn, -32768, 32767),
+        vy=_clip_int(100.0 * ve, -32768, 32767),
+        vz=_clip_int(100.0 * vd, -32768, 32767),
+        ind_airspeed=air, true_airspeed=air,
+    )
+
+
+def decode_hil_state(h: HilState, home_lat_deg: float, home_lon_deg: float,
+                     home_alt_m: float) -> NavState:
+    """Inverse of :func:`encode_hil_state` (up to the wire's resolution: about 1 cm, 1 cm/s)."""
+    pn = math.radians(h.lat * 1e-7 - home_lat_deg) * EARTH_RADIUS_M
+    pe = (math.radians(h.lon * 1e-7 - home_lon_deg) * EARTH_RADIUS_M
+          * math.cos(math.radians(home_lat_deg)))
+    pd = home_alt_m - h.alt * 1e-3
+    qw, qx, qy, qz = h.attitude_quaternion
+    n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    if not (n > 0.0 and math.isfinite(n)):
+        raise ValueError(f"HIL_STATE_QUATERNION attitude {h.attitude_quaternion}: "
+                         "not a rotation quaternion")
+    return NavState(
+        time_usec=int(h.time_usec),
+        q_wxyz=np.array((qw / n, qx / n, qy / n, qz / n)),
+        omega_body_rad_s=np.array((h.rollspeed, h.pitchspeed, h.yawspeed)),
+        pos_ned_m=np.array((pn, pe, pd)),
+        vel_ned_m_s=np.array((h.vx * 0.01, h.vy * 0.01, h.vz * 0.01)),
+        airspeed_m_s=h.ind_airspeed * 0.01,
+    )
+
+
+def wire_commands(u: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:
+    """Commands as HIL_ACTUATOR_CONTROLS carries them: float32, 16 slots (ours are 0..14)."""
+    arr = np.asarray(u, dtype=np.float64)
+    if arr.shape == (N_ACTUATORS,):  # the usual case: same float32 rounding, 1 us less
+        return arr.astype(np.float32).astype(np.float64)
+    out = np.zeros(16, dtype=np.float32)
+    out[: arr.size] = arr
+    return out[:N_ACTUATORS].astype(np.float64)

@@ -1,0 +1,67 @@
+"""The transport interface under every :class:`~vtolftc.protocols.link.Link`, and parsed URLs.
+
+A :class:`Transport` moves whole datagrams and knows nothing about MAVLink; the UDP
+(:mod:`vtolftc.protocols.udp`) and zenoh (:mod:`vtolftc.protocols.zenoh_transport`) transports
+implement it. :class:`LinkUrl` is a parsed link URL (the scheme is described in
+:mod:`vtolftc.protocols.link`). Both live here, below the link and the transports, so that no
+import runs in a circle.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+__all__ = ["LinkUrl", "Transport"]
+
+
+class Transport(ABC):
+    """Moves whole datagrams; knows nothing about MAVLink. Subclasses: UDP, zenoh."""
+
+    kind: str = "?"
+
+    @abstractmethod
+    def send_bytes(self, data: bytes) -> bool:
+        """Hand one datagram to the network. False if there is nowhere to send it (dropped)."""
+
+    @abstractmethod
+    def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
+        """Wait up to ``timeout_s`` (None = forever, 0 = poll) for at least one datagram, then
+        return every datagram already available (bounded batch); ``[]`` on timeout."""
+
+    @abstractmethod
+    def ready(self) -> bool:
+        """True if a datagram sent now has a destination (peer known / subscriber matched)."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release sockets / sessions. Idempotent."""
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        """Bound address for socket transports, None otherwise."""
+        return None
+
+    @property
+    def overflow_drops(self) -> int:
+        """Datagrams dropped by the transport's own receive queue (if it has one)."""
+        return 0
+
+    def describe(self) -> str:
+        """Human-readable endpoint description."""
+        return self.kind
+
+
+@dataclass(frozen=True)
+class LinkUrl:
+    """A parsed link URL (see the module docstring for the scheme)."""
+
+    scheme: str
+    host: str = ""
+    port: int = 0
+    vehicle: str = ""
+    link: str = ""
+    direction: str = ""
+    listen: tuple[str, ...] = ()
+    connect: tuple[str, ...] = ()
+    mode: str = "peer"

@@ -1,0 +1,40 @@
+"""What a synthesis run produced, in memory: the one type the pipeline, the export and the
+report share (kept apart so that none of them imports another in a circle)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from vtolftc.airframe.loader import Airframe
+from vtolftc.synthesis.baselines import LqrAxis
+from vtolftc.synthesis.design import AxisDesign
+from vtolftc.synthesis.models import AXES, Axis
+from vtolftc.synthesis.robustness import AxisRobustness
+from vtolftc.synthesis.uncertainty import DesignPoint
+
+__all__ = ["SynthesisResult"]
+
+
+@dataclass
+class SynthesisResult:
+    """Everything the synthesis produced (in memory), plus per-stage wall times [s]."""
+
+    airframe: Airframe
+    points: tuple[DesignPoint, ...]
+    gs: dict[Axis, list[AxisDesign]]
+    shif: dict[Axis, AxisDesign]
+    lqr: dict[Axis, LqrAxis]
+    mu_gs: dict[Axis, list[AxisRobustness]] = field(default_factory=dict)
+    mu_shif: dict[Axis, list[AxisRobustness]] = field(default_factory=dict)
+    times: dict[str, float] = field(default_factory=dict)
+    files: dict[str, Path] = field(default_factory=dict)
+    settings: dict[str, Any] = field(default_factory=dict)
+    method: str = "paper"
+    #: robust method: loop margins (``LoopMargins``) per axis and point, GS-SHIF and SHIF
+    margins_gs: dict[Axis, list[Any]] = field(default_factory=dict)
+    margins_shif: dict[Axis, list[Any]] = field(default_factory=dict)
+
+    def nominal_stable(self) -> dict[Axis, list[bool]]:
+        return {ax: [d.stable for d in self.gs[ax]] for ax in AXES}

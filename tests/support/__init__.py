@@ -1,0 +1,1 @@
+"""Test doubles and drivers used by the tests and benchmarks only (never installed)."""
