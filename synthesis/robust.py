@@ -60,6 +60,7 @@ from typing import Any
 import control as ct
 import numpy as np
 from numpy.typing import NDArray
+
 from vtolftc.airframe.loader import Airframe
 from vtolftc.synthesis.design import (
     A_SENSITIVITY,

@@ -9,8 +9,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
-from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 
+from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 from vtolftc.scenario import paper_scenario, run_scenario
 
 

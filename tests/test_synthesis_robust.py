@@ -9,6 +9,7 @@ import math
 import control as ct
 import numpy as np
 import pytest
+
 from vtolftc.synthesis.hinfnorm import frequency_response
 from vtolftc.synthesis.loops import CascadeChannel, closed_loop
 from vtolftc.synthesis.robust import (
