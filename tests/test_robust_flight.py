@@ -5,6 +5,7 @@ surviving rotor-outs, elevator failures, the paper's cases and a 25 ms one-way H
 from __future__ import annotations
 
 import itertools
+import math
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
@@ -63,6 +64,28 @@ def test_fixed_wing_allocator_keeps_the_lift_rotors_in_reserve(ds1):
     assert ap.allocator_fw.stats is ap.allocator.stats
 
 
+class _PeakPitch:
+    """Largest |pitch| [deg] after t = 3 s (the hover phase is outside the metrics' window)."""
+
+    def __init__(self) -> None:
+        self.peak = 0.0
+
+    def on_start(self, info):
+        pass
+
+    def on_sample(self, sample):
+        if sample.time_usec > 3_000_000:
+            from vtolftc.rotation import quat_to_euler
+
+            self.peak = max(self.peak, abs(math.degrees(quat_to_euler(sample.nav.q_wxyz)[1])))
+
+    def on_event(self, time_usec, kind, text):
+        pass
+
+    def on_finish(self, metrics):
+        pass
+
+
 def _fly(job):
     case, specs, duration, delay = job
     from vtolftc.airframe.loader import load_airframe
@@ -71,7 +94,9 @@ def _fly(job):
     af = load_airframe()
     faults = [f for s in specs for f in parse_fault_spec(s, af.actuator_names)]
     sc = paper_scenario(case, duration, airframe=af, extra_faults=faults)
-    return run_scenario(sc, "gs-shif", airframe=af, hil_delay_s=delay).metrics
+    peak = _PeakPitch()
+    m = run_scenario(sc, "gs-shif", airframe=af, hil_delay_s=delay, observers=[peak]).metrics
+    return {**m, "peak_pitch_deg": peak.peak}
 
 
 @pytest.mark.slow
@@ -92,4 +117,5 @@ def test_gs_shif_survives_rotor_outs_elevator_failures_paper_cases_and_delay():
         assert abs(m["final_altitude_error_m"]) < 5.0, (job, m["final_altitude_error_m"])
     delay = results[-1]
     assert delay["transition_complete_s"] is not None
-    assert delay["max_abs_pitch_error_deg"] < 10.0
+    # no delay-driven limit cycle in hover or later (the paper gains with 100 ms: +-30 deg)
+    assert delay["peak_pitch_deg"] < 5.0, delay["peak_pitch_deg"]

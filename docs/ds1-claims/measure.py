@@ -78,7 +78,8 @@ def fly(job: tuple[str, str, list[str], str, str | None, float, float]) -> dict[
     af = load_airframe()
     faults = [f for s in specs for f in parse_fault_spec(s, af.actuator_names)]
     sc = paper_scenario(case, duration, airframe=af, extra_faults=faults)
-    t0 = min((f.start_s for f in faults), default=20.0)
+    # peak attitude from the fault on, or (no fault: delay runs) from just after the arm
+    t0 = min((f.start_s for f in faults), default=1.5)
     peak = PeakAttitude(t0)
     m = run_scenario(sc, ctrl, airframe=af, gains_dir=gains, hil_delay_s=delay,
                      observers=[peak]).metrics
@@ -103,6 +104,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="delay: nominal transition (case 0, 45 s) with 20, 25 and 40 ms one-way "
                          "HIL delay, GS-SHIF (not part of all)")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--delays-ms", default="20,25,40",
+                    help="one-way HIL delays of --only delay, ms (default 20,25,40)")
     a = ap.parse_args(argv)
     ctrls = a.controllers.split(",")
     sctrls = (a.survival_controllers or a.controllers).split(",")
@@ -114,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
                  for lab, c, s in survival_cases()]
     if a.only == "delay":
         jobs = [(f"delay {d:g} ms", "0", [], "gs-shif", a.gains, 45.0, d * 1e-3)
-                for d in (20, 25, 40)]
+                for d in (float(x) for x in a.delays_ms.split(","))]
     with ProcessPoolExecutor(a.jobs) as ex:
         results = []
         for r in ex.map(fly, jobs):

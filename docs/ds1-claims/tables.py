@@ -79,13 +79,16 @@ def survival(rows: dict[str, list[dict[str, Any]]]) -> str:
 
 def delay_table(rows: dict[str, list[dict[str, Any]]]) -> str:
     out = ["| design | one-way HIL delay | crashed | transition complete [s] | "
-           "max pitch error [deg] | pitch RMSE t >= 20 s [deg] | final altitude error [m] |",
-           "|---|---|---|---:|---:|---:|---:|"]
+           "peak pitch / roll, whole flight [deg] | max pitch error t >= 20 s [deg] | "
+           "pitch RMSE t >= 20 s [deg] | final altitude error [m] |",
+           "|---|---|---|---:|---:|---:|---:|---:|"]
     for design, rs in rows.items():
         for r in rs:
             tc = r["transition_complete_s"]
+            pk = (f"{r['peak_pitch_deg']:.1f} / {r['peak_roll_deg']:.1f}"
+                  if "peak_pitch_deg" in r else "-")
             out.append(f"| {design} | {r['label'][6:]} | {r['crashed']} | "
-                       f"{'-' if tc is None else f'{tc:.2f}'} | "
+                       f"{'-' if tc is None else f'{tc:.2f}'} | {pk} | "
                        f"{r['max_abs_pitch_error_deg']:.2f} | {r['rmse_pitch_deg']:.3f} | "
                        f"{r['final_altitude_error_m']:.2f} |")
     return "\n".join(out)
