@@ -124,7 +124,8 @@ def plot_rmse(rows: dict[str, list[dict[str, Any]]], path: Path) -> None:
 def main() -> int:
     t4 = {"paper": load("paper"), "robust": load("robust")}
     sv = {"paper": load("paper"), "robust": load("robust") + load("robust-gs-shif")}
-    dl = {"paper": load("paper-delay"), "robust": load("robust-delay")}
+    dl = {"paper": load("paper-delay") + load("paper-delay-long"),
+          "robust": load("robust-delay") + load("robust-delay-long")}
     print("## Table 4\n\n" + table4(t4) + "\n")
     print("## Single-fault survival\n\n" + survival(sv) + "\n")
     if any(dl.values()):
