@@ -483,9 +483,12 @@ class LoopMargins:
 
     ``delay_margin_s``: the smallest extra loop delay that destabilises (min over gain
     crossovers of phase margin / crossover frequency; inf if |L_u| never crosses 1);
-    ``disk_alpha``: balanced disk margin alpha = 1 / max |S_u - T_u| * 2 ... as python-control
-    ``disk_margins`` (skew 0); ``disk_gain_margin``, ``disk_phase_margin_deg`` the gain and
-    phase variations it guarantees simultaneously; ``phase_margin_deg``, ``crossover_rad_s``.
+    ``disk_alpha``: balanced (skew 0) disk margin alpha = 2 / max_w |S_u - T_u| with
+    S_u = 1/(1 + L_u), T_u = L_u/(1 + L_u) (python-control ``disk_margins``, tested);
+    ``disk_gain_margin`` = (1 + alpha/2)/(1 - alpha/2) and ``disk_phase_margin_deg`` =
+    2 atan(alpha/2): the gain and phase variations it guarantees simultaneously;
+    ``phase_margin_deg`` (smallest over the crossovers), ``crossover_rad_s`` (the crossover
+    that sets the delay margin).
     """
 
     delay_margin_s: float
