@@ -49,6 +49,29 @@ def ned_to_display(p: Sequence[float] | np.ndarray) -> np.ndarray:
     return a * np.array([1.0, -1.0, -1.0])
 
 
+_EARTH_RADIUS_M = 6_378_137.0
+_RELATIVE_FRAMES = (3, 6)          # MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT)
+_NAV_COMMANDS = (16, 17, 19, 21, 22, 84, 85)
+
+
+def mission_points_display(items: Sequence[Any], home_lat_deg: float, home_lon_deg: float,
+                           home_alt_m: float) -> tuple[np.ndarray, list[int]]:
+    """Display-frame points (k, 3) of the positional items of a mission (MISSION_ITEM_INT
+    messages or anything with seq, frame, command, x, y (degE7) and z (m)) and their seqs.
+    Flat-earth projection about home (the autopilot's); lat/lon 0 (land here) is skipped."""
+    pts, seqs = [], []
+    cos_lat = math.cos(math.radians(home_lat_deg))
+    for it in items:
+        if int(it.command) not in _NAV_COMMANDS or (it.x == 0 and it.y == 0):
+            continue
+        n = math.radians(it.x * 1e-7 - home_lat_deg) * _EARTH_RADIUS_M
+        e = math.radians(it.y * 1e-7 - home_lon_deg) * _EARTH_RADIUS_M * cos_lat
+        h = float(it.z) if int(it.frame) in _RELATIVE_FRAMES else float(it.z) - home_alt_m
+        pts.append(ned_to_display((n, e, -h)))
+        seqs.append(int(it.seq))
+    return (np.array(pts) if pts else np.zeros((0, 3))), seqs
+
+
 @dataclass
 class CommandFeedback:
     """One command's fate, as shown to the user."""
@@ -92,6 +115,11 @@ class DashboardView:
     actuators: dict[str, float | None]           # name -> normalised output (None = unknown)
     actuator_html: str
     commands: list[CommandFeedback] = field(default_factory=list)
+    battery_text: str = "no data"
+    gps_text: str = "no data"
+    mission_text: str = "no mission"
+    mission_seq: int = 0
+    mission_total: int = 0
 
     @property
     def status_html(self) -> str:
@@ -110,6 +138,9 @@ class DashboardView:
             ("roll/pitch/yaw", f"{r:+.1f}° / {p:+.1f}° / {y:+.1f}°"),
             ("N / E / D", f"{n:.1f} / {e:.1f} / {d:.1f} m"),
             ("sim time", f"{self.sim_time_s:.1f} s · update #{self.update_count}"),
+            ("battery", esc(self.battery_text)),
+            ("GPS", esc(self.gps_text)),
+            ("mission", esc(self.mission_text)),
         ]
         if self.statustext:
             rows.append(("autopilot", f"<i>{esc(self.statustext)}</i>"))
@@ -321,7 +352,7 @@ class DashboardModel:
             traces={k: np.fromiter(v, dtype=float, count=len(v))
                     for k, v in self._traces.items()},
             actuators=acts, actuator_html=self.actuator_html(acts, state != "ok"),
-            commands=list(self._commands),
+            commands=list(self._commands), **_extras(snap),
         )
 
     def _reset_history(self) -> None:
@@ -381,3 +412,29 @@ class DashboardModel:
 
 
 _LANDED = {0: "undefined", 1: "on ground", 2: "in air", 3: "taking off", 4: "landing"}
+
+
+_MISSION_STATES = {1: "no mission", 2: "not started", 3: "active", 4: "paused", 5: "complete"}
+_FIX = {0: "no GPS", 1: "no fix", 2: "2D fix", 3: "3D fix", 4: "DGPS", 5: "RTK float",
+        6: "RTK fixed"}
+
+
+def _extras(snap: Any) -> dict[str, Any]:
+    """Battery, GPS and mission lines of the status panel from a snapshot."""
+    v = float(getattr(snap, "battery_v", math.nan))
+    rem = float(getattr(snap, "battery_remaining", math.nan))
+    amp = float(getattr(snap, "battery_a", math.nan))
+    bat = "no data" if not math.isfinite(v) else (
+        f"{v:.2f} V" + (f" · {amp:.1f} A" if math.isfinite(amp) else "")
+        + (f" · {100 * rem:.0f} %" if math.isfinite(rem) else ""))
+    fix = int(getattr(snap, "gps_fix_type", 0))
+    hdop = float(getattr(snap, "gps_hdop", math.nan))
+    gps = "no data" if fix == 0 else (
+        f"{_FIX.get(fix, str(fix))} · {int(getattr(snap, 'gps_satellites', 0))} sats"
+        + (f" · hdop {hdop:.1f}" if math.isfinite(hdop) else ""))
+    total = int(getattr(snap, "mission_total", 0))
+    seq = int(getattr(snap, "mission_seq", 0))
+    state = _MISSION_STATES.get(int(getattr(snap, "mission_state", 0)), "")
+    mission = "no mission" if total == 0 else f"item {seq} of {total} · {state}"
+    return {"battery_text": bat, "gps_text": gps, "mission_text": mission,
+            "mission_seq": seq, "mission_total": total}

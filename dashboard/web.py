@@ -23,6 +23,7 @@ and one command thread (commands never block the page).
 from __future__ import annotations
 
 import contextlib
+import math
 import queue
 import sys
 import threading
@@ -164,6 +165,12 @@ class Dashboard:
                             opacity=0.8, cast_shadow=False, receive_shadow=False)
         sc.add_frame("/aircraft/axes", axes_length=0.6, axes_radius=0.02)
         self._path = None
+        self._mission_total = 0           # mission size drawn (0 = none)
+        self._mission_seq = -1
+        self._mission_pts: tuple[np.ndarray, list[int]] | None = None
+        self._mission_loading = False
+        self._mission_new = False
+        self._mission_current = None
 
         # where a new browser's camera starts (behind-left of the aircraft, above it); the
         # update loop then moves every camera with the aircraft, keeping the user's offset
@@ -324,6 +331,7 @@ class Dashboard:
                 self._path = self.server.scene.add_line_segments(
                     "/path", points=seg, colors=(250, 180, 20), thickness=3.0,
                     thickness_units="screen")
+            self._draw_mission(view)
             tr = view.traces
             if tr["t"].size and self.updates % self._plot_every == 0:
                 self._plot_att.data = (tr["t"], tr["roll"], tr["pitch"], tr["yaw"])
@@ -332,6 +340,48 @@ class Dashboard:
         self._follow(view)
         self.updates += 1
         return view
+
+    def _load_mission(self) -> None:
+        """Download the vehicle's mission (in a thread) for the 3-D view."""
+        from vtolftc.dashboard.model import mission_points_display
+
+        try:
+            items = self.gs.download_mission()
+            snap = self.gs.snapshot()
+            lat, lon = snap.home_lat_lon_deg
+            if math.isfinite(lat) and math.isfinite(snap.home_amsl_m):
+                self._mission_pts = mission_points_display(items, lat, lon, snap.home_amsl_m)
+                self._mission_new = True
+        except Exception:  # the next MISSION_CURRENT change tries again
+            self._mission_total = 0
+        finally:
+            self._mission_loading = False
+
+    def _draw_mission(self, view: DashboardView) -> None:
+        """The mission's path (blue) and its current waypoint (red sphere) in the scene."""
+        if view.mission_total != self._mission_total and not self._mission_loading:
+            self._mission_total = view.mission_total
+            if view.mission_total > 0:
+                self._mission_loading = True
+                threading.Thread(target=self._load_mission, daemon=True,
+                                 name="dashboard-mission").start()
+        sc = self.server.scene
+        if self._mission_new and self._mission_pts is not None:
+            self._mission_new = False
+            self._mission_seq = -1
+            pts, _ = self._mission_pts
+            if len(pts) >= 2:
+                seg = np.stack([pts[:-1], pts[1:]], axis=1).astype(np.float32)
+                sc.add_line_segments("/mission", points=seg, colors=(40, 120, 250),
+                                     thickness=2.0, thickness_units="screen")
+        if self._mission_pts is not None and view.mission_seq != self._mission_seq:
+            self._mission_seq = view.mission_seq
+            pts, seqs = self._mission_pts
+            nxt = [k for k, s in enumerate(seqs) if s >= view.mission_seq]
+            if nxt:
+                self._mission_current = sc.add_icosphere(
+                    "/mission_current", radius=3.0, color=(220, 40, 40),
+                    position=tuple(float(x) for x in pts[nxt[0]]))
 
     def _follow(self, view: DashboardView) -> None:
         """Keep each browser's camera on the aircraft, keeping the user's viewing offset

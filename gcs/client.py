@@ -135,6 +135,8 @@ class VehicleSnapshot:
     connected: bool = False
     heartbeat_age_s: float = math.inf
     armed: bool = False
+    system_status: int = 0
+    """MAV_STATE of the last HEARTBEAT (1 BOOT, 3 STANDBY, 4 ACTIVE, 5 CRITICAL, 6 EMERGENCY)."""
     mode_name: str = "UNKNOWN"
     vtol_state: int = 0
     vtol_state_name: str = "UNDEFINED"
@@ -148,6 +150,21 @@ class VehicleSnapshot:
     position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     altitude_m: float = 0.0
     """Height above home (m), from GLOBAL_POSITION_INT.relative_alt."""
+    home_amsl_m: float = math.nan
+    """Altitude of home above mean sea level (m), from HOME_POSITION (NaN until heard)."""
+    home_lat_lon_deg: tuple[float, float] = (math.nan, math.nan)
+    battery_v: float = math.nan
+    """BATTERY_STATUS pack voltage (V; NaN until heard)."""
+    battery_a: float = math.nan
+    battery_remaining: float = math.nan
+    """Remaining charge 0..1 (BATTERY_STATUS.battery_remaining / 100)."""
+    gps_fix_type: int = 0
+    gps_satellites: int = 0
+    gps_hdop: float = math.nan
+    mission_seq: int = 0
+    """MISSION_CURRENT: current item, total items and MISSION_STATE."""
+    mission_total: int = 0
+    mission_state: int = 0
     airspeed_m_s: float = 0.0
     groundspeed_m_s: float = 0.0
     heading_deg: float = 0.0
@@ -341,11 +358,50 @@ class GroundStation:
         return self.command_long(CMD_ARM_DISARM, [0.0, ARM_FORCE_MAGIC if force else 0.0])
 
     def takeoff(self, altitude_m: float | None = None) -> CommandOutcome:
-        """NAV_TAKEOFF; ``altitude_m`` in param7 (None = NaN = the autopilot's default)."""
+        """NAV_TAKEOFF to ``altitude_m`` above home (None = NaN = the autopilot's default,
+        ``MIS_TAKEOFF_ALT``). param7 is AMSL, as PX4 reads it and QGroundControl sends it:
+        home's altitude (HOME_POSITION, requested if not heard yet) plus ``altitude_m``."""
         alt = math.nan if altitude_m is None else float(altitude_m)
         if altitude_m is not None and not (math.isfinite(alt) and alt > 0.0):
             raise GcsError(f"takeoff altitude {altitude_m!r}: expected a positive height in m")
+        if altitude_m is not None:
+            if not math.isfinite(self.snapshot().home_amsl_m):
+                self.command_long(512, [242.0])  # REQUEST_MESSAGE HOME_POSITION
+                try:
+                    self.wait_for(lambda s: math.isfinite(s.home_amsl_m), 2.0)
+                except GcsTimeout:
+                    raise GcsError("takeoff: no HOME_POSITION from the vehicle yet (param7 is "
+                                   "AMSL); wait for a position fix and try again") from None
+            alt += self.snapshot().home_amsl_m
         return self.command_long(CMD_NAV_TAKEOFF, [math.nan] * 6 + [alt])
+
+    def download_mission(self, timeout_s: float = 2.0, retries: int = 3) -> list[Any]:
+        """The vehicle's mission (MISSION_REQUEST_LIST, then MISSION_REQUEST_INT per item):
+        the MISSION_ITEM_INT messages in order. Raises :class:`GcsTimeout` if an answer does
+        not come after ``retries`` tries."""
+        c = self._link.codec
+
+        def ask(msg: Any, pred: Callable[[Any], bool]) -> Any:
+            for _ in range(max(0, retries) + 1):
+                w = self._add_waiter(lambda m: self._from_target(m) and pred(m))
+                try:
+                    self._send(msg)
+                    if w.event.wait(timeout_s):
+                        return w.message
+                finally:
+                    self._remove_waiter(w)
+            raise GcsTimeout(f"mission download: no answer to {msg.get_type()} within "
+                             f"{timeout_s:g} s")
+
+        cnt = ask(c.mission_request_list_encode(*self.target, 0),
+                  lambda m: m.get_type() == "MISSION_COUNT" and m.mission_type == 0)
+        items = []
+        for seq in range(int(cnt.count)):
+            items.append(ask(c.mission_request_int_encode(*self.target, seq, 0),
+                             lambda m, s=seq: m.get_type() == "MISSION_ITEM_INT"
+                             and m.seq == s))
+        self._send(c.mission_ack_encode(*self.target, 0, 0))
+        return items
 
     def land(self) -> CommandOutcome:
         """NAV_LAND at the current position."""
@@ -563,6 +619,7 @@ class GroundStation:
             if t == "HEARTBEAT":
                 self._last_heartbeat = time.monotonic()
                 s.armed = bool(m.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
+                s.system_status = int(m.system_status)
                 s.mode_name = mode_name(m.custom_mode)
                 self._heartbeat_event.set()
             elif t == "ATTITUDE":
@@ -572,6 +629,23 @@ class GroundStation:
             elif t == "LOCAL_POSITION_NED":
                 s.position_ned_m = (float(m.x), float(m.y), float(m.z))
                 self._time_ms(s, m.time_boot_ms)
+            elif t == "HOME_POSITION":
+                s.home_amsl_m = m.altitude * 1e-3
+                s.home_lat_lon_deg = (m.latitude * 1e-7, m.longitude * 1e-7)
+            elif t == "BATTERY_STATUS":
+                cells = [v for v in m.voltages[:10] if v != 65535]
+                s.battery_v = sum(cells) * 1e-3 if cells else math.nan
+                s.battery_a = m.current_battery * 0.01 if m.current_battery >= 0 else math.nan
+                s.battery_remaining = (m.battery_remaining / 100.0
+                                       if m.battery_remaining >= 0 else math.nan)
+            elif t == "GPS_RAW_INT":
+                s.gps_fix_type = int(m.fix_type)
+                s.gps_satellites = int(m.satellites_visible)
+                s.gps_hdop = m.eph / 100.0 if m.eph != 65535 else math.nan
+            elif t == "MISSION_CURRENT":
+                s.mission_seq = int(m.seq)
+                s.mission_total = int(getattr(m, "total", 0))
+                s.mission_state = int(getattr(m, "mission_state", 0))
             elif t == "GLOBAL_POSITION_INT":
                 s.altitude_m = m.relative_alt * 1e-3
                 self._time_ms(s, m.time_boot_ms)

@@ -14,12 +14,19 @@ import zenoh; both happen on first use.
 """
 
 from vtolftc.protocols.link import Link, LinkStats, Transport, open_link, parse_link_url
-from vtolftc.protocols.mavlink import SigningConfig, dialect, make_codec, signing_timestamp_now
+from vtolftc.protocols.mavlink import (
+    SigningConfig,
+    StreamTimestamps,
+    dialect,
+    make_codec,
+    signing_timestamp_now,
+)
 
 __all__ = [
     "Link",
     "LinkStats",
     "SigningConfig",
+    "StreamTimestamps",
     "Transport",
     "dialect",
     "make_codec",

@@ -44,7 +44,7 @@ from types import TracebackType
 from typing import Any
 from urllib.parse import urlsplit
 
-from vtolftc.protocols.mavlink import SigningConfig, dialect, make_codec
+from vtolftc.protocols.mavlink import SigningConfig, StreamTimestamps, dialect, make_codec
 from vtolftc.protocols.transport import LinkUrl, Transport
 
 __all__ = [
@@ -86,6 +86,10 @@ class LinkStats:
     """Well-framed messages whose id is not in the dialect (their CRC cannot be checked)."""
     dropped_overflow: int = 0
     """Datagrams dropped because the transport's receive queue was full."""
+    dropped_foreign: int = 0
+    """Datagrams dropped because they came from another address than the pinned peer."""
+    dropped_rate: int = 0
+    """Datagrams dropped unparsed by the link's receive rate limit (``rate_limit_hz``)."""
 
     @property
     def dropped(self) -> int:
@@ -97,6 +101,8 @@ class LinkStats:
             + self.dropped_signature
             + self.dropped_unknown
             + self.dropped_overflow
+            + self.dropped_foreign
+            + self.dropped_rate
         )
 
     def as_dict(self) -> dict[str, int]:
@@ -117,6 +123,13 @@ class Link:
             instead of dropping them.
         codec: use this generated ``MAVLink`` object instead of making one (ids and signing
             arguments are then ignored).
+        track_source: remember each message's source address (:meth:`source_of`), so that a
+            server can :meth:`pin` its peer.
+        stream_table: the signing replay window, shared with other links (see
+            :class:`vtolftc.protocols.mavlink.StreamTimestamps`).
+        rate_limit_hz, rate_burst: receive at most this many datagrams per second (token
+            bucket, ``rate_burst`` default twice the rate); the excess is dropped before it is
+            parsed (counted as ``dropped_rate``), so a flood costs little more than the read.
 
     One thread may send while another receives (the counters are then approximate, and with
     signing a send racing a receive may very rarely reuse a signing timestamp).
@@ -131,11 +144,20 @@ class Link:
         signing: SigningConfig | None = None,
         keep_unknown: bool = False,
         codec: Any = None,
+        track_source: bool = False,
+        stream_table: StreamTimestamps | None = None,
+        rate_limit_hz: float | None = None,
+        rate_burst: float | None = None,
     ) -> None:
         mod = dialect()
+        self._rate = rate_limit_hz
+        self._burst = float(rate_burst if rate_burst is not None else 2.0 * (rate_limit_hz or 0))
+        self._tokens = self._burst
+        self._tokens_t = time.monotonic()
+        self._track_source = track_source
         self._transport = transport
         self._codec = codec if codec is not None else make_codec(
-            system_id, component_id, signing=signing
+            system_id, component_id, signing=signing, stream_table=stream_table
         )
         self._codec.robust_parsing = True
         self._bad_data_cls = mod.MAVLink_bad_data
@@ -170,6 +192,7 @@ class Link:
     def stats(self) -> LinkStats:
         """Live counters (the same object is updated as traffic flows)."""
         self._stats.dropped_overflow = self._transport.overflow_drops
+        self._stats.dropped_foreign = self._transport.foreign_drops
         return self._stats
 
     @property
@@ -201,7 +224,45 @@ class Link:
         st.send_dropped += 1
         return 0
 
+    # ---------------------------------------------------------------- peers
+    @staticmethod
+    def source_of(msg: Any) -> object:
+        """Source address of a message received with ``track_source`` (None if unknown)."""
+        return getattr(msg, "_vtolftc_source", None)
+
+    def pin(self, addr: object) -> None:
+        """Talk to ``addr`` only from now on (UDP server); see :meth:`Transport.pin`."""
+        self._transport.pin(addr)
+
     # ---------------------------------------------------------------- receiving
+    def _admit(self) -> bool:
+        """Receive rate limit: take a token (False = drop the datagram unparsed)."""
+        now = time.monotonic()
+        self._tokens = min(self._burst, self._tokens + (now - self._tokens_t) * self._rate)
+        self._tokens_t = now
+        if self._tokens < 1.0:
+            self._stats.dropped_rate += 1
+            return False
+        self._tokens -= 1.0
+        return True
+
+    def _read(self, timeout_s: float | None, out: list[Any]) -> None:
+        """One transport read, parsed into ``out``."""
+        limited = self._rate is not None
+        if self._track_source:
+            for datagram, src in self._transport.recv_datagrams_from(timeout_s):
+                if limited and datagram and not self._admit():
+                    continue
+                n = len(out)
+                self._parse_datagram(datagram, out)
+                for m in out[n:]:
+                    m._vtolftc_source = src
+        else:
+            for datagram in self._transport.recv_datagrams(timeout_s):
+                if limited and datagram and not self._admit():
+                    continue
+                self._parse_datagram(datagram, out)
+
     def recv(self, timeout_s: float | None = 0.0) -> list[Any]:
         """Messages received, waiting up to ``timeout_s`` for the first one.
 
@@ -213,17 +274,14 @@ class Link:
             self._pending.clear()
             return out
         out: list[Any] = []
-        transport = self._transport
         if timeout_s is None:  # wait in slices so that close() from another thread ends it
             while not out and not self._closed:
-                for datagram in transport.recv_datagrams(0.25):
-                    self._parse_datagram(datagram, out)
+                self._read(0.25, out)
             return out
         deadline = time.monotonic() + max(0.0, timeout_s)
         remaining = max(0.0, timeout_s)
         while True:
-            for datagram in transport.recv_datagrams(remaining):
-                self._parse_datagram(datagram, out)
+            self._read(remaining, out)
             if out:
                 return out
             remaining = deadline - time.monotonic()
@@ -269,8 +327,7 @@ class Link:
             if remaining <= 0.0:
                 return False
             batch: list[Any] = []
-            for datagram in self._transport.recv_datagrams(min(remaining, 0.005)):
-                self._parse_datagram(datagram, batch)
+            self._read(min(remaining, 0.005), batch)
             self._pending.extend(batch)
         return True
 
@@ -417,6 +474,10 @@ def open_link(
     signing: SigningConfig | None = None,
     allow_remote: bool = False,
     keep_unknown: bool = False,
+    track_source: bool = False,
+    stream_table: StreamTimestamps | None = None,
+    rate_limit_hz: float | None = None,
+    rate_burst: float | None = None,
 ) -> Link:
     """Open a :class:`Link` from a URL (see the module docstring for the scheme).
 
@@ -426,6 +487,9 @@ def open_link(
         signing: MAVLink 2 signing configuration, None = no signing.
         allow_remote: permit non-loopback addresses (never settable from the URL).
         keep_unknown: deliver messages of ids unknown to the dialect instead of dropping them.
+        track_source: remember source addresses (see :meth:`Link.source_of`, :meth:`Link.pin`).
+        stream_table: signing replay window shared by several links.
+        rate_limit_hz, rate_burst: receive rate limit in datagrams/s (see :class:`Link`).
 
     Raises:
         ValueError: malformed URL, or a non-loopback address without ``allow_remote``.
@@ -460,6 +524,10 @@ def open_link(
             component_id=component_id,
             signing=signing,
             keep_unknown=keep_unknown,
+            track_source=track_source,
+            stream_table=stream_table,
+            rate_limit_hz=rate_limit_hz,
+            rate_burst=rate_burst,
         )
     except BaseException:
         transport.close()

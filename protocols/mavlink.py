@@ -20,17 +20,31 @@ Codecs
     :func:`make_codec` returns the generated ``MAVLink`` object (packer + parser) with a given
     system/component id, robust parsing on (bad data comes back as ``MAVLink_bad_data`` instead of
     exceptions) and, when a :class:`SigningConfig` is given, MAVLink 2 message signing.
+
+Signature check (how pymavlink is wrapped)
+    pymavlink's ``MAVLink.check_signature`` stores a frame's timestamp in the stream table
+    *before* it compares the hash, so one forged frame (any bytes, no key) with a far-future
+    timestamp locks the legitimate signer out until restart; and each codec keeps its own table,
+    so a signed frame captured on one link can be replayed on another. :func:`apply_signing`
+    therefore replaces ``check_signature`` on the codec instance (the parser calls it through
+    ``self``) with :func:`_verified_check`: the SHA-256 signature is compared first
+    (constant-time), and only a frame with a valid signature has its timestamp checked against
+    and stored in the :class:`StreamTimestamps` table; every codec given the same table (the
+    autopilot passes one to all its ground-station links) shares one replay window. The rest of
+    pymavlink's parser (unsigned-frame callback, counters) is unchanged.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
+import hmac
 import importlib
 import io
 import os
 import re
 import shutil
+import struct
 import tempfile
 import threading
 import time
@@ -47,6 +61,7 @@ __all__ = [
     "GENERATED_MODULE",
     "MAVLINK_EPOCH_UNIX_S",
     "SigningConfig",
+    "StreamTimestamps",
     "apply_signing",
     "dialect",
     "dialect_sources",
@@ -284,9 +299,71 @@ class SigningConfig:
         return cls(hashlib.sha256(passphrase.encode()).digest(), **kwargs)
 
 
-def apply_signing(codec: Any, signing: SigningConfig) -> None:
-    """Enable MAVLink 2 signing on a generated ``MAVLink`` codec object."""
+class StreamTimestamps:
+    """The replay window of MAVLink 2 signing: the last accepted timestamp of every stream
+    ``(link_id, system, component)``, shared by every codec (link) it is given to; thread-safe
+    (the links receive in their own threads).
+    """
+
+    def __init__(self) -> None:
+        self._ts: dict[tuple[int, int, int], int] = {}
+        self._lock = threading.Lock()
+
+    def accept(self, key: tuple[int, int, int], timestamp: int, now: int) -> bool:
+        """Accept ``timestamp`` for stream ``key`` (and store it) if it is newer than the last
+        one of that stream, or, for a new stream, at most one minute older than ``now``
+        (pymavlink's rule). Only ever called for frames whose signature was verified."""
+        with self._lock:
+            last = self._ts.get(key)
+            if last is not None:
+                if timestamp <= last:
+                    return False
+            elif timestamp + 6000 * 1000 < now:
+                return False
+            self._ts[key] = timestamp
+            return True
+
+    def __len__(self) -> int:
+        return len(self._ts)
+
+
+_SIGN_TS = struct.Struct("<IH")
+
+
+def _verified_check(codec: Any, table: StreamTimestamps, msgbuf: bytearray, src_system: int,
+                    src_component: int) -> bool:
+    """``check_signature`` with the hash verified before any timestamp is looked at or stored
+    (see the module docstring)."""
     s = codec.signing
+    key = s.secret_key
+    if key is None or len(msgbuf) < 13:
+        return False
+    digest = hashlib.sha256(bytes(key) + bytes(msgbuf[:-6])).digest()[:6]
+    if not hmac.compare_digest(digest, bytes(msgbuf[-6:])):
+        return False
+    tlow, thigh = _SIGN_TS.unpack(bytes(msgbuf[-12:-6]))
+    timestamp = tlow + (thigh << 32)
+    link_id = msgbuf[-13]
+    if not table.accept((int(link_id), int(src_system), int(src_component)), timestamp,
+                        int(s.timestamp)):
+        return False
+    if timestamp > s.timestamp:  # pymavlink: send with max(received, own) from now on
+        s.timestamp = timestamp
+    return True
+
+
+def apply_signing(codec: Any, signing: SigningConfig,
+                  table: StreamTimestamps | None = None) -> None:
+    """Enable MAVLink 2 signing on a generated ``MAVLink`` codec object.
+
+    Incoming signatures are checked by :func:`_verified_check` against ``table`` (a new one
+    for this codec when None; pass one table to every link of an endpoint).
+    """
+    s = codec.signing
+    tbl = table if table is not None else StreamTimestamps()
+    codec.check_signature = lambda msgbuf, sys_id, comp_id: _verified_check(
+        codec, tbl, msgbuf, sys_id, comp_id)
+    codec.stream_table = tbl
     s.secret_key = bytes(signing.secret_key)
     s.link_id = int(signing.link_id)
     s.timestamp = signing_timestamp_now() if signing.timestamp is None else int(signing.timestamp)
@@ -306,6 +383,7 @@ def make_codec(
     *,
     signing: SigningConfig | None = None,
     robust: bool = True,
+    stream_table: StreamTimestamps | None = None,
 ) -> Any:
     """A generated ``MAVLink`` object (encoder + parser) of the vtol-ftc dialect.
 
@@ -320,6 +398,8 @@ def make_codec(
         enable MAVLink 2 signing with these parameters.
     robust
         robust parsing (bad data returned as ``MAVLink_bad_data``, never raised).
+    stream_table
+        signing replay window shared with other codecs (see :class:`StreamTimestamps`).
 
     The codec's ``file`` is ``None``: pack with ``msg.pack(codec)`` (or let a
     :class:`vtolftc.protocols.link.Link` do it) rather than ``codec.send``.
@@ -329,6 +409,6 @@ def make_codec(
     codec = dialect().MAVLink(None, srcSystem=system_id, srcComponent=component_id)
     codec.robust_parsing = robust
     if signing is not None:
-        apply_signing(codec, signing)
+        apply_signing(codec, signing, stream_table)
     return codec
 

@@ -47,6 +47,19 @@ class Transport(ABC):
         """Datagrams dropped by the transport's own receive queue (if it has one)."""
         return 0
 
+    foreign_drops: int = 0
+    """Datagrams dropped because they came from another address than the pinned peer."""
+
+    def recv_datagrams_from(self, timeout_s: float | None) -> list[tuple[bytes, object]]:
+        """:meth:`recv_datagrams` with each datagram's source address (None where the
+        transport has no addresses, e.g. zenoh)."""
+        return [(d, None) for d in self.recv_datagrams(timeout_s)]
+
+    def pin(self, addr: object) -> None:
+        """Talk to ``addr`` only (see :meth:`vtolftc.protocols.udp.UdpServerTransport.pin`).
+        Transports without addresses ignore it."""
+        return None
+
     def describe(self) -> str:
         """Human-readable endpoint description."""
         return self.kind

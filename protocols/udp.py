@@ -1,7 +1,9 @@
 """UDP transports (loopback by default).
 
 * :class:`UdpServerTransport` binds HOST:PORT and replies to the last peer it heard from, like
-  PX4's ground-station port (14550).
+  PX4's ground-station port (14550); once :meth:`UdpServerTransport.pin` was called with an
+  address, it talks to that address only and drops (and counts) every datagram from elsewhere
+  (the vehicle pins its autopilot this way).
 * :class:`UdpClientTransport` sends to HOST:PORT from an ephemeral local port and reads only
   datagrams coming from HOST:PORT (a connected UDP socket).
 
@@ -44,15 +46,21 @@ class _UdpBase(Transport):
         self._closed = False
         sock.setblocking(False)
 
-    def _on_datagram_from(self, addr: tuple[str, int]) -> None:
-        """Hook: the server remembers the peer."""
+    def _on_datagram_from(self, addr: tuple[str, int]) -> bool:
+        """Hook: the server remembers the peer. False drops the datagram."""
+        return True
 
     def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
         """See :meth:`Transport.recv_datagrams`."""
+        return [d for d, _ in self.recv_datagrams_from(timeout_s)]
+
+    def recv_datagrams_from(self, timeout_s: float | None) -> list[tuple[bytes, object]]:
+        """See :meth:`Transport.recv_datagrams_from`."""
         if self._closed:
             return []
         sock = self._sock
-        out: list[bytes] = []
+        out: list[tuple[bytes, object]] = []
+        n = 0
         try:
             try:
                 data, addr = sock.recvfrom(_MAX_DATAGRAM)
@@ -63,12 +71,14 @@ class _UdpBase(Transport):
                 if not ready:
                     return out
                 data, addr = sock.recvfrom(_MAX_DATAGRAM)
-            self._on_datagram_from(addr)
-            out.append(data)
-            while len(out) < MAX_BATCH:
+            n += 1
+            if self._on_datagram_from(addr):
+                out.append((data, addr))
+            while n < MAX_BATCH:
                 data, addr = sock.recvfrom(_MAX_DATAGRAM)
-                self._on_datagram_from(addr)
-                out.append(data)
+                n += 1
+                if self._on_datagram_from(addr):
+                    out.append((data, addr))
         except (BlockingIOError, InterruptedError):
             pass
         except ConnectionRefusedError:
@@ -110,14 +120,35 @@ class UdpServerTransport(_UdpBase):
             raise
         super().__init__(sock)
         self._peer: tuple[str, int] | None = None
+        self._pinned = False
+        self.foreign_drops = 0
+        """Datagrams dropped because they came from another address than the pinned one."""
 
     @property
     def peer(self) -> tuple[str, int] | None:
         """Last peer heard from (where sends go), None before the first datagram."""
         return self._peer
 
-    def _on_datagram_from(self, addr: tuple[str, int]) -> None:
+    @property
+    def pinned(self) -> tuple[str, int] | None:
+        """The pinned peer address, None while not pinned."""
+        return self._peer if self._pinned else None
+
+    def pin(self, addr: object) -> None:
+        """Talk to ``addr`` only from now on: sends go there, datagrams from any other
+        address are dropped and counted in :attr:`foreign_drops`."""
+        host, port = addr[0], addr[1]  # type: ignore[index]
+        self._peer = (str(host), int(port))
+        self._pinned = True
+
+    def _on_datagram_from(self, addr: tuple[str, int]) -> bool:
+        if self._pinned:
+            if (addr[0], addr[1]) != self._peer:
+                self.foreign_drops += 1
+                return False
+            return True
         self._peer = addr
+        return True
 
     def send_bytes(self, data: bytes) -> bool:
         """Send to the last peer; False (dropped) if none yet or on a socket error."""

@@ -113,11 +113,20 @@ class DScaling:
     ``left`` acts on M's rows (partition by block cols), ``right`` on M's columns
     (partition by block rows); for structures of square blocks they are equal.
     ``params`` is the internal log-parametrisation (usable as a warm start).
+
+    With real blocks the bound is the mixed D-G bound: ``g`` is then the Hermitian G of the
+    certificate M^H D M + j (G M - M^H G) <= bound^2 D with D = left^H left (square
+    structures), and sigma_max(left M right^-1) alone may exceed the bound. ``method`` says
+    which algorithm produced it (``"ab13md"``, ``"dg"`` or ``"dscale"``), ``warm`` is that
+    algorithm's warm-start vector.
     """
 
     left: NDArray[np.complex128]
     right: NDArray[np.complex128]
     params: NDArray[np.float64]
+    g: NDArray[np.complex128] | None = field(default=None, repr=False)
+    method: str = "dscale"
+    warm: NDArray[np.float64] | None = field(default=None, repr=False)
 
     def scaled(self, M: NDArray[Any]) -> NDArray[np.complex128]:
         """Return D_l M D_r^-1."""
@@ -496,6 +505,84 @@ def _upper(
     return obj.best_val, obj.best_x
 
 
+_MU_METHODS = ("auto", "ab13md", "dg", "dscale")
+
+
+def _ab13md_spec(st: _Structure) -> tuple[NDArray[Any], NDArray[Any]] | None:
+    nblock, itype = [], []
+    for b in st.blocks:
+        if b.kind == "full" and b.rows == b.cols:
+            nblock.append(b.rows)
+            itype.append(2)
+        elif b.kind == "real" and b.rows == 1:
+            nblock.append(1)
+            itype.append(1)
+        else:
+            return None
+    return np.array(nblock), np.array(itype)
+
+
+def _certified_dg(M: NDArray[Any], D: NDArray[Any], G: NDArray[Any] | None) -> float:
+    """sqrt(lambda_max(M^H D M + j(G M - M^H G), D)), the bound certified by (D, G)."""
+    from scipy.linalg import eigh
+
+    H = M.conj().T @ D @ M
+    if G is not None:
+        GM = G @ M
+        H = H + 1j * (GM - GM.conj().T)
+    lam = eigh(0.5 * (H + H.conj().T), D, eigvals_only=True)
+    return math.sqrt(max(float(lam[-1]), 0.0))
+
+
+def _upper_any(
+    M: NDArray[Any],
+    st: _Structure,
+    warm: DScaling | None,
+    target: float,
+    rtol: float,
+    maxiter: int,
+    method: str,
+) -> tuple[float, DScaling]:
+    """Upper bound by AB13MD (where it applies), D-G scaling (real blocks) or D-scaling."""
+    if method not in _MU_METHODS:
+        raise ValueError(f"unknown method {method!r}; expected one of {_MU_METHODS}")
+    spec = _ab13md_spec(st) if st.all_square else None
+    if method == "ab13md" and spec is None:
+        raise ValueError(
+            "AB13MD only takes square full complex blocks and 1x1 real blocks; use "
+            "method='dg' (real blocks) or 'dscale' for this structure"
+        )
+    if method in ("auto", "ab13md") and spec is not None:
+        from slycot import ab13md
+
+        try:  # cold start only: chained AB13MD warm starts can hang (see mixed_mu)
+            _, d, g, xo = ab13md(M, spec[0], spec[1])
+            d = np.asarray(d, float)
+            ok = bool(np.all(np.isfinite(d)) and np.all(d > 0))
+        except Exception:
+            ok = False
+        if ok:
+            Dl = np.diag(d).astype(complex)
+            G = np.diag(np.asarray(g, float)).astype(complex) if st.has_real else None
+            if G is None:
+                val = float(np.linalg.norm((d[:, None] * M) / d[None, :], 2))
+            else:
+                val = _certified_dg(M, np.diag(d**2).astype(complex), G)
+            x = np.log(d[st.row_starts])
+            return val, DScaling(Dl, Dl.copy(), x, G, "ab13md", np.asarray(xo, float))
+    if st.has_real and method in ("auto", "dg"):
+        from vtolftc.synthesis.mixed_mu import BlockStructure, _dg_upper
+
+        x0 = warm.warm if warm is not None and warm.method == "dg" else None
+        res = _dg_upper(M, BlockStructure(st.blocks), x0, target, rtol, max(maxiter, 100))
+        T = np.linalg.cholesky(res.D).conj().T  # D = T^H T
+        return res.value, DScaling(T, T.copy(), np.zeros(st.n_params), res.G, "dg",
+                                   res.params)
+    x0 = warm.params if warm is not None and warm.method == "dscale" else None
+    val, x = _upper(M, st, x0, target, rtol, maxiter)
+    return val, st.dscaling(x)
+
+
 def mu_upper_bound(
     M: NDArray[Any],
     blocks: Sequence[Block],
@@ -503,6 +590,7 @@ def mu_upper_bound(
     warm_start: DScaling | NDArray[np.float64] | None = None,
     rtol: float = 1e-6,
     maxiter: int = 60,
+    method: str = "auto",
 ) -> tuple[float, DScaling]:
     """Upper bound on mu_Delta(M) (eq. 12) by D-scaling: min_D sigma_max(D_l M D_r^-1).
 
@@ -518,17 +606,28 @@ def mu_upper_bound(
     rtol, maxiter:
         Optimiser tolerance and iteration cap per continuation stage.
 
+    method:
+        ``"auto"`` (default): SLICOT AB13MD where it applies (square full complex blocks and
+        1x1 real blocks), the mixed D-G bound of :mod:`vtolftc.synthesis.mixed_mu` for other
+        structures with real blocks, D-scaling otherwise. ``"ab13md"``, ``"dg"`` or
+        ``"dscale"`` (the numpy D-scaling, real blocks scaled as complex) force one.
+
     Returns
     -------
     (value, D):
-        ``value`` = sigma_max(D.left @ M @ inv(D.right)) >= mu(M); value <= sigma_max(M).
-        Real blocks are scaled as complex ones (valid but possibly conservative).
+        ``value`` >= mu(M), value <= sigma_max(M). Without real blocks value =
+        sigma_max(D.left @ M @ inv(D.right)); with real blocks (D-G bound) ``D.g`` holds G.
     """
     Mc = _check_matrix(M)
     st = _Structure(blocks, Mc.shape[0])
-    x0 = warm_start.params if isinstance(warm_start, DScaling) else warm_start
-    val, x = _upper(Mc, st, None if x0 is None else np.asarray(x0, float), 0.0, rtol, maxiter)
-    return val, st.dscaling(x)
+    if isinstance(warm_start, DScaling):
+        warm = warm_start
+    elif warm_start is not None:
+        x0 = np.asarray(warm_start, float)
+        warm = DScaling(np.eye(1), np.eye(1), x0)
+    else:
+        warm = None
+    return _upper_any(Mc, st, warm, 0.0, rtol, maxiter, method)
 
 
 # ------------------------------------------------------------------------------------------
@@ -902,18 +1001,18 @@ def _svd_start(M: NDArray[Any], D: DScaling) -> tuple[NDArray[Any], NDArray[Any]
 def _bounds(
     M: NDArray[Any],
     st: _Structure,
-    x0: NDArray[np.float64] | None,
+    warm: DScaling | None,
     extra_starts: Sequence[tuple[NDArray[Any], NDArray[Any]]],
     n_starts: int,
     rng: np.random.Generator,
     rtol: float,
     maxiter: int,
     iters: int,
+    method: str = "auto",
 ) -> tuple[MuBounds, tuple[NDArray[Any], NDArray[Any]] | None]:
     # quick lower bound first: it lets the upper-bound optimiser stop early when tight
     lo0, Delta0, vec0 = _lower(M, st, 0, rng, list(extra_starts), iters, real_search=False)
-    up, x = _upper(M, st, x0, lo0, rtol, maxiter)
-    D = st.dscaling(x)
+    up, D = _upper_any(M, st, warm, lo0, rtol, maxiter, method)
     lo, Delta, vec = lo0, Delta0, vec0
     if up > lo0 * (1.0 + rtol) or st.has_real:
         lo1, Delta1, vec1 = _lower(
@@ -932,18 +1031,20 @@ def mu_bounds(
     seed: int = 0,
     rtol: float = 1e-6,
     warm_start: DScaling | None = None,
+    method: str = "auto",
 ) -> MuBounds:
     """Lower and upper bounds of mu_Delta(M) (eq. 12); see the module docstring.
 
     ``n_starts`` random power-iteration starts are added to the deterministic ones (eigen-
     and singular-vector based); ``seed`` makes them reproducible. The gap is upper - lower.
+    ``method`` selects the upper-bound algorithm (see :func:`mu_upper_bound`).
     """
     Mc = _check_matrix(M)
     st = _Structure(blocks, Mc.shape[0])
     if n_starts < 0:
         raise ValueError(f"n_starts must be >= 0, got {n_starts}")
-    x0 = None if warm_start is None else np.asarray(warm_start.params, float)
-    res, _ = _bounds(Mc, st, x0, [], n_starts, np.random.default_rng(seed), rtol, 60, 80)
+    res, _ = _bounds(Mc, st, warm_start, [], n_starts, np.random.default_rng(seed), rtol, 60,
+                     80, method)
     return res
 
 
@@ -955,6 +1056,7 @@ def mu_sweep(
     n_starts: int = 1,
     seed: int = 0,
     rtol: float = 1e-5,
+    method: str = "auto",
 ) -> MuSweep:
     """mu bounds of M(j w_i) over a frequency grid (robust stability/performance, eqs. 13-14).
 
@@ -970,6 +1072,11 @@ def mu_sweep(
     n_starts:
         Random power-iteration starts per frequency in addition to the warm starts from the
         neighbouring frequency and from the upper-bound scaling.
+    method:
+        Upper-bound algorithm (see :func:`mu_upper_bound`; AB13MD where it applies).
+
+    For non-square M or mixed real/complex structures with repeated real scalars see also
+    :func:`vtolftc.synthesis.mixed_mu.mixed_mu_sweep`.
     """
     F = np.asarray(freq_response)
     w = np.asarray(omegas, dtype=float).reshape(-1)
@@ -989,16 +1096,15 @@ def mu_sweep(
     rng = np.random.default_rng(seed)
     lower = np.zeros(w.size)
     upper = np.zeros(w.size)
-    x0: NDArray[np.float64] | None = None
+    warm: DScaling | None = None
     vec: tuple[NDArray[Any], NDArray[Any]] | None = None
     for i in range(w.size):
         Mi = F[i].astype(complex)
         res, new_vec = _bounds(
-            Mi, st, x0, [] if vec is None else [vec], n_starts, rng, rtol, 40, 60
+            Mi, st, warm, [] if vec is None else [vec], n_starts, rng, rtol, 40, 60, method
         )
         lower[i], upper[i] = res.lower, res.upper
-        assert res.scaling is not None
-        x0 = res.scaling.params
+        warm = res.scaling
         if new_vec is not None:
             vec = (new_vec[0], new_vec[1])
     il, iu = int(np.argmax(lower)), int(np.argmax(upper))

@@ -41,6 +41,7 @@ directly with numpy (fast enough to be called inside the optimiser).
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -54,6 +55,7 @@ from vtolftc.synthesis.hinfnorm import StateSpaceData, as_state_space, hinf_norm
 __all__ = [
     "Channel",
     "Parameter",
+    "Progress",
     "StartRecord",
     "TunableSystem",
     "TuneResult",
@@ -82,7 +84,9 @@ class Parameter:
 
     ``scale`` sets the unit of the optimiser's step and of random restarts; by default
     max(|initial|, 1e-3) if initial != 0, else 1. Use ``lower=0`` for gains that must stay
-    non-negative.
+    non-negative. ``sample_sd``, if given, makes random starts initial + sample_sd N(0, 1)
+    (clipped to the bounds), e.g. a gain scale derived from the plant
+    (:mod:`vtolftc.synthesis.blocks`); otherwise see :func:`tune`'s ``spread``.
     """
 
     name: str
@@ -90,6 +94,7 @@ class Parameter:
     lower: float = -math.inf
     upper: float = math.inf
     scale: float | None = None
+    sample_sd: float | None = None
 
     def __post_init__(self) -> None:
         if not (self.lower <= self.initial <= self.upper):
@@ -99,6 +104,12 @@ class Parameter:
             )
         if self.scale is not None and not (self.scale > 0 and math.isfinite(self.scale)):
             raise ValueError(f"parameter {self.name!r}: scale must be > 0, got {self.scale}")
+        if self.sample_sd is not None and not (
+            self.sample_sd > 0 and math.isfinite(self.sample_sd)
+        ):
+            raise ValueError(
+                f"parameter {self.name!r}: sample_sd must be > 0, got {self.sample_sd}"
+            )
 
     @property
     def typical(self) -> float:
@@ -428,6 +439,31 @@ class _Options:
     max_freqs: int
     trust_radius: float
     stabilize_maxfev: int
+    deadline: float | None = None  # time.monotonic() value
+    regularization: float = 0.0
+    progress: Callable[[Progress], None] | None = None
+    t_start: float = 0.0
+    interrupted: bool = False
+
+
+@dataclass(frozen=True)
+class Progress:
+    """What :func:`tune`'s ``progress`` callback receives after each accepted step.
+
+    ``start``: index of the start (0 = the initial point), ``iteration`` within it,
+    ``value``: the start's current objective (max norm, plus the regularisation if any),
+    ``theta``: its current point, ``elapsed_s``: seconds since :func:`tune` was called.
+    """
+
+    start: int
+    iteration: int
+    value: float
+    theta: NDArray[np.float64]
+    elapsed_s: float
+
+
+def _reg(theta: NDArray[np.float64], s: NDArray[np.float64], rho: float) -> float:
+    return rho * float(np.sum((theta / s) ** 2)) if rho > 0 else 0.0
 
 
 def _stabilize(
@@ -473,23 +509,23 @@ def _stabilize(
 
 
 def _local(
-    ev: _Evaluator, theta0: NDArray[np.float64], opts: _Options
+    ev: _Evaluator, theta0: NDArray[np.float64], opts: _Options, index: int = 0
 ) -> tuple[NDArray[np.float64], float, list[float], int, str]:
     pb = ev.pb
     lo, hi = pb.lower, pb.upper
     theta = np.clip(np.asarray(theta0, dtype=float), lo, hi)
+    rho = opts.regularization
+    s_reg = ev.scales
     vals, peaks = ev.exact(theta)
-    f = float(np.max(vals))
+    f = float(np.max(vals)) + _reg(theta, s_reg, rho)
     history: list[float] = []
     if not math.isfinite(f):
         theta, ok = _stabilize(ev, theta, lo, hi, opts)
         if not ok:
             return theta, math.inf, [math.inf], 0, "unstable: no stabilising point found"
         vals, peaks = ev.exact(theta)
-        f = float(np.max(vals))
+        f = float(np.max(vals)) + _reg(theta, s_reg, rho)
     history.append(f)
-    # step unit: the parameter's typical magnitude, or its current magnitude if larger
-    s = np.maximum(ev.scales, np.abs(theta))
     nch = len(pb.channels)
     omegas: list[list[float]] = [[] for _ in range(nch)]
 
@@ -515,78 +551,122 @@ def _local(
     status = "max_iter reached"
     margin = pb.stability_margin
     abs_target = -max(margin, 0.0) - 1e-9
-    p = theta.size
     while it < opts.max_iter:
-        it += 1
-        W = [np.array(o) for o in omegas]
-        th_k = theta.copy()
-        s = np.maximum(ev.scales, np.abs(theta))  # relative trust region
-
-        def unpack(
-            y: NDArray[np.float64], th_k: NDArray[np.float64] = th_k, s: NDArray[np.float64] = s
-        ) -> NDArray[np.float64]:
-            return np.clip(th_k + s * y[:p], lo, hi)
-
-        def cons_f(y: NDArray[np.float64], W: list[NDArray[np.float64]] = W) -> NDArray[np.float64]:
-            th = unpack(y)
-            sig, _ = ev.sigma_and_grad(th, W, False)
-            a, _ = ev.abscissa_and_grad(th)
-            return np.concatenate([y[p] - sig, abs_target - a])
-
-        def cons_j(
-            y: NDArray[np.float64], W: list[NDArray[np.float64]] = W, s: NDArray[np.float64] = s
-        ) -> NDArray[np.float64]:
-            th = unpack(y)
-            _, g = ev.sigma_and_grad(th, W, True)
-            _, ga = ev.abscissa_and_grad(th)
-            rows = []
-            if g is not None:
-                rows.append(np.hstack([-g * s, np.ones((g.shape[0], 1))]))
-            rows.append(np.hstack([-ga * s, np.zeros((ga.shape[0], 1))]))
-            return np.vstack(rows)
-
-        blo = np.maximum(-radius, (lo - th_k) / s)
-        bhi = np.minimum(radius, (hi - th_k) / s)
-        bounds = [(float(a), float(b)) for a, b in zip(blo, bhi, strict=True)] + [(None, None)]
-        y0 = np.zeros(p + 1)
-        y0[p] = f
+        if opts.deadline is not None and time.monotonic() >= opts.deadline:
+            status = "time limit reached"
+            break
+        if opts.interrupted:
+            status = "interrupted"
+            break
         try:
-            res = minimize(
-                lambda y: y[p], y0, jac=lambda y: np.eye(p + 1)[p], method="SLSQP",
-                bounds=bounds, constraints=[{"type": "ineq", "fun": cons_f, "jac": cons_j}],
-                options={"maxiter": 100, "ftol": 1e-10 * max(f, 1e-12)},
+            f_old = f
+            stop, theta, f, peaks, radius, status = _step(
+                ev, opts, theta, f, peaks, radius, omegas, add_freqs, abs_target, history,
+                index, it + 1, status,
             )
-            y = res.x
-        except (np.linalg.LinAlgError, ValueError):
-            y = y0
-        theta_new = unpack(y)
-        predicted = f - float(y[p])
-        step = float(np.max(np.abs(y[:p]))) if p else 0.0
-        try:
-            vals_new, peaks_new = ev.exact(theta_new)
-        except (np.linalg.LinAlgError, ValueError):
-            vals_new, peaks_new = np.full(nch, math.inf), [math.nan] * nch
-        f_new = float(np.max(vals_new))
-        if math.isfinite(f_new):
-            add_freqs(theta_new, peaks_new, 0.5 * f_new)
-        if math.isfinite(f_new) and f_new < f - 1e-3 * max(predicted, 0.0) and f_new < f:
-            rel_dec = (f - f_new) / f
-            theta, f, peaks = theta_new, f_new, peaks_new
-            history.append(f)
-            if step >= 0.9 * radius:
-                radius = min(2.0 * radius, 1e3)
-            if rel_dec < opts.tol and predicted <= opts.tol * f:
-                status = "converged (small decrease)"
-                break
-        else:
-            if predicted <= opts.tol * f and step < 1e-3 * radius:
-                status = "converged (stationary for the frequency model)"
-                break
-            radius = 0.3 * min(radius, max(step, 1e-12))
-            if radius < 1e-8:
-                status = "converged (trust radius collapsed)"
-                break
+            it += 1
+            if opts.progress is not None and f < f_old:
+                opts.progress(Progress(index, it, f, theta.copy(),
+                                       time.monotonic() - opts.t_start))
+        except KeyboardInterrupt:
+            opts.interrupted = True
+            status = "interrupted"
+            break
+        if stop:
+            break
     return theta, f, history, it, status
+
+
+def _step(
+    ev: _Evaluator, opts: _Options, theta: NDArray[np.float64], f: float, peaks: list[float],
+    radius: float, omegas: list[list[float]], add_freqs: Callable[..., None],
+    abs_target: float, history: list[float], index: int, it: int, status: str,
+) -> tuple[bool, NDArray[np.float64], float, list[float], float, str]:
+    """One trust-region step of :func:`_local`; returns (stop, theta, f, peaks, radius, status)."""
+    pb = ev.pb
+    lo, hi = pb.lower, pb.upper
+    p = theta.size
+    nch = len(pb.channels)
+    rho = opts.regularization
+    s_reg = ev.scales
+    W = [np.array(o) for o in omegas]
+    th_k = theta.copy()
+    s = np.maximum(ev.scales, np.abs(theta))  # relative trust region
+
+    def unpack(
+        y: NDArray[np.float64], th_k: NDArray[np.float64] = th_k, s: NDArray[np.float64] = s
+    ) -> NDArray[np.float64]:
+        return np.clip(th_k + s * y[:p], lo, hi)
+
+    def cons_f(y: NDArray[np.float64], W: list[NDArray[np.float64]] = W) -> NDArray[np.float64]:
+        th = unpack(y)
+        sig, _ = ev.sigma_and_grad(th, W, False)
+        a, _ = ev.abscissa_and_grad(th)
+        return np.concatenate([y[p] - sig, abs_target - a])
+
+    def cons_j(
+        y: NDArray[np.float64], W: list[NDArray[np.float64]] = W, s: NDArray[np.float64] = s
+    ) -> NDArray[np.float64]:
+        th = unpack(y)
+        _, g = ev.sigma_and_grad(th, W, True)
+        _, ga = ev.abscissa_and_grad(th)
+        rows = []
+        if g is not None:
+            rows.append(np.hstack([-g * s, np.ones((g.shape[0], 1))]))
+        rows.append(np.hstack([-ga * s, np.zeros((ga.shape[0], 1))]))
+        return np.vstack(rows)
+
+    blo = np.maximum(-radius, (lo - th_k) / s)
+    bhi = np.minimum(radius, (hi - th_k) / s)
+    bounds = [(float(a), float(b)) for a, b in zip(blo, bhi, strict=True)] + [(None, None)]
+    y0 = np.zeros(p + 1)
+    y0[p] = f - _reg(th_k, s_reg, rho)
+
+    def obj_f(y: NDArray[np.float64]) -> float:
+        return float(y[p]) + _reg(unpack(y), s_reg, rho)
+
+    def obj_j(y: NDArray[np.float64]) -> NDArray[np.float64]:
+        g = np.zeros(p + 1)
+        g[p] = 1.0
+        if rho > 0:
+            g[:p] = 2.0 * rho * unpack(y) / s_reg**2 * s
+        return g
+
+    try:
+        res = minimize(
+            obj_f, y0, jac=obj_j, method="SLSQP",
+            bounds=bounds, constraints=[{"type": "ineq", "fun": cons_f, "jac": cons_j}],
+            options={"maxiter": 100, "ftol": 1e-10 * max(f, 1e-12)},
+        )
+        y = res.x
+    except (np.linalg.LinAlgError, ValueError):
+        y = y0
+    theta_new = unpack(y)
+    predicted = f - obj_f(y)
+    step = float(np.max(np.abs(y[:p]))) if p else 0.0
+    try:
+        vals_new, peaks_new = ev.exact(theta_new)
+    except (np.linalg.LinAlgError, ValueError):
+        vals_new, peaks_new = np.full(nch, math.inf), [math.nan] * nch
+    f_new = float(np.max(vals_new)) + _reg(theta_new, s_reg, rho)
+    if math.isfinite(f_new):
+        add_freqs(theta_new, peaks_new, 0.5 * f_new)
+    if math.isfinite(f_new) and f_new < f - 1e-3 * max(predicted, 0.0) and f_new < f:
+        rel_dec = (f - f_new) / f
+        theta, f, peaks = theta_new, f_new, peaks_new
+        history.append(f)
+        if step >= 0.9 * radius:
+            radius = min(2.0 * radius, 1e3)
+        if rel_dec < opts.tol and predicted <= opts.tol * f:
+            return True, theta, f, peaks, radius, "converged (small decrease)"
+    else:
+        if predicted <= opts.tol * f and step < 1e-3 * radius:
+            return (True, theta, f, peaks, radius,
+                    "converged (stationary for the frequency model)")
+        radius = 0.3 * min(radius, max(step, 1e-12))
+        if radius < 1e-8:
+            return True, theta, f, peaks, radius, "converged (trust radius collapsed)"
+    return False, theta, f, peaks, radius, status
 
 
 # ------------------------------------------------------------------------------------------
@@ -599,7 +679,9 @@ def _sample_start(
 ) -> NDArray[np.float64]:
     th = np.empty(len(pb.parameters))
     for k, prm in enumerate(pb.parameters):
-        if math.isfinite(prm.lower) and math.isfinite(prm.upper):
+        if prm.sample_sd is not None:  # scaled to the plant by the block that made it
+            th[k] = prm.initial + prm.sample_sd * rng.standard_normal()
+        elif math.isfinite(prm.lower) and math.isfinite(prm.upper):
             if prm.lower > 0 and prm.upper / prm.lower > 10:
                 th[k] = math.exp(rng.uniform(math.log(prm.lower), math.log(prm.upper)))
             else:
@@ -616,7 +698,7 @@ def _run_start(args: tuple[TuningProblem, int, NDArray[np.float64], _Options]) -
     pb, index, theta0, opts = args
     ev = _Evaluator(pb)
     try:
-        theta, f, hist, it, status = _local(ev, theta0, opts)
+        theta, f, hist, it, status = _local(ev, theta0, opts, index)
     except (np.linalg.LinAlgError, FloatingPointError) as exc:
         theta, f, hist, it, status = theta0, math.inf, [math.inf], 0, f"failed: {exc}"
     return StartRecord(index, np.array(theta0), np.array(theta), f, hist, it, status)
@@ -635,6 +717,9 @@ def tune(
     start_sampler: Callable[[np.random.Generator], NDArray[np.float64]] | None = None,
     map_fn: Callable[[Callable[[Any], StartRecord], Iterable[Any]], Iterable[StartRecord]]
     | None = None,
+    time_limit: float | None = None,
+    progress: Callable[[Progress], None] | None = None,
+    regularization: float = 0.0,
 ) -> TuneResult:
     """Minimise max_i ||channel_i(theta)||_inf over theta (paper eqs. 7-8, ``systune`` role).
 
@@ -659,7 +744,22 @@ def tune(
         Optional ``rng -> theta`` replacing the default random start distribution.
     map_fn:
         Optional ``map`` for parallel execution, e.g. ``ProcessPoolExecutor().map`` (the
-        problem's channels must then be picklable). Default: built-in ``map``.
+        problem's channels must then be picklable). Default: the starts run one after the
+        other in this process.
+    time_limit:
+        Wall-clock budget in seconds (None: unlimited). Checked between iterations: running
+        starts stop at their current point, no new start begins after it; the result says
+        "time limit reached".
+    progress:
+        Callback receiving a :class:`Progress` after every accepted step (sequential runs;
+        with ``map_fn`` only the time limit applies inside workers).
+    regularization:
+        rho >= 0: minimise max_i ||T_i||_inf + rho sum_k (theta_k / scale_k)^2 instead (a
+        small rho keeps gains finite on problems whose infimum is approached only as gains
+        grow without bound). ``value`` then includes the penalty; ``channel_values`` do not.
+
+    Ctrl-C (KeyboardInterrupt) during a sequential run stops it and returns the best point
+    found so far (message "interrupted").
 
     Returns
     -------
@@ -670,7 +770,14 @@ def tune(
         raise ValueError(f"n_starts must be >= 0, got {n_starts}")
     if max_iter < 1:
         raise ValueError(f"max_iter must be >= 1, got {max_iter}")
-    opts = _Options(max_iter, tol, max_freqs, trust_radius, 200 * len(problem.parameters) + 200)
+    if time_limit is not None and not time_limit > 0:
+        raise ValueError(f"time_limit must be > 0 s (or None), got {time_limit}")
+    if not (regularization >= 0 and math.isfinite(regularization)):
+        raise ValueError(f"regularization must be a finite float >= 0, got {regularization}")
+    t_start = time.monotonic()
+    opts = _Options(max_iter, tol, max_freqs, trust_radius, 200 * len(problem.parameters) + 200,
+                    None if time_limit is None else t_start + time_limit, float(regularization),
+                    progress if map_fn is None else None, t_start)
     starts = [problem.initial]
     children = np.random.SeedSequence(seed).spawn(n_starts)
     for child in children:
@@ -682,13 +789,34 @@ def tune(
         )
         starts.append(th)
     jobs = [(problem, i, th, opts) for i, th in enumerate(starts)]
-    records = list((map_fn or map)(_run_start, jobs))
+    records: list[StartRecord] = []
+    stopped = ""
+    if map_fn is None:
+        for job in jobs:
+            if opts.deadline is not None and time.monotonic() >= opts.deadline and records:
+                stopped = "time limit reached"
+                break
+            try:
+                records.append(_run_start(job))
+            except KeyboardInterrupt:
+                opts.interrupted = True
+            if opts.interrupted:
+                stopped = "interrupted"
+                break
+        if not records:  # interrupted before the first start produced anything
+            th0 = np.clip(problem.initial, problem.lower, problem.upper)
+            records.append(StartRecord(0, th0, th0, math.inf, [math.inf], 0, "interrupted"))
+    else:
+        records = list(map_fn(_run_start, jobs))
     records.sort(key=lambda r: r.index)
+    if not stopped and any(r.status == "time limit reached" for r in records):
+        stopped = "time limit reached"
     best = min(records, key=lambda r: (r.value, r.index))
     stable = math.isfinite(best.value)
     chan = problem.channel_norms(best.theta) if stable else np.full(len(problem.channels), np.inf)
     msg = (
         f"best of {len(records)} start(s): start {best.index}, {best.status}"
+        + (f"; {stopped} after {time.monotonic() - t_start:.1f} s" if stopped else "")
         if stable
         else "no start reached a stabilising parameter vector; the problem may not be "
         "stabilisable with this structure/bounds (try other initial values or bounds)"

@@ -14,11 +14,13 @@ import pytest
 from scipy.optimize import lsq_linear
 
 from vtolftc.firmware_sim.autopilot.allocation import (
+    ActiveSetAllocator,
     AllocationStatus,
+    Allocator,
     PseudoInverseAllocator,
     QPAllocator,
-    box_qp_polish,
-    rate_limited_bounds,
+    box_qp,
+    step_bounds,
 )
 
 N_U = 15
@@ -53,10 +55,19 @@ def synth_B(V: float = 0.0, rotor_scale: np.ndarray | None = None) -> np.ndarray
     return B
 
 
-def make_qp(**kw) -> QPAllocator:
+QP_KINDS = {"osqp": QPAllocator, "active_set": ActiveSetAllocator}
+
+
+def make_qp(kind: str = "osqp", **kw) -> QPAllocator | ActiveSetAllocator:
     kw.setdefault("w_v", W_V)
     kw.setdefault("u_pref", U_PREF)
-    return QPAllocator(5, U_MIN, U_MAX, **kw)
+    return QP_KINDS[kind](5, U_MIN, U_MAX, **kw)
+
+
+@pytest.fixture(params=sorted(QP_KINDS))
+def kind(request) -> str:
+    """Each QP algorithm in turn (the generic properties hold for all of them)."""
+    return request.param
 
 
 def make_pinv() -> PseudoInverseAllocator:
@@ -84,9 +95,9 @@ def random_command(rng: np.random.Generator, scale: float = 1.0) -> np.ndarray:
 
 # --------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("V", [0.0, 4.0, 13.0])
-def test_feasible_command_is_met_exactly(V):
+def test_feasible_command_is_met_exactly(kind, V):
     B = synth_B(V)
-    qp = make_qp()
+    qp = make_qp(kind)
     for v in ([-122.6, 0, 0, 0, 0], [-130.0, 10.0, 5.0, -4.0, 1.0], [-100.0, 3.0, -8.0, 6.0, -2.0]):
         v = np.asarray(v, dtype=float)
         res = qp.allocate(v, B)
@@ -99,17 +110,17 @@ def test_feasible_command_is_met_exactly(V):
         np.testing.assert_allclose(res.u, exact_solution(v, B), atol=1e-4)
 
 
-def test_hover_trim_is_the_preferred_vector():
-    res = make_qp().allocate(synth_B(0.0) @ U_PREF, synth_B(0.0))
+def test_hover_trim_is_the_preferred_vector(kind):
+    res = make_qp(kind).allocate(synth_B(0.0) @ U_PREF, synth_B(0.0))
     # the secondary objective (weight eps) is resolved to ~1e-5 in the rotor null space
     np.testing.assert_allclose(res.u, U_PREF, atol=1e-4)
     np.testing.assert_allclose(res.residual, 0.0, atol=1e-6)
 
 
-def test_limits_never_violated_random_commands_with_rate_limits():
+def test_limits_never_violated_random_commands_with_rate_limits(kind):
     rng = np.random.default_rng(1234)
     rate = np.r_[np.full(10, 20.0), np.full(5, 8.0)]  # per second
-    qp = make_qp(rate_limit=rate, dt=0.004)
+    qp = make_qp(kind, rate_limit=rate, dt=0.004)
     prev = None
     for _ in range(300):
         V = rng.uniform(0, 18)
@@ -125,36 +136,38 @@ def test_limits_never_violated_random_commands_with_rate_limits():
 
 
 def test_rate_limited_bounds_collapse_to_position_limits():
-    lo, hi = rate_limited_bounds(
-        np.zeros(3), np.ones(3), np.array([0.5, 2.0, -1.0]), np.full(3, 10.0), 0.01
-    )
+    lo, hi = np.empty(3), np.empty(3)
+    zero, one = np.zeros(3), np.ones(3)
+    prev = np.array([0.5, 2.0, -1.0])
+    assert step_bounds(zero, one, zero, one, prev, True, np.full(3, 10.0), True, 0.01, lo, hi)
     np.testing.assert_allclose(lo, [0.4, 1.0, 0.0])
     np.testing.assert_allclose(hi, [0.6, 1.0, 0.0])
-    assert rate_limited_bounds(np.zeros(2), np.ones(2), None, np.ones(2), 0.1)[1][0] == 1.0
+    step_bounds(zero, one, zero, one, zero, False, one, True, 0.1, lo, hi)  # no previous
+    np.testing.assert_array_equal(hi, one)
 
 
-def test_infeasible_command_is_graceful_and_prioritised():
+def test_infeasible_command_is_graceful_and_prioritised(kind):
     B = synth_B(0.0)
     v = np.array([-400.0, 0.0, 20.0, -10.0, 2.0])  # 400 N up > 280 N available
-    res = make_qp().allocate(v, B)
+    res = make_qp(kind).allocate(v, B)
     assert res.status == AllocationStatus.SOLVED
     assert np.all(np.isfinite(res.u)) and np.all(res.u >= U_MIN) and np.all(res.u <= U_MAX)
     # moments (weighted 10) are met closely; the vertical force gives way
     assert np.all(np.abs(res.residual[2:4]) < 0.02 * abs(res.residual[0]))
     assert abs(res.residual[0]) > 100.0
     # with the priorities swapped, the force is tracked better and the moments worse
-    swapped = make_qp(w_v=[10.0, 10.0, 1.0, 1.0, 1.0]).allocate(v, B)
+    swapped = make_qp(kind, w_v=[10.0, 10.0, 1.0, 1.0, 1.0]).allocate(v, B)
     assert abs(swapped.residual[0]) < abs(res.residual[0])
     assert np.linalg.norm(swapped.residual[2:4]) > np.linalg.norm(res.residual[2:4])
     # and the result is the exact optimum of the QP
-    qp = make_qp()
+    qp = make_qp(kind)
     ue = exact_solution(v, B)
     assert qp.cost(res.u, v, B) <= qp.cost(ue, v, B) * (1 + 1e-6) + 1e-9
 
 
-def test_qp_tracks_better_than_pseudo_inverse_on_infeasible_commands():
+def test_qp_tracks_better_than_pseudo_inverse_on_infeasible_commands(kind):
     rng = np.random.default_rng(7)
-    qp = make_qp()
+    qp = make_qp(kind)
     pinv = make_pinv()
     n_infeasible = 0
     for _ in range(60):
@@ -174,11 +187,11 @@ def test_qp_tracks_better_than_pseudo_inverse_on_infeasible_commands():
 
 
 @pytest.mark.parametrize("loss", [0.5, 0.0])
-def test_rotor_fault_absorbed_when_told_the_true_B(loss):
+def test_rotor_fault_absorbed_when_told_the_true_B(kind, loss):
     scale = np.ones(8)
     scale[3] = loss  # rotor 4 (front right outer) weak or dead
     B_true = synth_B(2.0, rotor_scale=scale)
-    qp = make_qp()
+    qp = make_qp(kind)
     for v in ([-122.6, 0, 0, 0, 0], [-125.0, 2.0, 3.0, -2.0, 0.5]):
         v = np.asarray(v, dtype=float)
         res = qp.allocate(v, B_true)
@@ -276,8 +289,8 @@ def test_solver_exception_uses_fallback(monkeypatch):
 
 
 @pytest.mark.parametrize("where", ["v", "B", "u_prev", "u_pref"])
-def test_non_finite_input_holds_previous_command(where):
-    qp = make_qp()
+def test_non_finite_input_holds_previous_command(kind, where):
+    qp = make_qp(kind)
     B = synth_B(4.0)
     v = np.array([-122.6, 3.0, 1.0, -1.0, 0.2])
     good = qp.allocate(v, B)
@@ -304,14 +317,14 @@ def test_non_finite_input_holds_previous_command(where):
     )
 
 
-def test_non_finite_input_on_first_step_returns_preferred_vector():
-    res = make_qp().allocate(np.full(5, np.nan), synth_B(0.0))
+def test_non_finite_input_on_first_step_returns_preferred_vector(kind):
+    res = make_qp(kind).allocate(np.full(5, np.nan), synth_B(0.0))
     assert res.status == AllocationStatus.INVALID_INPUT
     np.testing.assert_allclose(res.u, U_PREF)
 
 
-def test_per_step_limits_and_nan_limits():
-    qp = make_qp()
+def test_per_step_limits_and_nan_limits(kind):
+    qp = make_qp(kind)
     B = synth_B(0.0)
     u_max = U_MAX.copy()
     u_max[:8] = 0.5
@@ -322,12 +335,54 @@ def test_per_step_limits_and_nan_limits():
     assert res.status == AllocationStatus.SOLVED and np.all(res.u <= U_MAX)
 
 
-def test_public_api_path_matches_fast_path():
-    B = synth_B(7.0)
-    v = np.array([-90.0, 20.0, 15.0, -5.0, 3.0])
-    a = make_qp(fast_path=False).allocate(v, B)
-    b = make_qp().allocate(v, B)
-    np.testing.assert_allclose(a.u, b.u, atol=1e-7)
+def test_active_set_alone_matches_osqp_plus_polish_along_a_trajectory():
+    """Warm-started from the previous command, the active-set solver reaches the same
+    allocation (B u) as OSQP + polish on a slowly varying command sequence."""
+    a, b = make_qp("active_set"), make_qp("osqp")
+    for i in range(200):
+        t = 0.004 * i
+        v = np.array([-122.6 + 30 * np.sin(t), 10 * np.sin(3 * t), 20 * np.sin(2 * t),
+                      -15 * np.cos(2.5 * t), 3 * np.sin(t)])
+        B = synth_B(0.05 * i)
+        ra, rb = a.allocate(v, B), b.allocate(v, B)
+        assert ra.status == AllocationStatus.SOLVED and ra.polished
+        np.testing.assert_allclose(ra.v_achieved, rb.v_achieved, atol=1e-4)
+        assert a.cost(ra.u, v, B) <= a.cost(exact_solution(v, B), v, B) * (1 + 1e-6) + 1e-9
+
+
+def test_active_set_coarse_tolerance_leaves_the_rotor_split_undetermined():
+    """What the KKT test certifies (``active_set`` docstring): at the polish's tolerance 1e-9
+    it passes far from the optimum along the rotor null space (curvature ~eps), with B u
+    exact; at the default 1e-15 the answer is the BVLS one."""
+    B = synth_B(4.0)
+    v = np.array([-130.0, 10.0, 5.0, -4.0, 1.0])
+    ue = exact_solution(v, B)
+    coarse = make_qp("active_set", tol=1e-9).allocate(v, B)
+    assert coarse.polished and np.abs(coarse.u - ue).max() > 0.1
+    np.testing.assert_allclose(coarse.v_achieved, v, atol=1e-5)
+    fine = make_qp("active_set").allocate(v, B)
+    assert fine.polished
+    np.testing.assert_allclose(fine.u, ue, atol=1e-4)
+
+
+def test_active_set_iteration_limit_uses_fallback():
+    qp = make_qp("active_set", max_iter=1)
+    pinv = make_pinv()
+    v = np.array([-350.0, 40.0, 60.0, -40.0, 10.0])  # many bounds to change: 1 step is short
+    B = synth_B(6.0)
+    res = qp.allocate(v, B)
+    assert res.status == AllocationStatus.FALLBACK and not res.polished
+    assert np.all(res.u >= U_MIN) and np.all(res.u <= U_MAX)
+    assert qp.cost(res.u, v, B) <= qp.cost(pinv.compute(v, B), v, B) + 1e-9
+
+
+def test_allocators_satisfy_the_protocol():
+    for alloc in (make_qp("osqp"), make_qp("active_set"), make_pinv()):
+        assert isinstance(alloc, Allocator)
+        res = alloc.allocate(np.array([-122.6, 0, 0, 0, 0.0]), synth_B(0.0))
+        np.testing.assert_allclose(res.v_achieved, [-122.6, 0, 0, 0, 0], atol=1e-5)
+        alloc.reset()
+        assert alloc.stats.calls == 1
 
 
 def test_pseudo_inverse_is_exact_when_unsaturated():
@@ -349,7 +404,7 @@ def test_pseudo_inverse_desaturation_keeps_attitude_over_thrust():
     assert np.all(base.u >= U_MIN) and np.all(base.u <= U_MAX)
 
 
-def test_box_qp_polish_matches_bvls_on_random_problems():
+def test_box_qp_matches_bvls_on_random_problems():
     rng = np.random.default_rng(11)
     for _ in range(30):
         n, m = 12, 5
@@ -358,7 +413,7 @@ def test_box_qp_polish_matches_bvls_on_random_problems():
         b = rng.normal(size=m) * 5
         q = -M.T @ b
         lo, hi = -np.ones(n), np.ones(n)
-        u, ok, _ = box_qp_polish(H, q, lo, hi, np.zeros(n))
+        u, ok, _ = box_qp(H, q, lo, hi, np.zeros(n))
         assert ok
         ref = lsq_linear(
             np.vstack([M, np.sqrt(1e-3) * np.eye(n)]),
@@ -377,13 +432,15 @@ def test_constructor_validation():
         QPAllocator(5, U_MIN, U_MAX, w_v=[1, 1, 0, 1, 1])
     with pytest.raises(ValueError, match="eps"):
         QPAllocator(5, U_MIN, U_MAX, eps=0.0)
+    with pytest.raises(ValueError, match="tol"):
+        ActiveSetAllocator(5, U_MIN, U_MAX, tol=0.0)
     qp = make_qp()
     with pytest.raises(ValueError, match="B: expected shape"):
         qp.allocate(np.zeros(5), np.zeros((5, 14)))
 
 
-def test_stats_summary():
-    qp = make_qp()
+def test_stats_summary(kind):
+    qp = make_qp(kind)
     qp.allocate(np.array([-122.6, 0, 0, 0, 0.0]), synth_B(0.0))
     d = qp.stats.as_dict()
     assert d["calls"] == 1 and d["counts"]["solved"] == 1

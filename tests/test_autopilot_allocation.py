@@ -1,4 +1,4 @@
-"""The autopilot's allocation set-up (QPAllocator on the nominal B(V) of DS-1): exact when
+"""The autopilot's allocation set-up (each QP allocator on the nominal B(V) of DS-1): exact when
 feasible, limits never violated, graceful when infeasible, no worse than the PX4-style
 pseudo-inverse, and the fixed-wing exclusion of the lift rotors."""
 
@@ -12,15 +12,15 @@ from vtolftc.firmware_sim.autopilot.autopilot import ALLOCATION_WEIGHTS
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
 
 
-@pytest.fixture
-def alloc(ds1):
-    from vtolftc.firmware_sim.autopilot.allocation import QPAllocator
+@pytest.fixture(params=["osqp", "active_set"])
+def alloc(ds1, request):
+    from vtolftc.firmware_sim.autopilot.allocation import ActiveSetAllocator, QPAllocator
 
     u_min = np.r_[np.zeros(10), -np.ones(5)]
     u_max = np.ones(15)
     pref = np.r_[np.full(8, ds1.weight_N / 280.0), np.zeros(7)]
-    return QPAllocator(5, u_min, u_max, w_v=ALLOCATION_WEIGHTS, u_pref=pref,
-                       settings={"time_limit": 1e10}), u_min, u_max, pref
+    cls = QPAllocator if request.param == "osqp" else ActiveSetAllocator
+    return cls(5, u_min, u_max, w_v=ALLOCATION_WEIGHTS, u_pref=pref), u_min, u_max, pref
 
 
 @pytest.mark.parametrize("V", [0.0, 7.0, 13.0, 18.0])
@@ -76,12 +76,23 @@ def test_fixed_wing_excludes_the_lift_rotors(ds1, alloc):
     np.testing.assert_allclose(res.v_achieved[1:], v[1:], atol=1e-3)
 
 
+def _reference_bounds(dmin, dmax, umin, umax, prev, rate, dt):
+    """Plain-numpy statement of the per-step bounds (the oracle of ``step_bounds``): position
+    limits (non-finite -> construction ones, upper raised to lower), intersected with
+    ``prev ± rate dt`` when ``prev`` is finite, position limits winning where that is empty."""
+    pmin = np.where(np.isfinite(umin), umin, dmin)
+    pmax = np.maximum(np.where(np.isfinite(umax), umax, dmax), pmin)
+    if not np.all(np.isfinite(prev)):
+        return pmin, pmax
+    lo = np.maximum(pmin, prev - rate * dt)
+    hi = np.minimum(pmax, prev + rate * dt)
+    bad = lo > hi
+    fix = np.clip(prev, pmin, pmax)
+    return np.where(bad, fix, lo), np.where(bad, fix, hi)
+
+
 def test_compiled_step_bounds_match_the_reference_functions():
-    from vtolftc.firmware_sim.autopilot.allocation import (
-        QPAllocator,
-        _step_bounds,
-        rate_limited_bounds,
-    )
+    from vtolftc.firmware_sim.autopilot.allocation import step_bounds
 
     rng = np.random.default_rng(7)
     n = 15
@@ -96,12 +107,10 @@ def test_compiled_step_bounds_match_the_reference_functions():
             prev[3] = np.nan
         rate = rng.uniform(1, 20, n)
         rate[rng.random(n) < 0.2] = np.inf
-        pmin = QPAllocator._sane_limit(umin, dmin, "u_min")
-        pmax = np.maximum(QPAllocator._sane_limit(umax, dmax, "u_max"), pmin)
         ok = bool(np.all(np.isfinite(prev)))
-        lo_ref, hi_ref = rate_limited_bounds(pmin, pmax, prev if ok else None, rate, 0.004)
+        lo_ref, hi_ref = _reference_bounds(dmin, dmax, umin, umax, prev, rate, 0.004)
         lo, hi = np.empty(n), np.empty(n)
-        assert _step_bounds(dmin, dmax, umin, umax, prev, True, rate, True, 0.004,
-                            lo, hi) == int(ok)
+        assert step_bounds(dmin, dmax, umin, umax, prev, True, rate, True, 0.004,
+                           lo, hi) == int(ok)
         np.testing.assert_array_equal(lo, lo_ref)
         np.testing.assert_array_equal(hi, hi_ref)

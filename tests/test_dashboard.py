@@ -313,3 +313,26 @@ def test_cli_dashboard_arguments(capsys):
                 "--duration", "0.6"]) == 0
     out = capsys.readouterr()
     assert f"http://127.0.0.1:{port}/" in out.out and "waiting for the autopilot" in out.err
+
+
+def test_mission_points_and_status_lines():
+    """The mission drawn in the 3-D view: the display frame of the planned positions."""
+    from types import SimpleNamespace
+
+    from vtolftc.dashboard.model import _extras, mission_points_display
+    from vtolftc.firmware_sim.vehicle.sensors import Home
+    from vtolftc.mission_run import rectangle_mission
+
+    h = Home()
+    pts, seqs = mission_points_display(rectangle_mission(), h.lat_deg, h.lon_deg, h.alt_m)
+    # takeoff at home, corners (300, 0), (300, 600), (0, 600), (0, 0) N/E at 30 m, land home
+    want = [(0, 0, 30), (300, 0, 30), (300, -600, 30), (0, -600, 30), (0, 0, 30), (0, 0, 0)]
+    assert seqs == [0, 2, 3, 4, 5, 7]
+    assert np.allclose(pts, want, atol=0.05)
+    snap = SimpleNamespace(battery_v=24.1, battery_a=48.0, battery_remaining=0.87,
+                           gps_fix_type=3, gps_satellites=12, gps_hdop=1.0, mission_total=8,
+                           mission_seq=3, mission_state=3)
+    ex = _extras(snap)
+    assert ex["battery_text"] == "24.10 V · 48.0 A · 87 %"
+    assert ex["gps_text"] == "3D fix · 12 sats · hdop 1.0"
+    assert ex["mission_text"] == "item 3 of 8 · active"

@@ -122,7 +122,8 @@ def test_heartbeat_and_snapshot(endpoint_and_gs):
     gs.add_listener(lambda m: beats.append(m) if m.get_type() == "HEARTBEAT"
                     and m.get_srcSystem() == 1 else None)
     s = gs.wait_for(lambda s: s.connected, 3.0)
-    assert not s.armed and s.mode_name == "AUTO.READY"
+    # on the ground PX4 reports Hold (AUTO.LOITER); AUTO.READY is UNKNOWN to pymavlink/MAVProxy
+    assert not s.armed and s.mode_name == "AUTO.LOITER"
     deadline = time.monotonic() + 3.0
     while not beats and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -292,3 +293,40 @@ def test_long_statustext_arrives_whole(endpoint_and_gs):
         ep.ep.statustext(text)
         s = gs.wait_for(lambda s, t=text: s.last_statustext == t, 3.0)
         assert s.last_statustext == text
+
+
+def test_mission_download_ping_timesync_and_command_int(endpoint_and_gs):
+    """The endpoint's PX4 services without a vehicle: a mission stored in the navigator comes
+    back through the ground station; PING, TIMESYNC and COMMAND_INT are answered."""
+    from vtolftc.firmware_sim.vehicle.sensors import Home
+    from vtolftc.mission_run import rectangle_mission
+
+    ep, gs = endpoint_and_gs
+    items = rectangle_mission()
+    assert ep.ap.navigator.store.replace(0, items)[0] == 0
+    got = gs.download_mission()
+    assert [(m.seq, m.command, m.x, m.y, m.z) for m in got] == \
+        [(it.seq, it.command, it.x, it.y, it.z) for it in items]
+    answers = []
+    gs.add_listener(lambda m: answers.append(m) if m.get_type() in ("PING", "TIMESYNC")
+                    and m.get_srcSystem() == 1 else None)
+    c = gs.link.codec
+    gs.link.send(c.ping_encode(4242, 7, 0, 0))
+    gs.link.send(c.timesync_encode(0, 99))
+    deadline = time.monotonic() + 2.0
+    while len(answers) < 2 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    ping = next(m for m in answers if m.get_type() == "PING")
+    assert (ping.time_usec, ping.seq, ping.target_system) == (4242, 7, gs.link.codec.srcSystem)
+    ts = next(m for m in answers if m.get_type() == "TIMESYNC")
+    assert ts.ts1 == 99 and ts.tc1 > 0
+    # COMMAND_INT DO_REPOSITION on the ground: answered (DENIED: not flying), like the LONG form
+    acks = []
+    gs.add_listener(lambda m: acks.append(m) if m.get_type() == "COMMAND_ACK" else None)
+    lat, lon = round(Home().lat_deg * 1e7), round(Home().lon_deg * 1e7)
+    gs.link.send(c.command_int_encode(1, 1, 6, 192, 0, 0, -1, 1, 0, math.nan, lat, lon, 20.0))
+    deadline = time.monotonic() + 2.0
+    while not acks and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert acks and acks[0].command == 192 and acks[0].result == 2
+    ep.ap.navigator.store.clear(0)

@@ -27,7 +27,8 @@ LAYERS: list[tuple[int, str, tuple[str, ...]]] = [
     (3, "vehicle", ("vtolftc.firmware_sim.vehicle",)),
     (3, "synthesis", ("vtolftc.synthesis",)),
     (3, "gcs", ("vtolftc.gcs",)),
-    (4, "runners", ("vtolftc.scenario", "vtolftc.sitl", "vtolftc.campaign",
+    (4, "runners", ("vtolftc.scenario", "vtolftc.sitl", "vtolftc.campaign", "vtolftc.mission_run",
+                    "vtolftc.mission_sitl",
                     "vtolftc.processes")),
     (5, "top", ("vtolftc.cli", "vtolftc.cmd_*", "vtolftc.dashboard", "vtolftc.__main__")),
 ]
@@ -183,3 +184,22 @@ def test_the_check_catches_a_forbidden_import(tmp_path, src, expect):
 
 def test_cycle_finder_finds_a_cycle():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_every_package_is_in_the_wheel():
+    """pyproject lists packages explicitly (the package-dir mapping needs it): a package
+    folder missing from the list would be missing from a wheel install."""
+    py = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    listed = set(py["tool"]["setuptools"]["packages"])
+    found = set()
+    for pkg, d in _package_dirs().items():
+        for init in d.rglob("__init__.py"):
+            rel = init.parent.relative_to(d)
+            if "__pycache__" in rel.parts:
+                continue
+            name = ".".join([pkg, *rel.parts])
+            if pkg == "vtolftc" and rel.parts and f"vtolftc.{rel.parts[0]}" in _package_dirs():
+                continue
+            found.add(name)
+    assert found - listed == set(), "add to [tool.setuptools] packages in pyproject.toml"
+    assert listed - found == set()

@@ -112,9 +112,19 @@ def test_random_mixed_structures_bound_relations(blocks: list[Block]) -> None:
                 r0 += b.cols
                 c0 += b.rows
             assert np.all(res.delta[~mask] == 0)
-        # the returned scaling reproduces the upper bound
+        # the returned scaling reproduces the upper bound (D-G certificate with real blocks)
         assert res.scaling is not None
-        assert np.linalg.norm(res.scaling.scaled(M), 2) == pytest.approx(res.upper, rel=1e-9)
+        if res.scaling.g is None:
+            assert np.linalg.norm(res.scaling.scaled(M), 2) == pytest.approx(res.upper, rel=1e-9)
+        else:
+            D = res.scaling.left.conj().T @ res.scaling.left
+            G = res.scaling.g
+            H = M.conj().T @ D @ M + 1j * (G @ M - M.conj().T @ G) - res.upper**2 * D
+            assert np.linalg.eigvalsh(0.5 * (H + H.conj().T)).max() <= 1e-9 * res.upper**2
+        # the real-aware bound is never worse than treating real blocks as complex
+        if not all_complex and all_square:
+            up_c, _ = mu_upper_bound(M, blocks, method="dscale")
+            assert res.upper <= up_c * (1 + 1e-6)
 
 
 def test_real_block_lower_bound_exact_for_real_eigenvalue() -> None:
@@ -146,7 +156,7 @@ def test_sweep_peak() -> None:
         w = np.logspace(-2, 2, 200)
         F = frequency_response(sys, w)
         blocks = [Block.full(1)] * n
-        sw = mu_sweep(F, blocks, w)  # speed: benchmarks/, never a wall-clock test
+        sw = mu_sweep(F, blocks, w)  # speed: benchmarks/bench_toolbox.py, never a wall-clock test
         assert sw.lower.shape == sw.upper.shape == (200,)
         assert np.all(sw.lower <= sw.upper * (1 + 1e-9))
         assert sw.peak_upper == pytest.approx(sw.upper.max())

@@ -8,6 +8,7 @@ import socket
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
@@ -176,10 +177,20 @@ def test_live_web_viewer_on_loopback(tmp_path, monkeypatch):
     try:
         assert rec.viewer_url == (f"http://127.0.0.1:{ports[1]}/?url=rerun+http://127.0.0.1:"
                                   f"{ports[0]}/proxy")
+        import urllib.error
         import urllib.request
 
-        with urllib.request.urlopen(f"http://127.0.0.1:{ports[1]}/", timeout=10) as r:
-            assert r.status == 200
+        # the server process may still be starting on a loaded machine: poll until it serves
+        deadline = time.monotonic() + 60.0
+        while True:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{ports[1]}/", timeout=10) as r:
+                    assert r.status == 200
+                    break
+            except (urllib.error.URLError, ConnectionError):
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.1)
         _feed(rec, 300)
         assert len(read_recording(tmp_path / "live.rrd")["altitude"][0]) == 60
     finally:

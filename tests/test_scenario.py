@@ -13,6 +13,7 @@ import pytest
 from vtolftc.firmware_sim.autopilot.attitude import default_gains_dir
 from vtolftc.firmware_sim.autopilot.interface import FlightMode
 from vtolftc.firmware_sim.vehicle.faults import Fault
+from vtolftc.firmware_sim.vehicle.sensors import Home
 from vtolftc.scenario import paper_scenario, run_scenario
 from vtolftc.telemetry.runfolder import RunFolderWriter
 
@@ -50,7 +51,7 @@ def test_paper_scenario_timeline(ds1):
     assert cmds == [(1.0, 400, 1.0), (1.0, 22, pytest.approx(math.nan, nan_ok=True)),
                     (20.0, 3000, 4.0)]
     takeoff = next(a for a in sc.actions if a.command_id == 22)
-    assert len(takeoff.params) == 7 and takeoff.params[6] == 30.0
+    assert len(takeoff.params) == 7 and takeoff.params[6] == Home().alt_m + 30.0  # AMSL
     faults = sorted((f.actuator, f.loss) for f in sc.faults)
     assert faults == sorted([("rotor_2b", 0.5), ("elevator", 0.2), ("aileron_left", 0.2),
                              ("aileron_right", 0.2), ("rudder_left", 0.2),

@@ -1,13 +1,12 @@
 """Case 1 flown by separate vehicle and autopilot processes through a ground station gives the
 metrics of the in-process run, over UDP and over zenoh; Ctrl-C stops everything cleanly.
 
-Tolerance: none. With the QP solver's wall-clock time limit switched off (``deterministic``,
-on both sides) the lockstep SITL run reproduces the in-process run bit for bit: the autopilot
-decodes the same HIL_STATE_QUATERNION encoding, its commands travel as float32 both ways, the
-commands act at the same control step (simulation hold) and the faults from the same physics
-step; fault magnitudes sent as float32 are read back as the decimal they stand for. (With the
-default 1 ms OSQP time limit even two in-process runs differ in the 6th digit, by how loaded the
-machine is.)
+Tolerance: none. The allocator has no wall-clock time limit (its solver stops on its
+tolerance or iteration cap only), so the lockstep SITL run
+reproduces the in-process run bit for bit: the autopilot decodes the same HIL_STATE_QUATERNION
+encoding, its commands travel as float32 both ways, the commands act at the same control step
+(simulation hold) and the faults from the same physics step; fault magnitudes sent as float32
+are read back as the decimal they stand for.
 """
 
 from __future__ import annotations
@@ -25,7 +24,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vtolftc.firmware_sim.autopilot.process import make_deterministic
 from vtolftc.protocols import open_link, parse_link_url
 from vtolftc.scenario import paper_scenario, run_scenario
 from vtolftc.sitl import SitlConfig, SitlRun, run_sitl
@@ -38,8 +36,7 @@ DURATION_S = 30.0  # transition at 20 s, faults at 22 s, fixed-wing from about 2
 
 @pytest.fixture(scope="module")
 def reference():
-    return run_scenario(paper_scenario(1, DURATION_S), "gs-shif",
-                        autopilot_setup=make_deterministic).metrics
+    return run_scenario(paper_scenario(1, DURATION_S), "gs-shif").metrics
 
 
 def _same(a, b) -> bool:
@@ -77,7 +74,7 @@ def _spray_garbage(run: SitlRun) -> None:
 def test_case1_sitl_equals_in_process(transport, reference, tmp_path):
     """Also with garbage thrown at every reachable port before the flight."""
     cfg = SitlConfig(case="1", transport=transport, duration_s=DURATION_S, out_dir=tmp_path,
-                     deterministic=True, plots=False)
+                     plots=False)
     with SitlRun(cfg) as run:
         run.start()
         _spray_garbage(run)

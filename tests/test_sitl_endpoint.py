@@ -67,7 +67,7 @@ def test_every_command_answered_in_time_with_the_true_result(sitl):
     deadline = time.monotonic() + 2.0
     while not got and time.monotonic() < deadline:
         time.sleep(0.02)
-    assert got and got[0].capabilities & (1 << 17)  # PARAM_ENCODE_BYTEWISE, as PX4
+    assert got and got[0].capabilities & (1 << 4)  # PARAM_ENCODE_BYTEWISE, as PX4
 
 
 def test_health_and_vtol_state_streams(sitl):
@@ -126,7 +126,12 @@ def test_plain_pymavlink_client_flies_the_vehicle(sitl):
             return ack.result
 
         assert command(400, 1.0) == 0                             # arm
-        assert command(22, math.nan, 0, 0, math.nan, math.nan, math.nan, 8.0) == 0  # takeoff
+        assert command(512, 242.0) == 0                           # HOME_POSITION, please
+        home = conn.recv_match(type="HOME_POSITION", blocking=True, timeout=5)
+        assert home is not None
+        # takeoff to 8 m above home: param7 is AMSL, as PX4 reads it
+        assert command(22, math.nan, 0, 0, math.nan, math.nan, math.nan,
+                       home.altitude * 1e-3 + 8.0) == 0
         deadline = time.monotonic() + 90.0
         mode = ""
         while mode != "AUTO.LOITER" and time.monotonic() < deadline:  # hovering at 8 m

@@ -28,10 +28,11 @@ from vtolftc.protocols.netutil import free_udp_port
 class _Harness:
     """A VehicleProcess on a free UDP port, run in a thread; ``ap`` is the test's link."""
 
-    def __init__(self, tmp_path) -> None:
+    def __init__(self, tmp_path, **kw) -> None:
         port = free_udp_port()
+        self.port = port
         self.proc = VehicleProcess(f"udp-server://127.0.0.1:{port}", out_dir=tmp_path,
-                                   peer_timeout_s=5.0, connect_timeout_s=5.0)
+                                   peer_timeout_s=5.0, connect_timeout_s=5.0, **kw)
         self.ap = open_link(f"udp-client://127.0.0.1:{port}", system_id=1, component_id=1)
         self.rc: list[int] = []
         self.thread = threading.Thread(target=lambda: self.rc.append(self.proc.run()),
@@ -163,14 +164,119 @@ def test_run_folder_written_on_stop(harness, tmp_path):
     assert summary["steps"] == 5 and summary["link"]["dropped"] == 0
 
 
+def _wait(pred, timeout_s: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        time.sleep(0.01)
+    return pred()
+
+
+def test_stray_senders_change_nothing(harness):
+    """Garbage, valid HIL_ACTUATOR_CONTROLS (even with the autopilot's ids) and a fault
+    command from another port than the pinned autopilot's: nothing is applied or answered."""
+    harness.step_msgs()  # pinned on the harness's heartbeat
+    proc = harness.proc
+    assert proc.pinned == harness.ap.local_address
+    stray = open_link(f"udp-client://127.0.0.1:{harness.port}", system_id=1, component_id=1)
+    try:
+        c = stray.codec
+        for _ in range(20):
+            stray.send(b"\xfd\x09garbage" * 3)
+            stray.send(c.hil_actuator_controls_encode(0, [1.0] * 16, 128, 1))
+            stray.send(c.command_long_encode(0, 0, 59900, 0, 101.0, 0.0, 1.0, 0, 0, 0, 0))
+            stray.send(c.command_long_encode(0, 0, 420, 0, 102.0, 1.0, 0.0, 0, 0, 0, 0))
+        assert _wait(lambda: proc.link.stats.dropped_foreign >= 80)
+        assert stray.recv(0.3) == []  # the vehicle never answers a stranger
+    finally:
+        stray.close()
+    assert proc.vehicle.time_usec == 0 and np.all(proc.commands == 0.0)
+    assert proc.faults == {} and np.all(proc.vehicle.effectiveness == 1.0)
+    # the pinned autopilot still flies it
+    harness.controls(0, [0.25] * 15)
+    assert harness.step_msgs()["HIL_SENSOR"].time_usec == 4000
+    assert np.all(proc.commands == 0.25)
+
+
+def test_other_ids_and_stale_controls_rejected(harness):
+    harness.step_msgs()
+    proc = harness.proc
+    harness.controls(0, [0.5] * 15)
+    harness.step_msgs()  # t = 4000
+    # the same time again, an older one, one in the future: all refused
+    for t in (0, 0, 8000):
+        harness.controls(t, [0.9] * 15)
+    assert _wait(lambda: proc.rejected["stale_controls"] >= 2
+                 and proc.rejected["future_controls"] >= 1)
+    assert np.all(proc.commands == 0.5) and proc.vehicle.time_usec == 4000
+    # right ids matter too (same address, another component)
+    other = harness.ap.codec
+    other.srcComponent = 25
+    harness.controls(4000, [0.7] * 15)
+    assert _wait(lambda: proc.rejected["foreign_ids"] >= 1)
+    other.srcComponent = 1
+    assert np.all(proc.commands == 0.5) and proc.vehicle.time_usec == 4000
+
+
+def test_latency_knob_delays_and_drops_controls(tmp_path):
+    h = _Harness(tmp_path, hil_delay_ms=8.0)
+    try:
+        h.step_msgs()
+        applied = []
+        for k in range(4):
+            h.controls(4000 * k, [0.1 * (k + 1)] * 15)
+            h.step_msgs()
+            applied.append(float(h.proc.commands[0]))
+        # the controls answering t act from t + 8 ms: two control periods late
+        assert applied == pytest.approx([0.0, 0.0, 0.1, 0.2])
+    finally:
+        h.close()
+    h = _Harness(tmp_path / "loss", hil_loss=1.0)
+    try:
+        h.step_msgs()
+        for k in range(3):
+            h.controls(4000 * k, [0.6] * 15)
+            h.step_msgs()
+        assert np.all(h.proc.commands == 0.0) and h.proc.rejected["lost_injected"] == 3
+        assert h.proc.vehicle.time_usec == 12000  # lockstep goes on with the old commands
+    finally:
+        h.close()
+
+
+def test_output_watchdog_safe_output_in_real_time(tmp_path):
+    """Real time: the autopilot stops sending controls; after --output-timeout the actuators
+    get the safe output (all 0), not the last commands."""
+    timeout = 0.4
+    h = _Harness(tmp_path, lockstep=False, output_timeout_s=timeout)
+    try:
+        h.step_msgs()
+        sent = time.monotonic()
+        for _ in range(50):  # 0.2 s of controls from the newest state
+            st = h.step_msgs()
+            h.controls(int(st["HIL_SENSOR"].time_usec), [0.5] * 15)
+            sent = time.monotonic()
+        assert _wait(lambda: np.all(h.proc.commands == 0.5), 5.0)
+        assert _wait(lambda: h.proc.watchdog_tripped, 10.0)
+        tripped = time.monotonic()
+        assert tripped - sent >= timeout
+        assert tripped - sent < timeout + 2.0  # generous: a loaded machine
+        assert np.all(h.proc.commands == 0.0)
+        h.ap.send(h.ap.codec.heartbeat_encode(22, 12, 0, 0, 3))  # keep the peer alive
+    finally:
+        h.close()
+    events = [json.loads(x) for x in (tmp_path / "vehicle_events.jsonl").read_text().splitlines()]
+    assert any(e["event"] == "watchdog" and "stopped" in e["text"] for e in events)
+
+
 def test_process_exits_when_the_autopilot_vanishes():
     port = free_udp_port()
-    p = subprocess.Popen([sys.executable, "-m", "vtolftc.firmware_sim.vehicle.process", "--link",
+    p = subprocess.Popen([sys.executable, "-m", "vtolftc.processes.vehicle", "--link",
                           f"udp-server://127.0.0.1:{port}", "--peer-timeout", "1",
                           "--connect-timeout", "20"], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE)
     try:
-        ap = open_link(f"udp-client://127.0.0.1:{port}")
+        ap = open_link(f"udp-client://127.0.0.1:{port}", system_id=1, component_id=1)
         deadline = time.monotonic() + 20.0
         got = []
         while not got and time.monotonic() < deadline:
@@ -188,7 +294,7 @@ def test_process_exits_when_the_autopilot_vanishes():
 
 
 def test_bad_arguments_exit_2():
-    r = subprocess.run([sys.executable, "-m", "vtolftc.firmware_sim.vehicle.process", "--link",
+    r = subprocess.run([sys.executable, "-m", "vtolftc.processes.vehicle", "--link",
                         "udp-server://8.8.8.8:4560"], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 2 and "loopback" in r.stderr and "Traceback" not in r.stderr

@@ -3,14 +3,27 @@
 ``vtolftc fly --case 1 --controller gs-shif`` flies one case and writes a run folder;
 ``vtolftc compare --case 1`` flies the three controllers and prints a table like the paper's
 table 4 (RMSE of altitude and attitude tracking over the transition window), with bar charts
-like figs 13/14 in the output folder. Ctrl-C stops cleanly, keeping what was written.
+like figs 13/14 in the output folder.
+
+Stopping: Ctrl-C (SIGINT) and SIGTERM only set a flag, which the run checks between control
+steps (never inside compiled code): the run stops at the next step, every observer finishes
+(``metrics.json`` with ``"interrupted": true``, telemetry, ``run.rrd``), one line is printed and
+the exit status is 130. An existing ``--out`` folder is refused (exit 2) unless ``--overwrite``
+is given, which first removes the old run folder (only a folder that holds a previous run, or
+an empty one), so stale files of an earlier run are never mixed in; an ``--out`` that cannot
+be created is one line and exit 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import shutil
+import signal
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -23,13 +36,88 @@ _PAPER_TABLE4 = {
 }
 
 
+class _StopRequest:
+    """Run observer that ends a run at the next control step once a stop signal came (raises
+    KeyboardInterrupt from Python code, which the runner turns into an interrupted run)."""
+
+    requested: bool = False
+
+    def on_start(self, info: dict[str, Any]) -> None:
+        """Nothing to do."""
+
+    def on_sample(self, sample: Any) -> None:
+        if _StopRequest.requested:
+            raise KeyboardInterrupt
+
+    def on_event(self, time_usec: int, kind: str, text: str) -> None:
+        """Nothing to do."""
+
+    def on_finish(self, metrics: dict[str, Any]) -> None:
+        """Nothing to do."""
+
+
+@contextlib.contextmanager
+def _stop_on_signals() -> Iterator[None]:
+    """SIGINT and SIGTERM set :attr:`_StopRequest.requested` (restored afterwards)."""
+    def handler(_sig: int, _frame: Any) -> None:
+        _StopRequest.requested = True
+
+    _StopRequest.requested = False
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signals are delivered to the main thread only
+        return
+    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+        if _StopRequest.requested:
+            _StopRequest.requested = False
+            raise KeyboardInterrupt
+
+
+def prepare_out(path: Path, overwrite: bool, marker: tuple[str, ...] = ("run.json",)) -> Path:
+    """Create the output folder; an existing one only with ``overwrite`` (then emptied first,
+    if it holds a previous run or nothing). Raises UsageError with one line otherwise."""
+    from vtolftc.cli import UsageError
+
+    path = Path(path)
+    if path.exists():
+        if not path.is_dir():
+            raise UsageError(f"--out {path}: exists and is not a folder; choose another path")
+        if any(path.iterdir()):
+            if not overwrite:
+                raise UsageError(f"--out {path}: already exists; choose another folder or "
+                                 "pass --overwrite to replace that run")
+            if not any((path / m).exists() for m in marker):
+                raise UsageError(f"--out {path}: exists and holds no vtol-ftc run; "
+                                 "refusing to delete it, choose another folder")
+            try:
+                shutil.rmtree(path)
+            except OSError as exc:
+                raise UsageError(f"--out {path}: cannot remove the old run: "
+                                 f"{exc.strerror or exc}") from None
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise UsageError(f"--out {path}: cannot create or write it: "
+                         f"{exc.strerror or exc}") from None
+    return path
+
+
 def default_observers(run_dir: Path, args: argparse.Namespace) -> list[Any]:
     """The observers of a run: the run-folder writer (telemetry, events, metrics, plots) and
-    the rerun recorder (``run.rrd`` always; a live viewer too with ``--rerun``)."""
+    the rerun recorder (``run.rrd`` always; a live viewer too with ``--rerun``), after the
+    stop-signal check."""
     from vtolftc.telemetry.recording import RerunRecorder
     from vtolftc.telemetry.runfolder import RunFolderWriter
 
-    return [RunFolderWriter(run_dir, plots=not getattr(args, "no_plots", False)),
+    return [_StopRequest(),
+            RunFolderWriter(run_dir, plots=not getattr(args, "no_plots", False)),
             RerunRecorder(run_dir / "run.rrd", live=bool(getattr(args, "rerun", False)))]
 
 
@@ -133,12 +221,14 @@ def cmd_fly(args: argparse.Namespace) -> int:
         extra += parse_fault_spec(spec, af.actuator_names)
     _check_controller(args.controller, args)
     run_dir = Path(args.out) if args.out else default_run_dir(args.case, args.controller)
+    prepare_out(run_dir, bool(getattr(args, "overwrite", False)))
     print(f"flying case {args.case} with {args.controller} for {args.duration:g} s "
-          f"-> {run_dir}")
+          f"-> {run_dir}", flush=True)
     try:
-        res = _fly_one(args.case, args.controller, args, run_dir, extra)
+        with _stop_on_signals():
+            res = _fly_one(args.case, args.controller, args, run_dir, extra)
     except KeyboardInterrupt:
-        print(f"interrupted: what was flown so far is in {run_dir}")
+        print(f"interrupted: what was flown so far is in {run_dir}", flush=True)
         raise
     for line in _summary_lines(res):
         print(line)
@@ -154,17 +244,17 @@ def cmd_compare(args: argparse.Namespace) -> int:
     for ctrl in CONTROLLER_NAMES:
         _check_controller(ctrl, args)
     out = Path(args.out) if args.out else default_run_dir(args.case, "compare")
-    out.mkdir(parents=True, exist_ok=True)
+    prepare_out(out, bool(getattr(args, "overwrite", False)),
+                marker=("comparison.json", *CONTROLLER_NAMES))
     results: dict[str, dict[str, Any]] = {}
     table = ""
-    print(f"comparing gs-shif, shif, lqr on case {args.case} -> {out}")
+    print(f"comparing gs-shif, shif, lqr on case {args.case} -> {out}", flush=True)
     try:
-        for ctrl in CONTROLLER_NAMES:
-            res = _fly_one(args.case, ctrl, args, out / ctrl, [])
-            results[ctrl] = res.metrics
-            print(f"{ctrl}:")
-            for line in _summary_lines(res):
-                print(line)
+        with _stop_on_signals():
+            _compare_all(args, out, results)
+    except KeyboardInterrupt:
+        print(f"interrupted: what was flown so far is in {out}", flush=True)
+        raise
     finally:
         if results:
             table = comparison_table(args.case, results)
@@ -178,6 +268,15 @@ def cmd_compare(args: argparse.Namespace) -> int:
     print()
     print(table)
     return 0
+
+
+def _compare_all(args: argparse.Namespace, out: Path, results: dict[str, Any]) -> None:
+    for ctrl in CONTROLLER_NAMES:
+        res = _fly_one(args.case, ctrl, args, out / ctrl, [])
+        results[ctrl] = res.metrics
+        print(f"{ctrl}:")
+        for line in _summary_lines(res):
+            print(line)
 
 
 def comparison_table(case: str, results: dict[str, dict[str, Any]]) -> str:
@@ -268,6 +367,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, default=40.0,
                    help="simulated seconds (default 40)")
     p.add_argument("--out", default=None, help="output folder (default runs/<case>-...)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing --out run folder (default: refuse)")
     p.add_argument("--gains", default=None,
                    help="gains directory (default firmware_sim/autopilot/gains)")
     p.add_argument("--hil-delay-ms", type=float, default=0.0,

@@ -3,7 +3,7 @@
     vtolftc sitl --case 1 --controller gs-shif [--transport udp|zenoh] [--realtime]
                  [--duration 40] [--out DIR] [--compare]
 
-Starts ``vtolftc.firmware_sim.vehicle.process`` and ``vtolftc.firmware_sim.autopilot.process`` on
+Starts ``vtolftc.processes.vehicle`` and ``vtolftc.processes.autopilot`` on
 free
 loopback ports (UDP, or embedded zenoh peers on tcp/127.0.0.1), flies the case through a
 ground station with the real MAVLink commands (arm, takeoff, transition, fault injection with
@@ -49,9 +49,6 @@ def register(sub: Any) -> None:
                    help="run folder (default runs/sitl-case<N>-<controller>-<transport>-<UTC>)")
     p.add_argument("--airframe", type=Path, default=None, help="airframe TOML (default DS-1)")
     p.add_argument("--gains-dir", type=Path, default=None, help="directory of the gain files")
-    p.add_argument("--deterministic", action="store_true",
-                   help="no wall-clock time limit in the allocation QP (same result whatever "
-                        "the CPU load; also for --compare)")
     p.add_argument("--compare", action="store_true",
                    help="also fly the case in-process and compare the metrics")
     p.add_argument("--dashboard", action="store_true",
@@ -121,8 +118,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     out = args.out or default_run_dir(case, f"{args.controller}-sitl-{args.transport}")
     cfg = SitlConfig(case=case, controller=args.controller, transport=args.transport,
                      realtime=args.realtime, duration_s=args.duration, out_dir=out,
-                     airframe=args.airframe, gains_dir=args.gains_dir,
-                     deterministic=args.deterministic)
+                     airframe=args.airframe, gains_dir=args.gains_dir)
     mode = "real time" if args.realtime else "lockstep"
     print(f"SITL {scenario.name} ({scenario.description}), {args.controller}, "
           f"{args.transport}, {mode}; run folder {out}", flush=True)
@@ -142,12 +138,10 @@ def cmd_sitl(args: argparse.Namespace) -> int:
         print(line + (f" ({o['detail']})" if o["result"] != "ACCEPTED" and o["detail"] else ""))
     ref = None
     if args.compare:
-        from vtolftc.firmware_sim.autopilot.process import make_deterministic
         from vtolftc.scenario import run_scenario
 
-        ref = run_scenario(scenario, args.controller, airframe=af, gains_dir=args.gains_dir,
-                           autopilot_setup=make_deterministic if args.deterministic
-                           else None).metrics
+        ref = run_scenario(scenario, args.controller, airframe=af, gains_dir=args.gains_dir
+                           ).metrics
     head = f"| metric | SITL ({args.transport}) |" + (" in-process |" if ref else "")
     print("\n" + head)
     print("|---|---:|" + ("---:|" if ref else ""))

@@ -50,6 +50,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
 )
 from vtolftc.firmware_sim.vehicle.faults import Fault, case_description, case_faults
 from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle.sensors import Home
 from vtolftc.telemetry import RunObserver, TelemetrySample, VehicleTruth
 from vtolftc.telemetry.metrics import MetricsAccumulator
 
@@ -113,7 +114,8 @@ def paper_scenario(case: int | str = 1, duration_s: float = 40.0, *,
     """The paper's timeline for fault case ``case`` (0 = nominal, 1, 2), see module docstring.
 
     ``extra_faults`` are added (each injected at its own start time). The takeoff altitude is
-    sent as NAV_TAKEOFF param7, metres above home.
+    sent as NAV_TAKEOFF param7 AMSL, as PX4 reads it: the vehicle's home altitude
+    (:class:`~vtolftc.firmware_sim.vehicle.sensors.Home`) plus ``takeoff_alt_m``.
     """
     af = airframe if airframe is not None else load_airframe()
     if not (math.isfinite(duration_s) and duration_s > 0):
@@ -122,7 +124,7 @@ def paper_scenario(case: int | str = 1, duration_s: float = 40.0, *,
     actions = [
         _cmd(arm_s, "arm", CMD_COMPONENT_ARM_DISARM, 1.0, 0.0),
         _cmd(arm_s, f"takeoff to {takeoff_alt_m:g} m", CMD_NAV_TAKEOFF,
-             NAN, NAN, NAN, NAN, NAN, NAN, takeoff_alt_m),
+             NAN, NAN, NAN, NAN, NAN, NAN, Home().alt_m + takeoff_alt_m),
         _cmd(transition_s, "transition to fixed-wing", CMD_DO_VTOL_TRANSITION, 4.0, 0.0),
     ]
     actions += [Action(f.start_s, "fault", f"fault {f.describe()}", fault=f) for f in faults]
@@ -179,6 +181,7 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
     veh = Vehicle(af, dt_usec=1_000_000 // physics_hz)
     home = veh.sensor_model.home
     home_lat, home_lon, home_alt = float(home.lat_deg), float(home.lon_deg), float(home.alt_m)
+    ap.set_home(home_lat, home_lon, home_alt)
     acc = MetricsAccumulator(window_start_s=scenario.transition_start_s)
     result = RunResult(metrics={})
     obs = list(observers)

@@ -1,7 +1,7 @@
 """SITL runner: the vehicle and the autopilot as separate processes, flown by a ground station.
 
-:class:`SitlRun` starts ``python -m vtolftc.firmware_sim.vehicle.process`` and ``python -m
-vtolftc.firmware_sim.autopilot.process`` (each in its own process group, output in log files of the
+:class:`SitlRun` starts ``python -m vtolftc.processes.vehicle`` and ``python -m
+vtolftc.processes.autopilot`` (each in its own process group, output in log files of the
 run folder) on free loopback ports, over UDP or zenoh (embedded peers, explicit
 ``tcp/127.0.0.1`` endpoints, no scouting), connects a :class:`vtolftc.gcs.client.GroundStation` and
 flies a :class:`vtolftc.scenario.Scenario` by sending the real MAVLink commands: arming,
@@ -21,17 +21,22 @@ exactly the control step at which the in-process runner executes them, and a fau
 to the vehicle arrives before the controls of that step, so it acts from the same physics
 step as the in-process ``Vehicle.inject`` (fault magnitudes travel as float32 and are read back
 as the decimal they stand for: 0.2, not 0.200000003). The autopilot's inputs are bit-identical
-to the in-process run's (same HIL_STATE_QUATERNION encoding, float32 commands both ways), so
-with ``deterministic=True`` (and the in-process run given
-:func:`vtolftc.firmware_sim.autopilot.process.make_deterministic`) every metric is *equal*, tested
-over
-UDP and zenoh. Without it, the allocator's OSQP ``time_limit`` (1 ms of wall clock) lets the
-machine's load change a QP solution now and then: two in-process runs then already differ
-around the 6th significant digit, and so does SITL against in-process.
+to the in-process run's (same HIL_STATE_QUATERNION encoding, float32 commands both ways), and
+the allocator has no wall-clock time limit (its solver stops on its tolerance or iteration cap
+only), so every metric is *equal* to the in-process run's, tested over UDP and zenoh, whatever
+the machine's load.
 
 Real-time mode (``realtime=True``): no hold; each action is sent when the ground station's
 telemetry shows the simulated time has reached it, so it lands tens of milliseconds (a few
 control steps) late and the metrics differ slightly from the in-process run.
+
+Readiness: :meth:`SitlRun.start` returns once the autopilot's HEARTBEAT says
+MAV_STATE_STANDBY (warm: every compiled path compiled) and, in lockstep with the start hold,
+once it holds at t = 0; nothing is assumed from elapsed time.
+
+Latency knob: ``SitlConfig.hil_delay_ms`` and ``hil_loss`` make the vehicle apply the
+autopilot's controls that many milliseconds (simulated time) after they arrived and drop that
+fraction of them (seeded), see :mod:`vtolftc.firmware_sim.vehicle.process`.
 
 Stopping: after the last action the hold is set to the scenario's end; once held there, the
 autopilot is stopped with SIGTERM (it writes ``metrics.json``), then the vehicle. Ctrl-C or any
@@ -85,16 +90,19 @@ class SitlConfig:
     vehicle: str = "ds1"
     startup_timeout_s: float = 120.0
     hold_timeout_s: float = 5.0
-    deterministic: bool = False
-    """Autopilot without the QP solver's wall-clock time limit (see
-    :func:`vtolftc.firmware_sim.autopilot.process.make_deterministic`)."""
     plots: bool = True
     hold_at_start: bool = True
     """Lockstep: start held at t = 0 (needed by :meth:`SitlRun.fly`); False = free-running."""
     failure_injection: bool = True
+    """Start the autopilot with SYS_FAILURE_EN = 1."""
     spin_us: float = 0.0
     """Busy-poll time of both processes before sleeping on the HIL link (``--spin-us``)."""
-    """Start the autopilot with SYS_FAILURE_EN = 1."""
+    hil_delay_ms: float = 0.0
+    """Injected one-way delay of the controls on the HIL link (ms of simulated time)."""
+    hil_loss: float = 0.0
+    """Injected loss of the controls on the HIL link (fraction, seeded)."""
+    vehicle_timeout_s: float = 30.0
+    """Each process stops when the other is silent this long (wall s)."""
     extra_autopilot_args: list[str] = field(default_factory=list)
     extra_vehicle_args: list[str] = field(default_factory=list)
 
@@ -188,20 +196,25 @@ class SitlRun:
         common += ["--parent-pid", str(os.getpid())]  # no orphans if this process is killed
         if cfg.spin_us > 0:
             common += ["--spin-us", f"{cfg.spin_us:g}"]
-        self._spawn("vehicle", ["-m", "vtolftc.firmware_sim.vehicle.process", "--link", v_url,
+        latency = []
+        if cfg.hil_delay_ms > 0:
+            latency += ["--hil-delay-ms", f"{cfg.hil_delay_ms:g}"]
+        if cfg.hil_loss > 0:
+            latency += ["--hil-loss", f"{cfg.hil_loss:g}"]
+        timeout = f"{cfg.vehicle_timeout_s:g}"
+        self._spawn("vehicle", ["-m", "vtolftc.processes.vehicle", "--link", v_url,
                                 *mode, *common, "--out", str(self.out / "vehicle"),
-                                "--peer-timeout", "30", "--connect-timeout",
-                                str(cfg.startup_timeout_s), *cfg.extra_vehicle_args])
-        ap_args = ["-m", "vtolftc.firmware_sim.autopilot.process", "--hil-link", a_hil,
+                                "--peer-timeout", timeout, "--connect-timeout",
+                                str(cfg.startup_timeout_s), *latency,
+                                *cfg.extra_vehicle_args])
+        ap_args = ["-m", "vtolftc.processes.autopilot", "--hil-link", a_hil,
                    "--gcs-link", a_gcs, "--no-default-gcs", *mode, *common,
                    "--controller", cfg.controller,
                    "--out", str(self.out / "autopilot"), "--case", str(cfg.case),
-                   "--vehicle-timeout", "30",
+                   "--vehicle-timeout", timeout,
                    "--param", f"SYS_FAILURE_EN={1 if cfg.failure_injection else 0}"]
         if not cfg.realtime and cfg.hold_at_start:
             ap_args += ["--hold-ms", "0"]
-        if cfg.deterministic:
-            ap_args.append("--deterministic")
         if not cfg.plots:
             ap_args.append("--no-plots")
         if cfg.gains_dir is not None:
@@ -211,12 +224,19 @@ class SitlRun:
             self.gs = GroundStation(gs_url)
         self.gs.add_listener(self._on_message)
         deadline = time.monotonic() + cfg.startup_timeout_s
-        while self.gs.snapshot().heartbeat_age_s > 2.0:
+        while not self.ready():
             self._check_alive()
             if time.monotonic() > deadline:
-                raise SitlError(f"no heartbeat from the autopilot within "
-                                f"{cfg.startup_timeout_s:g} s (see {self.out}/autopilot.log)")
+                raise SitlError(f"the autopilot did not report ready (heartbeat, "
+                                f"MAV_STATE_STANDBY) within {cfg.startup_timeout_s:g} s "
+                                f"(see {self.out}/autopilot.log)")
             time.sleep(0.05)
+
+    def ready(self) -> bool:
+        """The autopilot heartbeats and is warm (MAV_STATE_STANDBY or later)."""
+        assert self.gs is not None
+        s = self.gs.snapshot()
+        return s.heartbeat_age_s < 2.0 and s.system_status >= 3
 
     def _on_message(self, m: Any) -> None:
         if m.get_type() == "NAMED_VALUE_INT":

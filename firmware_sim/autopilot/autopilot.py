@@ -51,6 +51,7 @@ from vtolftc.airframe.loader import Airframe, load_airframe
 from vtolftc.firmware_sim.autopilot.allocation import AllocationStatus, QPAllocator
 from vtolftc.firmware_sim.autopilot.altitude import FixedWingAltitudeHold, MulticopterAltitudeHold
 from vtolftc.firmware_sim.autopilot.attitude import AttitudeController, make_controller
+from vtolftc.firmware_sim.autopilot.battery import BatteryMonitor
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
 from vtolftc.firmware_sim.autopilot.interface import (
     N_ACTUATORS,
@@ -62,6 +63,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
     ParamType,
 )
 from vtolftc.firmware_sim.autopilot.modes import ModeMachine, landed_state, vtol_state
+from vtolftc.firmware_sim.autopilot.navigator import Navigator
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.rotation import quat_to_euler
 
@@ -278,6 +280,27 @@ class Autopilot:
         self._alloc_status = "idle"
         self._have_nav = False
         self._last_nav: NavState | None = None
+        self.navigator = Navigator(self)
+        """Missions, RTL, loiter, reposition (:mod:`.navigator`)."""
+        self.battery = BatteryMonitor(self.params, self._battery_failsafe)
+        """Battery estimate and the low-battery failsafe (:mod:`.battery`)."""
+
+    def battery_update(self, time_usec: int, voltage_v: float, current_a: float) -> None:
+        """A power-module reading (pack voltage [V], current [A]) from the vehicle."""
+        self.battery.update(time_usec, voltage_v, current_a)
+
+    def _battery_failsafe(self, action: str, text: str) -> None:
+        self._note(text)
+        if action == "rtl" and self.navigator.start_rtl(text) == CommandResult.ACCEPTED:
+            return
+        if action in ("rtl", "land") and self.modes.mode != FlightMode.IDLE:
+            self.navigator._leave_auto((4, 6))
+            self.modes.land()
+            self._drain_events()
+
+    def set_home(self, lat_deg: float, lon_deg: float, alt_m: float) -> None:
+        """Geodetic origin of the NED frame (needed for missions and AMSL altitudes)."""
+        self.navigator.set_home(lat_deg, lon_deg, alt_m)
 
     # ------------------------------------------------------------------------------------
     # Commands
@@ -287,12 +310,15 @@ class Autopilot:
 
         COMPONENT_ARM_DISARM 400: param1 1 arm (on the ground, once navigation data came),
         0 disarm (on the ground; in the air only with param2 = 21196). NAV_TAKEOFF 22: param7
-        the takeoff altitude in metres ABOVE HOME (NaN: ``MIS_TAKEOFF_ALT``), armed and on
-        the ground only. DO_VTOL_TRANSITION 3000: param1 4 = to fixed-wing, 3 = to
-        multicopter (in the air). NAV_LAND 21 (from fixed-wing: back transition first).
+        the takeoff altitude AMSL as in PX4 (NaN: ``MIS_TAKEOFF_ALT`` above home; needs the
+        home position, :meth:`set_home`), armed and on the ground only. DO_VTOL_TRANSITION
+        3000: param1 4 = to fixed-wing, 3 = to multicopter (in the air). NAV_LAND 21 (from
+        fixed-wing: back transition first).
         DO_SET_MODE 176 with PX4 custom modes (param1 custom flag, param2 main, param3 sub):
-        POSCTL/ALTCTL/AUTO.LOITER hold, AUTO.TAKEOFF, AUTO.LAND. Not allowed now: DENIED;
-        unknown id: UNSUPPORTED.
+        POSCTL/ALTCTL/AUTO.LOITER hold, AUTO.TAKEOFF, AUTO.LAND, AUTO.MISSION, AUTO.RTL.
+        The navigator's commands (:meth:`.navigator.Navigator.command`): NAV_RETURN_TO_LAUNCH
+        20, DO_CHANGE_SPEED 178, DO_REPOSITION 192, DO_SET_MISSION_CURRENT 224,
+        MISSION_START 300. Not allowed now: DENIED; unknown id: UNSUPPORTED.
         """
         p = [float("nan")] * 7
         for i, x in enumerate(list(params)[:7]):
@@ -302,6 +328,9 @@ class Autopilot:
                 return CommandResult.DENIED
         m = self.modes
         cid = int(command_id)
+        nav_res = self.navigator.command(cid, p)
+        if nav_res is not None:
+            return self._after(nav_res)
         if cid == CMD_COMPONENT_ARM_DISARM:
             if p[0] == 1.0:
                 if not self._have_nav:
@@ -315,8 +344,16 @@ class Autopilot:
                 return self._after(m.disarm(force=p[1] == FORCE_DISARM_MAGIC))
             return CommandResult.DENIED
         if cid == CMD_NAV_TAKEOFF:
-            alt = p[6] if math.isfinite(p[6]) else self.params.get("MIS_TAKEOFF_ALT")
+            if math.isfinite(p[6]):
+                if self.navigator.home is None:
+                    self._note("takeoff denied: no home position yet (param7 is AMSL)")
+                    return CommandResult.TEMPORARILY_REJECTED
+                alt = p[6] - self.navigator.home_alt
+            else:
+                alt = self.params.get("MIS_TAKEOFF_ALT")
             if not 1.0 <= alt <= 500.0:
+                self._note(f"takeoff denied: {alt:.1f} m above home (param7 is AMSL, home "
+                           f"{self.navigator.home_alt:.1f} m)")
                 return CommandResult.DENIED
             res = m.takeoff()
             if res == CommandResult.ACCEPTED:
@@ -439,6 +476,7 @@ class Autopilot:
             self._enter_mode(mode, self._last_mode, nav, pitch)
             self._last_mode = mode
         self._drain_events()
+        self.navigator.update(nav, yaw)
 
         u = self._u
         if not m.armed or mode == _M_IDLE:
@@ -506,7 +544,11 @@ class Autopilot:
                 reserve = True
             u_pref = self.u_pref_fw
             lim = math.radians
-            ref[0] = 0.0
+            lateral = self.navigator.fw_lateral(nav, roll, yaw, V)
+            if lateral is None:
+                ref[0] = 0.0
+            else:
+                ref[0], ref[2] = lateral
             ref[1] = self.fw_alt.update(self._alt_ref, h, v_up, kp_alt=pp["FW_ALT_P"].value,
                                         kp_vz=pp["FW_VZ_P"].value, ki_vz=pp["FW_VZ_I"].value,
                                         climb_max=pp["FW_CLMB_MAX"].value,
@@ -514,7 +556,7 @@ class Autopilot:
                                         pitch_min=lim(pp["FW_P_LIM_MIN"].value),
                                         pitch_max=lim(pp["FW_P_LIM_MAX"].value))
             fx_max = self._pusher_max_force(V)
-            e_v = pp["FW_AIRSPD_TRIM"].value - V
+            e_v = self.navigator.airspeed_setpoint() - V
             a_x = pp["FW_AIRSPD_P"].value * e_v + self._airspeed_int
             fx_cmd = drag * math.cos(alpha) - lift * math.sin(alpha) + mass * (
                 a_x + g * math.sin(pitch))
@@ -665,7 +707,7 @@ class Autopilot:
             self._time_usec, mode, self.modes.armed, _VTOL_STATE_OF[mode],
             _LANDED_STATE_OF[mode], self._ref.copy(), self._att.copy(), float(self._alt_ref),
             float(self._airspeed), self._v.copy(), self._u.copy(), self._alloc_status,
-            self.controller_name, self._message)
+            self.controller_name, self._message, self.navigator.custom_mode(mode))
 
     @property
     def allocation_stats(self) -> dict[str, object]:

@@ -7,11 +7,13 @@ zenoh link). It is system 1, component 1 (MAV_COMP_ID_AUTOPILOT1) and does what
 
 - HEARTBEAT at 1 Hz: type MAV_TYPE_VTOL_FIXEDROTOR (22, PX4's standard VTOL: separate lift
   and cruise propulsion), autopilot MAV_AUTOPILOT_PX4 (12), PX4 custom mode
-  ``main << 16 | sub << 24`` (flight modes: IDLE = AUTO.READY, TAKEOFF = AUTO.TAKEOFF,
-  HOVER / transitions / FIXED_WING = AUTO.LOITER, LAND = AUTO.LAND), armed bit 128 in
-  base_mode, system_status STANDBY / ACTIVE.
+  ``main << 16 | sub << 24`` as the navigator reports it (AUTO.LOITER = Hold on the ground and
+  in hover, AUTO.TAKEOFF, AUTO.LAND, AUTO.MISSION, AUTO.RTL, POSCTL for fixed-wing course
+  hold after a commanded transition; :meth:`.navigator.Navigator.custom_mode`), armed bit 128
+  in base_mode, system_status STANDBY / ACTIVE. Missions, COMMAND_INT, TIMESYNC, PING,
+  BATTERY_STATUS, GPS_RAW_INT and the geofence bits: :mod:`.gcs_services`.
 - Streams (default rates in :data:`DEFAULT_RATES_HZ`, on simulated time; SET_MESSAGE_INTERVAL
-  changes them for every link): ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED,
+  changes them for the link it came on only): ATTITUDE, ATTITUDE_QUATERNION, LOCAL_POSITION_NED,
   GLOBAL_POSITION_INT, HOME_POSITION, VFR_HUD, SYS_STATUS (present / enabled / healthy bits for
   gyro, accel, mag, baro, differential pressure, GPS, AHRS, motor outputs and pre-arm check),
   EXTENDED_SYS_STATE (vtol_state and landed_state never UNDEFINED: MC / ON_GROUND until the
@@ -25,38 +27,69 @@ zenoh link). It is system 1, component 1 (MAV_COMP_ID_AUTOPILOT1) and does what
   the PARAM_VALUE echo on every link; INT32 values travel bytewise in the float (PX4,
   MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE). A refused PARAM_SET is echoed with the value
   kept and explained in a STATUSTEXT.
-- Every COMMAND_LONG addressed to (1, 1) or broadcast gets one COMMAND_ACK from (1, 1) on the
-  link it came from, as soon as the main loop sees it (well under 0.5 s): flight commands
+- Every COMMAND_LONG (and COMMAND_INT: params 1-4, x, y, z) addressed to (1, 1) or broadcast
+  and not dropped by a rate limit gets one COMMAND_ACK from (1, 1) on the link it came from,
+  well under 0.5 s (TEMPORARILY_REJECTED if the control thread's queue was full): flight commands
   (400, 22, 176, 3000, 21) go to :meth:`AutopilotAPI.command`; INJECT_FAILURE (420) and
   MAV_CMD_INJECT_PARTIAL_LOSS (59900) are DENIED unless SYS_FAILURE_EN == 1, checked against
   the airframe's actuators (bad unit UNSUPPORTED, bad instance or loss DENIED, no vehicle
   TEMPORARILY_REJECTED), then forwarded to the vehicle over the HIL link (never to the
   controller) and ACCEPTED; anything else UNSUPPORTED. NaN params mean default.
-- MAVLink 2 signing: with a key, outgoing frames are signed, unsigned frames are accepted for
-  telemetry and parameters, but arming and fault injection need a verified signature (else
-  DENIED with a STATUSTEXT).
+- MAVLink 2 signing: with a key, outgoing frames are signed, and every incoming frame must
+  carry a valid signature except those in :data:`UNSIGNED_ALLOWED` (HEARTBEAT, RADIO_STATUS,
+  PARAM_REQUEST_LIST, PARAM_REQUEST_READ: liveness and read-only requests, as ArduPilot keeps
+  RADIO_STATUS); the links drop everything else unsigned or badly signed (counted as
+  ``dropped_signature``), so every COMMAND_LONG / COMMAND_INT, PARAM_SET,
+  SET_MESSAGE_INTERVAL and mission message needs the key. All ground-station links share one
+  stream-timestamp table (a frame replayed on another link is refused), and the hash is checked
+  before a timestamp is stored (:mod:`vtolftc.protocols.mavlink`). With signing on, only signed
+  heartbeats count for the data-link-loss failsafe.
 - Simulation hold (lockstep only, a vtol-ftc extension for exactly timed scripted runs): the
   INT32 parameter ``SIM_HOLD_MS`` (-1 = off) makes the autopilot wait before the control step
   at simulated time >= SIM_HOLD_MS ms; it then sends NAMED_VALUE_INT ``SIM_HOLD`` (value = the
   hold time in ms) and keeps serving commands and parameters until SIM_HOLD_MS is moved past
   the current time (or set to -1). Commands handled while held act at exactly that step.
+- HEARTBEAT system_status: BOOT until the autopilot is warm (:attr:`GcsEndpoint.ready`, every
+  compiled path compiled), then STANDBY (disarmed) / ACTIVE (armed), or CRITICAL / EMERGENCY
+  while a failsafe says so (:attr:`GcsEndpoint.mav_state`).
 
-Receiving happens in one thread per link (into a queue); everything else (handling, the
-autopilot, sending) happens in the caller's thread through :meth:`poll`, :meth:`on_step` and
-:meth:`tick`, so the autopilot is never touched from two threads.
+Threads (the control step never waits for a ground station):
+
+- one receiver per link parses frames (bad ones dropped and counted by the link; the process
+  opens the links with a datagram rate limit, so a flood is dropped before it is parsed) into a
+  bounded per-link queue; when it is full the oldest message is dropped (counted in
+  :meth:`GcsEndpoint.link_stats` as ``queue_dropped``);
+- one worker thread handles the queues: at most :attr:`GcsEndpoint.budget_per_cycle` messages
+  per cycle (round robin over the links), a token bucket per client (link, system, component;
+  ``rate_limit_hz`` sustained, ``rate_burst`` burst; excess dropped, counted as
+  ``rate_limited``), one handler per message type (:attr:`GcsEndpoint.handlers`). Everything
+  read-only or link-local (parameter reads, REQUEST_MESSAGE, SET_MESSAGE_INTERVAL, refusals of
+  unknown commands or invalid parameter values, the streams, the heartbeats) is done there;
+- what changes the autopilot (flight and fault commands, a valid PARAM_SET) is handed to the
+  control thread through a bounded drop-oldest queue (a dropped request is answered
+  TEMPORARILY_REJECTED) and applied by :meth:`GcsEndpoint.poll` at most ``max_items`` per
+  control cycle; its answers go back to the worker, which alone sends on the ground-station
+  links (one sender per link: sequence numbers and signing timestamps stay consistent).
 """
 
 from __future__ import annotations
 
+import collections
+import contextlib
 import math
-import queue
 import threading
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from vtolftc.firmware_sim.autopilot.gcs_services import (
+    STREAM_RATES_HZ,
+    Px4Services,
+    command_int_params,
+)
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
 from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotAPI,
@@ -80,13 +113,15 @@ from vtolftc.protocols.px4 import (
 )
 from vtolftc.rotation import quat_to_euler
 
-__all__ = ["DEFAULT_RATES_HZ", "GcsEndpoint", "px4_mode_of"]
+__all__ = ["DEFAULT_RATES_HZ", "UNSIGNED_ALLOWED", "GcsEndpoint", "px4_mode_of"]
 
 MAV_TYPE_VTOL_FIXEDROTOR = 22
 MAV_AUTOPILOT_PX4 = 12
-MAV_STATE_STANDBY, MAV_STATE_ACTIVE = 3, 4
+MAV_TYPE_GCS = 6
+MAV_STATE_BOOT, MAV_STATE_STANDBY, MAV_STATE_ACTIVE = 1, 3, 4
+MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY = 5, 6
 MAV_MODE_FLAG_AUTO = 4 | 8 | 16  # AUTO_ENABLED | GUIDED_ENABLED | STABILIZE_ENABLED
-SEVERITY_WARNING, SEVERITY_NOTICE, SEVERITY_INFO = 4, 5, 6
+SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_NOTICE, SEVERITY_INFO = 2, 4, 5, 6
 
 CMD_NAV_LAND, CMD_NAV_TAKEOFF, CMD_DO_SET_MODE = 21, 22, 176
 CMD_ARM_DISARM, CMD_INJECT_FAILURE, CMD_DO_VTOL_TRANSITION = 400, 420, 3000
@@ -94,9 +129,16 @@ CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE = 511, 512
 CMD_REQUEST_AUTOPILOT_CAPABILITIES = 520
 CMD_INJECT_PARTIAL_LOSS = 59900
 FLIGHT_COMMANDS = (CMD_ARM_DISARM, CMD_NAV_TAKEOFF, CMD_DO_SET_MODE, CMD_DO_VTOL_TRANSITION,
-                   CMD_NAV_LAND)
+                   CMD_NAV_LAND, 20, 178, 192, 224, 300)
+# 20 NAV_RETURN_TO_LAUNCH, 178 DO_CHANGE_SPEED, 192 DO_REPOSITION, 224 DO_SET_MISSION_CURRENT,
+# 300 MISSION_START (the navigator's, see navigator.py)
 FAULT_COMMANDS = (CMD_INJECT_FAILURE, CMD_INJECT_PARTIAL_LOSS)
-SIGNED_COMMANDS = (CMD_ARM_DISARM, *FAULT_COMMANDS)
+
+UNSIGNED_ALLOWED = frozenset({0, 109, 20, 21})
+"""Message ids accepted without a valid signature when signing is on: HEARTBEAT (0),
+RADIO_STATUS (109, as ArduPilot), PARAM_REQUEST_READ (20) and PARAM_REQUEST_LIST (21)
+(read-only). Everything else, every command, PARAM_SET and mission message included, needs
+the key."""
 
 MSG = {"HEARTBEAT": 0, "SYS_STATUS": 1, "ATTITUDE": 30, "ATTITUDE_QUATERNION": 31,
        "LOCAL_POSITION_NED": 32, "GLOBAL_POSITION_INT": 33, "VFR_HUD": 74,
@@ -109,7 +151,9 @@ DEFAULT_RATES_HZ: dict[int, float] = {
     MSG["GLOBAL_POSITION_INT"]: 5.0, MSG["VFR_HUD"]: 4.0, MSG["HIL_STATE_QUATERNION"]: 10.0,
     MSG["HOME_POSITION"]: 0.2, MSG["EXTENDED_SYS_STATE"]: 2.0,
     MSG["ACTUATOR_OUTPUT_STATUS"]: 10.0, MSG["FAULT_INJECTION_STATUS"]: 1.0,
+    **STREAM_RATES_HZ,  # GPS_RAW_INT, MISSION_CURRENT, BATTERY_STATUS (gcs_services.py)
 }
+MSG.update({"GPS_RAW_INT": 24, "MISSION_CURRENT": 42, "BATTERY_STATUS": 147})
 """Stream rates in Hz of simulated time (PX4-like, a little lower to spare the CPU)."""
 
 # SYS_STATUS sensor bits (MAV_SYS_STATUS_SENSOR)
@@ -135,24 +179,43 @@ def _text(s: Any) -> str:
     return str(s).rstrip("\x00")
 
 
+@dataclass
+class _Client:
+    """Token bucket of one ground-station client (link, system, component)."""
+
+    tokens: float
+    last: float
+
+
 class GcsEndpoint:
     """Ground-station side of the autopilot (see the module docstring).
 
     Args:
         autopilot: the :class:`AutopilotAPI` (its ``params`` store gets ``SIM_HOLD_MS``).
-        hil: the HIL bridge (fault commands are forwarded through it).
+        hil: the HIL bridge (fault commands are forwarded through it, by the control thread).
         links: ground-station links (owned: closed by :meth:`close`).
         actuators: numbering of motors and servos (from the airframe).
-        signing_required: arming and fault injection need a verified MAVLink 2 signature.
+        signing_required: the links verify signatures (see :data:`UNSIGNED_ALLOWED`); arming
+            and fault commands are refused unsigned even if a link lets them through.
         lockstep: enables the simulation hold.
-        on_event: ``f(kind, text)`` for run logs ("command", "ack", "mode", "fault", ...).
+        on_event: ``f(kind, text)`` for run logs ("command", "ack", "mode", "fault", ...);
+            called from the worker thread and from the control thread, so it must be
+            thread-safe (the autopilot process only queues).
+        rate_limit_hz, rate_burst: per-client token bucket (messages per second, burst).
+        queue_len: per-link receive queue (drop-oldest).
+        budget_per_cycle: messages the worker handles per cycle.
+        ready: the autopilot is warm (else BOOT and no arming until :attr:`ready` is set).
+        start: start the threads (tests may drive :meth:`serve_once` by hand).
     """
 
     def __init__(self, autopilot: AutopilotAPI, hil: HilBridge, links: Sequence[Link], *,
                  actuators: ActuatorTable, signing_required: bool = False,
                  lockstep: bool = True, hold_ms: int = -1,
                  on_event: Callable[[str, str], None] | None = None,
-                 version: tuple[int, int, int] = (0, 1, 0)) -> None:
+                 version: tuple[int, int, int] = (0, 1, 0), rate_limit_hz: float = 50.0,
+                 rate_burst: float = 100.0, queue_len: int = 512,
+                 budget_per_cycle: int = 32, control_queue_len: int = 32,
+                 ready: bool = True, start: bool = True) -> None:
         self.ap = autopilot
         self.hil = hil
         self.links = list(links)
@@ -161,18 +224,38 @@ class GcsEndpoint:
         self.lockstep = lockstep
         self.on_event = on_event or (lambda kind, text: None)
         self.version = version
+        self.rate_limit_hz = float(rate_limit_hz)
+        self.rate_burst = float(rate_burst)
+        self.budget_per_cycle = int(budget_per_cycle)
         params = autopilot.params
         if SIM_HOLD_PARAM not in params:
             params.register(SIM_HOLD_PARAM, -1, ParamType.INT32, -1, 2**31 - 1,
                             "lockstep only: hold the simulation before the control step at "
                             "this simulated time in ms (-1 = off)")
         params.set(SIM_HOLD_PARAM, int(hold_ms))
-        self.rates_hz = dict(DEFAULT_RATES_HZ)
+        n = len(self.links)
+        self.rates_hz: list[dict[int, float]] = [dict(DEFAULT_RATES_HZ) for _ in range(n)]
+        """Stream rates of each link (SET_MESSAGE_INTERVAL changes its own link only)."""
+        self._next_due: list[dict[int, int]] = [{} for _ in range(n)]
+        self._earliest_due = [0] * n
         self._statustext_id = 0
-        self._next_due: dict[int, int] = {}
-        self._earliest_due = 0
-        self._queue: queue.SimpleQueue[tuple[int, Any]] = queue.SimpleQueue()
+        self._inq: list[collections.deque[Any]] = [collections.deque(maxlen=queue_len)
+                                                   for _ in range(n)]
+        self._counters = [{"queue_dropped": 0, "rate_limited": 0, "handled": 0,
+                           "control_dropped": 0} for _ in range(n)]
+        self._clients: dict[tuple[int, int, int], _Client] = {}
+        # control thread <-> worker
+        self._control_q: collections.deque[tuple[int, Any, Callable[[], None]]] = \
+            collections.deque()
+        self._control_queue_len = int(control_queue_len)
+        self._outbox: collections.deque[Callable[[], None]] = collections.deque()
+        self._snap_lock = threading.Lock()
+        self._snap: tuple[NavState | None, AutopilotStatus | None] = (None, None)
+        self._snap_seq = 0
+        self._seen_seq = -1
+        self._wake = threading.Event()
         self._closed = False
+        # what the worker knows
         self.nav: NavState | None = None
         self.status: AutopilotStatus | None = None
         self.commands = np.zeros(15)
@@ -181,19 +264,48 @@ class GcsEndpoint:
         self._last_message = ""
         self._wall_next = 0.0
         self._last_step_wall = -math.inf
-        self.held_at_ms: int | None = None
+        self._hold_notice_ms: int | None = None
+        self._hold_sent_ms: int | None = None
         self._hold_announce_wall = 0.0
         self._last_fault_status: Any = None
         self.commands_answered = 0
-        self._threads = [threading.Thread(target=self._rx, args=(i, link), daemon=True,
-                                          name=f"gcs-rx-{i}")
-                         for i, link in enumerate(self.links)]
-        for th in self._threads:
-            th.start()
-        self.refresh_status()
+        self.ready = ready
+        """True once the autopilot is warm (HEARTBEAT says STANDBY/ACTIVE, not BOOT)."""
+        self.mav_state: int | None = None
+        """MAV_STATE set by a failsafe (CRITICAL / EMERGENCY), None = normal."""
+        self.last_gcs_heartbeat = -math.inf
+        """monotonic time of the last (signed, if signing is on) ground-station HEARTBEAT or
+        command addressed to this autopilot."""
+        self.handlers: dict[str, Callable[[int, Link, Any], None]] = {
+            "HEARTBEAT": self._on_heartbeat,
+            "COMMAND_LONG": self._on_command_long,
+            "COMMAND_INT": self._on_command_int,
+            "PARAM_REQUEST_LIST": self._on_param_request_list,
+            "PARAM_REQUEST_READ": self._on_param_request_read,
+            "PARAM_SET": self._on_param_set,
+        }
+        """Handler per message type, run in the worker thread: ``f(link_index, link, msg)``.
+        A handler that must change the autopilot hands a function to :meth:`submit`."""
+        self._status0 = autopilot.status()
+        self._snap = (None, self._status0)
+        self._snap_seq = 0
+        self.services = Px4Services(self)
+        for name in self.services.HANDLES - {"COMMAND_INT"}:  # missions, TIMESYNC, PING
+            self.handlers.setdefault(name, self._on_service)
+        self._threads: list[threading.Thread] = []
+        if start:
+            self._threads = [threading.Thread(target=self._rx, args=(i, link), daemon=True,
+                                              name=f"gcs-rx-{i}")
+                             for i, link in enumerate(self.links)]
+            self._threads.append(threading.Thread(target=self._worker, daemon=True,
+                                                  name="gcs-worker"))
+            for th in self._threads:
+                th.start()
 
-    # ------------------------------------------------------------------ threads
+    # ------------------------------------------------------------------ receive threads
     def _rx(self, index: int, link: Link) -> None:
+        q = self._inq[index]
+        cnt = self._counters[index]
         while not self._closed:
             try:
                 msgs = link.recv(0.25)
@@ -203,32 +315,208 @@ class GcsEndpoint:
                 time.sleep(0.05)
                 continue
             for m in msgs:
-                self._queue.put((index, m))
+                if len(q) == q.maxlen:
+                    cnt["queue_dropped"] += 1  # the append drops the oldest
+                q.append(m)
 
     def close(self) -> None:
-        """Stop the receivers and close every link. Idempotent."""
+        """Stop the threads and close every link. Idempotent."""
         if self._closed:
             return
         self._closed = True
+        self._wake.set()
+        for th in self._threads:
+            if th.name == "gcs-worker":
+                th.join(timeout=2.0)
         for link in self.links:
             link.close()
         for th in self._threads:
             th.join(timeout=1.0)
 
     def link_stats(self) -> list[dict[str, Any]]:
-        """Counters of every ground-station link (garbage, CRC, truncated ... drops)."""
-        return [{"link": repr(link), **link.stats.as_dict()} for link in self.links]
+        """Counters of every ground-station link (garbage, CRC, truncated, signature ...
+        drops of the link; queue, rate-limit and control-queue drops of the endpoint)."""
+        return [{"link": repr(link), **link.stats.as_dict(), **self._counters[i]}
+                for i, link in enumerate(self.links)]
 
-    # ------------------------------------------------------------------ sending
+    # ------------------------------------------------------------------ worker thread
+    def _worker(self) -> None:
+        while not self._closed:
+            self._wake.wait(0.005)
+            self._wake.clear()
+            try:
+                self.serve_once()
+            except Exception as exc:  # the worker never dies
+                if self._closed:
+                    return
+                self.on_event("error", f"ground-station worker: {exc!r}")
+                time.sleep(0.01)
+        # last answers (e.g. a command handled just before stop)
+        with contextlib.suppress(Exception):
+            self._drain_outbox()
+
+    def serve_once(self) -> int:
+        """One worker cycle: answers from the control thread, queued messages (within the
+        budget), status changes, streams, wall-clock duties. Returns messages handled."""
+        n = self._serve_inputs()
+        self._drain_outbox()
+        self._observe_snapshot()
+        self._streams()
+        self._wall_duties()
+        return n
+
+    def _drain_outbox(self) -> None:
+        while True:
+            try:
+                fn = self._outbox.popleft()
+            except IndexError:
+                return
+            fn()
+
+    def _allow(self, index: int, msg: Any, now: float) -> bool:
+        key = (index, msg.get_srcSystem(), msg.get_srcComponent())
+        c = self._clients.get(key)
+        if c is None:
+            if len(self._clients) > 4096:  # a flood of made-up ids: forget the idle ones
+                self._clients = {k: v for k, v in self._clients.items() if now - v.last < 10}
+            c = self._clients[key] = _Client(self.rate_burst, now)
+        c.tokens = min(self.rate_burst, c.tokens + (now - c.last) * self.rate_limit_hz)
+        c.last = now
+        if c.tokens < 1.0:
+            return False
+        c.tokens -= 1.0
+        return True
+
+    def _serve_inputs(self) -> int:
+        budget = self.budget_per_cycle
+        handled = 0
+        now = time.monotonic()
+        active = True
+        while handled < budget and active:
+            active = False
+            for index, q in enumerate(self._inq):
+                if handled >= budget:
+                    break
+                try:
+                    msg = q.popleft()
+                except IndexError:
+                    continue
+                active = True
+                cnt = self._counters[index]
+                if not self._allow(index, msg, now):
+                    cnt["rate_limited"] += 1
+                    continue
+                handled += 1
+                cnt["handled"] += 1
+                handler = self.handlers.get(msg.get_type())
+                if handler is None:
+                    continue
+                link = self.links[index]
+                try:
+                    handler(index, link, msg)
+                except Exception as exc:  # one bad message must not stop the endpoint
+                    self.statustext(f"error handling {msg.get_type()}: {exc}",
+                                    SEVERITY_WARNING)
+        return handled
+
+    # ------------------------------------------------------------------ control thread side
+    def submit(self, index: int, msg: Any, fn: Callable[[], None],
+               on_drop: Callable[[], None] | None = None) -> None:
+        """Worker: have the control thread run ``fn`` (at most ``max_items`` per control
+        cycle). If the queue is full the oldest request is dropped and its ``on_drop`` run
+        (in the worker)."""
+        q = self._control_q
+        if len(q) >= self._control_queue_len:
+            old_index, _old, _fn = q.popleft()
+            self._counters[old_index]["control_dropped"] += 1
+            drop = getattr(_fn, "on_drop", None)
+            if drop is not None:
+                drop()
+        fn.on_drop = on_drop  # type: ignore[attr-defined]
+        q.append((index, msg, fn))
+
+    def poll(self, max_items: int = 4) -> int:
+        """Control thread: apply up to ``max_items`` requests (commands, parameter changes)
+        the worker queued; returns how many."""
+        n = 0
+        while n < max_items:
+            try:
+                _index, _msg, fn = self._control_q.popleft()
+            except IndexError:
+                break
+            n += 1
+            try:
+                fn()
+            except Exception as exc:
+                self.notify(f"error applying a ground-station request: {exc}",
+                            SEVERITY_WARNING)
+        if n:
+            self._wake.set()
+        return n
+
+    def has_pending(self) -> bool:
+        """Control thread: requests are waiting for :meth:`poll`."""
+        return bool(self._control_q)
+
+    def _reply(self, fn: Callable[[], None]) -> None:
+        """Control thread: have the worker send something (it alone sends on the links)."""
+        self._outbox.append(fn)
+        self._wake.set()
+
+    def notify(self, text: str, severity: int = SEVERITY_INFO) -> None:
+        """Any thread: a STATUSTEXT to every ground station (sent by the worker)."""
+        self._reply(lambda: self.statustext(text, severity))
+
+    def on_step(self, nav: NavState, status: AutopilotStatus) -> None:
+        """Control thread, after a control step: publish the step for the worker's streams."""
+        with self._snap_lock:
+            self._snap = (nav, status)
+            self._snap_seq += 1
+        self.services.on_step(nav)
+        self._hold_notice_ms = None
+        self._wake.set()
+
+    def publish_status(self, status: AutopilotStatus) -> None:
+        """Control thread: a new status without a step (e.g. after a command)."""
+        with self._snap_lock:
+            self._snap = (self._snap[0], status)
+            self._snap_seq += 1
+        self._wake.set()
+
+    def hold_usec(self) -> int | None:
+        """Simulated time at which to hold, None if no hold (or not lockstep)."""
+        if not self.lockstep:
+            return None
+        v = int(self.ap.params.get(SIM_HOLD_PARAM))
+        return None if v < 0 else v * 1000
+
+    def announce_hold(self, time_usec: int) -> None:
+        """Control thread: the simulation is held at ``time_usec`` (the worker tells the
+        ground stations, repeated at 1 Hz)."""
+        ms = time_usec // 1000
+        if self._hold_notice_ms != ms:
+            self._hold_notice_ms = ms
+            self._wake.set()
+
+    def tick(self) -> None:
+        """Kept for callers of the single-threaded endpoint: the worker does the wall-clock
+        duties now."""
+
+    def refresh_status(self) -> None:
+        """Read the autopilot's status (only from the control thread or before start)."""
+        self.publish_status(self.ap.status())
+
+    # ------------------------------------------------------------------ sending (worker)
     def _send_all(self, msg: Any) -> None:
         for link in self.links:
             link.send(msg)
 
     def statustext(self, text: str, severity: int = SEVERITY_INFO,
                    link: Link | None = None) -> None:
-        """STATUSTEXT to one link or to all. A text longer than the field's 50 bytes goes out
-        in chunks as MAVLink 2 specifies: one ``id`` (1..65535) for all of them, ``chunk_seq``
-        0, 1, ..., the last chunk shorter than 50 bytes (an empty one if needed)."""
+        """Worker: STATUSTEXT to one link or to all. A text longer than the field's 50 bytes
+        goes out in chunks as MAVLink 2 specifies: one ``id`` (1..65535) for all of them,
+        ``chunk_seq`` 0, 1, ..., the last chunk shorter than 50 bytes (an empty one if
+        needed)."""
         codec = self.links[0].codec if self.links else None
         if codec is None:
             return
@@ -252,10 +540,24 @@ class GcsEndpoint:
     def time_boot_ms(self) -> int:
         return self.sim_usec // 1000
 
-    # ------------------------------------------------------------------ status
-    def refresh_status(self) -> None:
-        """Read the autopilot's status; STATUSTEXT on mode changes and new messages."""
-        self._observe(self.ap.status())
+    def _observe_snapshot(self) -> None:
+        with self._snap_lock:
+            seq = self._snap_seq
+            nav, st = self._snap
+        if seq == self._seen_seq:
+            return
+        # answers queued before this snapshot was published go first (they carry the
+        # command's message, which must not be reported twice)
+        self._drain_outbox()
+        self._seen_seq = seq
+        if nav is not None and (self.nav is None or nav.time_usec != self.nav.time_usec):
+            self.nav = nav
+            self.sim_usec = int(nav.time_usec)
+            self._last_step_wall = time.monotonic()
+            self._hold_sent_ms = None
+        if st is not None:
+            self.commands = np.asarray(st.actuator_commands, dtype=float)
+            self._observe(st)
 
     def _observe(self, st: AutopilotStatus) -> None:
         self.status = st
@@ -271,79 +573,49 @@ class GcsEndpoint:
             self.on_event("autopilot", st.message)
         self._last_message = st.message
 
-    def hold_usec(self) -> int | None:
-        """Simulated time at which to hold, None if no hold (or not lockstep)."""
-        if not self.lockstep:
-            return None
-        v = int(self.ap.params.get(SIM_HOLD_PARAM))
-        return None if v < 0 else v * 1000
+    def _streams(self) -> None:
+        if self.nav is None:
+            return
+        fs = self.hil.fault_status
+        fid = MSG["FAULT_INJECTION_STATUS"]
+        if fs is not None and fs is not self._last_fault_status:
+            self._last_fault_status = fs
+            self._send_stream(fid)
+            for i, due in enumerate(self._next_due):
+                due[fid] = self.sim_usec + 1_000_000
+                self._earliest_due[i] = 0
+        t = self.sim_usec
+        for i, link in enumerate(self.links):
+            if t < self._earliest_due[i]:
+                continue
+            earliest = 2**63
+            next_due = self._next_due[i]
+            for msg_id, hz in self.rates_hz[i].items():
+                if hz <= 0:
+                    continue
+                due = next_due.get(msg_id, 0)
+                if t >= due:
+                    due = max(due + round(1e6 / hz), t)
+                    next_due[msg_id] = due
+                    self._send_stream(msg_id, link)
+                earliest = min(earliest, due)
+            self._earliest_due[i] = earliest
 
-    def announce_hold(self, time_usec: int) -> None:
-        """Tell the ground stations the simulation is held at ``time_usec`` (repeat at 1 Hz)."""
-        ms = time_usec // 1000
+    def _wall_duties(self) -> None:
+        """1 Hz HEARTBEAT, SYS_STATUS, EXTENDED_SYS_STATE while simulated time does not
+        advance; the SIM_HOLD notice."""
         now = time.monotonic()
-        if self.held_at_ms != ms or now >= self._hold_announce_wall:
-            self.held_at_ms = ms
+        self.services.tick()
+        if now >= self._wall_next and now - self._last_step_wall > 0.5:
+            self._wall_next = now + 1.0
+            for name in ("HEARTBEAT", "SYS_STATUS", "EXTENDED_SYS_STATE"):
+                self._send_stream(MSG[name])
+        ms = self._hold_notice_ms
+        if ms is not None and (self._hold_sent_ms != ms or now >= self._hold_announce_wall):
+            self._hold_sent_ms = ms
             self._hold_announce_wall = now + 1.0
             if self.links:
                 self._send_all(self.links[0].codec.named_value_int_encode(ms, b"SIM_HOLD", ms))
-
-    # ------------------------------------------------------------------ main-thread entry points
-    def poll(self) -> int:
-        """Handle every queued message from the ground stations; returns how many."""
-        n = 0
-        while True:
-            try:
-                index, msg = self._queue.get_nowait()
-            except queue.Empty:
-                return n
-            n += 1
-            try:
-                self._handle(self.links[index], msg)
-            except Exception as exc:  # one bad message must not stop the autopilot
-                self.statustext(f"error handling {msg.get_type()}: {exc}",
-                                SEVERITY_WARNING)
-
-    def has_pending(self) -> bool:
-        return not self._queue.empty()
-
-    def on_step(self, nav: NavState, status: AutopilotStatus) -> None:
-        """After a control step: remember it and the status, send the streams due."""
-        self.nav = nav
-        self.commands = np.asarray(status.actuator_commands, dtype=float)
-        self.sim_usec = int(nav.time_usec)
-        self._last_step_wall = time.monotonic()
-        self.held_at_ms = None
-        self._observe(status)
-        fs = self.hil.fault_status
-        if fs is not None and fs is not self._last_fault_status:
-            self._last_fault_status = fs
-            self._send_stream(MSG["FAULT_INJECTION_STATUS"])
-            self._next_due[MSG["FAULT_INJECTION_STATUS"]] = self.sim_usec + 1_000_000
-            self._earliest_due = 0
-        if self.sim_usec < self._earliest_due:
-            return
-        earliest = 2**63
-        for msg_id, hz in self.rates_hz.items():
-            if hz <= 0:
-                continue
-            due = self._next_due.get(msg_id, 0)
-            if self.sim_usec >= due:
-                due = max(due + round(1e6 / hz), self.sim_usec)
-                self._next_due[msg_id] = due
-                self._send_stream(msg_id)
-            earliest = min(earliest, due)
-        self._earliest_due = earliest
-
-    def tick(self) -> None:
-        """Wall-clock duties: 1 Hz HEARTBEAT, SYS_STATUS, EXTENDED_SYS_STATE while simulated
-        time does not advance."""
-        now = time.monotonic()
-        if now >= self._wall_next and now - self._last_step_wall > 0.5:
-            self._wall_next = now + 1.0
-            self.refresh_status()
-            for name in ("HEARTBEAT", "SYS_STATUS", "EXTENDED_SYS_STATE"):
-                self._send_stream(MSG[name])
 
     # ------------------------------------------------------------------ streams
     def _send_stream(self, msg_id: int, link: Link | None = None) -> bool:
@@ -356,6 +628,15 @@ class GcsEndpoint:
             link.send(msg)
         return True
 
+    def system_status(self) -> int:
+        """MAV_STATE of the HEARTBEAT (see the module docstring)."""
+        if not self.ready:
+            return MAV_STATE_BOOT
+        if self.mav_state is not None:
+            return self.mav_state
+        st = self.status
+        return MAV_STATE_ACTIVE if (st is not None and st.armed) else MAV_STATE_STANDBY
+
     def _build(self, msg_id: int) -> Any:
         if not self.links:
             return None
@@ -367,9 +648,10 @@ class GcsEndpoint:
             armed = bool(st and st.armed)
             base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | MAV_MODE_FLAG_AUTO | (
                 MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-            return c.heartbeat_encode(MAV_TYPE_VTOL_FIXEDROTOR, MAV_AUTOPILOT_PX4, base,
-                                      px4_custom_mode(st.mode if st else FlightMode.IDLE),
-                                      MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY)
+            cm = st.px4_custom_mode if st and st.px4_custom_mode >= 0 else px4_custom_mode(
+                st.mode if st else FlightMode.IDLE)
+            return c.heartbeat_encode(MAV_TYPE_VTOL_FIXEDROTOR, MAV_AUTOPILOT_PX4, base, cm,
+                                      self.system_status())
         if msg_id == MSG["SYS_STATUS"]:
             healthy = _ANGULAR_RATE_CTRL | _ATTITUDE_CTRL | _MOTOR_OUTPUTS
             if self.hil.connected and self.hil.last_sensor is not None:
@@ -379,9 +661,12 @@ class GcsEndpoint:
                 healthy |= _GPS
             if self.hil.connected and self.hil.home is not None and nav is not None:
                 healthy |= _PREARM
-            # no battery: voltage UINT16_MAX, current and remaining -1 ("not sent")
-            return c.sys_status_encode(_SENSORS_PRESENT, _SENSORS_PRESENT, healthy, 0, 65535,
-                                       -1, -1, 0, 0, 0, 0, 0, 0)
+            # battery: voltage UINT16_MAX, current and remaining -1 until the first reading
+            present, enabled, more_healthy = self.services.sensor_bits()
+            mv, ca, pct = self.services.sys_status_battery()
+            return c.sys_status_encode(_SENSORS_PRESENT | present, _SENSORS_PRESENT | enabled,
+                                       healthy | more_healthy, 0, mv, ca, pct, 0, 0, 0, 0, 0,
+                                       0)
         if msg_id == MSG["EXTENDED_SYS_STATE"]:
             vtol = int(st.vtol_state) if st else 0
             landed = int(st.landed_state) if st else 0
@@ -390,9 +675,10 @@ class GcsEndpoint:
         if msg_id == MSG["AUTOPILOT_VERSION"]:
             major, minor, patch = self.version
             sw = (major << 24) | (minor << 16) | (patch << 8) | 255
-            caps = (1 << 0) | (1 << 2) | (1 << 3) | (1 << 8) | (1 << 15) | (1 << 17)
-            # MISSION_FLOAT | PARAM_FLOAT | MISSION_INT | COMMAND_INT | MAVLINK2 |
-            # PARAM_ENCODE_BYTEWISE
+            # exactly what is served (MAV_PROTOCOL_CAPABILITY): MISSION_FLOAT 1, PARAM_FLOAT
+            # 2, MISSION_INT 4, COMMAND_INT 8, PARAM_ENCODE_BYTEWISE 16, MAVLINK2 8192,
+            # MISSION_FENCE 16384, MISSION_RALLY 32768
+            caps = 1 | 2 | 4 | 8 | 16 | 8192 | 16384 | 32768
             return c.autopilot_version_encode(caps, sw, sw, 0, 0, [0] * 8, [0] * 8, [0] * 8,
                                               0, 0, 1)
         if msg_id == MSG["HOME_POSITION"]:
@@ -409,6 +695,8 @@ class GcsEndpoint:
             return c.fault_injection_status_encode(
                 fs.time_usec, fs.change_count, fs.motor_count, fs.servo_count,
                 fs.motor_failure, fs.motor_loss, fs.servo_failure, fs.servo_loss)
+        if msg_id in STREAM_RATES_HZ:
+            return self.services.build(msg_id)
         if msg_id == MSG["ACTUATOR_OUTPUT_STATUS"]:
             out = [0.0] * 32
             out[: self.commands.size] = [float(x) for x in self.commands]
@@ -451,83 +739,138 @@ class GcsEndpoint:
                                     round(thr * 100), home_alt - p[2], -v[2])
         return None
 
-    # ------------------------------------------------------------------ receiving
-    def _handle(self, link: Link, msg: Any) -> None:
-        t = msg.get_type()
-        if t == "COMMAND_LONG":
-            if msg.target_system not in (0, 1) or msg.target_component not in (0, 1):
-                return
-            result, reason = self._command(link, msg)
-            if reason:
-                self.statustext(reason, SEVERITY_WARNING if result else SEVERITY_INFO,
-                                link)
-            link.send(link.codec.command_ack_encode(
-                int(msg.command), int(result), 0, 0, msg.get_srcSystem(),
-                msg.get_srcComponent()))
-            self.commands_answered += 1
-            self.on_event("ack", f"{_cmd_label(msg.command)} -> {CommandResult(result).name}"
-                          + (f" ({reason})" if reason else ""))
-        elif t == "PARAM_REQUEST_LIST":
-            if msg.target_system in (0, 1):
-                for i in range(len(self.ap.params)):
-                    self._param_value(i, link)
-        elif t == "PARAM_REQUEST_READ":
-            if msg.target_system in (0, 1):
-                self._param_read(link, msg)
-        elif t == "PARAM_SET" and msg.target_system in (0, 1):
-            self._param_set(link, msg)
+    # ------------------------------------------------------------------ handlers (worker)
+    def _on_service(self, index: int, link: Link, msg: Any) -> None:
+        """Missions, TIMESYNC, PING (:mod:`.gcs_services`), answered in the worker."""
+        self.services.handle(link, msg)
 
-    def _command(self, link: Link, msg: Any) -> tuple[int, str]:
-        cmd = int(msg.command)
+    def _on_heartbeat(self, index: int, link: Link, msg: Any) -> None:
+        if int(msg.type) == MAV_TYPE_GCS and (not self.signing_required or msg.get_signed()):
+            self.last_gcs_heartbeat = time.monotonic()
+
+    def _seen_gcs(self, msg: Any) -> None:
+        """A command from a ground station proves the link as its heartbeat does."""
+        if not self.signing_required or msg.get_signed():
+            self.last_gcs_heartbeat = time.monotonic()
+
+    def _on_command_long(self, index: int, link: Link, msg: Any) -> None:
+        if msg.target_system not in (0, 1) or msg.target_component not in (0, 1):
+            return
+        self._seen_gcs(msg)
         params = [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
                   msg.param7]
-        if self.signing_required and cmd in SIGNED_COMMANDS and not msg.get_signed():
-            return CommandResult.DENIED, "signed command required"
+        self._dispatch(index, link, msg, int(msg.command), [float(x) for x in params])
+
+    def _on_command_int(self, index: int, link: Link, msg: Any) -> None:
+        """COMMAND_INT, converted as PX4 does (:func:`.gcs_services.command_int_params`) and
+        answered like COMMAND_LONG."""
+        if msg.target_system not in (0, 1) or msg.target_component not in (0, 1):
+            return
+        self._seen_gcs(msg)
+        self._dispatch(index, link, msg, int(msg.command),
+                       command_int_params(msg, self.services.home_alt_m()))
+
+    def _ack(self, link: Link, msg: Any, cmd: int, result: int, reason: str) -> None:
+        """Worker: STATUSTEXT with the reason (if any) and the COMMAND_ACK on ``link``."""
+        if reason:
+            self.statustext(reason, SEVERITY_WARNING if result else SEVERITY_INFO, link)
+        link.send(link.codec.command_ack_encode(cmd, int(result), 0, 0, msg.get_srcSystem(),
+                                                msg.get_srcComponent()))
+        self.commands_answered += 1
+        self.on_event("ack", f"{_cmd_label(cmd)} -> {CommandResult(result).name}"
+                      + (f" ({reason})" if reason else ""))
+
+    def _dispatch(self, index: int, link: Link, msg: Any, cmd: int,
+                  params: list[float]) -> None:
+        if self.signing_required and cmd in (CMD_ARM_DISARM, *FAULT_COMMANDS) \
+                and not msg.get_signed():
+            self._ack(link, msg, cmd, CommandResult.DENIED, "signed command required")
+            return
+
+        def busy() -> None:
+            self._ack(link, msg, cmd, CommandResult.TEMPORARILY_REJECTED,
+                      "busy: too many requests")
+
         if cmd in FLIGHT_COMMANDS:
-            before = self.ap.status().message
-            res = CommandResult(self.ap.command(cmd, params))
-            self.refresh_status()
-            after = self.status.message if self.status else ""
-            reason = after if (res != CommandResult.ACCEPTED and after and after != before) \
-                else ""
-            if res != CommandResult.ACCEPTED and not reason:
-                reason = _default_reason(cmd, res, self.status)
-            self.on_event("command", f"{_cmd_label(cmd)} {_fmt_params(params)}")
-            self._last_message = after  # already reported with the ACK
-            return res, reason
+            if cmd == CMD_ARM_DISARM and params[0] not in (0.0, 1.0):
+                self._ack(link, msg, cmd, CommandResult.DENIED, "param1 must be 0 or 1")
+                return
+            if cmd == CMD_ARM_DISARM and params[0] == 1.0 and not self.ready:
+                self._ack(link, msg, cmd, CommandResult.TEMPORARILY_REJECTED,
+                          "autopilot still starting (compiling)")
+                return
+            self.submit(index, msg, lambda: self._flight_command(link, msg, cmd, params),
+                        busy)
+            return
         if cmd in FAULT_COMMANDS:
-            res, reason = self._fault(msg, params)
-            if res == CommandResult.ACCEPTED:
-                self.hil.forward_command(msg)
-                self.on_event("fault", f"{_cmd_label(cmd)} {_fmt_params(params)}")
-            return res, reason
+            res, reason = self._fault(cmd, params)
+            if res != CommandResult.ACCEPTED:
+                self._ack(link, msg, cmd, res, reason)
+                return
+            self.submit(index, msg, lambda: self._forward_fault(link, msg, cmd, params), busy)
+            return
         if cmd == CMD_SET_MESSAGE_INTERVAL:
-            mid, interval = params[0], params[1]
-            if not math.isfinite(mid) or int(mid) not in self.rates_hz:
-                return CommandResult.DENIED, f"cannot stream message {mid:g}"
-            mid = int(mid)
-            if not math.isfinite(interval) or interval == 0:
-                self.rates_hz[mid] = DEFAULT_RATES_HZ[mid]
-            elif interval < 0:
-                self.rates_hz[mid] = 0.0
-            else:
-                self.rates_hz[mid] = min(250.0, 1e6 / interval)
-            self._next_due[mid] = self.sim_usec
-            self._earliest_due = 0
-            return CommandResult.ACCEPTED, ""
-        if cmd == CMD_REQUEST_MESSAGE:
+            res, reason = self._set_interval(index, params)
+        elif cmd == CMD_REQUEST_MESSAGE:
             mid = params[0]
             if not math.isfinite(mid) or int(mid) not in MSG.values():
-                return CommandResult.UNSUPPORTED, ""
-            if not self._send_stream(int(mid), link):
-                return CommandResult.TEMPORARILY_REJECTED, "no data yet"
-            return CommandResult.ACCEPTED, ""
-        if cmd == CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+                res, reason = CommandResult.UNSUPPORTED, ""
+            elif not self._send_stream(int(mid), link):
+                res, reason = CommandResult.TEMPORARILY_REJECTED, "no data yet"
+            else:
+                res, reason = CommandResult.ACCEPTED, ""
+        elif cmd == CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             self._send_stream(MSG["AUTOPILOT_VERSION"], link)
-            return CommandResult.ACCEPTED, ""
-        return CommandResult.UNSUPPORTED, ""
+            res, reason = CommandResult.ACCEPTED, ""
+        else:
+            res, reason = CommandResult.UNSUPPORTED, ""
+        self._ack(link, msg, cmd, res, reason)
 
-    def _fault(self, msg: Any, p: list[float]) -> tuple[int, str]:
+    def _set_interval(self, index: int, params: list[float]) -> tuple[int, str]:
+        mid, interval = params[0], params[1]
+        rates = self.rates_hz[index]
+        if not math.isfinite(mid) or int(mid) not in rates:
+            return CommandResult.DENIED, f"cannot stream message {mid:g}"
+        mid = int(mid)
+        if not math.isfinite(interval) or interval == 0:
+            rates[mid] = DEFAULT_RATES_HZ[mid]
+        elif interval < 0:
+            rates[mid] = 0.0
+        else:
+            rates[mid] = min(250.0, 1e6 / interval)
+        self._next_due[index][mid] = self.sim_usec
+        self._earliest_due[index] = 0
+        return CommandResult.ACCEPTED, ""
+
+    # ------------------------------------------------------------------ control-thread work
+    def _flight_command(self, link: Link, msg: Any, cmd: int, params: list[float]) -> None:
+        """Control thread: a flight command on the autopilot; the answer goes to the worker."""
+        before = self.ap.status().message
+        res = CommandResult(self.ap.command(cmd, params))
+        st = self.ap.status()
+        after = st.message
+        reason = after if (res != CommandResult.ACCEPTED and after and after != before) else ""
+        if res != CommandResult.ACCEPTED and not reason:
+            reason = _default_reason(cmd, res, st)
+        self.on_event("command", f"{_cmd_label(cmd)} {_fmt_params(params)}")
+
+        def answer() -> None:
+            self._last_message = after  # already reported with the ACK
+            self._ack(link, msg, cmd, res, reason)
+
+        self._reply(answer)
+        self.publish_status(st)
+
+    def _forward_fault(self, link: Link, msg: Any, cmd: int, params: list[float]) -> None:
+        """Control thread: forward an accepted fault command to the vehicle (the HIL link is
+        the control thread's), so that in lockstep it acts at exactly this step."""
+        res, reason = self._fault(cmd, params)  # SYS_FAILURE_EN may have changed meanwhile
+        if res == CommandResult.ACCEPTED:
+            self.hil.forward_command(msg)
+            self.on_event("fault", f"{_cmd_label(cmd)} {_fmt_params(params)}")
+        self._reply(lambda: self._ack(link, msg, cmd, res, reason))
+
+    def _fault(self, cmd: int, p: list[float]) -> tuple[int, str]:
         if int(self.ap.params.get("SYS_FAILURE_EN")) != 1:
             return CommandResult.DENIED, "fault injection disabled: set SYS_FAILURE_EN to 1"
         unit = p[0]
@@ -535,7 +878,7 @@ class GcsEndpoint:
             return CommandResult.UNSUPPORTED, "unit must be motor 101 or servo 102"
         names = self.actuators.motors if int(unit) == FAILURE_UNIT_MOTOR \
             else self.actuators.servos
-        if int(msg.command) == CMD_INJECT_FAILURE:
+        if cmd == CMD_INJECT_FAILURE:
             ftype, inst = p[1], p[2]
             if not math.isfinite(ftype) or int(ftype) not in (0, 1, 2):
                 return CommandResult.UNSUPPORTED, "failure types: OK, OFF, STUCK"
@@ -561,30 +904,68 @@ class GcsEndpoint:
         else:
             link.send(msg)
 
-    def _param_read(self, link: Link, msg: Any) -> None:
+    def _on_param_request_list(self, index: int, link: Link, msg: Any) -> None:
+        if msg.target_system in (0, 1):
+            for i in range(len(self.ap.params)):
+                self._param_value(i, link)
+
+    def _on_param_request_read(self, index: int, link: Link, msg: Any) -> None:
+        if msg.target_system not in (0, 1):
+            return
         store = self.ap.params
         try:
-            index = int(msg.param_index) if msg.param_index >= 0 \
+            i = int(msg.param_index) if msg.param_index >= 0 \
                 else store.index(_text(msg.param_id))
-            self._param_value(index, link)
+            self._param_value(i, link)
         except ParamError:
             return  # unknown parameter: no answer (MAVLink parameter protocol)
 
-    def _param_set(self, link: Link, msg: Any) -> None:
+    def _on_param_set(self, index: int, link: Link, msg: Any) -> None:
+        if msg.target_system not in (0, 1):
+            return
         store = self.ap.params
         name = _text(msg.param_id)
         if name not in store:
             self.statustext(f"unknown parameter {name}", SEVERITY_WARNING, link)
             return
-        index = store.index(name)
-        prm = store.by_index(index)
+        pindex = store.index(name)
+        prm = store.by_index(pindex)
         value = decode_param_value(msg.param_value, prm.type)
-        try:
-            store.set(name, value)
-            self.on_event("param", f"{name} = {value:g}")
-        except ParamError as exc:
-            self.statustext(str(exc), SEVERITY_WARNING, link)
-        self._param_value(index, None)  # echo on every link, as PX4 does
+        problem = _param_problem(prm, value)
+        if problem:  # refused here: the control thread never sees it
+            self.statustext(problem, SEVERITY_WARNING, link)
+            self._param_value(pindex, link)
+            return
+
+        def apply() -> None:  # control thread
+            error = ""
+            try:
+                store.set(name, value)
+                self.on_event("param", f"{name} = {value:g}")
+            except ParamError as exc:
+                error = str(exc)
+
+            def answer() -> None:
+                if error:
+                    self.statustext(error, SEVERITY_WARNING, link)
+                self._param_value(pindex, None)  # echo on every link, as PX4 does
+
+            self._reply(answer)
+
+        self.submit(index, msg, apply, lambda: self._param_value(pindex, link))
+
+
+def _param_problem(prm: Any, value: float) -> str:
+    """Why ``value`` cannot be set on ``prm`` ("" if it can): the checks of
+    :meth:`ParameterStore.set`, made in the worker so that invalid requests cost the control
+    thread nothing."""
+    if not math.isfinite(value):
+        return f"{prm.name} = {value!r}: expected a finite number"
+    if prm.type == ParamType.INT32 and value != int(value):
+        return f"{prm.name} = {value!r}: expected an integer"
+    if not prm.minimum <= value <= prm.maximum:
+        return f"{prm.name} = {value!r}: expected {prm.minimum:g} .. {prm.maximum:g}"
+    return ""
 
 
 def _cmd_label(cmd: int) -> str:

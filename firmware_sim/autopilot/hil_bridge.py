@@ -14,8 +14,14 @@ autopilot's outputs into HIL_ACTUATOR_CONTROLS:
   the vehicle, never in the controller); the vehicle's COMMAND_ACK and FAULT_INJECTION_STATUS
   come back through :attr:`fault_status` and :attr:`vehicle_acks`.
 
-A 1 Hz HEARTBEAT on this link tells the vehicle the autopilot is alive (also while it holds the
-simulation) and, on UDP, gives a ``udp-server`` vehicle its peer address.
+A 1 Hz HEARTBEAT on this link (from system 1, component 1) tells the vehicle the autopilot is
+alive (also while it holds the simulation); the vehicle pins the address of the first one and
+talks to that address only (:mod:`vtolftc.firmware_sim.vehicle.process`). The first heartbeat
+goes out once the autopilot is warm (:meth:`HilBridge.tick`), just before the control loop
+runs.
+
+:meth:`drain` reads everything the link has (not one bounded batch): after a stall in real
+time the autopilot steps on the newest state, never on one queued seconds ago.
 """
 
 from __future__ import annotations
@@ -52,7 +58,12 @@ class HilBridge:
         self.last_sensor: Any = None
         self.last_gps: Any = None
         self.last_state: Any = None
+        self.last_battery: Any = None
         self.last_rx_wall = -np.inf
+        self.last_step_wall = -np.inf
+        """monotonic time at which the last complete HIL step (sensor + state pair) came."""
+        self.superseded = 0
+        """Steps replaced by a newer one before the autopilot could step on them."""
         self.fault_status: Any = None
         self.vehicle_acks: collections.deque[Any] = collections.deque(maxlen=32)
         self._sensor_time: int | None = None
@@ -85,11 +96,18 @@ class HilBridge:
                     self.resent += 1
                 return
             try:
-                self._pending = decode_hil_state(self.hil_state(msg), *self.home)
+                nav = decode_hil_state(self.hil_state(msg), *self.home)
             except ValueError:
                 self.decode_errors += 1
+                return
+            if self._pending is not None and self._pending.time_usec != t_us:
+                self.superseded += 1
+            self._pending = nav
+            self.last_step_wall = self.last_rx_wall
         elif t == "HIL_GPS":
             self.last_gps = msg
+        elif t == "BATTERY_STATUS":
+            self.last_battery = msg
         elif t == "GPS_GLOBAL_ORIGIN":
             self.home = (float(f"{msg.latitude * 1e-7:.7f}"),
                          float(f"{msg.longitude * 1e-7:.7f}"),
@@ -98,6 +116,21 @@ class HilBridge:
             self.fault_status = msg
         elif t == "COMMAND_ACK":
             self.vehicle_acks.append(msg)
+
+    def drain(self, timeout_s: float = 0.0, max_reads: int = 64) -> int:
+        """Handle every message the link has now (waiting up to ``timeout_s`` for the first);
+        a newer step replaces a pending one. Returns the number of messages."""
+        link = self.link
+        n = 0
+        msgs = link.recv(timeout_s)
+        for _ in range(max_reads):
+            if not msgs:
+                break
+            for m in msgs:
+                self.handle(m)
+            n += len(msgs)
+            msgs = link.recv(0.0)
+        return n
 
     @staticmethod
     def hil_state(msg: Any) -> HilState:

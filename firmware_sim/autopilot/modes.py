@@ -57,11 +57,11 @@ TAKEOFF_TOL_M = 0.5
 
 
 def px4_custom_mode(mode: FlightMode) -> int:
-    """PX4 custom mode (``main << 16 | sub << 24``) that best describes ``mode``."""
+    """PX4 custom mode (``main << 16 | sub << 24``) that best describes ``mode`` alone (the
+    navigator refines it: :meth:`.navigator.Navigator.custom_mode`). On the ground PX4
+    reports Hold (AUTO.LOITER), not AUTO.READY (which pymavlink and MAVProxy do not know)."""
     main, sub = PX4_MAIN["AUTO"], PX4_SUB_AUTO["LOITER"]
-    if mode == FlightMode.IDLE:
-        sub = PX4_SUB_AUTO["READY"]
-    elif mode == FlightMode.TAKEOFF:
+    if mode == FlightMode.TAKEOFF:
         sub = PX4_SUB_AUTO["TAKEOFF"]
     elif mode == FlightMode.LAND:
         sub = PX4_SUB_AUTO["LAND"]

@@ -1,7 +1,7 @@
 """The simulated vehicle as a process: a :class:`Vehicle` behind a MAVLink HIL link.
 
-    python -m vtolftc.firmware_sim.vehicle.process --link udp-server://127.0.0.1:4560 [--lockstep]
-        [--realtime] [--airframe FILE] [--seed N] [--noise] [--duration S] [--out DIR]
+:class:`VehicleProcess` is the simulator's loop; the program around it is
+:mod:`vtolftc.processes.vehicle` (``python -m vtolftc.processes.vehicle``).
 
 Physics runs at 1 kHz (the vehicle's RK4 step); every 4 ms of simulated time (one control
 period) the process sends, in one datagram, PX4-SITL style:
@@ -27,6 +27,29 @@ for ``--peer-timeout`` wall seconds (the autopilot sends a 1 Hz HEARTBEAT on thi
 holds the simulation). Real-time mode (``--realtime``): free-running at wall-clock pace with the
 latest controls received.
 
+Link integrity: the vehicle pins its autopilot. Until then it answers nothing and ignores
+everything but a HEARTBEAT from system 1, component 1 (MAV_COMP_ID_AUTOPILOT1); the source
+address of the first one is pinned (UDP: the server then talks to that address only and drops,
+counting, every datagram from another one; zenoh has no addresses, there the system and
+component ids are checked). From then on only messages from system 1, component 1 count;
+HIL_ACTUATOR_CONTROLS whose ``time_usec`` is not newer than the last applied controls, or lies
+in the vehicle's future, are rejected (counted in ``vehicle_summary.json``); fault commands
+come only from the pinned autopilot, which forwards them after its own SYS_FAILURE_EN and
+signing checks.
+
+Output watchdog (real time): if no valid controls arrive for ``--output-timeout`` wall seconds
+(default 0.5), the actuators get the documented safe output instead of the last commands:
+every lift rotor and pusher 0 (stopped), every control surface 0 (neutral). This is what
+electronic speed controllers and servos do on signal loss with PX4's failsafe PWM values
+(``PWM_MAIN_FAILn``): a flight termination, never a frozen attitude command. Logged as an
+event; controls arriving again take over.
+
+Latency knob (``--hil-delay-ms D``, ``--hil-loss P``): the controls are applied D ms of
+simulated time after they arrived (a delay line in simulated time: exact in lockstep, and on
+the wall clock in real time), and a fraction P of them is dropped (seeded by ``--seed``), so the
+latency margin of the control loop can be measured in SITL (the in-process runner has a delay
+line of the same kind).
+
 Faults: COMMAND_LONG INJECT_FAILURE (420: OK 0 / OFF 1 / STUCK 2) and the dialect's
 MAV_CMD_INJECT_PARTIAL_LOSS (59900, loss 0..1) forwarded by the autopilot (never sent to the
 controller) act from the next physics step (in lockstep: exactly at the time of the step the
@@ -38,18 +61,17 @@ fault command is answered with COMMAND_ACK and FAULT_INJECTION_STATUS (also sent
 
 Run folder (``--out DIR``): ``vehicle_truth.csv`` (simulated time, NED position and velocity,
 roll/pitch/yaw, body rates, airspeed, then per actuator: position, effectiveness, command; one
-row per control step, flushed every simulated second), ``vehicle_events.jsonl`` (faults,
+row per control step, flushed every 0.5 s of simulated time), ``vehicle_events.jsonl`` (faults,
 start/stop), ``vehicle_summary.json`` (link counters, steps, wall time).
 """
 
 from __future__ import annotations
 
-import argparse
+import collections
 import contextlib
 import json
 import math
 import os
-import signal
 import sys
 import time
 from pathlib import Path
@@ -57,7 +79,8 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from vtolftc.airframe.loader import Airframe, AirframeError, load_airframe
+from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.firmware_sim.vehicle.battery import BatteryModel, vehicle_power_w
 from vtolftc.firmware_sim.vehicle.dynamics import N_RIGID
 from vtolftc.firmware_sim.vehicle.faults import Fault, FaultKind
 from vtolftc.firmware_sim.vehicle.model import Vehicle
@@ -67,7 +90,8 @@ from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SER
 from vtolftc.protocols.hil import NavState, encode_hil_state
 from vtolftc.rotation import quat_to_euler as dyn_quat_to_euler
 
-__all__ = ["VehicleProcess", "main"]
+__all__ = ["AUTOPILOT_COMPONENT_ID", "AUTOPILOT_SYSTEM_ID", "EXIT_PEER_LOST", "SAFE_OUTPUT",
+           "VehicleProcess"]
 
 CONTROL_PERIOD_USEC = 4000
 VEHICLE_SYSTEM_ID = 1
@@ -80,6 +104,10 @@ FAILURE_TYPE_PARTIAL_LOSS = 100
 MAV_RESULT_ACCEPTED, MAV_RESULT_DENIED, MAV_RESULT_UNSUPPORTED = 0, 2, 3
 MAV_RESULT_FAILED = 4
 EXIT_PEER_LOST = 3
+_FLUSH_ROWS = 125
+AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID = 1, 1
+SAFE_OUTPUT = 0.0
+"""Output-watchdog value of every actuator: rotors and pushers stopped, surfaces neutral."""
 
 
 def _decimal_of_float32(x: float) -> float:
@@ -98,7 +126,8 @@ class VehicleProcess:
                  out_dir: Path | None = None, peer_timeout_s: float = 5.0,
                  connect_timeout_s: float = 60.0, gps_rate_hz: float = 10.0,
                  allow_remote: bool = False, log: TextIO | None = None,
-                 parent_pid: int | None = None) -> None:
+                 parent_pid: int | None = None, output_timeout_s: float = 0.5,
+                 hil_delay_ms: float = 0.0, hil_loss: float = 0.0) -> None:
         self.airframe = airframe or load_airframe()
         self.parent_pid = parent_pid
         self._next_parent_check = 0.0
@@ -107,6 +136,8 @@ class VehicleProcess:
         self.vehicle = Vehicle(self.airframe, state=initial_state, seed=seed,
                                noise=SensorNoise.typical() if noise else None)
         self.table = ActuatorTable.from_names(self.airframe.actuator_names)
+        self.battery = BatteryModel(rho=self.airframe.air_density_kg_m3)
+        self._next_battery = 0
         self.home = self.vehicle.sensor_model.home
         self.lockstep = lockstep
         self.duration_usec = None if duration_s is None else round(duration_s * 1e6)
@@ -115,7 +146,21 @@ class VehicleProcess:
         self.gps_period_usec = round(1e6 / gps_rate_hz) if gps_rate_hz > 0 else 0
         self.log = log or sys.stderr
         self.link = open_link(link_url, system_id=VEHICLE_SYSTEM_ID,
-                              component_id=VEHICLE_COMPONENT_ID, allow_remote=allow_remote)
+                              component_id=VEHICLE_COMPONENT_ID, allow_remote=allow_remote,
+                              track_source=True)
+        self.pinned: object = None
+        """Source of the autopilot's first heartbeat (address, or "ids" on zenoh)."""
+        self.rejected = {"not_pinned": 0, "foreign_ids": 0, "stale_controls": 0,
+                         "future_controls": 0, "lost_injected": 0}
+        self.output_timeout_s = output_timeout_s
+        self.watchdog_tripped = False
+        self.watchdog_trips = 0
+        self._last_controls_wall = time.monotonic()
+        self._last_controls_usec = -1
+        self.delay_usec = round(max(0.0, hil_delay_ms) * 1000)
+        self.loss = min(1.0, max(0.0, hil_loss))
+        self._loss_rng = np.random.default_rng(seed + 7919)
+        self._delay_line: collections.deque[tuple[int, np.ndarray]] = collections.deque()
         self.codec = self.link.codec
         n = self.airframe.n_actuators
         self.commands = np.zeros(n)
@@ -164,12 +209,12 @@ class VehicleProcess:
         v = self.vehicle
         self._rows.append((v.time_usec, v.x.copy(), float(v.fm[6]), v.eff.copy(),
                            self.commands.copy()))
-        if flush and len(self._rows) >= 250:
+        if flush and len(self._rows) >= _FLUSH_ROWS:
             self._flush()
 
     def _flush(self) -> None:
-        """Write the snapshots as CSV rows (``%.9g``) and flush the file (every 250 steps =
-        1 s of simulated time, and at exit)."""
+        """Write the snapshots as CSV rows (``%.9g``) and flush the file (every 125 steps =
+        0.5 s of simulated time, and at exit: a SIGKILL loses less than 0.5 s)."""
         if self._truth is not None and self._rows:
             rows = [np.concatenate(([t * 1e-6], x[0:6], dyn_quat_to_euler(x[6:10]),
                                     x[10:13], [air], x[N_RIGID:], eff, cmd))
@@ -219,7 +264,23 @@ class VehicleProcess:
         if t >= self._next_status:
             self._next_status = t + 1_000_000
             parts.append(self._pack(self._fault_status_msg()))
+        if t >= self._next_battery:  # the power module, 5 Hz
+            self._next_battery = t + 200_000
+            parts.append(self._pack(self._battery_msg()))
         return b"".join(parts)
+
+    def _battery_msg(self) -> Any:
+        """BATTERY_STATUS of the power module: cell voltages (mV), current (cA), consumed
+        (mAh); no charge estimate (-1): the autopilot makes its own."""
+        b = self.battery
+        cells = [min(65534, round(1000 * b.voltage_v / b.spec.cells))] * b.spec.cells
+        cells += [65535] * (10 - len(cells))
+        return self.codec.battery_status_encode(
+            0, 1, 3, 32767, cells, round(100 * b.current_a), round(b.consumed_mah), -1, -1)
+
+    def _step_battery(self) -> None:
+        self.battery.step(CONTROL_PERIOD_USEC * 1e-6, vehicle_power_w(self.battery,
+                                                                      self.vehicle))
 
     def _fault_status_msg(self) -> Any:
         motor_f, motor_l = [0] * 16, [0.0] * 16
@@ -240,15 +301,51 @@ class VehicleProcess:
 
     # ------------------------------------------------------------------ input
     def handle(self, msg: Any) -> bool:
-        """Process one message from the autopilot; True if it is the controls for ``t``."""
-        self._last_peer = time.monotonic()
+        """Process one message; True if it is the autopilot's controls for the current step
+        (lockstep). Anything not from the pinned autopilot is ignored (see the module
+        docstring)."""
         kind = msg.get_type()
+        from_ap = (msg.get_srcSystem() == AUTOPILOT_SYSTEM_ID
+                   and msg.get_srcComponent() == AUTOPILOT_COMPONENT_ID)
+        if self.pinned is None:
+            if kind == "HEARTBEAT" and from_ap:
+                src = self.link.source_of(msg)
+                self.pinned = src if src is not None else "ids"
+                if src is not None:
+                    self.link.pin(src)
+                self._event("pinned", f"autopilot pinned at {self.pinned}")
+                self._last_peer = time.monotonic()
+            else:
+                self.rejected["not_pinned"] += 1
+            return False
+        if not from_ap:
+            self.rejected["foreign_ids"] += 1
+            return False
+        self._last_peer = time.monotonic()
         if kind == "HIL_ACTUATOR_CONTROLS":
-            c = msg.controls[: self.airframe.n_actuators]
-            if all(map(math.isfinite, c)):
-                self.commands[:] = c
+            t = int(msg.time_usec)
+            now_usec = self.vehicle.time_usec
+            if t <= self._last_controls_usec:
+                self.rejected["stale_controls"] += 1
+                return False
+            if t > now_usec:
+                self.rejected["future_controls"] += 1
+                return False
+            self._last_controls_usec = t
+            self._last_controls_wall = self._last_peer
+            if self.watchdog_tripped:
+                self.watchdog_tripped = False
+                self._event("watchdog", "controls back: the autopilot has the actuators again")
             self.armed = bool(msg.mode & 128)
-            return int(msg.time_usec) == self.vehicle.time_usec
+            c = msg.controls[: self.airframe.n_actuators]
+            if self.loss > 0 and self._loss_rng.random() < self.loss:
+                self.rejected["lost_injected"] += 1
+            elif all(map(math.isfinite, c)):
+                if self.delay_usec:
+                    self._delay_line.append((now_usec + self.delay_usec, np.array(c)))
+                else:
+                    self.commands[:] = c
+            return t == now_usec
         if kind == "COMMAND_LONG":
             try:
                 self._command(msg)
@@ -317,16 +414,45 @@ class VehicleProcess:
 
     # ------------------------------------------------------------------ loops
     def wait_for_peer(self) -> bool:
-        """Wait until the autopilot is heard (its HIL-link heartbeat), so replies have a
+        """Wait until the autopilot's HIL-link heartbeat pinned it, so replies have a
         destination. False on timeout or stop."""
         deadline = time.monotonic() + self.connect_timeout_s
         while self.running and time.monotonic() < deadline and not self._orphaned():
-            msgs = self.link.recv(0.2)
-            if msgs:
-                for m in msgs:
-                    self.handle(m)
+            for m in self.link.recv(0.2):
+                self.handle(m)
+            if self.pinned is not None:
+                self._last_controls_wall = time.monotonic()
                 return True
         return False
+
+    def warm_up(self) -> None:
+        """Compile (or load from numba's cache) the physics and sensor kernels on a throwaway
+        vehicle before the autopilot is pinned, so that a real-time run does not stall at its
+        first step on a fresh install."""
+        v = Vehicle(self.airframe)
+        v.step(np.zeros(self.airframe.n_actuators), CONTROL_PERIOD_USEC // v.dt_usec)
+        v.sensors()
+
+    def _apply_due(self) -> None:
+        """Delay line: the controls whose time has come (the newest of them wins)."""
+        line = self._delay_line
+        t = self.vehicle.time_usec
+        while line and line[0][0] <= t:
+            self.commands[:] = line.popleft()[1]
+
+    def _watchdog(self, now: float) -> None:
+        """Real time: the safe output after ``output_timeout_s`` without valid controls."""
+        if (self.output_timeout_s > 0 and not self.watchdog_tripped
+                and now - self._last_controls_wall > self.output_timeout_s):
+            self.watchdog_tripped = True
+            self.watchdog_trips += 1
+            self.commands[:] = SAFE_OUTPUT
+            self._delay_line.clear()
+            text = (f"output watchdog: no controls for {self.output_timeout_s:g} s: rotors and "
+                    "pushers stopped, surfaces neutral")
+            self._event("watchdog", text)
+            print(f"vehicle: t = {self.vehicle.time_usec * 1e-6:.3f} s: {text}", file=self.log,
+                  flush=True)
 
     def _spin(self, link: Any) -> list[Any]:
         """Poll without sleeping for up to ``spin_s`` (see ``--spin-us``)."""
@@ -361,6 +487,7 @@ class VehicleProcess:
         """Run until the duration, a stop signal or the loss of the autopilot. Exit status."""
         self._event("start", f"vehicle process, {'lockstep' if self.lockstep else 'real time'}")
         try:
+            self.warm_up()
             if not self.wait_for_peer():
                 print(f"vehicle: no autopilot on {self.link!r} within "
                       f"{self.connect_timeout_s:g} s", file=self.log, flush=True)
@@ -402,8 +529,11 @@ class VehicleProcess:
                     got = self.handle(m) or got
             t_got = pc()
             self.step_rtt_s.append(t_got - t_sent)
+            if self.delay_usec:
+                self._apply_due()
             self._record(flush=False)
             v.step(self.commands, CONTROL_PERIOD_USEC // v.dt_usec)
+            self._step_battery()
             self.steps += 1
             if self._done():
                 break
@@ -416,7 +546,7 @@ class VehicleProcess:
             part["sensors_and_encode"] += t_sent - t_phys
             part["send"] += pc() - t_sent
             # bookkeeping while the autopilot computes
-            if len(self._rows) >= 250:
+            if len(self._rows) >= _FLUSH_ROWS:
                 self._flush()
         return 0
 
@@ -425,6 +555,7 @@ class VehicleProcess:
         v = self.vehicle
         period = CONTROL_PERIOD_USEC * 1e-6
         next_tick = time.monotonic()
+        prev = next_tick
         while self.running and not self._done():
             link.send(self.state_datagram())
             next_tick += period
@@ -434,13 +565,23 @@ class VehicleProcess:
                     self.handle(m)
                 if remaining <= 0:
                     break
-            if time.monotonic() - self._last_peer > self.peer_timeout_s or self._orphaned():
+            now = time.monotonic()
+            if now - prev > 0.1:  # this process was not running (suspended, starved): the
+                # autopilot could not have answered meanwhile; do not count it as silence
+                self._last_controls_wall += now - prev
+                self._last_peer += now - prev
+            prev = now
+            if now - self._last_peer > self.peer_timeout_s or self._orphaned():
                 print("vehicle: autopilot silent: stopping", file=self.log, flush=True)
                 return EXIT_PEER_LOST
-            if time.monotonic() - next_tick > 1.0:  # fell behind (suspended): resync
-                next_tick = time.monotonic()
+            if now - next_tick > 1.0:  # fell behind (suspended): resync
+                next_tick = now
+            if self.delay_usec:
+                self._apply_due()
+            self._watchdog(now)
             self._record()
             v.step(self.commands, CONTROL_PERIOD_USEC // v.dt_usec)
+            self._step_battery()
             self.steps += 1
         return 0
 
@@ -455,6 +596,9 @@ class VehicleProcess:
             "faults": {n: {"kind": f.kind.value, "loss": f.loss, "start_s": f.start_s}
                        for n, f in self.faults.items()},
             "link": self.link.stats.as_dict(),
+            "pinned_autopilot": None if self.pinned is None else str(self.pinned),
+            "rejected": dict(self.rejected), "watchdog_trips": self.watchdog_trips,
+            "hil_delay_ms": self.delay_usec / 1000, "hil_loss": self.loss,
         }
         if self.step_rtt_s:
             rtt = np.asarray(self.step_rtt_s) * 1e6
@@ -474,74 +618,3 @@ class VehicleProcess:
             assert self.out_dir is not None
             (self.out_dir / "vehicle_summary.json").write_text(json.dumps(summary, indent=2))
         self.link.close()
-
-
-def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(
-        prog="python -m vtolftc.firmware_sim.vehicle.process",
-        description="Simulated vehicle behind a MAVLink HIL link (PX4 SITL style).")
-    ap.add_argument("--link", required=True,
-                    help="HIL link URL, e.g. udp-server://127.0.0.1:4560 or "
-                         "zenoh://ds1/hil/up?listen=tcp/127.0.0.1:7447")
-    mode = ap.add_mutually_exclusive_group()
-    mode.add_argument("--lockstep", dest="lockstep", action="store_true", default=True,
-                      help="advance only when the controls for the last step arrived (default)")
-    mode.add_argument("--realtime", dest="lockstep", action="store_false",
-                      help="free-running at wall-clock pace")
-    ap.add_argument("--airframe", type=Path, default=None, help="airframe TOML (default DS-1)")
-    ap.add_argument("--seed", type=int, default=0, help="sensor-noise seed (default 0)")
-    ap.add_argument("--noise", action="store_true", help="typical sensor noise (default none)")
-    ap.add_argument("--duration", type=float, default=None,
-                    help="stop after this many simulated seconds (default: run until stopped)")
-    ap.add_argument("--out", type=Path, default=None, help="run folder for truth telemetry")
-    ap.add_argument("--peer-timeout", type=float, default=5.0,
-                    help="stop if the autopilot is silent this long, wall seconds (default 5)")
-    ap.add_argument("--connect-timeout", type=float, default=60.0,
-                    help="wait this long for the autopilot at start, wall seconds (default 60)")
-    ap.add_argument("--gps-rate", type=float, default=10.0, help="HIL_GPS rate in Hz (10)")
-    ap.add_argument("--allow-remote", action="store_true",
-                    help="allow non-loopback link addresses (containers on separate hosts)")
-    ap.add_argument("--parent-pid", type=int, default=None,
-                    help="stop when this process is gone (used by vtolftc sitl)")
-    ap.add_argument("--spin-us", type=float, default=0.0,
-                    help="lockstep: busy-poll this long for the controls before sleeping "
-                         "(faster on idle cores, costs CPU; default 0)")
-    return ap.parse_args(argv)
-
-
-def main(argv: list[str] | None = None) -> int:
-    args = _parse_args(argv)
-    for name, val in (("--duration", args.duration), ("--peer-timeout", args.peer_timeout),
-                      ("--connect-timeout", args.connect_timeout)):
-        if val is not None and not (math.isfinite(val) and val > 0):
-            print(f"vehicle: error: {name} {val!r}: expected a positive number of seconds",
-                  file=sys.stderr)
-            return 2
-    try:
-        airframe = load_airframe(args.airframe) if args.airframe else load_airframe()
-        proc = VehicleProcess(
-            args.link, airframe=airframe, lockstep=args.lockstep, seed=args.seed,
-            noise=args.noise, duration_s=args.duration, out_dir=args.out,
-            peer_timeout_s=args.peer_timeout, connect_timeout_s=args.connect_timeout,
-            gps_rate_hz=args.gps_rate, allow_remote=args.allow_remote,
-            parent_pid=args.parent_pid)
-        proc.spin_s = max(0.0, args.spin_us) * 1e-6
-    except (AirframeError, ValueError, OSError) as exc:
-        print(f"vehicle: error: {exc}", file=sys.stderr)
-        return 2
-
-    def stop(_sig: int, _frame: Any) -> None:
-        proc.running = False
-
-    signal.signal(signal.SIGTERM, stop)
-    signal.signal(signal.SIGINT, stop)
-    rc = proc.run()
-    st = proc.link.stats
-    print(f"vehicle: stopped at t = {proc.vehicle.time_usec * 1e-6:.3f} s after {proc.steps} "
-          f"steps; link dropped {st.dropped} (garbage {st.dropped_garbage}, crc "
-          f"{st.dropped_crc}, truncated {st.dropped_truncated})", file=sys.stderr, flush=True)
-    return rc
-
-
-if __name__ == "__main__":
-    sys.exit(main())

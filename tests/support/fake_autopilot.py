@@ -152,6 +152,9 @@ class FakeAutopilot:
         base = _CUSTOM | (_ARMED if self.armed else 0)
         self._link.send(self._mav.heartbeat_encode(_MAV_TYPE_VTOL_FIXEDROTOR, _MAV_AUTOPILOT_PX4,
                                                    base, self._mode(), 4 if self.armed else 3))
+        # home at 0 m AMSL, so NAV_TAKEOFF's AMSL param7 is also the height above home here
+        self._link.send(self._mav.home_position_encode(473977420, 85455940, 0, 0.0, 0.0, 0.0,
+                                                       [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0))
 
     def _telemetry(self) -> None:
         mav = self._mav

@@ -51,6 +51,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import uuid
 import warnings
@@ -107,6 +108,9 @@ class RerunRecorder:
         rate_hz: logging rate in simulated time; samples in between are skipped.
         chunk_rows: rows buffered before they are sent to rerun.
         live_flush_s: with ``live``, the longest wall-clock wait before buffered rows are sent.
+        file_flush_s: the longest wall-clock wait before buffered rows are sent to the file
+            (rerun's own batcher then writes them within its flush tick), so that a killed
+            process loses at most about this much of the recording.
         web_port, grpc_port: ports of the web viewer and of its data server (live, headless).
         airframe: airframe for the aircraft shape (default: the shipped DS-1).
     """
@@ -114,7 +118,7 @@ class RerunRecorder:
     def __init__(self, path: Path, *, live: bool = False, application_id: str = "vtolftc",
                  recording_id: str | None = None, rate_hz: float = 50.0, chunk_rows: int = 500,
                  live_flush_s: float = 0.2, web_port: int = 9090, grpc_port: int = 9876,
-                 airframe: Any = None) -> None:
+                 airframe: Any = None, file_flush_s: float = 0.5) -> None:
         import rerun as rr
 
         if not rate_hz > 0:
@@ -126,7 +130,7 @@ class RerunRecorder:
         self.viewer_url: str | None = None
         self._period_usec = max(1, round(1e6 / rate_hz))
         self._chunk = max(1, int(chunk_rows))
-        self._live_flush_s = live_flush_s
+        self._flush_s = min(live_flush_s, file_flush_s) if live else file_flush_s
         self._airframe = airframe
         self._rec = rr.RecordingStream(application_id,
                                        recording_id=recording_id or str(uuid.uuid4()))
@@ -148,6 +152,12 @@ class RerunRecorder:
         self._rows_total = 0
         self._last_flush_wall = time.monotonic()
         self._alloc(N_ACTUATORS)
+        # rerun writes the file from its own threads; this one asks it to every 0.25 s, so a
+        # killed process loses at most about file_flush_s + 0.25 s of the recording
+        self._flusher_stop = threading.Event()
+        self._flusher = threading.Thread(target=self._flush_loop, daemon=True,
+                                         name="rerun-flush")
+        self._flusher.start()
 
     # -- setup ---------------------------------------------------------------------------
     def _live_sink(self, web_port: int, grpc_port: int) -> Any:
@@ -315,8 +325,7 @@ class RerunRecorder:
         if mode != self._last_mode:
             self._last_mode = mode
             self._log_mode(t, mode)
-        if self._n >= self._chunk or (
-                self.live and time.monotonic() - self._last_flush_wall > self._live_flush_s):
+        if self._n >= self._chunk or time.monotonic() - self._last_flush_wall > self._flush_s:
             self._flush()
 
     def on_event(self, time_usec: int, kind: str, text: str) -> None:
@@ -339,6 +348,7 @@ class RerunRecorder:
         """Send what is buffered, the metrics and the path; flush and close the file."""
         if self._finished:
             return
+        self._stop_flusher()
         try:
             self._flush()
             rr = self._rr
@@ -361,9 +371,23 @@ class RerunRecorder:
             except Exception as exc:
                 print(f"rerun recorder: on_finish: {exc}", file=sys.stderr)
 
+    def _flush_loop(self) -> None:
+        timeout = _flush_takes_timeout(self._rec)
+        while not self._flusher_stop.wait(0.25):
+            try:
+                self._rec.flush(timeout_sec=1.0) if timeout else self._rec.flush()
+            except Exception:
+                return
+
+    def _stop_flusher(self) -> None:
+        self._flusher_stop.set()
+        if self._flusher.is_alive() and self._flusher is not threading.current_thread():
+            self._flusher.join(timeout=2.0)
+
     def close(self) -> None:
         """Disconnect from every sink (the file is complete afterwards) and stop the web
         viewer server started for ``live`` (a spawned native viewer stays open). Idempotent."""
+        self._stop_flusher()
         try:
             self._rec.disconnect()
         except Exception as exc:

@@ -6,7 +6,7 @@ writes, as the run goes:
 - ``run.json``: the configuration (airframe name and sha256, controller, case, gain-file path
   and sha256, seed, scenario, software versions), at the start;
 - ``telemetry.csv``: one row per control step (units in the column names; angles in deg at
-  this edge), flushed every second of simulated time and at the end, so an interrupted or
+  this edge), flushed every 0.5 s of simulated time and at the end, so an interrupted or
   crashed run keeps what was written;
 - ``events.log``: one line per event (``t_s kind text``), flushed at once;
 - ``metrics.json`` and the plots (PNG, matplotlib Agg) at the end: ``trajectory.png``
@@ -152,7 +152,7 @@ class RunFolderWriter:
         c["yaw_ref"].append(ref[2])
         c["mode"].append(float(int(st.mode)))
         c["u"].append(np.array(u, dtype=float))
-        if s.time_usec - self._last_flush_usec >= 1_000_000:
+        if s.time_usec - self._last_flush_usec >= 500_000:  # a crash loses < 0.5 s
             self._csv_file.flush()
             self._last_flush_usec = s.time_usec
 

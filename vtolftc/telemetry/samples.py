@@ -80,6 +80,7 @@ class AutopilotStatus:
     allocation_status: str
     controller: str                             # "gs-shif", "shif" or "lqr"
     message: str = ""                           # last event worth a STATUSTEXT
+    px4_custom_mode: int = -1                   # PX4 HEARTBEAT custom mode, -1: from ``mode``
 
 
 @dataclass(slots=True)

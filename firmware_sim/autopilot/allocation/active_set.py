@@ -1,0 +1,306 @@
+"""Compiled primal active-set solver of the box-constrained QP, and the allocator built on it.
+
+``box_qp`` solves ``min 1/2 u'Hu + q'u  s.t.  lo <= u <= hi`` (H symmetric positive definite):
+a primal active-set method (Nocedal & Wright, Numerical Optimization, alg. 16.3, specialised
+to bounds) started from a point ``u0``. The bounds that ``u0`` touches form the initial working
+set; Newton steps on the free variables (Cholesky of the reduced Hessian, one pass of iterative
+refinement) either reach the subspace minimum or stop at the first blocking bound (added to the
+working set); at a subspace minimum the bound with the most wrongly-signed multiplier is
+released. It stops when no multiplier is wrong by more than the tolerance. Started from a
+good point (OSQP's iterate, or the previous control step's command) this takes one to a few
+Newton steps. Compiled with numba.
+
+What the optimality test guarantees. With ``tol`` the relative tolerance, the test accepts a
+point whose bound multipliers are wrongly signed by at most ``tau = tol (1 + max|q| + max
+H_ii)`` and whose free gradient is at most ``1e3 tau``. On the normalised allocation problem
+(``wls``: max H_ii = 1, |q| ~ 1) ``tau`` ~ 3 tol. The curvature of that problem is ~1 along the
+directions that change ``B u``, but only ``c eps w_u²`` (~5e-12 for DS-1: ``c`` ~ 5e-6,
+``eps`` = 1e-6) along the null space of ``B`` (thrust moved among the eight lift rotors, yaw
+moved between differential pusher thrust and rudders). A bound held with a multiplier
+``-tau`` may therefore sit up to ``tau / (c eps)`` from the optimum along that null space:
+
+- ``tol = 1e-9`` (the polish's): ``tau / (c eps)`` ~ 600, i.e. the test says nothing about the
+  split among redundant actuators (the box caps it). Started from the previous command it
+  "certifies" answers 4.3e-2 away from the optimum (cost 1.3 % above it) on case 1, and from
+  ``u_pref`` on a feasible low-speed command (``tests/test_allocation.py``) it held one lift
+  rotor at 1 and another at 0, with ``B u`` exact.
+  Started from OSQP's iterate (``QPAllocator``), which is already close, it stays within
+  3.9e-5 (4.9e-3 on four ground steps where the two answers' costs tie to rounding).
+- ``tol = 1e-15`` (``ActiveSetAllocator``'s default): ``tau / (c eps)`` ~ 6e-4 in a normalised
+  command, near the floor set by rounding in ``g = H u + q`` (~1e-16 / 5e-12 ~ 2e-5).
+  Measured on all 9,750 QPs of case 1 (``benchmarks/bench_allocation.py``) against scipy's BVLS
+  at 1e-14: within 3.7e-5 wherever its cost is above the reference's, ``B u`` within 5e-10
+  N / N m, cost at most 3.3e-9 (relative) above the reference.
+
+So a passed test certifies a KKT point to that tolerance: ``B u`` and the cost accurately,
+the split among redundant actuators only to the figures above, not the exact optimum.
+
+``ActiveSetAllocator`` flies this solver alone on the ``wls`` problem, warm-started from the
+previous command.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numba
+import numpy as np
+
+from vtolftc.firmware_sim.autopilot.allocation.interface import AllocationResult
+from vtolftc.firmware_sim.autopilot.allocation.wls import (
+    _ST_FALLBACK,
+    _ST_SOLVED,
+    WLSAllocator,
+)
+
+__all__ = ["ActiveSetAllocator", "box_qp"]
+
+_perf_counter = time.perf_counter
+
+
+@numba.njit(cache=True)
+def _box_qp_active_set(H, q, lo, hi, u0, max_iter, tol):
+    n = q.size
+    u = np.empty(n)
+    state = np.zeros(n, dtype=np.int8)  # 0 free, -1 at lo, +1 at hi, 2 fixed (lo == hi)
+    hscale = 0.0
+    qscale = 0.0
+    for i in range(n):
+        hscale = max(hscale, abs(H[i, i]))
+        qscale = max(qscale, abs(q[i]))
+    if hscale == 0.0:
+        hscale = 1.0
+    tol_d = tol * (1.0 + qscale + hscale)
+    for i in range(n):
+        w = hi[i] - lo[i]
+        snap = 1e-6 * (1.0 + w)
+        ui = min(max(u0[i], lo[i]), hi[i])
+        if w <= 0.0:
+            state[i] = 2
+            ui = lo[i]
+        elif ui - lo[i] <= snap:
+            state[i] = -1
+            ui = lo[i]
+        elif hi[i] - ui <= snap:
+            state[i] = 1
+            ui = hi[i]
+        u[i] = ui
+    g = H @ u + q
+    at_min = False
+    it = 0
+    while it < max_iter:
+        it += 1
+        if not at_min:
+            # Newton step on the free variables: H_FF p_F = -g_F
+            nf = 0
+            for i in range(n):
+                if state[i] == 0:
+                    nf += 1
+            if nf > 0:
+                idx = np.empty(nf, dtype=np.int64)
+                k = 0
+                for i in range(n):
+                    if state[i] == 0:
+                        idx[k] = i
+                        k += 1
+                Hff = np.empty((nf, nf))
+                rhs = np.empty(nf)
+                for a in range(nf):
+                    rhs[a] = -g[idx[a]]
+                    for b in range(nf):
+                        Hff[a, b] = H[idx[a], idx[b]]
+                # Cholesky (H is SPD); a non-positive pivot means failure
+                L = np.zeros((nf, nf))
+                for a in range(nf):
+                    s = Hff[a, a]
+                    for c in range(a):
+                        s -= L[a, c] * L[a, c]
+                    if not s > 0.0:
+                        return u, False, it
+                    L[a, a] = np.sqrt(s)
+                    for b in range(a + 1, nf):
+                        s2 = Hff[b, a]
+                        for c in range(a):
+                            s2 -= L[b, c] * L[a, c]
+                        L[b, a] = s2 / L[a, a]
+                y = np.empty(nf)
+                for a in range(nf):
+                    s = rhs[a]
+                    for c in range(a):
+                        s -= L[a, c] * y[c]
+                    y[a] = s / L[a, a]
+                pf = np.empty(nf)
+                for a in range(nf - 1, -1, -1):
+                    s = y[a]
+                    for c in range(a + 1, nf):
+                        s -= L[c, a] * pf[c]
+                    pf[a] = s / L[a, a]
+                # step length to the first blocking bound
+                alpha = 1.0
+                block = -1
+                for a in range(nf):
+                    i = idx[a]
+                    if pf[a] < 0.0:
+                        r = (lo[i] - u[i]) / pf[a]
+                        if r < alpha:
+                            alpha = r
+                            block = i
+                    elif pf[a] > 0.0:
+                        r = (hi[i] - u[i]) / pf[a]
+                        if r < alpha:
+                            alpha = r
+                            block = i
+                if alpha < 0.0:
+                    alpha = 0.0
+                for a in range(nf):
+                    u[idx[a]] += alpha * pf[a]
+                if block < 0:
+                    # full step: one iterative-refinement pass with the same factor (the
+                    # reduced Hessian is badly conditioned in the rotor null space)
+                    g = H @ u + q
+                    for a in range(nf):
+                        s = -g[idx[a]]
+                        for c in range(a):
+                            s -= L[a, c] * y[c]
+                        y[a] = s / L[a, a]
+                    for a in range(nf - 1, -1, -1):
+                        s = y[a]
+                        for c in range(a + 1, nf):
+                            s -= L[c, a] * pf[c]
+                        pf[a] = s / L[a, a]
+                    for a in range(nf):
+                        i = idx[a]
+                        u[i] = min(max(u[i] + pf[a], lo[i]), hi[i])
+                if block >= 0:
+                    if pf[np.searchsorted(idx, block)] < 0.0:
+                        state[block] = -1
+                        u[block] = lo[block]
+                    else:
+                        state[block] = 1
+                        u[block] = hi[block]
+                else:
+                    at_min = True
+                g = H @ u + q
+                if block >= 0:
+                    continue
+            at_min = True
+        # at a subspace minimum: check the multipliers of the bounds held
+        worst = -1
+        worst_v = tol_d
+        for i in range(n):
+            if state[i] == -1 and -g[i] > worst_v:  # at lo, optimal iff g_i >= 0
+                worst_v = -g[i]
+                worst = i
+            elif state[i] == 1 and g[i] > worst_v:  # at hi, optimal iff g_i <= 0
+                worst_v = g[i]
+                worst = i
+        if worst < 0:
+            # KKT: free gradient ~ 0 (checked relative), bounds held with right sign
+            for i in range(n):
+                if state[i] == 0 and abs(g[i]) > tol_d * 1e3:
+                    return u, False, it
+            return u, True, it
+        state[worst] = 0
+        at_min = False
+    return u, False, it
+
+
+
+
+def box_qp(
+    H: np.ndarray,
+    q: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    u0: np.ndarray,
+    max_iter: int = 60,
+    tol: float = 1e-15,
+) -> tuple[np.ndarray, bool, int]:
+    """Solve ``min 1/2 u'Hu + q'u  s.t.  lo <= u <= hi`` by the active-set method from ``u0``.
+
+    Parameters
+    ----------
+    H : numpy.ndarray
+        Symmetric positive definite Hessian (n x n).
+    q : numpy.ndarray
+        Linear term (n,).
+    lo, hi : numpy.ndarray
+        Bounds (n,), ``lo <= hi``.
+    u0 : numpy.ndarray
+        Starting point (n,), finite; clipped into the bounds, its active bounds (within 1e-6)
+        form the initial working set.
+    max_iter : int
+        Maximum Newton steps / working-set changes.
+    tol : float
+        Relative KKT tolerance (see the module docstring for what it means).
+
+    Returns
+    -------
+    tuple
+        ``(u, ok, iterations)``; ``u`` is within the bounds; ``ok`` is True when the KKT test
+        passed.
+    """
+    u, ok, it = _box_qp_active_set(H, q, lo, hi, u0, max_iter, tol)
+    return u, bool(ok), int(it)  # u stays within [lo, hi] by construction
+
+
+class ActiveSetAllocator(WLSAllocator):
+    """Weighted least-squares control allocation solved by the active-set ``box_qp`` alone.
+
+    Every step starts ``box_qp`` from the previous command (before the first step, or after
+    ``reset()``, from ``u_pref``), clipped into this step's bounds. Status ``SOLVED`` (and
+    ``polished``) when its KKT test passes; otherwise ``FALLBACK`` (``wls``). No OSQP.
+
+    Parameters
+    ----------
+    n_v, u_min, u_max, w_v, w_u, eps, u_pref, rate_limit, dt
+        The problem, see ``wls.WLSAllocator``.
+    tol : float
+        Relative KKT tolerance of ``box_qp`` (default 1e-15; 1e-9, the polish's, leaves the
+        split among redundant actuators undetermined, see the module docstring).
+    max_iter : int
+        Maximum working-set changes per step (default 60).
+    thrust_axis, roll_axis, pitch_axis, yaw_axis : int or None
+        Axis indices for the fallback's sequential desaturation (defaults follow ``AXES_5``).
+    """
+
+    def __init__(
+        self,
+        n_v: int,
+        u_min: np.ndarray,
+        u_max: np.ndarray,
+        *,
+        w_v: np.ndarray | None = None,
+        w_u: np.ndarray | None = None,
+        eps: float = 1e-6,
+        u_pref: np.ndarray | None = None,
+        rate_limit: np.ndarray | None = None,
+        dt: float = 1.0 / 250.0,
+        tol: float = 1e-15,
+        max_iter: int = 60,
+        thrust_axis: int | None = 0,
+        roll_axis: int | None = 2,
+        pitch_axis: int | None = 3,
+        yaw_axis: int | None = 4,
+    ) -> None:
+        super().__init__(n_v, u_min, u_max, w_v=w_v, w_u=w_u, eps=eps, u_pref=u_pref,
+                         rate_limit=rate_limit, dt=dt, thrust_axis=thrust_axis,
+                         roll_axis=roll_axis, pitch_axis=pitch_axis, yaw_axis=yaw_axis)
+        if not (tol > 0 and np.isfinite(tol)):
+            raise ValueError(f"tol must be finite and > 0, got {tol}")
+        if max_iter < 1:
+            raise ValueError(f"max_iter must be >= 1, got {max_iter}")
+        self.tol = float(tol)
+        self.max_iter = int(max_iter)
+
+    def _solve(self, v: np.ndarray, B: np.ndarray, pref: np.ndarray, lo: np.ndarray,
+               hi: np.ndarray, B_changed: bool, t0: float) -> AllocationResult:
+        u0 = self._u_last if self._u_last is not None else pref
+        t1 = _perf_counter()
+        u, ok, it = _box_qp_active_set(self._Hn, self._qn, lo, hi, u0, self.max_iter, self.tol)
+        t_solve = _perf_counter() - t1
+        if ok:
+            return self._finish(u, v, B, _ST_SOLVED, it, t_solve, t0, "solved", True)
+        u = self._fallback(v, B, lo, hi, pref, u)
+        return self._finish(u, v, B, _ST_FALLBACK, it, t_solve, t0, "active set not converged",
+                            False)

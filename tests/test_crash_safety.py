@@ -1,0 +1,191 @@
+"""Runs are crash-safe: ``vtolftc fly`` stops cleanly on SIGTERM and Ctrl-C, refuses to mix a
+new run into an old ``--out``; the SITL processes killed (SIGKILL) or stopped (SIGTERM) mid-run
+leave a run folder that reads back, with at most 1 s lost and a rerun file that verifies."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from vtolftc.sitl import SitlConfig, SitlRun
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _rrd_verify(path: Path, footers: bool) -> subprocess.CompletedProcess[str]:
+    args = [sys.executable, "-m", "rerun", "rrd", "verify", str(path)]
+    if not footers:
+        args[5:5] = ["--check-footers", "false"]
+    return subprocess.run(args, capture_output=True, text=True, timeout=120)
+
+
+def _rrd_rows(path: Path, entity: str = "/altitude") -> int:
+    """Rows of ``entity`` scalars in a recording (``rerun rrd print``)."""
+    r = subprocess.run([sys.executable, "-m", "rerun", "rrd", "print", str(path)],
+                       capture_output=True, text=True, timeout=120)
+    n = 0
+    for line in r.stdout.splitlines():
+        if f"- {entity} -" in line and "Scalars:scalars" in line:
+            n += int(line.split(" with ")[1].split(" rows")[0])
+    return n
+
+
+def _csv_times(path: Path) -> list[float]:
+    """The ``time_s`` of every complete row (a killed writer may leave half a line)."""
+    out = []
+    with path.open(newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        for row in reader:
+            if len(row) == len(header):
+                out.append(float(row[0]))
+    return out
+
+
+def _wait_file_rows(path: Path, n: int, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if path.is_file() and path.read_text(errors="replace").count("\n") > n:
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"{path} never got {n} rows")
+
+
+# ---------------------------------------------------------------------------- vtolftc fly
+def _fly(args: list[str]) -> subprocess.Popen[str]:
+    return subprocess.Popen([sys.executable, "-m", "vtolftc.cli", "fly", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=REPO)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_fly_stops_cleanly_on_signal(tmp_path, hand_gains, sig):
+    out = tmp_path / "run"
+    p = _fly(["--case", "1", "--controller", "lqr", "--duration", "600", "--gains",
+              str(hand_gains), "--out", str(out), "--no-plots"])
+    try:
+        _wait_file_rows(out / "telemetry.csv", 200, 120.0)
+        p.send_signal(sig)
+        stdout, stderr = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode == 130, stderr
+    assert "Traceback" not in stderr and "interrupted" in stderr
+    assert "interrupted: what was flown so far is in" in stdout
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["interrupted"] is True
+    assert len(_csv_times(out / "telemetry.csv")) >= 200
+    assert _rrd_verify(out / "run.rrd", footers=True).returncode == 0
+
+
+def test_fly_out_refused_unless_overwrite_and_never_mixed(tmp_path, hand_gains, capsys):
+    from vtolftc.cli import run
+
+    out = tmp_path / "run"
+    base = ["fly", "--case", "0", "--controller", "lqr", "--duration", "0.5", "--gains",
+            str(hand_gains), "--out", str(out), "--no-plots"]
+    assert run(base) == 0
+    (out / "stale.png").write_text("from the first run")
+    capsys.readouterr()
+    assert run(base) == 2
+    err = capsys.readouterr().err
+    assert "already exists" in err and "--overwrite" in err and err.count("\n") == 1
+    assert (out / "stale.png").exists()
+    assert run([*base, "--overwrite"]) == 0
+    assert not (out / "stale.png").exists() and (out / "metrics.json").is_file()
+    # a folder that holds something else is never deleted
+    other = tmp_path / "precious"
+    other.mkdir()
+    (other / "thesis.tex").write_text("x")
+    capsys.readouterr()
+    assert run(["fly", "--duration", "0.5", "--gains", str(hand_gains), "--out", str(other),
+                "--overwrite"]) == 2
+    assert "holds no vtol-ftc run" in capsys.readouterr().err
+    assert (other / "thesis.tex").exists()
+
+
+@pytest.mark.parametrize("bad", ["/proc/nope/run", "FILE"])
+def test_fly_bad_out_is_one_line_exit_2(tmp_path, hand_gains, capsys, bad):
+    from vtolftc.cli import run
+
+    if bad == "FILE":
+        bad = str(tmp_path / "a_file")
+        Path(bad).write_text("x")
+    assert run(["fly", "--duration", "0.5", "--gains", str(hand_gains), "--out", bad]) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and "Traceback" not in err and err.count("\n") == 1
+
+
+# ---------------------------------------------------------------------------- SITL processes
+def _sitl(out: Path) -> SitlRun:
+    cfg = SitlConfig(out_dir=out, realtime=True, plots=False, failure_injection=False,
+                     vehicle_timeout_s=60.0)
+    run = SitlRun(cfg)
+    run.start()
+    run.gs.wait_for(lambda s: s.sim_time_s > 4.0, 60.0)
+    return run
+
+
+def _stop(p: subprocess.Popen[bytes], sig: int) -> None:
+    os.killpg(p.pid, sig)
+    p.wait(timeout=30)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_autopilot_killed_mid_run_leaves_a_readable_run_folder(tmp_path, sig):
+    run = _sitl(tmp_path)
+    try:
+        t_kill = run.gs.snapshot().sim_time_s
+        _stop(run.procs["autopilot"], sig)
+        ap = tmp_path / "autopilot"
+        times = _csv_times(ap / "telemetry.csv")
+        assert times and t_kill - times[-1] <= 1.0, (t_kill, times[-1])
+        assert _rrd_verify(ap / "run.rrd", footers=sig == signal.SIGTERM).returncode == 0
+        rows = _rrd_rows(ap / "run.rrd")  # 50 Hz recording from the first step on
+        assert rows >= 50 * (t_kill - times[0] - 1.0), (rows, t_kill, times[0])
+        events = [json.loads(x) for x in
+                  (ap / "autopilot_events.jsonl").read_text().splitlines() if x.strip()]
+        assert all("kind" in e for e in events)
+        if sig == signal.SIGTERM:
+            assert json.loads((ap / "metrics.json").read_text())["sim_time_s"] >= t_kill
+            assert json.loads((ap / "autopilot_summary.json").read_text())["steps"] > 0
+    finally:
+        run.close()
+    veh = tmp_path / "vehicle"  # the vehicle was stopped by SIGTERM afterwards
+    assert json.loads((veh / "vehicle_summary.json").read_text())["steps"] > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_vehicle_killed_mid_run_leaves_a_readable_run_folder(tmp_path, sig):
+    run = _sitl(tmp_path)
+    try:
+        _stop(run.procs["vehicle"], sig)
+        time.sleep(0.5)  # the autopilot's last step is the vehicle's last state
+        run.stop()
+        ap_times = _csv_times(tmp_path / "autopilot" / "telemetry.csv")
+        veh = tmp_path / "vehicle"
+        times = _csv_times(veh / "vehicle_truth.csv")
+        assert times and ap_times[-1] - times[-1] <= 1.0, (ap_times[-1], times[-1])
+        events = [json.loads(x) for x in
+                  (veh / "vehicle_events.jsonl").read_text().splitlines() if x.strip()]
+        assert events[0]["event"] == "start"
+        if sig == signal.SIGTERM:
+            assert events[-1]["event"] == "stop"
+            assert json.loads((veh / "vehicle_summary.json").read_text())["steps"] > 0
+        # the autopilot, stopped by SIGTERM, finished its folder completely
+        assert _rrd_verify(tmp_path / "autopilot" / "run.rrd", footers=True).returncode == 0
+        assert json.loads((tmp_path / "autopilot" / "metrics.json").read_text())
+    finally:
+        run.close()

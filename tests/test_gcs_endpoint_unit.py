@@ -1,0 +1,121 @@
+"""The ground-station endpoint driven by hand (no threads, in-memory links): intervals are per
+link, floods are rate-limited per client, and nothing reaches the autopilot until the control
+thread polls."""
+
+from __future__ import annotations
+
+import pytest
+
+from vtolftc.airframe.loader import load_airframe
+from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
+from vtolftc.firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
+from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
+from vtolftc.protocols import Link, Transport, make_codec
+from vtolftc.protocols.failure_units import ActuatorTable
+
+
+class _Capture(Transport):
+    kind = "memory"
+
+    def __init__(self) -> None:
+        self.sent: list[bytes] = []
+
+    def send_bytes(self, data: bytes) -> bool:
+        self.sent.append(data)
+        return True
+
+    def recv_datagrams(self, timeout_s):
+        return []
+
+    def ready(self) -> bool:
+        return True
+
+    def close(self) -> None:
+        pass
+
+
+def _msgs(transport: _Capture) -> list:
+    reader = Link(_Capture())
+    out: list = []
+    for d in transport.sent:
+        reader._parse_datagram(d, out)
+    transport.sent.clear()
+    return out
+
+
+@pytest.fixture()
+def ep():
+    af = load_airframe()
+    ap = Autopilot(af)
+    links = [Link(_Capture(), system_id=1, component_id=1) for _ in range(2)]
+    hil = HilBridge(Link(_Capture(), system_id=1, component_id=1))
+    e = GcsEndpoint(ap, hil, links, actuators=ActuatorTable.from_names(af.actuator_names),
+                    start=False)
+    yield e
+    e.close()
+
+
+def _inject(ep, index: int, msgs) -> None:
+    q = ep._inq[index]
+    parser = Link(_Capture())
+    for data in msgs:
+        out: list = []
+        parser._parse_datagram(data, out)
+        q.extend(out)
+
+
+def _pack(codec, msg) -> bytes:
+    data = msg.pack(codec)
+    codec.seq = (codec.seq + 1) & 0xFF
+    return data
+
+
+def test_message_interval_is_per_link(ep):
+    gs = make_codec(255, 190)
+    _inject(ep, 0, [_pack(gs, gs.command_long_encode(1, 1, 511, 0, 0, -1, 0, 0, 0, 0, 0))])
+    ep.serve_once()
+    assert ep.rates_hz[0][0] == 0.0          # HEARTBEAT off on link 0 only
+    assert ep.rates_hz[1][0] == 1.0
+    acks0 = [m for m in _msgs(ep.links[0].transport) if m.get_type() == "COMMAND_ACK"]
+    acks1 = [m for m in _msgs(ep.links[1].transport) if m.get_type() == "COMMAND_ACK"]
+    assert [(a.command, a.result) for a in acks0] == [(511, 0)] and acks1 == []
+
+
+def test_flood_rate_limited_per_client_and_kept_off_the_control_thread(ep):
+    flood = make_codec(200, 1)
+    frames = [_pack(flood, flood.param_set_encode(1, 1, f"NOPE_{k}".encode(), 1.0, 9))
+              for k in range(300)]
+    frames += [_pack(flood, flood.param_set_encode(1, 1, b"MIS_TAKEOFF_ALT", 1e9, 9))
+               for _ in range(50)]
+    _inject(ep, 0, frames)
+    for _ in range(20):
+        ep.serve_once()
+    cnt = ep._counters[0]
+    # one client: its burst (100) handled, the rest dropped and counted, nothing queued for
+    # the control thread (unknown names and out-of-range values are refused in the worker)
+    assert cnt["handled"] == pytest.approx(ep.rate_burst, abs=2)
+    assert cnt["handled"] + cnt["rate_limited"] == 350
+    assert not ep.has_pending() and ep.ap.params.get("MIS_TAKEOFF_ALT") == 30.0
+    # another client is not starved by the first
+    gs = make_codec(255, 190)
+    _inject(ep, 0, [_pack(gs, gs.param_set_encode(1, 1, b"MIS_TAKEOFF_ALT", 12.0, 9))])
+    ep.serve_once()
+    assert ep.has_pending()
+    assert ep.ap.params.get("MIS_TAKEOFF_ALT") == 30.0  # not before the control thread polls
+    assert ep.poll() == 1 and ep.ap.params.get("MIS_TAKEOFF_ALT") == 12.0
+    ep.serve_once()
+    echo = [m for m in _msgs(ep.links[1].transport) if m.get_type() == "PARAM_VALUE"]
+    assert echo and echo[-1].param_value == 12.0  # echoed on every link
+
+
+def test_control_queue_bounded_drop_oldest_answered(ep):
+    gs = make_codec(255, 190)
+    n = ep._control_queue_len + 5
+    _inject(ep, 0, [_pack(gs, gs.command_long_encode(1, 1, 21, 0, 0, 0, 0, 0, 0, 0, 0))
+                    for _ in range(n)])
+    ep.serve_once()
+    ep.serve_once()
+    assert len(ep._control_q) == ep._control_queue_len
+    acks = [m for m in _msgs(ep.links[0].transport) if m.get_type() == "COMMAND_ACK"]
+    assert [a.result for a in acks] == [1] * 5  # TEMPORARILY_REJECTED for the dropped ones
+    assert ep.poll(max_items=4) == 4           # the control thread takes a few per cycle

@@ -1,0 +1,102 @@
+"""The reference VTOL mission uploaded with pymavlink's mission protocol and flown by the SITL
+processes in lockstep over UDP (free-running, no holds).
+
+What is asserted (the numbers are what the design gives, measured in-process and here):
+every item reached in order (MISSION_ITEM_REACHED), the fixed-wing legs within 30 m of the
+planned polyline at every sample (the corner cut of a 90 deg turn with L1 switching at the L1
+distance is about 24 m; on the straight parts the error is below 1 m) and within 10 m RMS,
+landed within 5 m of home and disarmed; the mission downloaded back item for item equal;
+HEARTBEAT modes AUTO.LOITER on the ground, AUTO.MISSION in flight; BATTERY_STATUS voltage
+lower in hover than on the ground and remaining falling; TIMESYNC and COMMAND_INT answered.
+With case 1's faults injected 5 s into the first fixed-wing leg the same mission completes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pyulog import ULog
+
+from vtolftc.firmware_sim.autopilot.ulog import TOPICS
+from vtolftc.firmware_sim.vehicle.sensors import Home
+from vtolftc.mission_run import path_errors
+from vtolftc.mission_sitl import fly_sitl_mission
+
+pytestmark = pytest.mark.slow
+
+XTE_MAX_M = 30.0
+XTE_RMS_M = 10.0
+
+
+def _check(rec):
+    items = rec["items"]
+    assert rec["upload_ack"] == 0
+    back = rec["downloaded"]
+    assert len(back) == len(items)
+    assert all(a.same_as(b) for a, b in zip(items, back, strict=True)), (items, back)
+    assert rec["timesync"] is not None and rec["timesync"][1] == 123456789
+    assert rec["timesync"][0] > 0                     # the autopilot's clock, ns
+    assert rec["command_int_ack"] == (512, 0)         # REQUEST_MESSAGE as COMMAND_INT
+    assert rec["reached"] == list(range(len(items))), rec["reached"]
+    pos = np.array(rec["pos"])
+    home_err = math.hypot(pos[-1][0], pos[-1][1])
+    assert home_err < 5.0, f"landed {home_err:.1f} m from home"
+    assert -pos[-1][2] < 0.5
+    mode = np.where(np.array(rec["fw"]), 4, 0)
+    errs = path_errors(items, np.array(rec["t"]), pos, mode, np.array(rec["seq"]), Home())
+    assert set(errs) == {2, 3, 4, 5}, errs
+    for s, e in errs.items():
+        assert e["max_m"] < XTE_MAX_M and e["rms_m"] < XTE_RMS_M, (s, e)
+    assert rec["modes"] == {"AUTO.MISSION"}, rec["modes"]
+    assert rec["ground_modes"] == {"AUTO.LOITER"}
+    return errs
+
+
+def test_vtol_mission_over_udp(tmp_path):
+    rec = fly_sitl_mission(tmp_path)
+    errs = _check(rec)
+    _check_ulog(tmp_path / "autopilot" / "flight.ulg", rec)
+    bat = rec["battery"]
+    assert len(bat) > 20
+    v_ground = rec["v_ground"]
+    v_load = min(b[0] for b in bat[1:20])
+    assert v_load < v_ground - 0.2, (v_ground, v_load)  # sag under the hover load
+    assert bat[-1][2] < rec["pct_ground"]             # remaining falls with time
+    print("cross-track per leg:", errs)
+
+
+def _check_ulog(path, rec):
+    """The autopilot's ULog of the flight, read by pyulog."""
+    log = ULog(str(path))
+    names = {d.name for d in log.data_list}
+    assert set(TOPICS) <= names, set(TOPICS) - names
+    t = log.get_dataset("vehicle_attitude").data["timestamp"] * 1e-6
+    flight_s = rec["t"][-1] - rec["t"][0]
+    assert t[-1] - t[0] >= flight_s - 1.0              # the whole flight, at 50 Hz
+    assert len(t) == pytest.approx(50 * (t[-1] - t[0]), rel=0.01)
+    items = log.get_dataset("navigator_mission_item").data
+    assert list(items["nav_cmd"]) == [it.command for it in rec["items"]]
+    res = log.get_dataset("mission_result").data
+    assert res["finished"][-1] == 1 and res["seq_reached"][-1] == len(rec["items"]) - 1
+    st = log.get_dataset("vehicle_status").data
+    ns = set(st["nav_state"])
+    assert 3 in ns and 4 in ns and 2 not in ns          # MISSION, LOITER (ground), no POSCTL
+    assert set(st["vehicle_type"]) == {1, 2}            # rotary wing and fixed wing
+    p = log.initial_parameters
+    assert p["MIS_TAKEOFF_ALT"] == pytest.approx(30.0) and p["SYS_FAILURE_EN"] == 1
+    assert "NAV_ACC_RAD" in p and "COM_LOW_BAT_ACT" in p
+    texts = [m.message for m in log.logged_messages]
+    assert any("mission complete" in x for x in texts), texts[-5:]
+    bat = log.get_dataset("battery_status").data
+    assert bat["remaining"][-1] < bat["remaining"][0]
+
+
+def test_vtol_mission_with_case1_faults_in_the_first_fixed_wing_leg_over_zenoh(tmp_path):
+    """The HIL and ground-station links over zenoh (the pymavlink client stays on UDP)."""
+    rec = fly_sitl_mission(tmp_path, inject_case=1, transport="zenoh")
+    assert rec["fault_acks"] and all("ACCEPTED" in a for a in rec["fault_acks"])
+    assert rec["injected"]
+    errs = _check(rec)
+    print("cross-track per leg with faults:", errs)
