@@ -9,13 +9,19 @@ SHIF at every point), the gain files and (unless ``--no-report``) the report wit
 then prints the per-stage wall times, the total, and the total without the report (the
 "synthesis" proper: loops, weights, mu, baselines).
 
-Usage: ``python benchmarks/bench_synthesis.py [--starts N] [--jobs N] [--seed S]
-[--out DIR] [--no-report]``
+``--method robust`` (default; issue 11's target: < 60 s on 2 cores): 21 robust GS-SHIF tunes
+(seven points, three channels each) + 3 SHIF tunes over the seven points, loop margins, mu
+(42 sweeps), gain files, report. ``--method paper``: the paper's design (six points).
+
+Usage: ``python benchmarks/bench_synthesis.py [--method robust|paper] [--starts N] [--jobs N]
+[--seed S] [--out DIR] [--no-report]``. The machine's load is printed with the times (the
+numbers mean little on a shared machine).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -26,21 +32,27 @@ from vtolftc.synthesis.pipeline import run_synthesis
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--starts", type=int, default=4, help="random starts per tune (default 4)")
+    ap.add_argument("--method", choices=("robust", "paper"), default="robust")
+    ap.add_argument("--starts", type=int, default=None,
+                    help="random starts per tune (default 2 robust, 4 paper: vtolftc synth's)")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=None, help="output dir (default: a temp dir)")
     ap.add_argument("--no-report", action="store_true")
     args = ap.parse_args()
+    if args.starts is None:
+        args.starts = 2 if args.method == "robust" else 4
     af = load_airframe()
+    load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or Path(tmp)
         t0 = time.perf_counter()
         res = run_synthesis(af, out, n_starts=args.starts, jobs=args.jobs, seed=args.seed,
-                            report=not args.no_report)
+                            report=not args.no_report, method=args.method)
         total = time.perf_counter() - t0
-    print(f"full synthesis of {af.name}: {args.starts} random starts + 1 per tune, "
-          f"{args.jobs} worker process(es)")
+    print(f"full {args.method} synthesis of {af.name}: {args.starts} random starts + 1 per "
+          f"tune, {args.jobs} worker process(es); load average {load0:.1f} at the start, "
+          f"{os.getloadavg()[0]:.1f} at the end ({os.cpu_count()} CPUs)")
     for k, v in res.times.items():
         print(f"  {k:<34s} {v:7.2f} s")
     print(f"  {'total':<34s} {total:7.2f} s")

@@ -273,27 +273,40 @@ class CascadeChannel:
 
     Any of the weights may be None (its row is omitted). Picklable (no closures), so it can
     be sent to worker processes. ``outputs`` names the rows.
+
+    ``Wd`` (optional, not in eq. 8): a weight on the angle response to a moment at the plant
+    input, row ``"Wd*Sd"`` = Wd e/d (e/d = -G_angle / (1 + L_u), rad per N m); a constant
+    d_max / e_max makes ||Wd e/d|| <= 1 mean "a moment d_max leaves an angle error of at most
+    about e_max" (the input-disturbance objective of the robust design). Its states come
+    after all the others, so a channel without ``Wd`` is exactly the eq. 8 channel.
     """
 
     G: Any
     Ws: Any = None
     Wt: Any = None
     Wr: Any = None
+    Wd: Any = None
 
     def __post_init__(self) -> None:
         self._G = _plant(self.G)
         self._W = [None if W is None else as_state_space(W.ss() if hasattr(W, "ss") else W)
                    for W in (self.Ws, self.Wt, self.Wr)]
-        if all(W is None for W in self._W):
-            raise ValueError("at least one of Ws, Wt, Wr must be given")
+        self._Wd = (None if self.Wd is None
+                    else as_state_space(self.Wd.ss() if hasattr(self.Wd, "ss") else self.Wd))
+        if all(W is None for W in self._W) and self._Wd is None:
+            raise ValueError("at least one of Ws, Wt, Wr, Wd must be given")
         names = ("Ws*S", "Wt*T", "Wr*R")
         self.outputs = [n for n, W in zip(names, self._W, strict=True) if W is not None]
+        if self._Wd is not None:
+            self.outputs.append("Wd*Sd")
 
     def __getstate__(self) -> dict[str, Any]:
-        return {"G": self._G, "Ws": self._W[0], "Wt": self._W[1], "Wr": self._W[2]}
+        return {"G": self._G, "Ws": self._W[0], "Wt": self._W[1], "Wr": self._W[2],
+                "Wd": self._Wd}
 
     def __setstate__(self, st: dict[str, Any]) -> None:
         self.G, self.Ws, self.Wt, self.Wr = st["G"], st["Ws"], st["Wt"], st["Wr"]
+        self.Wd = st.get("Wd")
         self.__post_init__()
 
     def _template(self) -> None:
@@ -304,6 +317,9 @@ class CascadeChannel:
         ncl = self._G[0].shape[0] + 2
         sizes = [ncl, 0 if Ws is None else Ws[0].shape[0], 0 if Wr is None else Wr[0].shape[0]]
         sizes += [ncl if Wt is not None else 0, 0 if Wt is None else Wt[0].shape[0]]
+        Wd = self._Wd
+        if Wd is not None:  # its own d-driven loop copy and weight, after everything else
+            sizes += [ncl, Wd[0].shape[0]]
         off = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
         self._off, self._ncl = off, ncl
         n = int(off[-1])
@@ -320,6 +336,11 @@ class CascadeChannel:
             C[row, off[k]:off[k + 1]] = Cw[0]
             self._rows[name] = row
             row += 1
+        if Wd is not None:
+            Aw, _, Cw, _ = Wd
+            A[off[6]:off[7], off[6]:off[7]] = Aw
+            C[row, off[6]:off[7]] = Cw[0]
+            self._rows["Wd*Sd"] = row
         self._A0, self._C0 = A, C
 
     def __call__(self, theta: NDArray[np.float64]) -> StateSpaceData:
@@ -354,6 +375,16 @@ class CascadeChannel:
             A[sl, c2] = np.outer(Bw[:, 0], -Cu)   # T_u = -u/d
             r = self._rows["Wt*T"]
             C[r, c2] = -Dw[0, 0] * Cu
+        if self._Wd is not None:
+            _, Bw, _, Dw = self._Wd
+            Ced = cl.C[0]                          # e from d (no feed-through)
+            c3 = slice(off[5], off[6])
+            A[c3, c3] = cl.A
+            B[c3, 0] = cl.B[:, 1]
+            sl = slice(off[6], off[7])
+            A[sl, c3] = np.outer(Bw[:, 0], Ced)
+            r = self._rows["Wd*Sd"]
+            C[r, c3] = Dw[0, 0] * Ced
         return A, B, C, D
 
     def rows(self, theta: NDArray[np.float64]) -> dict[str, StateSpaceData]:
@@ -372,4 +403,6 @@ class CascadeChannel:
             parts.append(series(cl.T_u(), Wt))
         if Wr is not None:
             parts.append(series(cl.R(), Wr))
+        if self._Wd is not None:
+            parts.append(series(cl.S_ud(), self._Wd))
         return _stack(parts)

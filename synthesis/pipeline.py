@@ -34,16 +34,34 @@ from vtolftc.synthesis.result import SynthesisResult
 from vtolftc.synthesis.robustness import AxisRobustness, analyse
 from vtolftc.synthesis.uncertainty import GAMMA_RANGE, PAPER_DESIGN_POINTS, DesignPoint
 
-__all__ = ["SynthesisResult", "run_synthesis"]
+__all__ = ["METHODS", "SynthesisResult", "run_synthesis"]
+
+#: ``paper``: the paper's design as published (table 2 weights, healthy nominal at the
+#: nominal airspeed, six points); ``robust``: :mod:`vtolftc.synthesis.robust`.
+METHODS: tuple[str, ...] = ("robust", "paper")
 
 
 def _mu_job(args: tuple[Any, ...]) -> AxisRobustness:
     af, axis, point, theta, w, seed = args
-    G = attitude_model(af, axis, point.airspeed_m_s)
+    G = w.plant(af) if hasattr(w, "plant") else attitude_model(af, axis, point.airspeed_m_s)
     return analyse(G, theta, w.Ws, w.Wt, w.Wr, seed=seed)
 
 
 def _weights_meta(res: SynthesisResult) -> dict[str, Any]:
+    if res.method == "robust":
+        from vtolftc.synthesis.robust import RobustSpec
+
+        return {
+            "Ws_form": "(s/M + omega_b) / (s + A omega_b)  (paper eq. 5; M, omega_b by the "
+                       "rule of synthesis/robust.py, table 2 beside)",
+            "Wr_form": "((r_max/u_max) s + omega_a 1e-3) / (s + omega_a)  (paper eq. 6)",
+            "Wt_form": "gain * prod (s/z_i + 1)/(s/p_i + 1)  (cover about the centred nominal)",
+            "Wd_form": "Wd (s + w_i)/(s + 0.01 w_i), Wd = 1.25 d_max / e_max",
+            "A": A_SENSITIVITY, "omega_a_rad_s": OMEGA_A_RAD_S, "r_max_rad": R_MAX_RAD,
+            "gamma_range": list(GAMMA_RANGE), "spec": RobustSpec().to_dict(),
+            "per_axis": {ax: [w.to_dict() for d in res.gs[ax] for w in d.weights]
+                         for ax in AXES},
+        }
     return {
         "Ws_form": "(s/M + omega_b) / (s + A omega_b)  (paper eq. 5, table 2)",
         "Wr_form": "((r_max/u_max) s + omega_a 1e-3) / (s + omega_a)  (paper eq. 6)",
@@ -67,6 +85,8 @@ def _axis_meta_gs(res: SynthesisResult, ax: Axis) -> dict[str, Any]:
     }
     if ax in res.mu_gs:
         out["mu"] = [m.summary() for m in res.mu_gs[ax]]
+    if ax in res.margins_gs:
+        out["loop_margins"] = [m.to_dict() for m in res.margins_gs[ax]]
     return out
 
 
@@ -80,6 +100,8 @@ def _axis_meta_shif(res: SynthesisResult, ax: Axis) -> dict[str, Any]:
     }
     if ax in res.mu_shif:
         out["mu"] = [m.summary() for m in res.mu_shif[ax]]
+    if ax in res.margins_shif:
+        out["loop_margins_per_point"] = [m.to_dict() for m in res.margins_shif[ax]]
     return out
 
 
@@ -93,6 +115,13 @@ def write_gain_files(res: SynthesisResult, out_dir: Path) -> dict[str, Path]:
         "method": "structured H-infinity mixed sensitivity (paper eq. 4-8) on the cascaded "
                   "P-PID of fig. 5; mu analysis eq. 12-14",
     }
+    if res.method == "robust":
+        common["method"] = ("robust: structured H-infinity mixed sensitivity (paper eq. 4-8) "
+                            "on the cascaded P-PID of fig. 5 at the centred nominal with loop "
+                            "delays, a rotor-out input-disturbance objective and a 50 ms "
+                            "delay-margin requirement (synthesis/robust.py); mu analysis "
+                            "eq. 12-14")
+        common["synthesis_method"] = "robust"
     files: dict[str, Path] = {}
     gs_doc = schedule_document(
         af, "gs-shif", [p.airspeed_m_s for p in res.points],
@@ -100,11 +129,12 @@ def write_gain_files(res: SynthesisResult, out_dir: Path) -> dict[str, Path]:
         {ax: _axis_meta_gs(res, ax) for ax in AXES}, common)
     files["gs-shif"] = write_json(out_dir / "gs-shif.json", gs_doc)
     if res.shif:
+        npts = "six" if len(res.points) == 6 else str(len(res.points))
         sh_doc = schedule_document(
             af, "shif", [0.0], {ax: [res.shif[ax].gains] for ax in AXES},
             {ax: _axis_meta_shif(res, ax) for ax in AXES},
-            {**common, "note": "one constant P-PID per axis tuned over all six design points "
-                               "at once (multi-model minimax, same weights per point)"})
+            {**common, "note": f"one constant P-PID per axis tuned over all {npts} design "
+                               "points at once (multi-model minimax, same weights per point)"})
         files["shif"] = write_json(out_dir / "shif.json", sh_doc)
     if res.lqr:
         lq_doc = lqr_document(af, {ax: res.lqr[ax].gains() for ax in AXES}, {
@@ -119,14 +149,26 @@ def write_gain_files(res: SynthesisResult, out_dir: Path) -> dict[str, Path]:
 
 def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs: int = 2,
                   seed: int = 0, report: bool = True, mu: bool = True,
-                  points: tuple[DesignPoint, ...] = PAPER_DESIGN_POINTS,
+                  points: tuple[DesignPoint, ...] | None = None,
                   progress: Callable[[str, int], None] | None = None,
+                  method: str = "robust",
                   ) -> SynthesisResult:
     """The whole synthesis; see the module docstring.
 
-    ``progress(label, n)`` is called when ``n`` more work units are done (the total is
-    :func:`work_units`). ``jobs`` worker processes (1 = in-process).
+    ``method``: one of :data:`METHODS`. ``points``: the design points (default: the
+    method's, six for ``paper``, seven for ``robust``). ``progress(label, n)`` is called when
+    ``n`` more work units are done (the total is :func:`work_units`). ``jobs`` worker
+    processes (1 = in-process).
     """
+    if method not in METHODS:
+        raise ValueError(f"method {method!r}: expected one of {', '.join(METHODS)}")
+    if points is None:
+        if method == "robust":
+            from vtolftc.synthesis.robust import ROBUST_DESIGN_POINTS
+
+            points = ROBUST_DESIGN_POINTS
+        else:
+            points = PAPER_DESIGN_POINTS
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     times: dict[str, float] = {}
@@ -136,16 +178,37 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
     interrupted = False
     try:
         t0 = time.perf_counter()
-        gs, sh = run_designs(af, n_starts=n_starts, seed=seed, points=points,
-                             executor=executor, progress=lambda s: tick(f"tune {s}"))
-        times["tuning (18 GS-SHIF + 3 SHIF)"] = time.perf_counter() - t0
+        if method == "robust":
+            from vtolftc.synthesis.robust import run_robust_designs
+
+            gs, sh = run_robust_designs(af, n_starts=n_starts, seed=seed, points=points,
+                                        executor=executor,
+                                        progress=lambda s: tick(f"tune {s}"))
+        else:
+            gs, sh = run_designs(af, n_starts=n_starts, seed=seed, points=points,
+                                 executor=executor, progress=lambda s: tick(f"tune {s}"))
+        times[f"tuning ({3 * len(points)} GS-SHIF + 3 SHIF)"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
         lqr = lqr_design(af)
         times["LQR"] = time.perf_counter() - t0
         tick("LQR")
-        res = SynthesisResult(af, tuple(points), gs, sh, lqr, settings={
-            "n_starts": n_starts, "seed": seed, "jobs": jobs, "table2": TABLE2})
+        settings: dict[str, Any] = {"n_starts": n_starts, "seed": seed, "jobs": jobs,
+                                    "table2": TABLE2}
+        if method == "robust":
+            settings["method"] = "robust"
+        res = SynthesisResult(af, tuple(points), gs, sh, lqr, settings=settings, method=method)
+        if method == "robust":
+            from vtolftc.synthesis.robust import loop_margins
+
+            t0 = time.perf_counter()
+            for ax in AXES:
+                res.margins_gs[ax] = [loop_margins(d.weights[0].plant(af), d.gains)
+                                      for d in gs[ax]]
+                if ax in sh:
+                    res.margins_shif[ax] = [loop_margins(w.plant(af), sh[ax].gains)
+                                            for w in sh[ax].weights]
+            times["loop margins"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         res.files = write_gain_files(res, out)
         times["export (first)"] = time.perf_counter() - t0

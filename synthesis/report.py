@@ -162,6 +162,8 @@ def _plots(res: SynthesisResult, out: Path) -> list[str]:
 
 def write_report(res: SynthesisResult, out_dir: str | Path) -> Path:
     """Write ``README.md`` and the PNGs into ``out_dir``; returns the markdown path."""
+    if getattr(res, "method", "paper") == "robust":
+        return write_robust_report(res, out_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     af = res.airframe
@@ -340,3 +342,234 @@ def _must_show(res: SynthesisResult) -> str:
                          "range, since gamma alone gives 60 %) at: " + ", ".join(floors)
                          + ". Robust stability cannot be certified there with these weights.")
     return "\n\n".join(lines)
+
+
+# ------------------------------------------------------------------------------------------
+# the robust method's report
+# ------------------------------------------------------------------------------------------
+
+
+def _grid(n: int) -> tuple[int, int]:
+    return (2, (n + 1) // 2) if n > 3 else (1, n)
+
+
+def _plots_robust(res: SynthesisResult, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names: list[str] = []
+    af = res.airframe
+    om = np.logspace(-3, 3, 241)
+    n = len(res.points)
+    rows, cols = _grid(n)
+    for ax in AXES:
+        fig, axs = plt.subplots(rows, cols, figsize=(3.3 * cols, 3.5 * rows), sharex=True)
+        for k, d in enumerate(res.gs[ax]):
+            a = axs.flat[k]
+            w = d.weights[0]
+            rel = relative_error(af, ax, w.point, om, nominal=w.nominal)
+            for row in rel.errors[:: max(1, len(rel.errors) // 24)]:
+                a.loglog(om, np.maximum(row, 1e-6), color="0.75", lw=0.6)
+            a.loglog(om, rel.bound, "k--", lw=1, label="max relative error")
+            a.loglog(om, w.Wt.magnitude(om), "r", lw=1.8, label="|W_t| (centred)")
+            a.set_title(f"{ax} {w.point.number}: nominal {w.nominal[0]:.3g} m/s, "
+                        f"gamma {w.nominal[1]:.2f}", fontsize=8)
+            a.grid(True, alpha=0.3)
+            a.set_ylim(1e-3, max(10.0, 2 * float(np.max(w.Wt.magnitude(om)))))
+            if k == 0:
+                a.legend(fontsize=7)
+        for a in list(axs.flat)[n:]:
+            a.set_visible(False)
+        fig.suptitle(f"Multiplicative uncertainty weight about the centred nominal, {ax}")
+        _layout(fig)
+        name = f"wt_{ax}.png"
+        fig.savefig(out / name, dpi=80)
+        plt.close(fig)
+        names.append(name)
+    for ax in AXES:
+        if ax not in res.mu_gs:
+            continue
+        fig, axs = plt.subplots(rows, cols, figsize=(3.3 * cols, 3.5 * rows), sharex=True)
+        for k, m in enumerate(res.mu_gs[ax]):
+            a = axs.flat[k]
+            a.semilogx(m.omegas, m.rs.upper, "b", label="mu_Delta (RS)")
+            a.semilogx(m.omegas, m.rp.upper, "r", label="mu_Delta-hat (RP)")
+            a.axhline(1.0, color="k", lw=0.8)
+            pt = res.points[k]
+            a.set_title(f"{ax} point {pt.number} ({pt.airspeed_m_s:g} m/s)", fontsize=8)
+            a.grid(True, alpha=0.3)
+            if k == 0:
+                a.legend(fontsize=7)
+        for a in list(axs.flat)[n:]:
+            a.set_visible(False)
+        fig.suptitle(f"Structured singular values, {ax} (robust GS-SHIF)")
+        _layout(fig)
+        name = f"mu_{ax}.png"
+        fig.savefig(out / name, dpi=80)
+        plt.close(fig)
+        names.append(name)
+    return names
+
+
+def _active_bounds(d: Any, tol: float = 5e-3) -> list[str]:
+    b = getattr(d, "bounds", None)
+    if not b:
+        return []
+    out = []
+    for k in PARAM_NAMES:
+        lo, hi, v = b[k]["lower"], b[k]["upper"], d.gains[k]
+        if v <= lo + tol * max(abs(lo), 1e-9) + 1e-12:
+            out.append(f"{k} at lower {_g(lo)} ({b[k].get('lower_from', 'range')})")
+        elif v >= hi * (1 - tol):
+            out.append(f"{k} at upper {_g(hi)} ({b[k].get('upper_from', 'range')})")
+    return out
+
+
+def write_robust_report(res: SynthesisResult, out_dir: str | Path) -> Path:
+    """Report of the robust method (``synthesis/robust.py``): points with their centred
+    nominals, weights by rule beside table 2, rotor-out moments, norms, gains and active
+    bounds, mu next to the disk and delay margins, SHIF and LQR."""
+    from vtolftc.synthesis.robust import (
+        RobustSpec,
+        disturbance_peak,
+        high_frequency_gain_bound,
+    )
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    af = res.airframe
+    spec = RobustSpec()
+    pngs = _plots_robust(res, out)
+    md: list[str] = [f"# Attitude synthesis report (robust method): {af.name}", ""]
+    md += [f"Airframe file `{Path(af.source).name}`, sha256 `{af.sha256}`. Settings: "
+           f"{res.settings.get('n_starts')} random starts + 1 classical start per tune, "
+           f"seed {res.settings.get('seed')}. Method: `synthesis/robust.py` (its docstring "
+           "states every rule). Declared requirements: worst single rotor-out angle "
+           f"excursion {math.degrees(spec.excursion_rad):g} deg; stable with "
+           f"{spec.delays.extra_margin_s * 1e3:g} ms extra loop delay; modelled loop delay "
+           f"{spec.delays.transport_s * 1e3:g} ms (1.5 x {spec.delays.control_period_s * 1e3:g}"
+           f" ms control period + {spec.delays.hil_transport_s * 1e3:g} ms HIL) folded into "
+           "the actuator lag.", ""]
+    md += ["## Design points and centred nominals", ""]
+    rows = []
+    for k, p in enumerate(res.points):
+        row = [str(p.number), _g(p.airspeed_m_s), f"[{_g(p.v_min_m_s)}, {_g(p.v_max_m_s)}]"]
+        for ax in AXES:
+            w = res.gs[ax][k].weights[0]
+            row.append(f"{_g(w.nominal[0])} / {w.nominal[1]:.2f}")
+        rows.append(row)
+    md.append(_table(["No.", "V [m/s]", "range [m/s]"] + [f"{ax} nominal V / gamma"
+                                                           for ax in AXES], rows))
+    md += ["", "## Weights: Ws by rule (table 2 beside), W_t about the centred nominal, "
+           "rotor-out moments", "",
+           "omega_b = min(omega_act/8, omega_u/2), omega_u = sqrt((u_max - d_max)/(J r_max)), "
+           f"M = peak |S| of the 2nd-order loop with {spec.overshoot:.0%} overshoot. "
+           "d_max = largest trim moment one lift rotor-out leaves (`rotor_out_moment`); "
+           "u_max = rotors about their trim thrust + surfaces (`moment_authority_robust`); "
+           "|W_t(0)| paper = the paper's cover (healthy nominal at the nominal airspeed).", ""]
+    rows = []
+    for ax in AXES:
+        for k, p in enumerate(res.points):
+            w = res.gs[ax][k].weights[0]
+            r = w.rule or {}
+            paper_w0 = "-"
+            if p.number <= 6:
+                from vtolftc.synthesis.uncertainty import cover as _cover
+
+                paper_w0 = _g(_cover(af, ax, p)[0].gain)
+            rows.append([ax, str(p.number), _g(w.Ws.M), _g(w.Ws.omega_b_rad_s),
+                         str(r.get("limited_by", "")), _g(r.get("table2_M", math.nan)),
+                         _g(r.get("table2_omega_b_rad_s", math.nan)), _g(w.Wr.u_max_N_m),
+                         _g(w.d_max_N_m), paper_w0, _g(w.Wt.gain),
+                         _g(float(np.max(w.Wt.magnitude(np.logspace(-3, 3, 241)))))])
+    md.append(_table(["axis", "No.", "M", "omega_b [rad/s]", "omega_b limited by",
+                      "table 2 M", "table 2 omega_b", "u_max [N m]", "d_max [N m]",
+                      "|W_t(0)| paper", "|W_t(0)| centred", "max |W_t| centred"], rows))
+    md += ["", "## Achieved norms, margins, mu (GS-SHIF)", "",
+           "Norms unnormalised: gamma = eq. 8 stack about the centred nominal; Wd*Sd = the "
+           "rotor-out objective (<= 1: the worst rotor-out excursion within "
+           f"{math.degrees(spec.excursion_rad):g} deg / 1.25); Wdelay*T <= 1 guarantees "
+           f"stability with {spec.delays.extra_margin_s * 1e3:g} ms extra delay (small gain). "
+           "Delay margin (exact, on the design plant), disk margin alpha (balanced, "
+           "guaranteed simultaneous gain / phase variation), linear peak angle after the "
+           "rotor-out moment step.", ""]
+    rows = []
+    for ax in AXES:
+        for k, d in enumerate(res.gs[ax]):
+            n = d.norms
+            w = d.weights[0]
+            lm = res.margins_gs.get(ax, [None] * len(res.points))[k]
+            mu = res.mu_gs.get(ax)
+            pk = disturbance_peak(w.plant(af), d.gains, w.d_max_N_m)
+            rows.append([ax, str(res.points[k].number), _f(n["gamma"]), _f(n["Ws*S"]),
+                         _f(n["Wt*T"]), _f(n["Wr*R"]), _f(n.get("Wd*Sd", 0.0)),
+                         _f(n["Wdelay*T"]), "yes" if d.stable else "NO",
+                         "-" if lm is None else f"{lm.delay_margin_s * 1e3:.0f}",
+                         "-" if lm is None else f"{lm.disk_alpha:.2f} (GM {lm.disk_gain_margin:.2f}"
+                         f", PM {lm.disk_phase_margin_deg:.0f} deg)",
+                         f"{math.degrees(pk):.1f}",
+                         "-" if not mu else _f(mu[k].mu_rs), "-" if not mu else _f(mu[k].mu_rp)])
+    md.append(_table(["axis", "No.", "gamma", "||Ws S||", "||Wt T||", "||Wr R||", "||Wd Sd||",
+                      "||Wdelay T||", "stable", "delay margin [ms]", "disk margin",
+                      "rotor-out peak [deg]", "mu_Delta", "mu_Delta-hat"], rows))
+    lows = [f"{ax} {res.points[k].number} ({m.delay_margin_s * 1e3:.0f} ms)"
+            for ax in AXES for k, m in enumerate(res.margins_gs.get(ax, []))
+            if m.delay_margin_s < spec.delays.extra_margin_s]
+    md += ["", "Delay-margin requirement (>= "
+           f"{spec.delays.extra_margin_s * 1e3:g} ms at every point): "
+           + ("holds." if not lows else "FAILS at " + ", ".join(lows) + "."), ""]
+    md += ["## Final gains (GS-SHIF) and active bounds", "",
+           "kp_angle [1/s], kp_rate [N m s/rad], ki_rate [N m/rad], kd_rate [N m s^2/rad], "
+           "tf_rate_s [s]; K_hf = kp_rate + kd_rate/tf_rate_s against its gyro-noise bound.",
+           ""]
+    rows = []
+    for ax in AXES:
+        for k, d in enumerate(res.gs[ax]):
+            g = d.gains
+            khf = g["kp_rate"] + g["kd_rate"] / g["tf_rate_s"]
+            hf = high_frequency_gain_bound(af, d.weights[0].Wr.u_max_N_m, spec)
+            rows.append([ax, str(res.points[k].number), _g(res.points[k].airspeed_m_s)]
+                        + [_g(g[p]) for p in PARAM_NAMES]
+                        + [f"{_g(khf)} / {_g(hf['k_hf_max'])}",
+                           "; ".join(_active_bounds(d)) or "none"])
+    md.append(_table(["axis", "No.", "V [m/s]", *PARAM_NAMES, "K_hf / bound",
+                      "active bounds"], rows))
+    if res.shif:
+        md += ["", "## SHIF (one constant P-PID per axis, same channels at every point)", ""]
+        md.append(_table(["axis", *PARAM_NAMES, "max gamma", "max ||Wd Sd||",
+                          "max ||Wdelay T||", "min delay margin [ms]", "stable at all points",
+                          "active bounds"],
+                         [[ax] + [_g(res.shif[ax].gains[p]) for p in PARAM_NAMES]
+                          + [_f(res.shif[ax].norms["gamma"]),
+                             _f(res.shif[ax].norms.get("Wd*Sd", 0.0)),
+                             _f(res.shif[ax].norms["Wdelay*T"]),
+                             f"{min(m.delay_margin_s for m in res.margins_shif[ax]) * 1e3:.0f}"
+                             if ax in res.margins_shif else "-",
+                             "yes" if res.shif[ax].stable else "NO",
+                             "; ".join(_active_bounds(res.shif[ax])) or "none"]
+                          for ax in AXES]))
+        if res.mu_shif:
+            md += ["", "SHIF mu per point (mu_Delta / mu_Delta-hat):", ""]
+            md.append(_table(["axis"] + [str(p.number) for p in res.points],
+                             [[ax] + [f"{m.mu_rs:.3f} / {m.mu_rp:.3f}"
+                                      for m in res.mu_shif[ax]]
+                              for ax in AXES if ax in res.mu_shif]))
+    if res.lqr:
+        from vtolftc.synthesis.baselines import LQR_Q, LQR_R
+
+        md += ["", "## Baseline: LQR (the paper's: hover model, Bryson's rule, unchanged)", "",
+               f"Q = diag{tuple(LQR_Q)}, R = {LQR_R}.", ""]
+        md.append(_table(["axis", "k_int [N m/(rad s)]", "k_angle [N m/rad]",
+                          "k_rate [N m s/rad]"],
+                         [[ax, _g(q.k_int), _g(q.k_angle), _g(q.k_rate)]
+                          for ax, q in res.lqr.items()]))
+    md += ["", "## Plots", ""] + [f"![{n}]({n})" for n in pngs]
+    if res.times:
+        md += ["", "## Run times", ""]
+        md.append(_table(["stage", "wall time [s]"],
+                         [[k, f"{v:.2f}"] for k, v in res.times.items()]))
+    path = out / "README.md"
+    atomic_write_text(path, "\n".join(md) + "\n")
+    return path

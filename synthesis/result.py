@@ -31,6 +31,10 @@ class SynthesisResult:
     times: dict[str, float] = field(default_factory=dict)
     files: dict[str, Path] = field(default_factory=dict)
     settings: dict[str, Any] = field(default_factory=dict)
+    method: str = "paper"
+    #: robust method: loop margins (``LoopMargins``) per axis and point, GS-SHIF and SHIF
+    margins_gs: dict[Axis, list[Any]] = field(default_factory=dict)
+    margins_shif: dict[Axis, list[Any]] = field(default_factory=dict)
 
     def nominal_stable(self) -> dict[Axis, list[bool]]:
         return {ax: [d.stable for d in self.gs[ax]] for ax in AXES}

@@ -153,7 +153,9 @@ def _check_limits(samples, dt=0.004):
     assert np.all(du[:, 10:] <= 14.0 + 1e-6)            # 350 deg/s of 25 deg
     fw = [s for s in samples if s.status.mode == FlightMode.FIXED_WING]
     late = [s for s in fw if s.time_usec - fw[0].time_usec > 2.5e6]
-    assert late and all(np.all(s.status.actuator_commands[:8] == 0.0) for s in late)
+    # fixed-wing: the lift rotors are a reserve (weighted, not bounded to 0): idle to within
+    # the secondary objective's share (measured 1.4e-4 nominal), unless the surfaces fall short
+    assert late and all(np.all(s.status.actuator_commands[:8] < 1e-3) for s in late)
 
 
 def _shipped():

@@ -218,8 +218,14 @@ def test_shipped_default_gains_match_the_shipped_airframe(ds1):
         s = GainSchedule.load(GAINS_DIR / f"{name}.json")
         assert s.controller == name
         s.verify_airframe(ds1.name, ds1.sha256)  # re-run the synthesis if the airframe changed
-    assert len(GainSchedule.load(GAINS_DIR / "gs-shif.json").breakpoints_m_s) == 6
+    # the robust design (default) schedules over 0..18 m/s; the paper's over 0..13 m/s
+    assert GainSchedule.load(GAINS_DIR / "gs-shif.json").breakpoints_m_s[-1] == 18.0
+    assert len(GainSchedule.load(GAINS_DIR / "gs-shif.json").breakpoints_m_s) == 7
+    assert len(GainSchedule.load(GAINS_DIR / "paper" / "gs-shif.json").breakpoints_m_s) == 6
     assert GainSchedule.load(GAINS_DIR / "shif.json").is_constant
+    for name in ("gs-shif", "shif"):
+        GainSchedule.load(GAINS_DIR / "paper" / f"{name}.json").verify_airframe(ds1.name,
+                                                                              ds1.sha256)
     lq = json.loads((GAINS_DIR / "lqr.json").read_text())
     assert lq["format"] == LQR_FORMAT and lq["controller"] == "lqr"
     assert lq["airframe"]["sha256"] == ds1.sha256
@@ -231,7 +237,8 @@ def test_shipped_default_gains_match_the_shipped_airframe(ds1):
 
 
 def test_shipped_gains_are_physically_sensible(ds1):
-    s = GainSchedule.load(GAINS_DIR / "gs-shif.json")
+    # paper design: the bounds of synthesis/design.py
+    s = GainSchedule.load(GAINS_DIR / "paper" / "gs-shif.json")
     J = np.diag(ds1.inertia_kg_m2)
     for i, ax in enumerate(AXES):
         t = s.table[ax]
@@ -242,6 +249,19 @@ def test_shipped_gains_are_physically_sensible(ds1):
     assert s.metadata["design_points"][2]["airspeed_m_s"] == 4.0
     assert s.metadata["weights"]["r_max_rad"] == R_MAX_RAD
     assert len(s.metadata["axes_metadata"]["roll"]["mu"]) == 6
+    # robust design (shipped default): the physical bounds of synthesis/robust.py
+    s = GainSchedule.load(GAINS_DIR / "gs-shif.json")
+    w_act = 1.0 / 0.05                                  # DS-1 actuators: 50 ms lag
+    for i, ax in enumerate(AXES):
+        t = s.table[ax]
+        assert min(t["tf_rate_s"]) >= 0.01 - 1e-9
+        assert max(t["kp_angle"]) <= w_act / 2 + 1e-9   # outer loop <= omega_act / 2
+        assert min(t["ki_rate"]) >= 0.1 * J[i] * (1 - 1e-5)   # integral action everywhere
+        assert max(t["kp_rate"]) <= w_act * J[i] * (1 + 1e-5)  # rate crossover <= omega_act
+    md = s.metadata["axes_metadata"]
+    assert len(md["roll"]["mu"]) == 7
+    for ax in AXES:   # the delay-margin requirement at every design point
+        assert min(m["delay_margin_s"] for m in md[ax]["loop_margins"]) >= 0.05
 
 
 def test_cli_rejects_bad_input(tmp_path, capsys):
@@ -260,7 +280,8 @@ def test_cli_rejects_bad_input(tmp_path, capsys):
 def test_full_synthesis_end_to_end(ds1, tmp_path):
     from vtolftc.synthesis.pipeline import run_synthesis
 
-    res = run_synthesis(ds1, tmp_path, n_starts=1, jobs=2, seed=0, report=True)
+    res = run_synthesis(ds1, tmp_path, n_starts=1, jobs=2, seed=0, report=True,
+                        method="paper")
     for name in ("gs-shif.json", "shif.json", "lqr.json", "report/README.md",
                  "report/mu_yaw.png", "report/wt_pitch.png", "report/poles_roll.png"):
         assert (tmp_path / name).is_file(), name
@@ -296,18 +317,21 @@ def test_atomic_write_gives_ordinary_permissions(tmp_path):
 
 
 @pytest.mark.slow
-def test_shipped_gains_are_what_the_synthesis_gives(ds1, tmp_path):
+@pytest.mark.parametrize("sub", ["paper", "."])
+def test_shipped_gains_are_what_the_synthesis_gives(ds1, tmp_path, sub):
     """The gains the autopilot ships are the output of `vtolftc synth` with the settings they
     record: same achieved norms at every point (the gains themselves may differ where a
     tie-break within 0.1 % picks another start on another machine's round-off). Fails when
-    the synthesis code or the airframe changed without regenerating the gain files."""
+    the synthesis code or the airframe changed without regenerating the gain files. ``paper``:
+    ``--method paper`` still gives the paper design's numbers (gains/paper/, the shipped
+    gains before the robust design); ``.``: the shipped robust design."""
     from vtolftc.firmware_sim.autopilot.attitude import default_gains_dir
     from vtolftc.synthesis.pipeline import run_synthesis
 
-    shipped = json.loads((default_gains_dir() / "gs-shif.json").read_text())
+    shipped = json.loads((default_gains_dir() / sub / "gs-shif.json").read_text())
     st = shipped["settings"]
     run_synthesis(ds1, tmp_path, n_starts=st["n_starts"], jobs=2, seed=st["seed"],
-                  report=False, mu=False)
+                  report=False, mu=False, method=st.get("method", "paper"))
     fresh = json.loads((tmp_path / "gs-shif.json").read_text())
     for ax in AXES:
         want = [n["gamma"] for n in shipped["axes"][ax]["metadata"]["achieved_norms"]]

@@ -135,6 +135,9 @@ def _check_common(args: argparse.Namespace) -> None:
 
     if not (math.isfinite(args.duration) and 0.0 < args.duration <= 3600.0):
         raise UsageError(f"--duration {args.duration!r}: expected seconds in (0, 3600]")
+    delay = getattr(args, "hil_delay_ms", 0.0)
+    if not (math.isfinite(delay) and 0.0 <= delay <= 1000.0):
+        raise UsageError(f"--hil-delay-ms {delay!r}: expected milliseconds in [0, 1000]")
     if args.gains is not None and not Path(args.gains).is_dir():
         raise UsageError(f"--gains {args.gains}: not a directory (expected one holding "
                          "gs-shif.json, shif.json and lqr.json)")
@@ -159,7 +162,8 @@ def _fly_one(case: str, controller: str, args: argparse.Namespace, run_dir: Path
                         for a in scen.actions]}
     observers = default_observers(run_dir, args)
     res = run_scenario(scen, controller, airframe=af, gains_dir=args.gains,
-                       observers=observers, info=info, vehicle_options=vopts)
+                       observers=observers, info=info, vehicle_options=vopts,
+                       hil_delay_s=getattr(args, "hil_delay_ms", 0.0) * 1e-3)
     if getattr(args, "rerun", False):
         _keep_viewer(observers)
     return res
@@ -427,6 +431,9 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="replace an existing --out run folder (default: refuse)")
     p.add_argument("--gains", default=None,
                    help="gains directory (default firmware_sim/autopilot/gains)")
+    p.add_argument("--hil-delay-ms", type=float, default=0.0,
+                   help="one-way delay on the in-process HIL state path, ms (rounded up to "
+                        "whole 4 ms control steps; default 0)")
     p.add_argument("--airframe", type=Path, default=None,
                    help="airframe TOML file (default: the shipped DS-1)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")

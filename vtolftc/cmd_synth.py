@@ -1,5 +1,9 @@
 """``vtolftc synth``: the attitude synthesis of an airframe (paper sections 3-4).
 
+``--method robust`` (default) is the robust design of ``synthesis/robust.py``;
+``--method paper`` reproduces the paper's design as published (the gains in
+``firmware_sim/autopilot/gains/paper/``).
+
 Writes ``DIR/gs-shif.json``, ``DIR/shif.json`` (format ``vtolftc-gain-schedule/1``),
 ``DIR/lqr.json`` (``vtolftc-lqr-gains/1``) and ``DIR/report/`` (markdown tables and PNG
 plots). A progress bar goes to stderr; the per-stage wall times and a summary are printed at
@@ -21,6 +25,8 @@ from typing import Any
 def _check(args: argparse.Namespace) -> None:
     from vtolftc.cli import UsageError
 
+    if args.starts is None:
+        args.starts = 2 if args.method == "robust" else 4
     if not 0 <= args.starts <= 200:
         raise UsageError(f"--starts {args.starts}: expected 0..200 random starts per tune")
     if not 1 <= args.jobs <= 64:
@@ -51,8 +57,9 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
     from vtolftc.synthesis.pipeline import run_synthesis, work_units
 
+    n_points = 7 if args.method == "robust" else 6
     t0 = time.perf_counter()
-    bar = tqdm(total=work_units(mu=not args.no_mu, report=not args.no_report),
+    bar = tqdm(total=work_units(n_points, mu=not args.no_mu, report=not args.no_report),
                desc="synth", unit="step", file=sys.stderr, dynamic_ncols=True,
                disable=args.quiet)
 
@@ -67,7 +74,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     try:
         res = run_synthesis(af, args.out, n_starts=args.starts, jobs=args.jobs,
                             seed=args.seed, mu=not args.no_mu, report=not args.no_report,
-                            progress=progress)
+                            progress=progress, method=args.method)
     finally:
         signal.signal(signal.SIGTERM, old_term)
         bar.close()
@@ -110,10 +117,15 @@ def register(sub: Any) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--airframe", type=Path, default=None,
                    help="airframe TOML file (default: the shipped DS-1)")
+    p.add_argument("--method", choices=("robust", "paper"), default="robust",
+                   help="robust (default): centred nominal, loop delays, rotor-out and "
+                        "delay-margin objectives, Ws by rule, 18 m/s cruise point; paper: "
+                        "the paper's design as published (table 2 weights, six points)")
     p.add_argument("--out", type=Path, default=Path("synth_out"),
                    help="output directory (default synth_out)")
-    p.add_argument("--starts", type=int, default=4,
-                   help="random starts per tune in addition to the classical start (default 4)")
+    p.add_argument("--starts", type=int, default=None,
+                   help="random starts per tune in addition to the classical start (default "
+                        "2 for robust, 4 for paper)")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random starts (default 0)")
     p.add_argument("--no-mu", action="store_true", help="skip the mu analysis")

@@ -13,8 +13,12 @@ The in-process runner is deterministic: vehicle at 1 kHz (RK4), autopilot at 250
 physics steps per control step), the autopilot fed ``decode_hil_state(encode_hil_state(...))``
 of the vehicle truth (bit-identical to what it receives over MAVLink HIL_STATE_QUATERNION),
 its output passed through ``wire_commands`` (float32) before the vehicle: the very functions
-of the SITL processes (:mod:`vtolftc.protocols.hil`). Actions due at a control step are
-executed before that step's ``Autopilot.step``.
+of the SITL processes (:mod:`vtolftc.protocols.hil`). ``hil_delay_s`` adds a one-way
+transport delay on the HIL state path: the autopilot gets the state of
+ceil(hil_delay_s x control rate) control steps earlier (a FIFO; 25 ms at 250 Hz = 7 steps =
+28 ms; the first steps of the run see the oldest state there is; telemetry and metrics keep
+the current state). Actions due at a control step are executed before that step's
+``Autopilot.step``.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
+from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -156,7 +161,8 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                  control_hz: int = 250, stop_on_crash: bool = True,
                  autopilot_setup: Callable[[Autopilot], None] | None = None,
                  info: dict[str, Any] | None = None,
-                 vehicle_options: Mapping[str, Any] | None = None) -> RunResult:
+                 vehicle_options: Mapping[str, Any] | None = None,
+                 hil_delay_s: float = 0.0) -> RunResult:
     """Fly ``scenario`` in-process with ``controller``; see the module docstring.
 
     Observers get ``on_start``, every sample, every event and exactly one ``on_finish``
@@ -175,6 +181,10 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
         raise ValueError(f"physics rate {physics_hz} Hz is not a multiple of the control "
                          f"rate {control_hz} Hz")
     n_sub = physics_hz // control_hz
+    if not (math.isfinite(hil_delay_s) and 0.0 <= hil_delay_s <= 1.0):
+        raise ValueError(f"HIL delay {hil_delay_s!r} s: expected 0 .. 1 s")
+    n_delay = math.ceil(hil_delay_s * control_hz - 1e-9) if hil_delay_s > 0 else 0
+    fifo: deque[NavState] = deque()
     ap = Autopilot(af, controller=controller, gains_dir=gains_dir, dt_s=1.0 / control_hz)
     if autopilot_setup is not None:
         autopilot_setup(ap)
@@ -199,6 +209,7 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
         "case": scenario.case, "scenario": scenario.name, "duration_s": scenario.duration_s,
         "description": scenario.description, "physics_hz": physics_hz,
         "control_hz": control_hz, "gains_file": str(ap.attitude.gains_path),
+        "hil_delay_s": n_delay / control_hz,
         "gains_sha256": ap.attitude.gains_sha256,
     }
     if info:
@@ -237,8 +248,12 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
             truth_nav = NavState(now, xe[6:10], xe[10:13], xe[0:3], xe[3:6], air)
             nav = decode_hil_state(encode_hil_state(truth_nav, home_lat, home_lon, home_alt),
                                    home_lat, home_lon, home_alt)
+            nav_ap = nav
+            if n_delay:  # the autopilot sees the delayed state, telemetry the current one
+                fifo.append(nav)
+                nav_ap = fifo.popleft() if len(fifo) > n_delay else fifo[0]
             t1 = pc()
-            u = ap.step(nav)
+            u = ap.step(nav_ap)
             st = ap.status()
             t2 = pc()
             log = ap.event_log

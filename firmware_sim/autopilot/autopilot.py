@@ -14,9 +14,15 @@
    nominal ``B(V)`` at the measured airspeed (:mod:`.effectiveness`), actuator position
    limits, rate limits as per-step bounds and a warm-started OSQP solve (the paper's
    redundancy management; ``B`` is evaluated on a 0.1 m/s airspeed grid). In fixed-wing the
-   lift rotors are excluded (upper bound ramped to 0 over ``VT_TRANS_P2_DUR`` after the
-   transition, then 0) and the ``Fz`` row is dropped; in hover the surfaces stay in the
-   problem (their columns vanish with the airspeed). The pushers are off (upper bound 0) in
+   lift rotors' upper bound is ramped to 0 over ``VT_TRANS_P2_DUR`` after the transition (they
+   stop carrying the weight); after the ramp the ``Fz`` row is dropped and the lift rotors
+   become a moment reserve: a second allocator with the actuator weights
+   :data:`FW_ROTOR_RESERVE_WEIGHT` (lift rotors 30 times costlier than the surfaces in the
+   secondary objective) keeps them at 0 while the surfaces can deliver the moments and uses
+   them only for what the surfaces cannot (e.g. a dead elevator, once the pitch command
+   exceeds what the nominal elevator could give). Still passive: both allocators use the
+   nominal ``B``. In hover the surfaces stay in the problem (their columns vanish with the
+   airspeed). The pushers are off (upper bound 0) in
    the multicopter modes and the back transition.
 
 Anti-windup: where the allocation could not achieve a moment (achieved short of the command by
@@ -100,6 +106,10 @@ _LANDED_STATE_OF = {m: landed_state(m) for m in FlightMode}
 
 #: Virtual-axis weights of the QP: [Fz (N), Fx (N), L, M, N (N m)]; moments first.
 ALLOCATION_WEIGHTS = np.array([1.0, 0.5, 10.0, 10.0, 5.0])
+#: Weight of the lift rotors in the fixed-wing allocator's secondary objective (surfaces and
+#: pushers 1): the rotors are a reserve the QP reaches for only when the surfaces cannot
+#: deliver (the primary, tracking, objective is ~1e5 times heavier per N m).
+FW_ROTOR_RESERVE_WEIGHT = 30.0
 
 
 def _body_velocity(q: NDArray[np.float64], v: NDArray[np.float64]) -> tuple[float, float, float]:
@@ -232,6 +242,15 @@ class Autopilot:
         self.allocator = QPAllocator(5, u_min, u_max, w_v=ALLOCATION_WEIGHTS,
                                      u_pref=self.u_pref_mc, rate_limit=rate, dt=self.dt,
                                      settings={"time_limit": 1e10})
+        w_fw = np.ones(self.n_u)
+        w_fw[: self.n_rotors] = FW_ROTOR_RESERVE_WEIGHT
+        self.allocator_fw = QPAllocator(5, u_min, u_max, w_v=ALLOCATION_WEIGHTS, w_u=w_fw,
+                                        u_pref=self.u_pref_fw, rate_limit=rate, dt=self.dt,
+                                        settings={"time_limit": 1e10})
+        # one statistics record and one settings dict for both (make_deterministic et al.)
+        self.allocator_fw.stats = self.allocator.stats
+        self.allocator_fw.settings = self.allocator.settings
+        self._fw_reserve = False  # allocator_fw active (fixed-wing after the rotor ramp)
         self.mc_alt = MulticopterAltitudeHold(self.dt)
         self.fw_alt = FixedWingAltitudeHold(self.dt)
         self.modes = ModeMachine()
@@ -470,6 +489,7 @@ class Autopilot:
             self._ref[:] = (0.0, 0.0, self._yaw_hold)
             self._alloc_status = "idle"
             self.allocator.reset(u)
+            self._fw_reserve = False
             self._reset_loops()
             return u.copy()
 
@@ -480,6 +500,7 @@ class Autopilot:
         g = self.airframe.gravity_m_s2
         fx_cmd = 0.0
         use_fz = True
+        reserve = False
         rotor_hi = 1.0
         pusher_hi = 1.0
         u_pref = self.u_pref_mc
@@ -520,6 +541,9 @@ class Autopilot:
             t_fw = (self._time_usec - self._fw_entry_usec) * 1e-6
             ramp = pp["VT_TRANS_P2_DUR"].value
             rotor_hi = max(0.0, 1.0 - t_fw / ramp) if ramp > 0 else 0.0
+            if rotor_hi <= 0.0:
+                rotor_hi = 1.0   # the reserve: weighted, not bounded (allocator_fw)
+                reserve = True
             u_pref = self.u_pref_fw
             lim = math.radians
             lateral = self.navigator.fw_lateral(nav, roll, yaw, V)
@@ -542,7 +566,7 @@ class Autopilot:
                 self._airspeed_int = min(max(self._airspeed_int
                                              + pp["FW_AIRSPD_I"].value * e_v * self.dt, -3.0), 3.0)
             fx_cmd = min(max(fx_cmd, 0.0), fx_max)
-            if rotor_hi > 0.0:
+            if not reserve:
                 a_up = self.mc_alt.update(self._alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
                                           kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
                                           ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
@@ -578,7 +602,11 @@ class Autopilot:
             for i in self.i_push:
                 hi[i] = pusher_hi
             self._hi_key = (rotor_hi, pusher_hi)
-        res = self.allocator.allocate(v, B, u_max=hi, u_pref=u_pref)
+        if reserve != self._fw_reserve:  # hand over, warm-started at the current command
+            (self.allocator_fw if reserve else self.allocator).reset(u)
+            self._fw_reserve = reserve
+        alloc = self.allocator_fw if reserve else self.allocator
+        res = alloc.allocate(v, B, u_max=hi, u_pref=u_pref)
         self._alloc_status = _STATUS_NAMES[res.status]
         self._track_saturation(v, res.v_achieved)
         u[:] = res.u
