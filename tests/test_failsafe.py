@@ -40,7 +40,7 @@ def _check(m: FailsafeMonitor, hil: float = 0.0, gcs: float = 0.5, fw: bool = Fa
     return m.check(armed=True, in_air=True, fixed_wing=fw, hil_age_s=hil, gcs_age_s=gcs)
 
 
-@pytest.mark.parametrize(("act", "action"), [(0, ""), (1, "hold"), (2, "land"), (3, "land")])
+@pytest.mark.parametrize(("act", "action"), [(0, ""), (1, "hold"), (2, "rtl"), (3, "land")])
 def test_datalink_loss_fires_after_com_dl_loss_t(act, action):
     ps = ParameterStore()
     m = FailsafeMonitor(ps, realtime=True)
@@ -58,13 +58,14 @@ def test_datalink_loss_fires_after_com_dl_loss_t(act, action):
     assert m.mav_state == (MAV_STATE_CRITICAL if action else None)
 
 
-def test_return_says_it_lands_and_fixed_wing_transitions_back():
-    ps = ParameterStore()
-    m = FailsafeMonitor(ps, realtime=True)
-    ps.set("NAV_DLL_ACT", 2)
-    _check(m)
-    ev = _check(m, gcs=10.5, fw=True)
-    assert ev[0].action == "land" and "no RTL" in ev[0].text and "back transition" in ev[0].text
+def test_return_is_rtl_and_land_from_fixed_wing_transitions_back():
+    for act, action, text in ((2, "rtl", "return to launch"), (3, "land", "back transition")):
+        ps = ParameterStore()
+        m = FailsafeMonitor(ps, realtime=True)
+        ps.set("NAV_DLL_ACT", act)
+        _check(m)
+        ev = _check(m, gcs=10.5, fw=True)
+        assert ev[0].action == action and text in ev[0].text
 
 
 def test_hil_loss_lands_in_real_time_reports_in_lockstep():

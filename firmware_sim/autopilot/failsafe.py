@@ -12,8 +12,9 @@ Parameters (registered in the autopilot's store, so ground stations read and set
     Data-link loss: armed and in the air, once a ground station was heard, no ground-station
     HEARTBEAT or command (signed, when signing is on) for COM_DL_LOSS_T wall seconds.
     Action NAV_DLL_ACT: 0 none (report only), 1 hold (AUTO.LOITER: TAKEOFF / LAND stop and
-    hover, hover and fixed-wing go on), 2 return (*this autopilot has no return mode yet: it
-    lands, and says so*), 3 land (from fixed-wing: back transition first). PX4 allows
+    hover, hover and fixed-wing go on), 2 return (AUTO.RTL of the navigator: climb or descend
+    to RTL_RETURN_ALT, fly home, land; where RTL is refused, e.g. no home yet, it lands),
+    3 land (from fixed-wing: back transition first). PX4 allows
     COM_DL_LOSS_T from 5 s; 1 s is allowed here so that tests stay short. Regained: reported,
     the action stays.
 ``COM_HIL_LOSS_T`` (s, default 0.5, 0.05..10), a vtol-ftc parameter in PX4's style
@@ -65,7 +66,7 @@ FAILSAFE_PARAMS: tuple[tuple[str, float, ParamType, float, float, str], ...] = (
     ("COM_DL_LOSS_T", 10.0, ParamType.REAL32, 1.0, 300.0,
      "data-link loss time-out, s (ground-station heartbeats)"),
     ("NAV_DLL_ACT", 0, ParamType.INT32, 0, 3,
-     "data-link loss action: 0 none, 1 hold, 2 return (lands: no RTL yet), 3 land"),
+     "data-link loss action: 0 none, 1 hold, 2 return to launch, 3 land"),
     ("COM_HIL_LOSS_T", 0.5, ParamType.REAL32, 0.05, 10.0,
      "HIL/sensor data loss time-out, s (then land)"),
     ("FD_FAIL_R", 60, ParamType.INT32, 0, 180, "attitude failure: roll limit, deg (0 off)"),
@@ -216,7 +217,7 @@ class FailsafeMonitor:
                 act = int(p.get("NAV_DLL_ACT"))
                 action, what = {DLL_NONE: ("", "no action (NAV_DLL_ACT 0)"),
                                 DLL_HOLD: ("hold", "hold"),
-                                DLL_RETURN: ("land", "return: no RTL, landing"),
+                                DLL_RETURN: ("rtl", "return to launch"),
                                 DLL_LAND: ("land", "landing")}.get(act, ("", "?"))
                 if action == "land" and fixed_wing:
                     what += " (back transition first)"

@@ -51,17 +51,21 @@ from vtolftc.firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
 from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotAPI,
+    CommandResult,
     FlightMode,
     LandedState,
 )
 from vtolftc.protocols.failure_units import ActuatorTable
+from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.link import Link
 from vtolftc.telemetry import TelemetrySample
 
 __all__ = ["EXIT_VEHICLE_LOST", "AutopilotProcess"]
 
 EXIT_VEHICLE_LOST = 3
-CMD_NAV_LAND, CMD_DO_SET_MODE, CMD_ARM_DISARM = 21, 176, 400
+CMD_NAV_LAND, CMD_DO_SET_MODE, CMD_ARM_DISARM = (mav.MAV_CMD_NAV_LAND, mav.MAV_CMD_DO_SET_MODE,
+                                              mav.MAV_CMD_COMPONENT_ARM_DISARM)
+CMD_NAV_RTL = mav.MAV_CMD_NAV_RETURN_TO_LAUNCH
 FORCE_DISARM = 21196.0
 _NAN7 = [math.nan] * 7
 
@@ -161,7 +165,10 @@ class AutopilotProcess:
                                          "name": ev.name, "text": ev.text,
                                          "action": ev.action})
             print(f"autopilot: failsafe: {ev.text}", file=self.log, flush=True)
-            if ev.action == "land":
+            if ev.action == "rtl":  # the navigator's RTL; land where it is refused
+                if ap.command(CMD_NAV_RTL, _NAN7) != CommandResult.ACCEPTED:
+                    ap.command(CMD_NAV_LAND, _NAN7)
+            elif ev.action == "land":
                 ap.command(CMD_NAV_LAND, _NAN7)
             elif ev.action == "hold":
                 ap.command(CMD_DO_SET_MODE, [1.0, 4.0, 3.0, *_NAN7[:4]])
