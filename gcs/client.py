@@ -186,13 +186,19 @@ class _Waiter:
 class GroundStation:
     """A MAVLink ground station talking to the autopilot (system 1, component 1).
 
-    Args:
-        url: link URL (``udp-server://127.0.0.1:14550`` = QGroundControl's port; a zenoh URL
-            such as ``zenoh://ds1/gcs/down?connect=tcp/127.0.0.1:7447`` works the same).
-        system_id, component_id: this ground station's ids (255 / 190 by convention).
-        signing: MAVLink 2 signing (:class:`protocols.SigningConfig`) for outgoing frames.
-        target_system, target_component: the autopilot's ids.
-        actuators: actuator numbering for :meth:`inject` (default: the shipped DS-1's).
+    Parameters
+    ----------
+    url
+        link URL (``udp-server://127.0.0.1:14550`` = QGroundControl's port; a zenoh URL
+        such as ``zenoh://ds1/gcs/down?connect=tcp/127.0.0.1:7447`` works the same).
+    system_id, component_id
+        this ground station's ids (255 / 190 by convention).
+    signing
+        MAVLink 2 signing (:class:`protocols.SigningConfig`) for outgoing frames.
+    target_system, target_component
+        the autopilot's ids.
+    actuators
+        actuator numbering for :meth:`inject` (default: the shipped DS-1's).
 
     The receive thread starts at once; :meth:`connect` also waits for the first heartbeat.
     """
@@ -242,9 +248,12 @@ class GroundStation:
                 **kw: Any) -> GroundStation:
         """Open the link, start the receive thread, wait for the autopilot's first heartbeat.
 
-        Raises:
-            GcsError: the link cannot be opened (bad URL, port in use).
-            GcsTimeout: no heartbeat from the autopilot within ``timeout_s``.
+        Raises
+        ------
+        GcsError
+            the link cannot be opened (bad URL, port in use).
+        GcsTimeout
+            no heartbeat from the autopilot within ``timeout_s``.
         """
         gs = cls(url, **kw)
         if not gs._heartbeat_event.wait(timeout_s):

@@ -109,9 +109,12 @@ def register_failsafe_params(params: ParameterStore) -> None:
 class FailsafeMonitor:
     """The failsafe state machine (see the module docstring).
 
-    Args:
-        params: the autopilot's parameter store (the parameters are registered if missing).
-        realtime: the vehicle runs on the wall clock (HIL loss then lands the aircraft).
+    Parameters
+    ----------
+    params
+        the autopilot's parameter store (the parameters are registered if missing).
+    realtime
+        the vehicle runs on the wall clock (HIL loss then lands the aircraft).
     """
 
     def __init__(self, params: ParameterStore, *, realtime: bool) -> None:
@@ -198,11 +201,15 @@ class FailsafeMonitor:
               gcs_age_s: float) -> list[FailsafeEvent]:
         """Data-link and HIL-data loss on the wall clock.
 
-        Args:
-            armed, in_air, fixed_wing: the autopilot's state.
-            hil_age_s: wall seconds since the last HIL step arrived (real time), since the
-                vehicle was last heard (lockstep); inf = never.
-            gcs_age_s: wall seconds since the last ground-station heartbeat (inf = never).
+        Parameters
+        ----------
+        armed, in_air, fixed_wing
+            the autopilot's state.
+        hil_age_s
+            wall seconds since the last HIL step arrived (real time), since the
+            vehicle was last heard (lockstep); inf = never.
+        gcs_age_s
+            wall seconds since the last ground-station heartbeat (inf = never).
         """
         out: list[FailsafeEvent] = []
         p = self.params

@@ -190,22 +190,35 @@ class _Client:
 class GcsEndpoint:
     """Ground-station side of the autopilot (see the module docstring).
 
-    Args:
-        autopilot: the :class:`AutopilotAPI` (its ``params`` store gets ``SIM_HOLD_MS``).
-        hil: the HIL bridge (fault commands are forwarded through it, by the control thread).
-        links: ground-station links (owned: closed by :meth:`close`).
-        actuators: numbering of motors and servos (from the airframe).
-        signing_required: the links verify signatures (see :data:`UNSIGNED_ALLOWED`); arming
-            and fault commands are refused unsigned even if a link lets them through.
-        lockstep: enables the simulation hold.
-        on_event: ``f(kind, text)`` for run logs ("command", "ack", "mode", "fault", ...);
-            called from the worker thread and from the control thread, so it must be
-            thread-safe (the autopilot process only queues).
-        rate_limit_hz, rate_burst: per-client token bucket (messages per second, burst).
-        queue_len: per-link receive queue (drop-oldest).
-        budget_per_cycle: messages the worker handles per cycle.
-        ready: the autopilot is warm (else BOOT and no arming until :attr:`ready` is set).
-        start: start the threads (tests may drive :meth:`serve_once` by hand).
+    Parameters
+    ----------
+    autopilot
+        the :class:`AutopilotAPI` (its ``params`` store gets ``SIM_HOLD_MS``).
+    hil
+        the HIL bridge (fault commands are forwarded through it, by the control thread).
+    links
+        ground-station links (owned: closed by :meth:`close`).
+    actuators
+        numbering of motors and servos (from the airframe).
+    signing_required
+        the links verify signatures (see :data:`UNSIGNED_ALLOWED`); arming
+        and fault commands are refused unsigned even if a link lets them through.
+    lockstep
+        enables the simulation hold.
+    on_event
+        ``f(kind, text)`` for run logs ("command", "ack", "mode", "fault", ...);
+        called from the worker thread and from the control thread, so it must be
+        thread-safe (the autopilot process only queues).
+    rate_limit_hz, rate_burst
+        per-client token bucket (messages per second, burst).
+    queue_len
+        per-link receive queue (drop-oldest).
+    budget_per_cycle
+        messages the worker handles per cycle.
+    ready
+        the autopilot is warm (else BOOT and no arming until :attr:`ready` is set).
+    start
+        start the threads (tests may drive :meth:`serve_once` by hand).
     """
 
     def __init__(self, autopilot: AutopilotAPI, hil: HilBridge, links: Sequence[Link], *,

@@ -321,12 +321,17 @@ class _Upload:
 class MissionProtocol:
     """The mission microservice on top of a :class:`MissionStore` (see the module docstring).
 
-    Args:
-        store: the plans.
-        codec: a pymavlink ``MAVLink`` instance of the dialect (builds the replies).
-        mission_state: ``f() -> (mission_state, mission_mode)`` for MISSION_CURRENT
-            (MISSION_STATE and MISSION_MODE enums; default NOT_STARTED / not in mission mode).
-        on_text: ``f(text)`` for refusal reasons (the endpoint sends them as STATUSTEXT).
+    Parameters
+    ----------
+    store
+        the plans.
+    codec
+        a pymavlink ``MAVLink`` instance of the dialect (builds the replies).
+    mission_state
+        ``f() -> (mission_state, mission_mode)`` for MISSION_CURRENT
+        (MISSION_STATE and MISSION_MODE enums; default NOT_STARTED / not in mission mode).
+    on_text
+        ``f(text)`` for refusal reasons (the endpoint sends them as STATUSTEXT).
     """
 
     MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM",

@@ -148,10 +148,13 @@ class Goal:
 class Navigator:
     """Mission, RTL, loiter and reposition (see the module docstring).
 
-    Args:
-        ap: the :class:`~vtolftc.firmware_sim.autopilot.autopilot.Autopilot` it steers (its
-            mode machine, references and parameters; not imported here: no import cycle).
-        on_text: ``f(text)`` for events worth a STATUSTEXT.
+    Parameters
+    ----------
+    ap
+        the :class:`~vtolftc.firmware_sim.autopilot.autopilot.Autopilot` it steers (its
+        mode machine, references and parameters; not imported here: no import cycle).
+    on_text
+        ``f(text)`` for events worth a STATUSTEXT.
     """
 
     def __init__(self, ap: Any, on_text: Callable[[str], None] | None = None) -> None:

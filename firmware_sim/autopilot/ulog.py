@@ -83,10 +83,14 @@ def _struct_of(fields: list[tuple[str, str]]) -> struct.Struct:
 class ULogWriter:
     """Run observer writing ``path`` (see the module docstring).
 
-    Args:
-        path: the ``.ulg`` file (parent directory created).
-        autopilot: the autopilot (parameters, navigator, battery estimate), optional.
-        home: (lat, lon, alt) of the local frame's origin, if known at start.
+    Parameters
+    ----------
+    path
+        the ``.ulg`` file (parent directory created).
+    autopilot
+        the autopilot (parameters, navigator, battery estimate), optional.
+    home
+        (lat, lon, alt) of the local frame's origin, if known at start.
     """
 
     def __init__(self, path: str | Path, autopilot: Any = None,
