@@ -50,11 +50,13 @@ from vtolftc.firmware_sim.autopilot.interface import (
     ParameterStore,
     ParamType,
 )
+from vtolftc.protocols.generated import constants as mav
 
 __all__ = ["FAILSAFE_PARAMS", "FailsafeEvent", "FailsafeMonitor", "register_failsafe_params"]
 
-MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY = 5, 6
-SEVERITY_EMERGENCY, SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_INFO = 0, 2, 4, 6
+MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY = mav.MAV_STATE_CRITICAL, mav.MAV_STATE_EMERGENCY
+SEVERITY_EMERGENCY, SEVERITY_CRITICAL = mav.MAV_SEVERITY_EMERGENCY, mav.MAV_SEVERITY_CRITICAL
+SEVERITY_WARNING, SEVERITY_INFO = mav.MAV_SEVERITY_WARNING, mav.MAV_SEVERITY_INFO
 
 LOCKSTEP_HIL_LOSS_MIN_S = 1.5
 """Least HIL-loss time-out in lockstep, s: the vehicle repeats a state every 0.5 s while it

@@ -79,14 +79,15 @@ from vtolftc.firmware_sim.autopilot.mission import (
     MissionItem,
     MissionStore,
 )
+from vtolftc.protocols.generated import constants as mav
 
 __all__ = ["NAV_PARAMS", "Goal", "NavMode", "Navigator"]
 
-CMD_NAV_RETURN_TO_LAUNCH = 20
-CMD_DO_CHANGE_SPEED = 178
-CMD_DO_REPOSITION = 192
-CMD_DO_SET_MISSION_CURRENT = 224
-CMD_MISSION_START = 300
+CMD_NAV_RETURN_TO_LAUNCH = mav.MAV_CMD_NAV_RETURN_TO_LAUNCH
+CMD_DO_CHANGE_SPEED = mav.MAV_CMD_DO_CHANGE_SPEED
+CMD_DO_REPOSITION = mav.MAV_CMD_DO_REPOSITION
+CMD_DO_SET_MISSION_CURRENT = mav.MAV_CMD_DO_SET_MISSION_CURRENT
+CMD_MISSION_START = mav.MAV_CMD_MISSION_START
 
 
 class NavMode:
@@ -275,7 +276,7 @@ class Navigator:
         """Commands the navigator owns (None: not one of them). ``p``: seven params, NaN =
         default, positions in degrees and altitudes AMSL (the endpoint converts COMMAND_INT
         and relative frames)."""
-        if cid == 176:  # DO_SET_MODE
+        if cid == mav.MAV_CMD_DO_SET_MODE:
             if not (math.isfinite(p[0]) and int(p[0]) & 1 and math.isfinite(p[1])):
                 return CommandResult.DENIED
             main = int(p[1])
@@ -314,13 +315,14 @@ class Navigator:
             return self._change_speed(p)
         if cid == CMD_DO_REPOSITION:
             return self._reposition(p)
-        if cid in (21, 22, 3000):  # land, takeoff, transition: the autopilot flies them
-            if cid == 22:
+        if cid in (mav.MAV_CMD_NAV_LAND, mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_CMD_DO_VTOL_TRANSITION):
+            # land, takeoff, transition: the autopilot flies them
+            if cid == mav.MAV_CMD_NAV_TAKEOFF:
                 self._leave_auto(NavMode.TAKEOFF)
-            elif cid == 21:
+            elif cid == mav.MAV_CMD_NAV_LAND:
                 self._leave_auto(NavMode.LAND)
-            elif cid == 3000 and self.nav_mode in (NavMode.MISSION, NavMode.RTL,
-                                                   NavMode.LOITER, NavMode.TAKEOFF):
+            elif cid == mav.MAV_CMD_DO_VTOL_TRANSITION and self.nav_mode in (
+                    NavMode.MISSION, NavMode.RTL, NavMode.LOITER, NavMode.TAKEOFF):
                 # a transition outside the navigator's plan: course and altitude hold
                 self._leave_auto(NavMode.POSCTL)
             return None
