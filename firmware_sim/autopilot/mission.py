@@ -159,14 +159,17 @@ class MissionItem:
 
     @property
     def lat_deg(self) -> float:
+        """Latitude (deg) from the item's ``x`` (degE7)."""
         return self.x * 1e-7
 
     @property
     def lon_deg(self) -> float:
+        """Longitude (deg) from the item's ``y`` (degE7)."""
         return self.y * 1e-7
 
     @property
     def relative_alt(self) -> bool:
+        """True when ``z`` is relative to home (a ..._RELATIVE_ALT frame)."""
         return self.frame in RELATIVE_FRAMES
 
     def altitude_amsl(self, home_alt_m: float) -> float:
@@ -284,6 +287,7 @@ class MissionStore:
 
     @property
     def mission(self) -> list[MissionItem]:
+        """The items of the mission plan (MAV_MISSION_TYPE_MISSION)."""
         return self.plans[MISSION]
 
     def replace(self, plan: int, items: list[MissionItem]) -> tuple[int, str]:
@@ -302,6 +306,7 @@ class MissionStore:
         return Result.ACCEPTED, ""
 
     def clear(self, plan: int) -> None:
+        """Empty plan ``plan`` (``ALL``: all three); the mission's current item goes to 0."""
         for p in (MISSION, FENCE, RALLY) if plan == ALL else (plan,):
             self.plans[p] = []
             if p == MISSION:
@@ -388,6 +393,7 @@ class MissionProtocol:
         return self.codec.mission_current_encode(self.store.current if n else 0, n, state, mode)
 
     def item_msg(self, item: MissionItem, partner: tuple[int, int], as_int: bool) -> Any:
+        """MISSION_ITEM_INT (``as_int``) or float MISSION_ITEM carrying ``item`` to ``partner``."""
         cur = int(item.mission_type == MISSION and item.seq == self.store.current)
         c = self.codec
         if as_int:

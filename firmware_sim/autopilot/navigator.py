@@ -143,6 +143,7 @@ class Goal:
 
     @property
     def has_position(self) -> bool:
+        """True when the goal has a horizontal position (north and east finite)."""
         return math.isfinite(self.north) and math.isfinite(self.east)
 
 
@@ -201,6 +202,7 @@ class Navigator:
 
     @property
     def home_alt(self) -> float:
+        """Home altitude AMSL (m); 0 before the home is set."""
         return self.home[2] if self.home is not None else 0.0
 
     def to_local(self, lat_deg: float, lon_deg: float) -> tuple[float, float]:
@@ -220,6 +222,7 @@ class Navigator:
                 lon0 + math.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(lat0)))))
 
     def goal_of(self, item: MissionItem) -> Goal:
+        """Goal of ``item``: north, east from home (m, local NED) and height above home (m)."""
         g = Goal(item.command, item.seq,
                  params=(item.param1, item.param2, item.param3, item.param4))
         positional = item.command in (NAV_WAYPOINT, NAV_LOITER_TIME, NAV_LOITER_UNLIM,
@@ -237,6 +240,7 @@ class Navigator:
         return (main << 16) | (sub << 24)
 
     def px4_mode(self, mode: FlightMode) -> tuple[int, int]:
+        """PX4 (main, sub) mode reported for flight mode ``mode`` and the navigator's state."""
         if self.nav_mode in (NavMode.MISSION, NavMode.RTL):
             return self.nav_mode
         if mode == FlightMode.TAKEOFF:
@@ -384,6 +388,10 @@ class Navigator:
         return CommandResult.ACCEPTED
 
     def start_mission(self) -> CommandResult:
+        """Fly the uploaded mission from its current item (from the start once completed).
+
+        DENIED without a mission, TEMPORARILY_REJECTED before the home is known.
+        """
         if not self.store.mission:
             self._say("mission rejected: no mission uploaded")
             return CommandResult.DENIED
@@ -397,6 +405,11 @@ class Navigator:
         return CommandResult.ACCEPTED
 
     def start_rtl(self, why: str) -> CommandResult:
+        """Return to launch (``why`` is the reason told to the ground station).
+
+        Flies to the nearest of home and the rally points at ``RTL_RETURN_ALT`` or higher and
+        lands there; a running mission is paused. DENIED when disarmed, IDLE or without a home.
+        """
         m = self.ap.modes
         if not m.armed or m.mode == FlightMode.IDLE or self.home is None:
             return CommandResult.DENIED
