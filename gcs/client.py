@@ -120,6 +120,7 @@ class CommandOutcome:
 
     @property
     def accepted(self) -> bool:
+        """True when the autopilot answered MAV_RESULT_ACCEPTED."""
         return self.result == 0
 
     def __str__(self) -> str:
@@ -297,6 +298,7 @@ class GroundStation:
         self._listeners.append(callback)
 
     def remove_listener(self, callback: Callable[[Any], None]) -> None:
+        """Stop calling ``callback`` for received messages (no error if not added)."""
         with contextlib.suppress(ValueError):
             self._listeners.remove(callback)
 

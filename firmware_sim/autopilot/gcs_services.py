@@ -166,12 +166,14 @@ class Px4Services:
         self._check_fence(pos)
 
     def tick(self) -> None:
+        """Mission-protocol wall-clock duties (request retries); replies go to all links."""
         if self.mission is not None:
             for reply in self.mission.tick(time.monotonic()):
                 self.ep._send_all(reply)
 
     # ------------------------------------------------------------------ streams
     def build(self, msg_id: int) -> Any:
+        """Stream message ``msg_id`` (GPS_RAW_INT, MISSION_CURRENT, BATTERY_STATUS) or None."""
         ep = self.ep
         c = ep.links[0].codec
         if msg_id == MSG_MISSION_CURRENT:

@@ -141,6 +141,7 @@ class ULogWriter:
 
     # ------------------------------------------------------------------ observer protocol
     def on_start(self, info: dict[str, Any]) -> None:
+        """Create the ``.ulg`` file and write the header, flag bits, formats and parameters."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._f = self.path.open("wb")
         self._f.write(_HEADER_MAGIC + bytes([1]) + struct.pack("<Q", 0))
@@ -166,6 +167,7 @@ class ULogWriter:
         self._f.flush()
 
     def on_sample(self, sample: Any) -> None:
+        """Append one control step's topics (timestamps relative to the first sample)."""
         if self._f is None:
             return
         t = int(sample.time_usec)
@@ -203,6 +205,7 @@ class ULogWriter:
             self._f.flush()
 
     def on_event(self, time_usec: int, kind: str, text: str) -> None:
+        """Log the event as a ULog string: WARNING for faults, failsafes and denials, else INFO."""
         if self._f is None:
             return
         level = b"4" if kind in ("fault", "failsafe") or "denied" in text else b"6"
@@ -210,6 +213,7 @@ class ULogWriter:
                   + f"[{kind}] {text}".encode())
 
     def on_finish(self, metrics: dict[str, Any]) -> None:
+        """Flush and close the file (``metrics`` unused)."""
         if self._f is None:
             return
         self._f.flush()
