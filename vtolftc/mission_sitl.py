@@ -55,6 +55,13 @@ def pymavlink_upload(conn: Any, items: list[MissionItem]) -> Any:
 
 
 def pymavlink_download(conn: Any) -> list[MissionItem]:
+    """Download the mission from system 1 with plain pymavlink calls (an independent client).
+
+    Raises
+    ------
+    SitlError
+        no MISSION_COUNT, or an item missing or out of order, within 5 s each.
+    """
     conn.mav.mission_request_list_send(1, 1, 0)
     cnt = _recv(conn, ["MISSION_COUNT"], 5.0)
     if cnt is None:

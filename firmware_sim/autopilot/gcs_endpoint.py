@@ -569,6 +569,7 @@ class GcsEndpoint:
 
     @property
     def time_boot_ms(self) -> int:
+        """Simulated time since boot (ms), for the messages' ``time_boot_ms``."""
         return self.sim_usec // 1000
 
     def _observe_snapshot(self) -> None:

@@ -150,6 +150,7 @@ class AutopilotProcess:
         self._held = False
 
     def add_observer(self, obs: Any) -> None:
+        """Add a run observer (gets ``on_start``, ``on_sample``, ``on_event``, ``on_finish``)."""
         self.observers.append(obs)
 
     def _event(self, kind: str, text: str) -> None:
