@@ -912,7 +912,8 @@ class GcsEndpoint:
             else self.actuators.servos
         if cmd == CMD_INJECT_FAILURE:
             ftype, inst = p[1], p[2]
-            if not math.isfinite(ftype) or int(ftype) not in (0, 1, 2):
+            if not math.isfinite(ftype) or int(ftype) not in (
+                    mav.FAILURE_TYPE_OK, mav.FAILURE_TYPE_OFF, mav.FAILURE_TYPE_STUCK):
                 return CommandResult.UNSUPPORTED, "failure types: OK, OFF, STUCK"
         else:
             inst, loss = p[1], p[2]

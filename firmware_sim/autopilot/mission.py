@@ -64,7 +64,8 @@ __all__ = [
 ]
 
 # MAV_MISSION_TYPE
-MISSION, FENCE, RALLY, ALL = 0, 1, 2, 255
+MISSION, FENCE = mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_FENCE
+RALLY, ALL = mav.MAV_MISSION_TYPE_RALLY, mav.MAV_MISSION_TYPE_ALL
 PLAN_NAMES = {MISSION: "mission", FENCE: "fence", RALLY: "rally"}
 MAX_ITEMS = {MISSION: 500, FENCE: 64, RALLY: 8}
 """Capacity of each plan (PX4's dataman sizes)."""
