@@ -404,14 +404,17 @@ class GroundStation:
             raise GcsTimeout(f"mission download: no answer to {msg.get_type()} within "
                              f"{timeout_s:g} s")
 
-        cnt = ask(c.mission_request_list_encode(*self.target, 0),
-                  lambda m: m.get_type() == "MISSION_COUNT" and m.mission_type == 0)
+        cnt = ask(c.mission_request_list_encode(*self.target, mav.MAV_MISSION_TYPE_MISSION),
+                  lambda m: m.get_type() == "MISSION_COUNT"
+                  and m.mission_type == mav.MAV_MISSION_TYPE_MISSION)
         items = []
         for seq in range(int(cnt.count)):
-            items.append(ask(c.mission_request_int_encode(*self.target, seq, 0),
+            items.append(ask(c.mission_request_int_encode(*self.target, seq,
+                                                          mav.MAV_MISSION_TYPE_MISSION),
                              lambda m, s=seq: m.get_type() == "MISSION_ITEM_INT"
                              and m.seq == s))
-        self._send(c.mission_ack_encode(*self.target, 0, 0))
+        self._send(c.mission_ack_encode(*self.target, mav.MAV_MISSION_ACCEPTED,
+                                        mav.MAV_MISSION_TYPE_MISSION))
         return items
 
     def land(self) -> CommandOutcome:
@@ -595,7 +598,8 @@ class GroundStation:
                 next_hb = now + 1.0
                 # no peer yet on a udp-server: dropped and counted by the link
                 with contextlib.suppress(Exception), self._send_lock:
-                    self._link.send(codec.heartbeat_encode(6, 8, 0, 0, 4))
+                    self._link.send(codec.heartbeat_encode(
+                        mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE))
             try:
                 msgs = self._link.recv(0.2)
             except Exception:  # closed under us
