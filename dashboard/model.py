@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from vtolftc.protocols.generated import constants as mav
 from vtolftc.rotation import euler_to_quat, quat_mul
 
 __all__ = [
@@ -50,8 +51,10 @@ def ned_to_display(p: Sequence[float] | np.ndarray) -> np.ndarray:
 
 
 _EARTH_RADIUS_M = 6_378_137.0
-_RELATIVE_FRAMES = (3, 6)          # MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT)
-_NAV_COMMANDS = (16, 17, 19, 21, 22, 84, 85)
+_RELATIVE_FRAMES = (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+_NAV_COMMANDS = (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_LOITER_UNLIM,
+                 mav.MAV_CMD_NAV_LOITER_TIME, mav.MAV_CMD_NAV_LAND, mav.MAV_CMD_NAV_TAKEOFF,
+                 mav.MAV_CMD_NAV_VTOL_TAKEOFF, mav.MAV_CMD_NAV_VTOL_LAND)
 
 
 def mission_points_display(items: Sequence[Any], home_lat_deg: float, home_lon_deg: float,

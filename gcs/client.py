@@ -120,6 +120,7 @@ class CommandOutcome:
 
     @property
     def accepted(self) -> bool:
+        """True when the autopilot answered MAV_RESULT_ACCEPTED."""
         return self.result == 0
 
     def __str__(self) -> str:
@@ -186,13 +187,19 @@ class _Waiter:
 class GroundStation:
     """A MAVLink ground station talking to the autopilot (system 1, component 1).
 
-    Args:
-        url: link URL (``udp-server://127.0.0.1:14550`` = QGroundControl's port; a zenoh URL
-            such as ``zenoh://ds1/gcs/down?connect=tcp/127.0.0.1:7447`` works the same).
-        system_id, component_id: this ground station's ids (255 / 190 by convention).
-        signing: MAVLink 2 signing (:class:`protocols.SigningConfig`) for outgoing frames.
-        target_system, target_component: the autopilot's ids.
-        actuators: actuator numbering for :meth:`inject` (default: the shipped DS-1's).
+    Parameters
+    ----------
+    url
+        link URL (``udp-server://127.0.0.1:14550`` = QGroundControl's port; a zenoh URL
+        such as ``zenoh://ds1/gcs/down?connect=tcp/127.0.0.1:7447`` works the same).
+    system_id, component_id
+        this ground station's ids (255 / 190 by convention).
+    signing
+        MAVLink 2 signing (:class:`protocols.SigningConfig`) for outgoing frames.
+    target_system, target_component
+        the autopilot's ids.
+    actuators
+        actuator numbering for :meth:`inject` (default: the shipped DS-1's).
 
     The receive thread starts at once; :meth:`connect` also waits for the first heartbeat.
     """
@@ -242,9 +249,12 @@ class GroundStation:
                 **kw: Any) -> GroundStation:
         """Open the link, start the receive thread, wait for the autopilot's first heartbeat.
 
-        Raises:
-            GcsError: the link cannot be opened (bad URL, port in use).
-            GcsTimeout: no heartbeat from the autopilot within ``timeout_s``.
+        Raises
+        ------
+        GcsError
+            the link cannot be opened (bad URL, port in use).
+        GcsTimeout
+            no heartbeat from the autopilot within ``timeout_s``.
         """
         gs = cls(url, **kw)
         if not gs._heartbeat_event.wait(timeout_s):
@@ -288,6 +298,7 @@ class GroundStation:
         self._listeners.append(callback)
 
     def remove_listener(self, callback: Callable[[Any], None]) -> None:
+        """Stop calling ``callback`` for received messages (no error if not added)."""
         with contextlib.suppress(ValueError):
             self._listeners.remove(callback)
 
@@ -393,14 +404,17 @@ class GroundStation:
             raise GcsTimeout(f"mission download: no answer to {msg.get_type()} within "
                              f"{timeout_s:g} s")
 
-        cnt = ask(c.mission_request_list_encode(*self.target, 0),
-                  lambda m: m.get_type() == "MISSION_COUNT" and m.mission_type == 0)
+        cnt = ask(c.mission_request_list_encode(*self.target, mav.MAV_MISSION_TYPE_MISSION),
+                  lambda m: m.get_type() == "MISSION_COUNT"
+                  and m.mission_type == mav.MAV_MISSION_TYPE_MISSION)
         items = []
         for seq in range(int(cnt.count)):
-            items.append(ask(c.mission_request_int_encode(*self.target, seq, 0),
+            items.append(ask(c.mission_request_int_encode(*self.target, seq,
+                                                          mav.MAV_MISSION_TYPE_MISSION),
                              lambda m, s=seq: m.get_type() == "MISSION_ITEM_INT"
                              and m.seq == s))
-        self._send(c.mission_ack_encode(*self.target, 0, 0))
+        self._send(c.mission_ack_encode(*self.target, mav.MAV_MISSION_ACCEPTED,
+                                        mav.MAV_MISSION_TYPE_MISSION))
         return items
 
     def land(self) -> CommandOutcome:
@@ -584,7 +598,8 @@ class GroundStation:
                 next_hb = now + 1.0
                 # no peer yet on a udp-server: dropped and counted by the link
                 with contextlib.suppress(Exception), self._send_lock:
-                    self._link.send(codec.heartbeat_encode(6, 8, 0, 0, 4))
+                    self._link.send(codec.heartbeat_encode(
+                        mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE))
             try:
                 msgs = self._link.recv(0.2)
             except Exception:  # closed under us

@@ -115,21 +115,30 @@ class LinkStats:
 class Link:
     """A MAVLink 2 endpoint over any :class:`Transport`.
 
-    Args:
-        transport: the byte mover (owned: closed with the link).
-        system_id, component_id: source ids of frames packed by :meth:`send`.
-        signing: MAVLink 2 signing for outgoing frames and verification of incoming ones.
-        keep_unknown: pass messages of unknown ids to the caller (as ``MAVLink_unknown``)
-            instead of dropping them.
-        codec: use this generated ``MAVLink`` object instead of making one (ids and signing
-            arguments are then ignored).
-        track_source: remember each message's source address (:meth:`source_of`), so that a
-            server can :meth:`pin` its peer.
-        stream_table: the signing replay window, shared with other links (see
-            :class:`vtolftc.protocols.mavlink.StreamTimestamps`).
-        rate_limit_hz, rate_burst: receive at most this many datagrams per second (token
-            bucket, ``rate_burst`` default twice the rate); the excess is dropped before it is
-            parsed (counted as ``dropped_rate``), so a flood costs little more than the read.
+    Parameters
+    ----------
+    transport
+        the byte mover (owned: closed with the link).
+    system_id, component_id
+        source ids of frames packed by :meth:`send`.
+    signing
+        MAVLink 2 signing for outgoing frames and verification of incoming ones.
+    keep_unknown
+        pass messages of unknown ids to the caller (as ``MAVLink_unknown``)
+        instead of dropping them.
+    codec
+        use this generated ``MAVLink`` object instead of making one (ids and signing
+        arguments are then ignored).
+    track_source
+        remember each message's source address (:meth:`source_of`), so that a
+        server can :meth:`pin` its peer.
+    stream_table
+        the signing replay window, shared with other links (see
+        :class:`vtolftc.protocols.mavlink.StreamTimestamps`).
+    rate_limit_hz, rate_burst
+        receive at most this many datagrams per second (token
+        bucket, ``rate_burst`` default twice the rate); the excess is dropped before it is
+        parsed (counted as ``dropped_rate``), so a flood costs little more than the read.
 
     One thread may send while another receives (the counters are then approximate, and with
     signing a send racing a receive may very rarely reuse a signing timestamp).
@@ -426,8 +435,10 @@ _SCHEMES = ("udp-server", "udp-client", "zenoh")
 def parse_link_url(url: str) -> LinkUrl:
     """Parse and validate a link URL (syntax only: the loopback policy is applied on open).
 
-    Raises:
-        ValueError: with a message saying what is wrong and what is expected.
+    Raises
+    ------
+    ValueError
+        with a message saying what is wrong and what is expected.
     """
     if not isinstance(url, str) or "://" not in url:
         raise ValueError(
@@ -481,19 +492,31 @@ def open_link(
 ) -> Link:
     """Open a :class:`Link` from a URL (see the module docstring for the scheme).
 
-    Args:
-        url: ``udp-server://...``, ``udp-client://...`` or ``zenoh://...``.
-        system_id, component_id: source ids of the frames this link packs.
-        signing: MAVLink 2 signing configuration, None = no signing.
-        allow_remote: permit non-loopback addresses (never settable from the URL).
-        keep_unknown: deliver messages of ids unknown to the dialect instead of dropping them.
-        track_source: remember source addresses (see :meth:`Link.source_of`, :meth:`Link.pin`).
-        stream_table: signing replay window shared by several links.
-        rate_limit_hz, rate_burst: receive rate limit in datagrams/s (see :class:`Link`).
+    Parameters
+    ----------
+    url
+        ``udp-server://...``, ``udp-client://...`` or ``zenoh://...``.
+    system_id, component_id
+        source ids of the frames this link packs.
+    signing
+        MAVLink 2 signing configuration, None = no signing.
+    allow_remote
+        permit non-loopback addresses (never settable from the URL).
+    keep_unknown
+        deliver messages of ids unknown to the dialect instead of dropping them.
+    track_source
+        remember source addresses (see :meth:`Link.source_of`, :meth:`Link.pin`).
+    stream_table
+        signing replay window shared by several links.
+    rate_limit_hz, rate_burst
+        receive rate limit in datagrams/s (see :class:`Link`).
 
-    Raises:
-        ValueError: malformed URL, or a non-loopback address without ``allow_remote``.
-        OSError: the socket could not be bound (e.g. port in use).
+    Raises
+    ------
+    ValueError
+        malformed URL, or a non-loopback address without ``allow_remote``.
+    OSError
+        the socket could not be bound (e.g. port in use).
     """
     spec = parse_link_url(url)
     transport: Transport

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import struct
 
+from vtolftc.protocols.generated import constants as mav
+
 __all__ = [
     "MAV_MODE_FLAG_CUSTOM_MODE_ENABLED",
     "MAV_MODE_FLAG_SAFETY_ARMED",
@@ -25,8 +27,8 @@ __all__ = [
     "mode_name",
 ]
 
-MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
-MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+MAV_MODE_FLAG_SAFETY_ARMED = mav.MAV_MODE_FLAG_SAFETY_ARMED
 
 PX4_MAIN: dict[str, int] = {
     "MANUAL": 1, "ALTCTL": 2, "POSCTL": 3, "AUTO": 4, "ACRO": 5, "OFFBOARD": 6,

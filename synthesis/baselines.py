@@ -57,6 +57,7 @@ class LqrAxis:
     B: NDArray[np.float64]
 
     def gains(self) -> dict[str, float]:
+        """``k_int``, ``k_angle``, ``k_rate`` of this axis as a dict."""
         return {"k_int": self.k_int, "k_angle": self.k_angle, "k_rate": self.k_rate}
 
 

@@ -84,6 +84,7 @@ class TunableBlock:
 
     @property
     def n_params(self) -> int:
+        """Number of tunable parameters of the block."""
         return len(self.parameters())
 
     def _matrix_params(
@@ -150,9 +151,11 @@ class StaticGain(TunableBlock):
         self._initial = _grid(self.initial, shape, "initial", 0.0)
 
     def parameters(self) -> list[Parameter]:
+        """The gain matrix entries ``K[i,j]``, row-major, as parameters."""
         return self._matrix_params("K", self._initial, self._scale, self._bound)
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
+        """Static gain: no states, ``D = theta`` reshaped to (n_out, n_in)."""
         K = np.asarray(theta, float).reshape(self.n_out, self.n_in)
         return np.zeros((0, 0)), np.zeros((0, self.n_in)), np.zeros((self.n_out, 0)), K
 
@@ -207,12 +210,14 @@ class StateSpaceBlock(TunableBlock):
                         gscale)
 
     def parameters(self) -> list[Parameter]:
+        """All entries of A, B, C and D (in that order, row-major) as parameters."""
         out: list[Parameter] = []
         for label, x0, s in zip("ABCD", self._init, self._scales, strict=True):
             out += self._matrix_params(label, x0, s, self.bound_factor * s)
         return out
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
+        """``(A, B, C, D)`` cut from ``theta`` in the order of :meth:`parameters`."""
         k, p, m = self.order, self.n_out, self.n_in
         th = np.asarray(theta, float)
         i = 0
@@ -243,6 +248,7 @@ class PIDBlock(TunableBlock):
         self.n_states = 2
 
     def parameters(self) -> list[Parameter]:
+        """``kp``, ``ki``, ``kd`` and the derivative filter time constant ``tf`` (s)."""
         dflt = {"kp": (-1e6, 1e6), "ki": (1e-9, 1e6), "kd": (-1e6, 1e6), "tf": (1e-4, 1e3)}
         out = []
         for k in ("kp", "ki", "kd", "tf"):
@@ -253,6 +259,7 @@ class PIDBlock(TunableBlock):
         return out
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
+        """State-space PID with filtered derivative for ``theta = (kp, ki, kd, tf)``."""
         return pid(*(float(v) for v in theta))
 
 
@@ -278,6 +285,7 @@ class PPIDBlock(TunableBlock):
         self.n_in, self.n_out, self.n_states = 2, 1, 2
 
     def parameters(self) -> list[Parameter]:
+        """The five cascaded P-PID gains (angle P, rate P, I, D, derivative filter s)."""
         from vtolftc.synthesis.loops import PARAM_NAMES
 
         dflt = {"kp_angle": (1e-6, 1e3), "kp_rate": (1e-9, 1e6), "ki_rate": (1e-9, 1e6),
@@ -291,6 +299,10 @@ class PPIDBlock(TunableBlock):
         return out
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
+        """Cascaded P-PID for ``theta``: inputs (angle error (rad), rate (rad/s)), output moment.
+
+        The rate loop sees ``kp_angle * e - rate``.
+        """
         from vtolftc.synthesis.loops import rate_controller
 
         kpa, kp, ki, kd, tf = (float(v) for v in theta)
@@ -327,6 +339,7 @@ class ControllerStructure:
         self.n_out = sum(b.n_out for b in self.blocks)
 
     def parameters(self) -> list[Parameter]:
+        """Parameters of all blocks, concatenated in block order."""
         return [p for ps in self._params for p in ps]
 
     def split(self, theta: NDArray[np.float64]) -> dict[str, NDArray[np.float64]]:

@@ -134,6 +134,7 @@ class AxisWeights:
     Wr: ControlWeight
 
     def to_dict(self) -> dict[str, Any]:
+        """Ws, Wt and Wr parameters as a JSON-ready dict."""
         return {"Ws": self.Ws.to_dict(), "Wt": self.Wt.to_dict(), "Wr": self.Wr.to_dict()}
 
 
@@ -188,6 +189,7 @@ class AxisDesign:
 
     @property
     def theta(self) -> NDArray[np.float64]:
+        """The P-PID gains as a vector in :data:`PARAM_NAMES` order."""
         return np.array([self.gains[k] for k in PARAM_NAMES])
 
 

@@ -62,14 +62,17 @@ class BlockStructure:
 
     @property
     def m_shape(self) -> tuple[int, int]:
+        """Shape (rows, cols) of the matrix M that the structure closes a loop around."""
         return sum(b.cols for b in self.blocks), sum(b.rows for b in self.blocks)
 
     @property
     def delta_shape(self) -> tuple[int, int]:
+        """Shape (rows, cols) of the block-diagonal perturbation Delta."""
         return sum(b.rows for b in self.blocks), sum(b.cols for b in self.blocks)
 
     @property
     def has_real(self) -> bool:
+        """True when a block is a real (parametric) scalar block."""
         return any(b.kind == "real" for b in self.blocks)
 
     def ab13md_spec(self) -> tuple[NDArray[np.int64], NDArray[np.int64]] | None:

@@ -76,19 +76,23 @@ class SensitivityWeight:
                                  "number > 0 (A = 0 gives an infinite weighted norm)")
 
     def tf(self) -> ct.TransferFunction:
+        """Ws(s) as a python-control transfer function."""
         return ct.tf([1.0 / self.M, self.omega_b_rad_s], [1.0, self.A * self.omega_b_rad_s])
 
     def ss(self) -> StateSpaceData:
+        """First-order state-space realisation ``(A, B, C, D)`` of Ws(s)."""
         a = -self.A * self.omega_b_rad_s
         # (s/M + wb)/(s - a) = 1/M + (wb + a/M)/(s - a)
         return (np.array([[a]]), np.array([[1.0]]),
                 np.array([[self.omega_b_rad_s + a / self.M]]), np.array([[1.0 / self.M]]))
 
     def response(self, omegas: NDArray[np.float64]) -> NDArray[np.complex128]:
+        """Ws(j omega) at the frequencies ``omegas`` (rad/s)."""
         s = 1j * np.asarray(omegas, float)
         return (s / self.M + self.omega_b_rad_s) / (s + self.A * self.omega_b_rad_s)
 
     def to_dict(self) -> dict[str, float]:
+        """The parameters ``M``, ``omega_b_rad_s``, ``A`` as a JSON-ready dict."""
         return {"M": self.M, "omega_b_rad_s": self.omega_b_rad_s, "A": self.A}
 
 
@@ -114,22 +118,27 @@ class ControlWeight:
 
     @property
     def high_gain(self) -> float:
+        """High-frequency gain r_max / u_max (rad per N m)."""
         return self.r_max_rad / self.u_max_N_m
 
     def tf(self) -> ct.TransferFunction:
+        """Wr(s) = (h s + 1e-3 omega_a) / (s + omega_a) as a python-control transfer function."""
         return ct.tf([self.high_gain, self.omega_a_rad_s * 1e-3], [1.0, self.omega_a_rad_s])
 
     def ss(self) -> StateSpaceData:
+        """First-order state-space realisation ``(A, B, C, D)`` of Wr(s)."""
         wa, h = self.omega_a_rad_s, self.high_gain
         # (h s + wa 1e-3)/(s + wa) = h + (wa 1e-3 - h wa)/(s + wa)
         return (np.array([[-wa]]), np.array([[1.0]]), np.array([[wa * 1e-3 - h * wa]]),
                 np.array([[h]]))
 
     def response(self, omegas: NDArray[np.float64]) -> NDArray[np.complex128]:
+        """Wr(j omega) at the frequencies ``omegas`` (rad/s)."""
         s = 1j * np.asarray(omegas, float)
         return (self.high_gain * s + self.omega_a_rad_s * 1e-3) / (s + self.omega_a_rad_s)
 
     def to_dict(self) -> dict[str, float]:
+        """The parameters ``r_max_rad``, ``u_max_N_m``, ``omega_a_rad_s`` as a JSON-ready dict."""
         return {"r_max_rad": self.r_max_rad, "u_max_N_m": self.u_max_N_m,
                 "omega_a_rad_s": self.omega_a_rad_s}
 
@@ -191,12 +200,15 @@ class ClosedLoop:
 
     @property
     def poles(self) -> NDArray[np.complex128]:
+        """Eigenvalues of the closed-loop state matrix (rad/s)."""
         return np.linalg.eigvals(self.A)
 
     def stable(self, margin: float = 0.0) -> bool:
+        """True when every closed-loop pole has real part < ``-margin`` (rad/s)."""
         return bool(np.max(self.poles.real) < -margin)
 
     def lti(self) -> ct.StateSpace:
+        """The closed loop as a python-control state-space system."""
         return ct.ss(self.A, self.B, self.C, self.D)
 
 

@@ -166,6 +166,7 @@ class MixedMuBounds:
 
     @property
     def gap(self) -> float:
+        """Upper minus lower bound."""
         return self.upper - self.lower
 
 

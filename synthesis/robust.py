@@ -153,6 +153,7 @@ class RobustSpec:
     gyro_noise_rad_s: float = GYRO_NOISE_RAD_S
 
     def to_dict(self) -> dict[str, float]:
+        """Delays (s), excursion (rad), overshoot and gyro noise (rad/s) as a JSON-ready dict."""
         return {"control_period_s": self.delays.control_period_s,
                 "hil_transport_s": self.delays.hil_transport_s,
                 "modelled_transport_delay_s": self.delays.transport_s,
@@ -328,11 +329,13 @@ class RobustWeights(AxisWeights):
     delays: LoopDelays = LoopDelays()
 
     def to_dict(self) -> dict[str, Any]:
+        """The weights, nominal point, rotor-out moment (N m), Wd and the Ws rule, as a dict."""
         return {**super().to_dict(), "nominal_airspeed_m_s": self.nominal[0],
                 "nominal_gamma": self.nominal[1], "rotor_out_moment_N_m": self.d_max_N_m,
                 "Wd": self.Wd, "Ws_rule": self.rule}
 
     def plant(self, af: Airframe) -> ct.StateSpace:
+        """Design plant of this axis at the nominal (airspeed, gamma), loop delays included."""
         return design_plant(af, self.axis, self.nominal[0], self.nominal[1], self.delays)
 
 
@@ -499,6 +502,7 @@ class LoopMargins:
     disk_phase_margin_deg: float
 
     def to_dict(self) -> dict[str, float]:
+        """All margins as a dict of floats."""
         return dict(self.__dict__)
 
 

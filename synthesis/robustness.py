@@ -112,21 +112,26 @@ class AxisRobustness:
 
     @property
     def mu_rs(self) -> float:
+        """Certified robust-stability mu: peak of the upper bound over the grid."""
         return self.rs.peak_upper
 
     @property
     def mu_rp(self) -> float:
+        """Certified robust-performance mu: peak of the upper bound over the grid."""
         return self.rp.peak_upper
 
     @property
     def gap_rs(self) -> float:
+        """Largest upper - lower bound gap of the robust-stability sweep."""
         return float(np.max(self.rs.gap))
 
     @property
     def gap_rp(self) -> float:
+        """Largest upper - lower bound gap of the robust-performance sweep."""
         return float(np.max(self.rp.gap))
 
     def summary(self) -> dict[str, float]:
+        """Peaks, lower bounds, peak frequencies (rad/s), gaps, the closed-form check, as a dict."""
         return {
             "mu_rs": self.mu_rs, "mu_rs_lower": self.rs.peak_lower,
             "mu_rs_peak_frequency_rad_s": self.rs.peak_upper_frequency_rad_s,

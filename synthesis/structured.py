@@ -113,6 +113,10 @@ class Parameter:
 
     @property
     def typical(self) -> float:
+        """Magnitude that scales this parameter in the optimiser.
+
+        ``scale`` if given, else ``|initial|`` (at least 1e-3), and 1 when ``initial`` is 0.
+        """
         if self.scale is not None:
             return float(self.scale)
         return max(abs(self.initial), 1e-3) if self.initial != 0 else 1.0
@@ -165,22 +169,27 @@ class TuningProblem:
 
     @property
     def names(self) -> list[str]:
+        """Names of the tunable parameters, in vector order."""
         return [p.name for p in self.parameters]
 
     @property
     def initial(self) -> NDArray[np.float64]:
+        """Initial parameter vector."""
         return np.array([p.initial for p in self.parameters], dtype=float)
 
     @property
     def lower(self) -> NDArray[np.float64]:
+        """Lower bounds of the parameter vector."""
         return np.array([p.lower for p in self.parameters], dtype=float)
 
     @property
     def upper(self) -> NDArray[np.float64]:
+        """Upper bounds of the parameter vector."""
         return np.array([p.upper for p in self.parameters], dtype=float)
 
     @property
     def scales(self) -> NDArray[np.float64]:
+        """Typical magnitude of each parameter (see :attr:`Parameter.typical`)."""
         return np.array([p.typical for p in self.parameters], dtype=float)
 
     def realize(self, theta: NDArray[np.float64]) -> list[StateSpaceData]:

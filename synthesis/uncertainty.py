@@ -67,6 +67,11 @@ def rate_response(af: Airframe, axis: Axis, airspeed_m_s: float, gamma: float,
 
 @dataclass(frozen=True)
 class RelativeError:
+    """Relative model error ``|G_p / G_nom - 1|`` of the rate models over a grid.
+
+    ``omegas`` (rad/s); ``errors`` (n_models, n_omega); ``bound`` its maximum over the models;
+    ``models`` the (airspeed m/s, effectiveness loss gamma) of each row.
+    """
     omegas: np.ndarray      # rad/s
     errors: np.ndarray      # (n_models, n_omega) |G_p/G_nom - 1|
     bound: np.ndarray       # (n_omega,) maximum over the models
@@ -105,15 +110,18 @@ class UncertaintyWeight:
 
     @property
     def order(self) -> int:
+        """Number of pole/zero pairs of W_t(s)."""
         return len(self.poles_rad_s)
 
     def tf(self) -> ct.TransferFunction:
+        """W_t(s) as a python-control transfer function."""
         W = ct.tf([self.gain], [1.0])
         for z, p in zip(self.zeros_rad_s, self.poles_rad_s, strict=True):
             W = W * ct.tf([1.0 / z, 1.0], [1.0 / p, 1.0])
         return W
 
     def magnitude(self, omegas: np.ndarray) -> np.ndarray:
+        """|W_t(j omega)| at the frequencies ``omegas`` (rad/s)."""
         s = 1j * np.asarray(omegas, dtype=float)
         m = np.full(s.shape, self.gain, dtype=complex)
         for z, p in zip(self.zeros_rad_s, self.poles_rad_s, strict=True):
@@ -121,6 +129,7 @@ class UncertaintyWeight:
         return np.abs(m)
 
     def to_dict(self) -> dict[str, object]:
+        """Gain, zeros and poles (rad/s) as a JSON-ready dict."""
         return {"gain": self.gain, "zeros_rad_s": list(self.zeros_rad_s),
                 "poles_rad_s": list(self.poles_rad_s)}
 

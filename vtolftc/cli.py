@@ -93,6 +93,7 @@ def cmd_trim(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``vtolftc`` argument parser with all subcommands."""
     ap = argparse.ArgumentParser(
         prog="vtolftc",
         description="Passive fault-tolerant control of a dual-system VTOL UAV: synthesis, "
@@ -117,6 +118,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def run(argv: Sequence[str] | None, handler: Callable[[argparse.Namespace], int] | None = None,
         ) -> int:
+    """Parse ``argv`` and run the subcommand (or ``handler``); return the exit status.
+
+    Bad input (airframe, fault or usage errors) prints one line and returns 2, Ctrl-C 130,
+    domain failures (RuntimeError) 1.
+    """
     ap = build_parser()
     args = ap.parse_args(argv)
     func = handler or args.func
@@ -135,6 +141,7 @@ def run(argv: Sequence[str] | None, handler: Callable[[argparse.Namespace], int]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``vtolftc`` command; returns the exit status."""
     return run(argv)
 
 

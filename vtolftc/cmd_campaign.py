@@ -203,6 +203,7 @@ def _compare(paths: list[str]) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``campaign`` subcommand to the CLI's subparsers."""
     p = sub.add_parser("campaign", help="fly a fault campaign (spec file) on local cores or a "
                        "Dask cluster and report where each controller survives",
                        description=__doc__.split("\n\n")[1] if __doc__ else None)

@@ -71,6 +71,7 @@ def _wait(dash: Any, duration: float | None) -> None:
 
 
 def register(sub: Any) -> None:
+    """Add the ``dashboard`` subcommand to the CLI's subparsers."""
     p = sub.add_parser("dashboard", help="web dashboard (viser) that watches and commands the "
                        "vehicle over MAVLink", description=cmd_dashboard.__doc__)
     p.add_argument("--url", default="udp-server://127.0.0.1:14550",

@@ -113,6 +113,7 @@ def _summary(res: Any, total: float) -> None:
 
 
 def register(sub: Any) -> None:
+    """Add the ``synth`` subcommand to the CLI's subparsers."""
     p = sub.add_parser("synth", help="attitude synthesis: GS-SHIF/SHIF/LQR gains, mu, report",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--airframe", type=Path, default=None,

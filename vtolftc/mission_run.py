@@ -100,6 +100,7 @@ class MissionRun:
 
     @property
     def final_position(self) -> np.ndarray:
+        """Last recorded position, NED (m)."""
         return self.pos_ned[-1]
 
 

@@ -22,6 +22,7 @@ from pymavlink import mavutil
 from vtolftc.firmware_sim.autopilot.mission import MissionItem
 from vtolftc.firmware_sim.vehicle.faults import case_faults
 from vtolftc.mission_run import rectangle_mission
+from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.netutil import free_udp_port
 from vtolftc.protocols.px4 import mode_name
 from vtolftc.sitl import SitlConfig, SitlError, SitlRun
@@ -54,6 +55,13 @@ def pymavlink_upload(conn: Any, items: list[MissionItem]) -> Any:
 
 
 def pymavlink_download(conn: Any) -> list[MissionItem]:
+    """Download the mission from system 1 with plain pymavlink calls (an independent client).
+
+    Raises
+    ------
+    SitlError
+        no MISSION_COUNT, or an item missing or out of order, within 5 s each.
+    """
     conn.mav.mission_request_list_send(1, 1, 0)
     cnt = _recv(conn, ["MISSION_COUNT"], 5.0)
     if cnt is None:
@@ -111,8 +119,9 @@ def fly_sitl_mission(out_dir: Path, inject_case: int | None = None, transport: s
                 raise SitlError("no BATTERY_STATUS")
             rec["v_ground"] = bs.voltages[0] * 6e-3
             rec["pct_ground"] = bs.battery_remaining
-            conn.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
-            conn.mav.command_long_send(1, 1, 176, 0, 1, 4, 4, 0, 0, 0, 0)
+            conn.mav.command_long_send(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0,
+                                       1, 0, 0, 0, 0, 0, 0)
+            conn.mav.command_long_send(1, 1, mav.MAV_CMD_DO_SET_MODE, 0, 1, 4, 4, 0, 0, 0, 0)
             faults = case_faults(inject_case, _actuators()) if inject_case else []
             fw_leg_since = None
             injected = False

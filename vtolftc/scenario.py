@@ -83,6 +83,7 @@ class Action:
 
     @property
     def t_usec(self) -> int:
+        """Action time in simulated time (us)."""
         return round(self.t_s * 1e6)
 
 
@@ -100,6 +101,7 @@ class Scenario:
 
     @property
     def faults(self) -> list[Fault]:
+        """The fault actions' faults, in scenario order."""
         return [a.fault for a in self.actions if a.fault is not None]
 
 
@@ -152,6 +154,7 @@ class RunResult:
 
     @property
     def real_time_factor(self) -> float:
+        """Simulated over wall-clock time (inf for a zero wall time)."""
         return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else math.inf
 
 

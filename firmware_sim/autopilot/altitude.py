@@ -51,6 +51,7 @@ class MulticopterAltitudeHold:
         self.v_up_ref = 0.0
 
     def reset(self, integral: float = 0.0) -> None:
+        """Set the integral term (m/s^2), e.g. to the hover feed-forward for a bumpless start."""
         self.integral = float(integral)
 
     def update(self, h_ref: float, h: float, v_up: float, *, kp_z: float, kp_vz: float,
@@ -90,6 +91,27 @@ class FixedWingAltitudeHold:
     def update(self, h_ref: float, h: float, v_up: float, *, kp_alt: float, kp_vz: float,
                ki_vz: float, climb_max: float, sink_max: float, pitch_min: float,
                pitch_max: float) -> float:
+        """Pitch reference (rad) from the altitude error, through a climb-rate loop.
+
+        Parameters
+        ----------
+        h_ref, h : float
+            altitude reference and altitude (m).
+        v_up : float
+            climb rate (m/s, up positive).
+        kp_alt : float
+            altitude gain (1/s); the climb-rate reference is clipped to
+    ``[-sink_max, climb_max]`` (m/s).
+        kp_vz, ki_vz : float
+            proportional (rad s/m) and integral (rad/m) climb-rate gains.
+        pitch_min, pitch_max : float
+            output limits (rad); the integrator stops at them (anti-windup).
+
+        Returns
+        -------
+        float
+            pitch reference (rad).
+        """
         v_ref = min(max(kp_alt * (h_ref - h), -sink_max), climb_max)
         self.v_up_ref = v_ref
         e = v_ref - v_up

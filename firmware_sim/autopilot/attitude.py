@@ -72,11 +72,31 @@ class AttitudeController(Protocol):
     gains_path: Path
     gains_sha256: str
 
-    def reset(self) -> None: ...
+    def reset(self) -> None:
+        """Clear the integrators (on arming, and every step while still on the ground)."""
 
     def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
                rates: NDArray[np.float64], airspeed_m_s: float,
-               sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]: ...
+               sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """Moment demand for one control step.
+
+        Parameters
+        ----------
+        ref, att : numpy.ndarray
+            attitude reference and measured attitude, (roll, pitch, yaw) ZYX Euler angles (rad).
+        rates : numpy.ndarray
+            body rates p, q, r, FRD (rad/s).
+        airspeed_m_s : float
+            airspeed (m/s), the scheduling variable.
+        sat_hi, sat_lo : numpy.ndarray
+            per axis, the allocator saturated the moment at its upper / lower limit last step
+            (anti-windup: the integrators do not move further that way).
+
+        Returns
+        -------
+        numpy.ndarray
+            moment demand (roll, pitch, yaw) about the body FRD axes (N m).
+        """
 
 
 def _floats3(x: NDArray[np.float64] | tuple[float, ...] | list[float]) -> list[float]:
@@ -121,12 +141,32 @@ class ScheduledPPIDController:
         self._cached_schedule: GainSchedule | None = schedule
 
     def reset(self) -> None:
+        """Clear the integrators of the three axes' P-PID loops."""
         for p in self.pids:
             p.reset()
 
     def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
                rates: NDArray[np.float64], airspeed_m_s: float,
                sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """Moment demand for one control step.
+
+        Parameters
+        ----------
+        ref, att : numpy.ndarray
+            attitude reference and measured attitude, (roll, pitch, yaw) ZYX Euler angles (rad).
+        rates : numpy.ndarray
+            body rates p, q, r, FRD (rad/s).
+        airspeed_m_s : float
+            airspeed (m/s), the scheduling variable.
+        sat_hi, sat_lo : numpy.ndarray
+            per axis, the allocator saturated the moment at its upper / lower limit last step
+            (anti-windup: the integrators do not move further that way).
+
+        Returns
+        -------
+        numpy.ndarray
+            moment demand (roll, pitch, yaw) about the body FRD axes (N m).
+        """
         g = self._gains_cache.get(airspeed_m_s) if self._cached_schedule is self.schedule \
             else None
         if g is None:
@@ -172,11 +212,31 @@ class LQRAttitudeController:
         self.integral_term = np.zeros(3)  # k_int * int(e) [N m], bumpless under scheduling
 
     def reset(self) -> None:
+        """Clear the integral terms of the three axes."""
         self.integral_term[:] = 0.0
 
     def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
                rates: NDArray[np.float64], airspeed_m_s: float,
                sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """Moment demand for one control step.
+
+        Parameters
+        ----------
+        ref, att : numpy.ndarray
+            attitude reference and measured attitude, (roll, pitch, yaw) ZYX Euler angles (rad).
+        rates : numpy.ndarray
+            body rates p, q, r, FRD (rad/s).
+        airspeed_m_s : float
+            airspeed (m/s), the scheduling variable.
+        sat_hi, sat_lo : numpy.ndarray
+            per axis, the allocator saturated the moment at its upper / lower limit last step
+            (anti-windup: the integrators do not move further that way).
+
+        Returns
+        -------
+        numpy.ndarray
+            moment demand (roll, pitch, yaw) about the body FRD axes (N m).
+        """
         g = self.gains.gains_at(airspeed_m_s)
         out = np.empty(3)
         rl, al, wl = _floats3(ref), _floats3(att), _floats3(rates)

@@ -190,11 +190,16 @@ def default_parameters() -> ParameterStore:
 class Autopilot:
     """The flight software (see the module docstring).
 
-    Args:
-        airframe: the airframe (nominal model for allocation); default the shipped DS-1.
-        controller: ``"gs-shif"``, ``"shif"`` or ``"lqr"``.
-        gains_dir: directory holding the gain files (default ``firmware_sim/autopilot/gains``).
-        dt_s: control period [s] (default 0.004, 250 Hz).
+    Parameters
+    ----------
+    airframe
+        the airframe (nominal model for allocation); default the shipped DS-1.
+    controller
+        ``"gs-shif"``, ``"shif"`` or ``"lqr"``.
+    gains_dir
+        directory holding the gain files (default ``firmware_sim/autopilot/gains``).
+    dt_s
+        control period [s] (default 0.004, 250 Hz).
     """
 
     def __init__(self, airframe: Airframe | None = None, controller: str = "gs-shif",

@@ -42,9 +42,12 @@ LEVEL_NAMES = ("OK", "LOW", "CRITICAL", "EMERGENCY")
 class BatteryMonitor:
     """PX4-style battery estimate and low-battery failsafe (see the module docstring).
 
-    Args:
-        params: the autopilot's parameter store (the BAT_* parameters are registered in it).
-        on_action: ``f(action, text)``; ``action`` is "warn", "land" or "rtl".
+    Parameters
+    ----------
+    params
+        the autopilot's parameter store (the BAT_* parameters are registered in it).
+    on_action
+        ``f(action, text)``; ``action`` is "warn", "land" or "rtl".
     """
 
     def __init__(self, params: ParameterStore,

@@ -51,11 +51,13 @@ from vtolftc.firmware_sim.autopilot.interface import (
     ParameterStore,
     ParamType,
 )
+from vtolftc.protocols.generated import constants as mav
 
 __all__ = ["FAILSAFE_PARAMS", "FailsafeEvent", "FailsafeMonitor", "register_failsafe_params"]
 
-MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY = 5, 6
-SEVERITY_EMERGENCY, SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_INFO = 0, 2, 4, 6
+MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY = mav.MAV_STATE_CRITICAL, mav.MAV_STATE_EMERGENCY
+SEVERITY_EMERGENCY, SEVERITY_CRITICAL = mav.MAV_SEVERITY_EMERGENCY, mav.MAV_SEVERITY_CRITICAL
+SEVERITY_WARNING, SEVERITY_INFO = mav.MAV_SEVERITY_WARNING, mav.MAV_SEVERITY_INFO
 
 LOCKSTEP_HIL_LOSS_MIN_S = 1.5
 """Least HIL-loss time-out in lockstep, s: the vehicle repeats a state every 0.5 s while it
@@ -110,9 +112,12 @@ def register_failsafe_params(params: ParameterStore) -> None:
 class FailsafeMonitor:
     """The failsafe state machine (see the module docstring).
 
-    Args:
-        params: the autopilot's parameter store (the parameters are registered if missing).
-        realtime: the vehicle runs on the wall clock (HIL loss then lands the aircraft).
+    Parameters
+    ----------
+    params
+        the autopilot's parameter store (the parameters are registered if missing).
+    realtime
+        the vehicle runs on the wall clock (HIL loss then lands the aircraft).
     """
 
     def __init__(self, params: ParameterStore, *, realtime: bool) -> None:
@@ -199,11 +204,15 @@ class FailsafeMonitor:
               gcs_age_s: float) -> list[FailsafeEvent]:
         """Data-link and HIL-data loss on the wall clock.
 
-        Args:
-            armed, in_air, fixed_wing: the autopilot's state.
-            hil_age_s: wall seconds since the last HIL step arrived (real time), since the
-                vehicle was last heard (lockstep); inf = never.
-            gcs_age_s: wall seconds since the last ground-station heartbeat (inf = never).
+        Parameters
+        ----------
+        armed, in_air, fixed_wing
+            the autopilot's state.
+        hil_age_s
+            wall seconds since the last HIL step arrived (real time), since the
+            vehicle was last heard (lockstep); inf = never.
+        gcs_age_s
+            wall seconds since the last ground-station heartbeat (inf = never).
         """
         out: list[FailsafeEvent] = []
         p = self.params

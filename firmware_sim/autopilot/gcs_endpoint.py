@@ -104,6 +104,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
 )
 from vtolftc.firmware_sim.autopilot.modes import px4_custom_mode
 from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
+from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.link import Link
 from vtolftc.protocols.px4 import (
     MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
@@ -115,36 +116,46 @@ from vtolftc.rotation import quat_to_euler
 
 __all__ = ["DEFAULT_RATES_HZ", "UNSIGNED_ALLOWED", "GcsEndpoint", "px4_mode_of"]
 
-MAV_TYPE_VTOL_FIXEDROTOR = 22
-MAV_AUTOPILOT_PX4 = 12
-MAV_TYPE_GCS = 6
-MAV_STATE_BOOT, MAV_STATE_STANDBY, MAV_STATE_ACTIVE = 1, 3, 4
-MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY = 5, 6
-MAV_MODE_FLAG_AUTO = 4 | 8 | 16  # AUTO_ENABLED | GUIDED_ENABLED | STABILIZE_ENABLED
-SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_NOTICE, SEVERITY_INFO = 2, 4, 5, 6
+# 22: named VTOL_FIXEDROTOR in current MAVLink, still VTOL_RESERVED2 in this dialect's common.xml
+MAV_TYPE_VTOL_FIXEDROTOR = mav.MAV_TYPE_VTOL_RESERVED2
+MAV_AUTOPILOT_PX4 = mav.MAV_AUTOPILOT_PX4
+MAV_TYPE_GCS = mav.MAV_TYPE_GCS
+MAV_STATE_BOOT, MAV_STATE_STANDBY, MAV_STATE_ACTIVE = (
+    mav.MAV_STATE_BOOT, mav.MAV_STATE_STANDBY, mav.MAV_STATE_ACTIVE)
+MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY = mav.MAV_STATE_CRITICAL, mav.MAV_STATE_EMERGENCY
+MAV_MODE_FLAG_AUTO = (mav.MAV_MODE_FLAG_AUTO_ENABLED | mav.MAV_MODE_FLAG_GUIDED_ENABLED
+                      | mav.MAV_MODE_FLAG_STABILIZE_ENABLED)
+SEVERITY_CRITICAL, SEVERITY_WARNING = mav.MAV_SEVERITY_CRITICAL, mav.MAV_SEVERITY_WARNING
+SEVERITY_NOTICE, SEVERITY_INFO = mav.MAV_SEVERITY_NOTICE, mav.MAV_SEVERITY_INFO
 
-CMD_NAV_LAND, CMD_NAV_TAKEOFF, CMD_DO_SET_MODE = 21, 22, 176
-CMD_ARM_DISARM, CMD_INJECT_FAILURE, CMD_DO_VTOL_TRANSITION = 400, 420, 3000
-CMD_SET_MESSAGE_INTERVAL, CMD_REQUEST_MESSAGE = 511, 512
-CMD_REQUEST_AUTOPILOT_CAPABILITIES = 520
-CMD_INJECT_PARTIAL_LOSS = 59900
+CMD_NAV_LAND, CMD_NAV_TAKEOFF = mav.MAV_CMD_NAV_LAND, mav.MAV_CMD_NAV_TAKEOFF
+CMD_DO_SET_MODE = mav.MAV_CMD_DO_SET_MODE
+CMD_ARM_DISARM = mav.MAV_CMD_COMPONENT_ARM_DISARM
+CMD_INJECT_FAILURE = mav.MAV_CMD_INJECT_FAILURE
+CMD_DO_VTOL_TRANSITION = mav.MAV_CMD_DO_VTOL_TRANSITION
+CMD_SET_MESSAGE_INTERVAL = mav.MAV_CMD_SET_MESSAGE_INTERVAL
+CMD_REQUEST_MESSAGE = mav.MAV_CMD_REQUEST_MESSAGE
+CMD_REQUEST_AUTOPILOT_CAPABILITIES = mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES
+CMD_INJECT_PARTIAL_LOSS = mav.MAV_CMD_INJECT_PARTIAL_LOSS
 FLIGHT_COMMANDS = (CMD_ARM_DISARM, CMD_NAV_TAKEOFF, CMD_DO_SET_MODE, CMD_DO_VTOL_TRANSITION,
-                   CMD_NAV_LAND, 20, 178, 192, 224, 300)
-# 20 NAV_RETURN_TO_LAUNCH, 178 DO_CHANGE_SPEED, 192 DO_REPOSITION, 224 DO_SET_MISSION_CURRENT,
-# 300 MISSION_START (the navigator's, see navigator.py)
+                   CMD_NAV_LAND, mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, mav.MAV_CMD_DO_CHANGE_SPEED,
+                   mav.MAV_CMD_DO_REPOSITION, mav.MAV_CMD_DO_SET_MISSION_CURRENT,
+                   mav.MAV_CMD_MISSION_START)
+# the last five are the navigator's (see navigator.py)
 FAULT_COMMANDS = (CMD_INJECT_FAILURE, CMD_INJECT_PARTIAL_LOSS)
 
-UNSIGNED_ALLOWED = frozenset({0, 109, 20, 21})
+UNSIGNED_ALLOWED = frozenset({mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_RADIO_STATUS,
+                              mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
+                              mav.MAVLINK_MSG_ID_PARAM_REQUEST_LIST})
 """Message ids accepted without a valid signature when signing is on: HEARTBEAT (0),
 RADIO_STATUS (109, as ArduPilot), PARAM_REQUEST_READ (20) and PARAM_REQUEST_LIST (21)
 (read-only). Everything else, every command, PARAM_SET and mission message included, needs
 the key."""
 
-MSG = {"HEARTBEAT": 0, "SYS_STATUS": 1, "ATTITUDE": 30, "ATTITUDE_QUATERNION": 31,
-       "LOCAL_POSITION_NED": 32, "GLOBAL_POSITION_INT": 33, "VFR_HUD": 74,
-       "HIL_STATE_QUATERNION": 115, "AUTOPILOT_VERSION": 148, "HOME_POSITION": 242,
-       "EXTENDED_SYS_STATE": 245, "ACTUATOR_OUTPUT_STATUS": 375,
-       "FAULT_INJECTION_STATUS": 59900}
+MSG = {name: getattr(mav, "MAVLINK_MSG_ID_" + name) for name in (
+    "HEARTBEAT", "SYS_STATUS", "ATTITUDE", "ATTITUDE_QUATERNION", "LOCAL_POSITION_NED",
+    "GLOBAL_POSITION_INT", "VFR_HUD", "HIL_STATE_QUATERNION", "AUTOPILOT_VERSION",
+    "HOME_POSITION", "EXTENDED_SYS_STATE", "ACTUATOR_OUTPUT_STATUS", "FAULT_INJECTION_STATUS")}
 DEFAULT_RATES_HZ: dict[int, float] = {
     MSG["HEARTBEAT"]: 1.0, MSG["SYS_STATUS"]: 1.0, MSG["ATTITUDE"]: 10.0,
     MSG["ATTITUDE_QUATERNION"]: 10.0, MSG["LOCAL_POSITION_NED"]: 10.0,
@@ -153,13 +164,20 @@ DEFAULT_RATES_HZ: dict[int, float] = {
     MSG["ACTUATOR_OUTPUT_STATUS"]: 10.0, MSG["FAULT_INJECTION_STATUS"]: 1.0,
     **STREAM_RATES_HZ,  # GPS_RAW_INT, MISSION_CURRENT, BATTERY_STATUS (gcs_services.py)
 }
-MSG.update({"GPS_RAW_INT": 24, "MISSION_CURRENT": 42, "BATTERY_STATUS": 147})
+MSG.update({name: getattr(mav, "MAVLINK_MSG_ID_" + name)
+            for name in ("GPS_RAW_INT", "MISSION_CURRENT", "BATTERY_STATUS")})
 """Stream rates in Hz of simulated time (PX4-like, a little lower to spare the CPU)."""
 
 # SYS_STATUS sensor bits (MAV_SYS_STATUS_SENSOR)
-_GYRO, _ACCEL, _MAG, _BARO, _DIFF, _GPS = 1, 2, 4, 8, 16, 32
-_ANGULAR_RATE_CTRL, _ATTITUDE_CTRL, _MOTOR_OUTPUTS = 1024, 2048, 32768
-_AHRS, _PREARM = 0x200000, 0x10000000
+_GYRO, _ACCEL, _MAG = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO, mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
+                       mav.MAV_SYS_STATUS_SENSOR_3D_MAG)
+_BARO, _DIFF, _GPS = (mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE,
+                      mav.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE,
+                      mav.MAV_SYS_STATUS_SENSOR_GPS)
+_ANGULAR_RATE_CTRL = mav.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+_ATTITUDE_CTRL = mav.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+_MOTOR_OUTPUTS = mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+_AHRS, _PREARM = mav.MAV_SYS_STATUS_AHRS, mav.MAV_SYS_STATUS_PREARM_CHECK
 _SENSORS_PRESENT = (_GYRO | _ACCEL | _MAG | _BARO | _DIFF | _GPS | _ANGULAR_RATE_CTRL
                     | _ATTITUDE_CTRL | _MOTOR_OUTPUTS | _AHRS | _PREARM)
 
@@ -190,22 +208,35 @@ class _Client:
 class GcsEndpoint:
     """Ground-station side of the autopilot (see the module docstring).
 
-    Args:
-        autopilot: the :class:`AutopilotAPI` (its ``params`` store gets ``SIM_HOLD_MS``).
-        hil: the HIL bridge (fault commands are forwarded through it, by the control thread).
-        links: ground-station links (owned: closed by :meth:`close`).
-        actuators: numbering of motors and servos (from the airframe).
-        signing_required: the links verify signatures (see :data:`UNSIGNED_ALLOWED`); arming
-            and fault commands are refused unsigned even if a link lets them through.
-        lockstep: enables the simulation hold.
-        on_event: ``f(kind, text)`` for run logs ("command", "ack", "mode", "fault", ...);
-            called from the worker thread and from the control thread, so it must be
-            thread-safe (the autopilot process only queues).
-        rate_limit_hz, rate_burst: per-client token bucket (messages per second, burst).
-        queue_len: per-link receive queue (drop-oldest).
-        budget_per_cycle: messages the worker handles per cycle.
-        ready: the autopilot is warm (else BOOT and no arming until :attr:`ready` is set).
-        start: start the threads (tests may drive :meth:`serve_once` by hand).
+    Parameters
+    ----------
+    autopilot
+        the :class:`AutopilotAPI` (its ``params`` store gets ``SIM_HOLD_MS``).
+    hil
+        the HIL bridge (fault commands are forwarded through it, by the control thread).
+    links
+        ground-station links (owned: closed by :meth:`close`).
+    actuators
+        numbering of motors and servos (from the airframe).
+    signing_required
+        the links verify signatures (see :data:`UNSIGNED_ALLOWED`); arming
+        and fault commands are refused unsigned even if a link lets them through.
+    lockstep
+        enables the simulation hold.
+    on_event
+        ``f(kind, text)`` for run logs ("command", "ack", "mode", "fault", ...);
+        called from the worker thread and from the control thread, so it must be
+        thread-safe (the autopilot process only queues).
+    rate_limit_hz, rate_burst
+        per-client token bucket (messages per second, burst).
+    queue_len
+        per-link receive queue (drop-oldest).
+    budget_per_cycle
+        messages the worker handles per cycle.
+    ready
+        the autopilot is warm (else BOOT and no arming until :attr:`ready` is set).
+    start
+        start the threads (tests may drive :meth:`serve_once` by hand).
     """
 
     def __init__(self, autopilot: AutopilotAPI, hil: HilBridge, links: Sequence[Link], *,
@@ -538,6 +569,7 @@ class GcsEndpoint:
 
     @property
     def time_boot_ms(self) -> int:
+        """Simulated time since boot (ms), for the messages' ``time_boot_ms``."""
         return self.sim_usec // 1000
 
     def _observe_snapshot(self) -> None:
@@ -880,7 +912,8 @@ class GcsEndpoint:
             else self.actuators.servos
         if cmd == CMD_INJECT_FAILURE:
             ftype, inst = p[1], p[2]
-            if not math.isfinite(ftype) or int(ftype) not in (0, 1, 2):
+            if not math.isfinite(ftype) or int(ftype) not in (
+                    mav.FAILURE_TYPE_OK, mav.FAILURE_TYPE_OFF, mav.FAILURE_TYPE_STUCK):
                 return CommandResult.UNSUPPORTED, "failure types: OK, OFF, STUCK"
         else:
             inst, loss = p[1], p[2]

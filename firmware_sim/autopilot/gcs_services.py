@@ -36,13 +36,16 @@ from vtolftc.firmware_sim.autopilot.mission import (
     RELATIVE_FRAMES,
     MissionProtocol,
 )
+from vtolftc.protocols.generated import constants as mav
 
 __all__ = ["STREAM_RATES_HZ", "Px4Services"]
 
-MSG_GPS_RAW_INT, MSG_MISSION_CURRENT, MSG_BATTERY_STATUS = 24, 42, 147
+MSG_GPS_RAW_INT = mav.MAVLINK_MSG_ID_GPS_RAW_INT
+MSG_MISSION_CURRENT = mav.MAVLINK_MSG_ID_MISSION_CURRENT
+MSG_BATTERY_STATUS = mav.MAVLINK_MSG_ID_BATTERY_STATUS
 STREAM_RATES_HZ = {MSG_GPS_RAW_INT: 2.0, MSG_MISSION_CURRENT: 1.0, MSG_BATTERY_STATUS: 1.0}
-GEOFENCE_BIT = 1 << 20  # MAV_SYS_STATUS_GEOFENCE
-BATTERY_BIT = 1 << 25   # MAV_SYS_STATUS_SENSOR_BATTERY
+GEOFENCE_BIT = mav.MAV_SYS_STATUS_GEOFENCE
+BATTERY_BIT = mav.MAV_SYS_STATUS_SENSOR_BATTERY
 _INT32_MAX = 2**31 - 1
 
 
@@ -163,12 +166,14 @@ class Px4Services:
         self._check_fence(pos)
 
     def tick(self) -> None:
+        """Mission-protocol wall-clock duties (request retries); replies go to all links."""
         if self.mission is not None:
             for reply in self.mission.tick(time.monotonic()):
                 self.ep._send_all(reply)
 
     # ------------------------------------------------------------------ streams
     def build(self, msg_id: int) -> Any:
+        """Stream message ``msg_id`` (GPS_RAW_INT, MISSION_CURRENT, BATTERY_STATUS) or None."""
         ep = self.ep
         c = ep.links[0].codec
         if msg_id == MSG_MISSION_CURRENT:

@@ -48,9 +48,12 @@ def roll_for_lateral_accel(a_lat: float, g: float, roll_max: float) -> float:
 class L1Guidance:
     """L1 path following: straight segments A -> B and loiter circles (PX4's ECL law).
 
-    Args:
-        period: ``FW_L1_PERIOD`` [s].
-        damping: ``FW_L1_DAMPING``.
+    Parameters
+    ----------
+    period
+        ``FW_L1_PERIOD`` [s].
+    damping
+        ``FW_L1_DAMPING``.
     """
 
     def __init__(self, period: float = 20.0, damping: float = 0.75) -> None:

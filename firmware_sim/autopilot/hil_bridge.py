@@ -39,11 +39,12 @@ from vtolftc.firmware_sim.autopilot.interface import (
     decode_hil_state,
     wire_commands,
 )
+from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.link import Link
 
 __all__ = ["HilBridge"]
 
-MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_MODE_FLAG_SAFETY_ARMED = mav.MAV_MODE_FLAG_SAFETY_ARMED
 _HEARTBEAT_PERIOD_S = 1.0
 _ZEROS16 = [0.0] * 16
 
@@ -184,4 +185,5 @@ class HilBridge:
         now = time.monotonic() if now is None else now
         if now >= self._next_heartbeat:
             self._next_heartbeat = now + _HEARTBEAT_PERIOD_S
-            self.link.send(self.link.codec.heartbeat_encode(22, 12, 0, 0, 4))
+            self.link.send(self.link.codec.heartbeat_encode(
+                mav.MAV_TYPE_VTOL_RESERVED2, mav.MAV_AUTOPILOT_PX4, 0, 0, mav.MAV_STATE_ACTIVE))

@@ -112,6 +112,13 @@ class ParameterStore:
     def register(self, name: str, default: float, type: ParamType = ParamType.REAL32,
                  minimum: float = -math.inf, maximum: float = math.inf,
                  description: str = "") -> None:
+        """Add a parameter with its default value, MAVLink type, range and description.
+
+        Raises
+        ------
+        ParamError
+            the name is not 1-16 ASCII characters, or it is already registered.
+        """
         if not 0 < len(name) <= 16 or not name.isascii():
             raise ParamError(f"parameter name {name!r}: expected 1-16 ASCII characters")
         if name in self._params:
@@ -129,9 +136,11 @@ class ParameterStore:
         return len(self._params)
 
     def index(self, name: str) -> int:
+        """Position of parameter ``name`` in registration order (PARAM_VALUE's index)."""
         return list(self._params).index(self._lookup(name).name)
 
     def by_index(self, i: int) -> Parameter:
+        """The parameter at registration position ``i`` (ParamError when out of range)."""
         if not 0 <= i < len(self._params):
             raise ParamError(f"parameter index {i}: expected 0..{len(self._params) - 1}")
         return list(self._params.values())[i]
@@ -143,6 +152,7 @@ class ParameterStore:
             raise ParamError(f"unknown parameter {name!r}") from None
 
     def get(self, name: str) -> float:
+        """Current value of parameter ``name`` (ParamError if unknown)."""
         return self._lookup(name).value
 
     def set(self, name: str, value: float) -> Parameter:
@@ -174,8 +184,11 @@ class AutopilotAPI(Protocol):
 
     params: ParameterStore
 
-    def step(self, nav: NavState) -> NDArray[np.float64]: ...
+    def step(self, nav: NavState) -> NDArray[np.float64]:
+        """One control step: the 15 normalised actuator commands for navigation state ``nav``."""
 
-    def command(self, command_id: int, params: Sequence[float]) -> CommandResult: ...
+    def command(self, command_id: int, params: Sequence[float]) -> CommandResult:
+        """Execute flight command ``command_id`` with its seven params (NaN = default)."""
 
-    def status(self) -> AutopilotStatus: ...
+    def status(self) -> AutopilotStatus:
+        """Snapshot for telemetry: mode, arming, VTOL and landed state, references, commands."""

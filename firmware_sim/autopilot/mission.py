@@ -50,6 +50,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from vtolftc.protocols.generated import constants as mav
+
 __all__ = [
     "FENCE_COMMANDS",
     "MAX_ITEMS",
@@ -62,7 +64,8 @@ __all__ = [
 ]
 
 # MAV_MISSION_TYPE
-MISSION, FENCE, RALLY, ALL = 0, 1, 2, 255
+MISSION, FENCE = mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_FENCE
+RALLY, ALL = mav.MAV_MISSION_TYPE_RALLY, mav.MAV_MISSION_TYPE_ALL
 PLAN_NAMES = {MISSION: "mission", FENCE: "fence", RALLY: "rally"}
 MAX_ITEMS = {MISSION: 500, FENCE: 64, RALLY: 8}
 """Capacity of each plan (PX4's dataman sizes)."""
@@ -71,36 +74,45 @@ MAX_ITEMS = {MISSION: 500, FENCE: 64, RALLY: 8}
 class Result:
     """MAV_MISSION_RESULT values."""
 
-    ACCEPTED = 0
-    ERROR = 1
-    UNSUPPORTED_FRAME = 2
-    UNSUPPORTED = 3
-    NO_SPACE = 4
-    INVALID = 5
-    INVALID_PARAM5_X = 10
-    INVALID_PARAM6_Y = 11
-    INVALID_PARAM7 = 12
-    INVALID_SEQUENCE = 13
-    DENIED = 14
-    OPERATION_CANCELLED = 15
+    ACCEPTED = mav.MAV_MISSION_ACCEPTED
+    ERROR = mav.MAV_MISSION_ERROR
+    UNSUPPORTED_FRAME = mav.MAV_MISSION_UNSUPPORTED_FRAME
+    UNSUPPORTED = mav.MAV_MISSION_UNSUPPORTED
+    NO_SPACE = mav.MAV_MISSION_NO_SPACE
+    INVALID = mav.MAV_MISSION_INVALID
+    INVALID_PARAM5_X = mav.MAV_MISSION_INVALID_PARAM5_X
+    INVALID_PARAM6_Y = mav.MAV_MISSION_INVALID_PARAM6_Y
+    INVALID_PARAM7 = mav.MAV_MISSION_INVALID_PARAM7
+    INVALID_SEQUENCE = mav.MAV_MISSION_INVALID_SEQUENCE
+    DENIED = mav.MAV_MISSION_DENIED
+    OPERATION_CANCELLED = mav.MAV_MISSION_OPERATION_CANCELLED
 
 
 # MAV_FRAME
-FRAME_GLOBAL, FRAME_MISSION, FRAME_GLOBAL_RELATIVE_ALT = 0, 2, 3
-FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT_INT = 5, 6
+FRAME_GLOBAL, FRAME_MISSION = mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_MISSION
+FRAME_GLOBAL_RELATIVE_ALT = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT
+FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT_INT = (mav.MAV_FRAME_GLOBAL_INT,
+                                                   mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 GLOBAL_FRAMES = frozenset({FRAME_GLOBAL, FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_INT,
                            FRAME_GLOBAL_RELATIVE_ALT_INT})
 RELATIVE_FRAMES = frozenset({FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT})
 
 # MAV_CMD values of the items this autopilot flies (navigator.py executes them)
-NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME = 16, 17, 19
-NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF = 20, 21, 22
-NAV_VTOL_TAKEOFF, NAV_VTOL_LAND, NAV_DELAY = 84, 85, 93
-DO_JUMP, DO_CHANGE_SPEED, DO_LAND_START = 177, 178, 189
-DO_VTOL_TRANSITION = 3000
-FENCE_POLYGON_INCLUSION, FENCE_POLYGON_EXCLUSION = 5001, 5002
-FENCE_CIRCLE_INCLUSION, FENCE_CIRCLE_EXCLUSION = 5003, 5004
-NAV_RALLY_POINT = 5100
+NAV_WAYPOINT = mav.MAV_CMD_NAV_WAYPOINT
+NAV_LOITER_UNLIM = mav.MAV_CMD_NAV_LOITER_UNLIM
+NAV_LOITER_TIME = mav.MAV_CMD_NAV_LOITER_TIME
+NAV_RETURN_TO_LAUNCH = mav.MAV_CMD_NAV_RETURN_TO_LAUNCH
+NAV_LAND, NAV_TAKEOFF = mav.MAV_CMD_NAV_LAND, mav.MAV_CMD_NAV_TAKEOFF
+NAV_VTOL_TAKEOFF, NAV_VTOL_LAND = mav.MAV_CMD_NAV_VTOL_TAKEOFF, mav.MAV_CMD_NAV_VTOL_LAND
+NAV_DELAY = mav.MAV_CMD_NAV_DELAY
+DO_JUMP, DO_CHANGE_SPEED = mav.MAV_CMD_DO_JUMP, mav.MAV_CMD_DO_CHANGE_SPEED
+DO_LAND_START = mav.MAV_CMD_DO_LAND_START
+DO_VTOL_TRANSITION = mav.MAV_CMD_DO_VTOL_TRANSITION
+FENCE_POLYGON_INCLUSION = mav.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+FENCE_POLYGON_EXCLUSION = mav.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+FENCE_CIRCLE_INCLUSION = mav.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION
+FENCE_CIRCLE_EXCLUSION = mav.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
+NAV_RALLY_POINT = mav.MAV_CMD_NAV_RALLY_POINT
 
 NAV_COMMANDS = frozenset({NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_LAND,
                           NAV_TAKEOFF, NAV_VTOL_TAKEOFF, NAV_VTOL_LAND})
@@ -148,14 +160,17 @@ class MissionItem:
 
     @property
     def lat_deg(self) -> float:
+        """Latitude (deg) from the item's ``x`` (degE7)."""
         return self.x * 1e-7
 
     @property
     def lon_deg(self) -> float:
+        """Longitude (deg) from the item's ``y`` (degE7)."""
         return self.y * 1e-7
 
     @property
     def relative_alt(self) -> bool:
+        """True when ``z`` is relative to home (a ..._RELATIVE_ALT frame)."""
         return self.frame in RELATIVE_FRAMES
 
     def altitude_amsl(self, home_alt_m: float) -> float:
@@ -273,6 +288,7 @@ class MissionStore:
 
     @property
     def mission(self) -> list[MissionItem]:
+        """The items of the mission plan (MAV_MISSION_TYPE_MISSION)."""
         return self.plans[MISSION]
 
     def replace(self, plan: int, items: list[MissionItem]) -> tuple[int, str]:
@@ -291,6 +307,7 @@ class MissionStore:
         return Result.ACCEPTED, ""
 
     def clear(self, plan: int) -> None:
+        """Empty plan ``plan`` (``ALL``: all three); the mission's current item goes to 0."""
         for p in (MISSION, FENCE, RALLY) if plan == ALL else (plan,):
             self.plans[p] = []
             if p == MISSION:
@@ -321,12 +338,17 @@ class _Upload:
 class MissionProtocol:
     """The mission microservice on top of a :class:`MissionStore` (see the module docstring).
 
-    Args:
-        store: the plans.
-        codec: a pymavlink ``MAVLink`` instance of the dialect (builds the replies).
-        mission_state: ``f() -> (mission_state, mission_mode)`` for MISSION_CURRENT
-            (MISSION_STATE and MISSION_MODE enums; default NOT_STARTED / not in mission mode).
-        on_text: ``f(text)`` for refusal reasons (the endpoint sends them as STATUSTEXT).
+    Parameters
+    ----------
+    store
+        the plans.
+    codec
+        a pymavlink ``MAVLink`` instance of the dialect (builds the replies).
+    mission_state
+        ``f() -> (mission_state, mission_mode)`` for MISSION_CURRENT
+        (MISSION_STATE and MISSION_MODE enums; default NOT_STARTED / not in mission mode).
+    on_text
+        ``f(text)`` for refusal reasons (the endpoint sends them as STATUSTEXT).
     """
 
     MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM",
@@ -372,6 +394,7 @@ class MissionProtocol:
         return self.codec.mission_current_encode(self.store.current if n else 0, n, state, mode)
 
     def item_msg(self, item: MissionItem, partner: tuple[int, int], as_int: bool) -> Any:
+        """MISSION_ITEM_INT (``as_int``) or float MISSION_ITEM carrying ``item`` to ``partner``."""
         cur = int(item.mission_type == MISSION and item.seq == self.store.current)
         c = self.codec
         if as_int:

@@ -122,14 +122,17 @@ class ModeMachine:
             self._say(f"mode {old.name} -> {mode.name}" + (f" ({why})" if why else ""))
 
     def time_in_mode_s(self) -> float:
+        """Time since the current mode was entered (s, simulated time)."""
         return (self.now_usec - self.mode_since_usec) * 1e-6
 
     @property
     def in_air(self) -> bool:
+        """True in every mode but IDLE (the machine's notion of flying)."""
         return self.mode != FlightMode.IDLE
 
     # -- commands ---------------------------------------------------------------------------
     def arm(self) -> CommandResult:
+        """Arm on the ground (IDLE); already armed is accepted, in any other mode denied."""
         if self.armed:
             return CommandResult.ACCEPTED
         if self.mode != FlightMode.IDLE:
@@ -139,6 +142,10 @@ class ModeMachine:
         return CommandResult.ACCEPTED
 
     def disarm(self, force: bool) -> CommandResult:
+        """Disarm and go to IDLE; in the air only with ``force`` (else DENIED).
+
+        Already disarmed is accepted.
+        """
         if not self.armed:
             return CommandResult.ACCEPTED
         if self.mode != FlightMode.IDLE and not force:
@@ -149,12 +156,18 @@ class ModeMachine:
         return CommandResult.ACCEPTED
 
     def takeoff(self) -> CommandResult:
+        """Armed and IDLE: enter TAKEOFF (climb to the take-off altitude); else DENIED."""
         if not self.armed or self.mode != FlightMode.IDLE:
             return CommandResult.DENIED
         self.set_mode(FlightMode.TAKEOFF, "takeoff command")
         return CommandResult.ACCEPTED
 
     def transition(self, to_fw: bool) -> CommandResult:
+        """Command a transition: ``to_fw`` True starts FRONT_TRANSITION, False BACK_TRANSITION.
+
+        Denied when disarmed, in IDLE, TAKEOFF or LAND, and (to fixed-wing) during a back
+        transition; accepted without change when already in or going to the requested state.
+        """
         if not self.armed or self.mode in (FlightMode.IDLE, FlightMode.TAKEOFF, FlightMode.LAND):
             return CommandResult.DENIED
         if to_fw:
@@ -171,6 +184,10 @@ class ModeMachine:
         return CommandResult.ACCEPTED
 
     def land(self) -> CommandResult:
+        """Land: in hover directly (LAND), from fixed-wing or a transition after a back transition.
+
+        Denied when disarmed or IDLE; already landing is accepted.
+        """
         if not self.armed or self.mode == FlightMode.IDLE:
             return CommandResult.DENIED
         if self.mode == FlightMode.LAND:

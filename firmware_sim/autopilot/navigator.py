@@ -79,14 +79,15 @@ from vtolftc.firmware_sim.autopilot.mission import (
     MissionItem,
     MissionStore,
 )
+from vtolftc.protocols.generated import constants as mav
 
 __all__ = ["NAV_PARAMS", "Goal", "NavMode", "Navigator"]
 
-CMD_NAV_RETURN_TO_LAUNCH = 20
-CMD_DO_CHANGE_SPEED = 178
-CMD_DO_REPOSITION = 192
-CMD_DO_SET_MISSION_CURRENT = 224
-CMD_MISSION_START = 300
+CMD_NAV_RETURN_TO_LAUNCH = mav.MAV_CMD_NAV_RETURN_TO_LAUNCH
+CMD_DO_CHANGE_SPEED = mav.MAV_CMD_DO_CHANGE_SPEED
+CMD_DO_REPOSITION = mav.MAV_CMD_DO_REPOSITION
+CMD_DO_SET_MISSION_CURRENT = mav.MAV_CMD_DO_SET_MISSION_CURRENT
+CMD_MISSION_START = mav.MAV_CMD_MISSION_START
 
 
 class NavMode:
@@ -102,7 +103,8 @@ class NavMode:
 
 
 # MISSION_STATE / MISSION_MODE of MISSION_CURRENT
-MS_NOT_STARTED, MS_ACTIVE, MS_PAUSED, MS_COMPLETE = 2, 3, 4, 5
+MS_NOT_STARTED, MS_ACTIVE = mav.MISSION_STATE_NOT_STARTED, mav.MISSION_STATE_ACTIVE
+MS_PAUSED, MS_COMPLETE = mav.MISSION_STATE_PAUSED, mav.MISSION_STATE_COMPLETE
 
 NAV_PARAMS: tuple[tuple[str, float, ParamType, float, float, str], ...] = (
     ("NAV_ACC_RAD", 2.0, ParamType.REAL32, 0.05, 200.0,
@@ -142,16 +144,20 @@ class Goal:
 
     @property
     def has_position(self) -> bool:
+        """True when the goal has a horizontal position (north and east finite)."""
         return math.isfinite(self.north) and math.isfinite(self.east)
 
 
 class Navigator:
     """Mission, RTL, loiter and reposition (see the module docstring).
 
-    Args:
-        ap: the :class:`~vtolftc.firmware_sim.autopilot.autopilot.Autopilot` it steers (its
-            mode machine, references and parameters; not imported here: no import cycle).
-        on_text: ``f(text)`` for events worth a STATUSTEXT.
+    Parameters
+    ----------
+    ap
+        the :class:`~vtolftc.firmware_sim.autopilot.autopilot.Autopilot` it steers (its
+        mode machine, references and parameters; not imported here: no import cycle).
+    on_text
+        ``f(text)`` for events worth a STATUSTEXT.
     """
 
     def __init__(self, ap: Any, on_text: Callable[[str], None] | None = None) -> None:
@@ -197,6 +203,7 @@ class Navigator:
 
     @property
     def home_alt(self) -> float:
+        """Home altitude AMSL (m); 0 before the home is set."""
         return self.home[2] if self.home is not None else 0.0
 
     def to_local(self, lat_deg: float, lon_deg: float) -> tuple[float, float]:
@@ -216,6 +223,7 @@ class Navigator:
                 lon0 + math.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(lat0)))))
 
     def goal_of(self, item: MissionItem) -> Goal:
+        """Goal of ``item``: north, east from home (m, local NED) and height above home (m)."""
         g = Goal(item.command, item.seq,
                  params=(item.param1, item.param2, item.param3, item.param4))
         positional = item.command in (NAV_WAYPOINT, NAV_LOITER_TIME, NAV_LOITER_UNLIM,
@@ -233,6 +241,7 @@ class Navigator:
         return (main << 16) | (sub << 24)
 
     def px4_mode(self, mode: FlightMode) -> tuple[int, int]:
+        """PX4 (main, sub) mode reported for flight mode ``mode`` and the navigator's state."""
         if self.nav_mode in (NavMode.MISSION, NavMode.RTL):
             return self.nav_mode
         if mode == FlightMode.TAKEOFF:
@@ -272,7 +281,7 @@ class Navigator:
         """Commands the navigator owns (None: not one of them). ``p``: seven params, NaN =
         default, positions in degrees and altitudes AMSL (the endpoint converts COMMAND_INT
         and relative frames)."""
-        if cid == 176:  # DO_SET_MODE
+        if cid == mav.MAV_CMD_DO_SET_MODE:
             if not (math.isfinite(p[0]) and int(p[0]) & 1 and math.isfinite(p[1])):
                 return CommandResult.DENIED
             main = int(p[1])
@@ -311,13 +320,14 @@ class Navigator:
             return self._change_speed(p)
         if cid == CMD_DO_REPOSITION:
             return self._reposition(p)
-        if cid in (21, 22, 3000):  # land, takeoff, transition: the autopilot flies them
-            if cid == 22:
+        if cid in (mav.MAV_CMD_NAV_LAND, mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_CMD_DO_VTOL_TRANSITION):
+            # land, takeoff, transition: the autopilot flies them
+            if cid == mav.MAV_CMD_NAV_TAKEOFF:
                 self._leave_auto(NavMode.TAKEOFF)
-            elif cid == 21:
+            elif cid == mav.MAV_CMD_NAV_LAND:
                 self._leave_auto(NavMode.LAND)
-            elif cid == 3000 and self.nav_mode in (NavMode.MISSION, NavMode.RTL,
-                                                   NavMode.LOITER, NavMode.TAKEOFF):
+            elif cid == mav.MAV_CMD_DO_VTOL_TRANSITION and self.nav_mode in (
+                    NavMode.MISSION, NavMode.RTL, NavMode.LOITER, NavMode.TAKEOFF):
                 # a transition outside the navigator's plan: course and altitude hold
                 self._leave_auto(NavMode.POSCTL)
             return None
@@ -379,6 +389,10 @@ class Navigator:
         return CommandResult.ACCEPTED
 
     def start_mission(self) -> CommandResult:
+        """Fly the uploaded mission from its current item (from the start once completed).
+
+        DENIED without a mission, TEMPORARILY_REJECTED before the home is known.
+        """
         if not self.store.mission:
             self._say("mission rejected: no mission uploaded")
             return CommandResult.DENIED
@@ -392,6 +406,11 @@ class Navigator:
         return CommandResult.ACCEPTED
 
     def start_rtl(self, why: str) -> CommandResult:
+        """Return to launch (``why`` is the reason told to the ground station).
+
+        Flies to the nearest of home and the rally points at ``RTL_RETURN_ALT`` or higher and
+        lands there; a running mission is paused. DENIED when disarmed, IDLE or without a home.
+        """
         m = self.ap.modes
         if not m.armed or m.mode == FlightMode.IDLE or self.home is None:
             return CommandResult.DENIED

@@ -73,21 +73,36 @@ _NAN7 = [math.nan] * 7
 class AutopilotProcess:
     """Wires an :class:`AutopilotAPI` to a HIL link and ground-station links.
 
-    Args:
-        autopilot: the flight software.
-        hil_link, gcs_links: the links (owned: closed at the end).
-        actuators: numbering of motors and servos.
-        lockstep: the vehicle waits for every answer (else it runs on the wall clock).
-        hold_ms: initial ``SIM_HOLD_MS``.
-        signing_required: the ground-station links verify signatures.
-        observers: run observers (see the module docstring).
-        metrics: object with ``add(sample)`` and ``result() -> dict`` (or None).
-        on_finish: ``f(metrics, summary)`` called once at the end (writes the files).
-        info: run description for ``on_start``.
-        vehicle_timeout_s: stop (exit 3) after the vehicle was silent this long (0 = never).
-        max_wall_s: stop after this long (0 = never).
-        warmup: called once before the autopilot reports itself ready (compile everything).
-        parent_pid: stop when that process is gone.
+    Parameters
+    ----------
+    autopilot
+        the flight software.
+    hil_link, gcs_links
+        the links (owned: closed at the end).
+    actuators
+        numbering of motors and servos.
+    lockstep
+        the vehicle waits for every answer (else it runs on the wall clock).
+    hold_ms
+        initial ``SIM_HOLD_MS``.
+    signing_required
+        the ground-station links verify signatures.
+    observers
+        run observers (see the module docstring).
+    metrics
+        object with ``add(sample)`` and ``result() -> dict`` (or None).
+    on_finish
+        ``f(metrics, summary)`` called once at the end (writes the files).
+    info
+        run description for ``on_start``.
+    vehicle_timeout_s
+        stop (exit 3) after the vehicle was silent this long (0 = never).
+    max_wall_s
+        stop after this long (0 = never).
+    warmup
+        called once before the autopilot reports itself ready (compile everything).
+    parent_pid
+        stop when that process is gone.
     """
 
     def __init__(self, autopilot: AutopilotAPI, hil_link: Link, gcs_links: list[Link], *,
@@ -139,6 +154,7 @@ class AutopilotProcess:
         self._held = False
 
     def add_observer(self, obs: Any) -> None:
+        """Add a run observer (gets ``on_start``, ``on_sample``, ``on_event``, ``on_finish``)."""
         self.observers.append(obs)
 
     def _event(self, kind: str, text: str) -> None:

@@ -83,10 +83,14 @@ def _struct_of(fields: list[tuple[str, str]]) -> struct.Struct:
 class ULogWriter:
     """Run observer writing ``path`` (see the module docstring).
 
-    Args:
-        path: the ``.ulg`` file (parent directory created).
-        autopilot: the autopilot (parameters, navigator, battery estimate), optional.
-        home: (lat, lon, alt) of the local frame's origin, if known at start.
+    Parameters
+    ----------
+    path
+        the ``.ulg`` file (parent directory created).
+    autopilot
+        the autopilot (parameters, navigator, battery estimate), optional.
+    home
+        (lat, lon, alt) of the local frame's origin, if known at start.
     """
 
     def __init__(self, path: str | Path, autopilot: Any = None,
@@ -137,6 +141,7 @@ class ULogWriter:
 
     # ------------------------------------------------------------------ observer protocol
     def on_start(self, info: dict[str, Any]) -> None:
+        """Create the ``.ulg`` file and write the header, flag bits, formats and parameters."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._f = self.path.open("wb")
         self._f.write(_HEADER_MAGIC + bytes([1]) + struct.pack("<Q", 0))
@@ -162,6 +167,7 @@ class ULogWriter:
         self._f.flush()
 
     def on_sample(self, sample: Any) -> None:
+        """Append one control step's topics (timestamps relative to the first sample)."""
         if self._f is None:
             return
         t = int(sample.time_usec)
@@ -199,6 +205,7 @@ class ULogWriter:
             self._f.flush()
 
     def on_event(self, time_usec: int, kind: str, text: str) -> None:
+        """Log the event as a ULog string: WARNING for faults, failsafes and denials, else INFO."""
         if self._f is None:
             return
         level = b"4" if kind in ("fault", "failsafe") or "denied" in text else b"6"
@@ -206,6 +213,7 @@ class ULogWriter:
                   + f"[{kind}] {text}".encode())
 
     def on_finish(self, metrics: dict[str, Any]) -> None:
+        """Flush and close the file (``metrics`` unused)."""
         if self._f is None:
             return
         self._f.flush()

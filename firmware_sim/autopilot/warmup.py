@@ -28,14 +28,21 @@ def warm_up(make_autopilot: Callable[[], AutopilotAPI], steps: int = 400,
             dt_usec: int = 4000, stop: Callable[[], bool] | None = None) -> int:
     """Step a fresh autopilot from ``make_autopilot`` through a synthetic flight.
 
-    Args:
-        make_autopilot: builds an autopilot configured like the real one.
-        steps: control steps after the take-off command (half climbing, the rest after a
-            transition command).
-        dt_usec: control period, us.
-        stop: checked every step; True ends the warm-up early (a stop signal).
+    Parameters
+    ----------
+    make_autopilot
+        builds an autopilot configured like the real one.
+    steps
+        control steps after the take-off command (half climbing, the rest after a
+        transition command).
+    dt_usec
+        control period, us.
+    stop
+        checked every step; True ends the warm-up early (a stop signal).
 
-    Returns:
+    Returns
+    -------
+    int
         The number of control steps taken.
     """
     ap = make_autopilot()

@@ -80,6 +80,7 @@ class BatteryModel:
         self.voltage_v = self.open_circuit_v()
 
     def open_circuit_v(self) -> float:
+        """Pack open-circuit voltage at the current state of charge (V)."""
         return self.spec.cells * cell_ocv(self.soc)
 
     def load_power_w(self, lift_thrusts_n: np.ndarray, pusher_thrusts_n: np.ndarray,

@@ -36,6 +36,7 @@ class FaultError(ValueError):
 
 
 class FaultKind(StrEnum):
+    """What happens to the actuator: partial effectiveness loss, switched off, or stuck."""
     LOSS = "loss"
     OFF = "off"
     STUCK = "stuck"
@@ -83,9 +84,11 @@ class Fault:
 
     @property
     def start_usec(self) -> int:
+        """Fault onset in simulated time (us)."""
         return round(self.start_s * 1e6)
 
     def describe(self) -> str:
+        """One line for logs, e.g. ``rotor_2b: 50% loss from t = 20 s``."""
         what = f"{self.loss:.0%} loss" if self.kind is FaultKind.LOSS else self.kind.value
         return f"{self.actuator}: {what} from t = {self.start_s:g} s"
 
@@ -206,6 +209,7 @@ def case_faults(case: str | int, actuator_names: Sequence[str], path: str | Path
 
 
 def case_description(case: str | int, path: str | Path | None = None) -> str:
+    """The ``description`` of fault case ``case`` (3 or "case3") in the cases file, or ""."""
     doc = load_cases(path)
     key = f"case{case}" if not str(case).startswith("case") else str(case)
     return str(doc.get(key, {}).get("description", ""))

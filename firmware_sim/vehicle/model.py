@@ -58,12 +58,14 @@ class Perturbation:
 
     @property
     def is_identity(self) -> bool:
+        """True when nothing is changed (scales 1, CG offset 0): the airframe file as it is."""
         return (self.mass_scale == 1.0 and tuple(self.inertia_scale) == (1.0, 1.0, 1.0)
                 and tuple(self.cg_offset_m) == (0.0, 0.0, 0.0))
 
 
 @dataclass(frozen=True)
 class ActiveFault:
+    """A fault waiting for (or in) effect; ``index``: its place in the actuator vector."""
     fault: Fault
     index: int
 
@@ -151,6 +153,20 @@ class Vehicle:
         return self.x.copy()
 
     def set_state(self, state: np.ndarray) -> None:
+        """Overwrite the full state (13 rigid-body states, then the actuator positions).
+
+        The quaternion part is renormalised.
+
+        Parameters
+        ----------
+        state : numpy.ndarray
+            ``[p_ned (m), v_ned (m/s), q (w, x, y, z), omega_frd (rad/s), actuators]``.
+
+        Raises
+        ------
+        ValueError
+            wrong shape or a non-finite entry.
+        """
         s = np.asarray(state, dtype=float)
         if s.shape != self.x.shape or not np.all(np.isfinite(s)):
             raise ValueError(
@@ -161,34 +177,42 @@ class Vehicle:
 
     @property
     def position_ned_m(self) -> np.ndarray:
+        """Position in the NED world frame (m), a copy."""
         return self.x[0:3].copy()
 
     @property
     def velocity_ned_m_s(self) -> np.ndarray:
+        """Velocity in the NED world frame (m/s), a copy."""
         return self.x[3:6].copy()
 
     @property
     def quaternion(self) -> np.ndarray:
+        """Attitude quaternion (w, x, y, z), body FRD to NED world, a copy."""
         return self.x[6:10].copy()
 
     @property
     def omega_body_rad_s(self) -> np.ndarray:
+        """Angular rate in the body FRD frame (rad/s), a copy."""
         return self.x[10:13].copy()
 
     @property
     def actuator_positions(self) -> np.ndarray:
+        """Actuator states after their dynamics (motor commands and servo angles), a copy."""
         return self.x[dyn.N_RIGID:].copy()
 
     @property
     def euler_rad(self) -> tuple[float, float, float]:
+        """ZYX Euler angles (roll, pitch, yaw) in rad, of the current attitude."""
         return quat_to_euler(self.x[6:10])
 
     @property
     def altitude_m(self) -> float:
+        """Height above the NED origin, ``-p_down`` (m)."""
         return float(-self.x[2])
 
     @property
     def airspeed_m_s(self) -> float:
+        """True airspeed of the last force evaluation (m/s)."""
         return float(self.fm[6])
 
     @property
@@ -198,14 +222,17 @@ class Vehicle:
 
     @property
     def moment_body_Nm(self) -> np.ndarray:
+        """Moment about the CG of the last force evaluation, body FRD (N m)."""
         return self.fm[3:6].copy()
 
     @property
     def alpha_rad(self) -> float:
+        """Angle of attack of the last force evaluation (rad)."""
         return float(self.fm[7])
 
     @property
     def beta_rad(self) -> float:
+        """Sideslip angle of the last force evaluation (rad)."""
         return float(self.fm[8])
 
     @property

@@ -113,12 +113,14 @@ class PartWriter:
         self.written = 0
 
     def add(self, row: dict[str, Any]) -> None:
+        """Buffer one result row; write a part once ``batch`` rows or ``interval_s`` have passed."""
         self._rows.append(row)
         if (len(self._rows) >= self.batch
                 or time.monotonic() - self._last >= self.interval_s):
             self.flush()
 
     def flush(self) -> None:
+        """Write the buffered rows as the next Parquet part (atomic rename); nothing if empty."""
         if not self._rows:
             return
         _atomic_write(_table(self._rows), self.dir / f"part-{self._seq:06d}.parquet")

@@ -43,6 +43,7 @@ class CampaignScenario:
 
     @property
     def faults_label(self) -> str:
+        """The fault set's label (``--fault`` syntax, without the time)."""
         return self.fault_set.label
 
     @property

@@ -107,6 +107,7 @@ class FaultSet:
 
 @dataclass(frozen=True)
 class FaultFamily:
+    """A named group of fault sets (one ``[[faults]]`` entry of the spec), reported together."""
     name: str
     sets: tuple[FaultSet, ...]
 
@@ -121,23 +122,27 @@ class GustSpec:
     after_fault_s: float | None = None
 
     def start(self, fault_time_s: float) -> float:
+        """Gust start (s, simulated): ``start_s``, else ``after_fault_s`` after ``fault_time_s``."""
         return self.start_s if self.start_s is not None else fault_time_s + float(
             self.after_fault_s or 0.0)
 
 
 @dataclass(frozen=True)
 class WindSpec:
+    """A named wind condition: steady wind in NED (m/s) plus 1 - cosine gusts."""
     name: str
     steady_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gusts: tuple[GustSpec, ...] = ()
 
     @property
     def calm(self) -> bool:
+        """True for no steady wind and no gusts."""
         return self.steady_ned_m_s == (0.0, 0.0, 0.0) and not self.gusts
 
 
 @dataclass(frozen=True)
 class PerturbationSpec:
+    """A named airframe perturbation: mass and inertia scales, CG offset (body FRD, m)."""
     name: str
     mass_scale: float = 1.0
     inertia_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
@@ -145,12 +150,14 @@ class PerturbationSpec:
 
     @property
     def nominal(self) -> bool:
+        """True when the perturbation changes nothing (scales 1, offset 0)."""
         return (self.mass_scale == 1.0 and self.inertia_scale == (1.0, 1.0, 1.0)
                 and self.cg_offset_m == (0.0, 0.0, 0.0))
 
 
 @dataclass(frozen=True)
 class Gate:
+    """CI gate: minimum survival fraction, optionally for one fault family and/or controller."""
     min_survival: float
     family: str | None = None
     controller: str | None = None

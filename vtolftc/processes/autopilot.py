@@ -135,12 +135,14 @@ class EventLog:
         """Nothing to do."""
 
     def on_event(self, time_usec: int, kind: str, text: str) -> None:
+        """Append the event as one JSON line and flush."""
         if self._f is not None:
             self._f.write(json.dumps({"time_s": time_usec * 1e-6, "kind": kind,
                                       "text": text}) + "\n")
             self._f.flush()
 
     def on_finish(self, metrics: dict[str, Any]) -> None:
+        """Close the file."""
         if self._f is not None:
             self._f.close()
             self._f = None
@@ -170,6 +172,7 @@ def _write_json(path: Path, data: Any) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the autopilot process (see the module docstring); returns the exit status."""
     args = _parse_args(argv)
     err = sys.stderr
     try:

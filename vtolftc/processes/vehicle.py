@@ -67,6 +67,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the vehicle process (see the module docstring); returns the exit status."""
     args = _parse_args(argv)
     for name, val in (("--duration", args.duration), ("--peer-timeout", args.peer_timeout),
                       ("--connect-timeout", args.connect_timeout)):

@@ -97,6 +97,7 @@ class MetricsAccumulator:
         self.t_last = 0.0
 
     def add(self, s: TelemetrySample) -> None:
+        """Add one control step: errors, peaks, transition and crash detection."""
         t = s.time_usec * 1e-6
         self.t_last = t
         nav, st = s.nav, s.status
@@ -159,6 +160,7 @@ class MetricsAccumulator:
             tail.popleft()
 
     def result(self) -> dict[str, Any]:
+        """Metrics so far: RMSE and peak errors, transition timing, crash and quad-chute flags."""
         n = max(self.n_win, 1)
         rm = [math.sqrt(x / n) if self.n_win else math.nan for x in self._se]
         tail = list(self._tail) or [(0.0, math.nan, math.nan, math.nan)]

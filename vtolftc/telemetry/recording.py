@@ -100,19 +100,30 @@ def _has_display() -> bool:
 class RerunRecorder:
     """A :class:`~vtolftc.telemetry.RunObserver` writing a rerun recording (see module doc).
 
-    Args:
-        path: the ``.rrd`` file to write (parent folders are created).
-        live: also stream to a viewer (native if a display exists, else the web viewer).
-        application_id: rerun application id.
-        recording_id: rerun recording id (default: a fresh UUID).
-        rate_hz: logging rate in simulated time; samples in between are skipped.
-        chunk_rows: rows buffered before they are sent to rerun.
-        live_flush_s: with ``live``, the longest wall-clock wait before buffered rows are sent.
-        file_flush_s: the longest wall-clock wait before buffered rows are sent to the file
-            (rerun's own batcher then writes them within its flush tick), so that a killed
-            process loses at most about this much of the recording.
-        web_port, grpc_port: ports of the web viewer and of its data server (live, headless).
-        airframe: airframe for the aircraft shape (default: the shipped DS-1).
+    Parameters
+    ----------
+    path
+        the ``.rrd`` file to write (parent folders are created).
+    live
+        also stream to a viewer (native if a display exists, else the web viewer).
+    application_id
+        rerun application id.
+    recording_id
+        rerun recording id (default: a fresh UUID).
+    rate_hz
+        logging rate in simulated time; samples in between are skipped.
+    chunk_rows
+        rows buffered before they are sent to rerun.
+    live_flush_s
+        with ``live``, the longest wall-clock wait before buffered rows are sent.
+    file_flush_s
+        the longest wall-clock wait before buffered rows are sent to the file
+        (rerun's own batcher then writes them within its flush tick), so that a killed
+        process loses at most about this much of the recording.
+    web_port, grpc_port
+        ports of the web viewer and of its data server (live, headless).
+    airframe
+        airframe for the aircraft shape (default: the shipped DS-1).
     """
 
     def __init__(self, path: Path, *, live: bool = False, application_id: str = "vtolftc",

@@ -76,6 +76,7 @@ class RunFolderWriter:
 
     # -- observer protocol --------------------------------------------------------------------
     def on_start(self, info: dict[str, Any]) -> None:
+        """Create the run folder, write ``run.json``, open ``telemetry.csv`` and ``events.log``."""
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.info = dict(info)
         self._names = list(info.get("actuator_names", [f"u{i}" for i in range(15)]))
@@ -109,6 +110,7 @@ class RunFolderWriter:
         self._cols["u"] = []
 
     def on_sample(self, s: TelemetrySample) -> None:
+        """Append one row to ``telemetry.csv`` (angles in deg at this edge), flushed every 0.5 s."""
         if self._csv is None:
             return
         nav, st = s.nav, s.status
@@ -157,12 +159,14 @@ class RunFolderWriter:
             self._last_flush_usec = s.time_usec
 
     def on_event(self, time_usec: int, kind: str, text: str) -> None:
+        """Append ``t_s kind text`` to ``events.log`` and flush it."""
         if self._events is None:
             return
         self._events.write(f"{time_usec * 1e-6:10.3f} {kind:9s} {text}\n")
         self._events.flush()
 
     def on_finish(self, metrics: dict[str, Any]) -> None:
+        """Close the CSV, write ``metrics.json`` and the plots (once; plot errors go to the log)."""
         if self.finished:
             return
         self.finished = True

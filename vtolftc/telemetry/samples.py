@@ -116,9 +116,11 @@ class RunObserver(Protocol):
     def on_start(self, info: dict[str, Any]) -> None:
         """``info``: airframe name and sha256, actuator names, controller, case, run folder."""
 
-    def on_sample(self, sample: TelemetrySample) -> None: ...
+    def on_sample(self, sample: TelemetrySample) -> None:
+        """One control step's navigation state, autopilot status and commands."""
 
     def on_event(self, time_usec: int, kind: str, text: str) -> None:
         """``kind``: "mode", "command", "fault", "ack", "warning"; ``text`` human-readable."""
 
-    def on_finish(self, metrics: dict[str, Any]) -> None: ...
+    def on_finish(self, metrics: dict[str, Any]) -> None:
+        """End of run with the final ``metrics``; close files here."""
