@@ -351,6 +351,10 @@ class AutopilotProcess:
         stats = getattr(self.ap, "allocation_stats", None)
         if stats is not None:
             m["allocation"] = stats
+        steps = getattr(self.metrics, "n", 0)
+        if hasattr(self.ap, "saturated_steps") and steps:
+            # the in-process runner's figure: share of the metrics' steps with a saturated QP
+            m["allocation_saturated_share"] = self.ap.saturated_steps / steps
         m["sim_time_s"] = self._sim_usec * 1e-6
         m["failsafes"] = [e["text"] for e in self.failsafe_events]
         summary = self.summary()
