@@ -121,7 +121,8 @@ def rt(tmp_path_factory):
 
 def _take_off(run) -> None:
     gs = run.gs
-    gs.wait_for(lambda s: s.connected and not s.armed and s.landed_state == 1, 60.0)
+    gs.wait_for(lambda s: s.connected and not s.armed and s.landed_state == 1
+                and math.isfinite(s.home_amsl_m), 120.0)
     assert gs.arm().accepted
     assert gs.takeoff(TAKEOFF_M).accepted
     gs.wait_for(lambda s: s.mode_name == "AUTO.LOITER" and s.altitude_m > TAKEOFF_M - 0.5,
@@ -325,7 +326,10 @@ def test_fresh_install_first_real_time_flight_takes_off_and_transitions(tmp_path
     with SitlRun(cfg) as run:
         run.start()  # returns once the autopilot says MAV_STATE_STANDBY
         gs = run.gs
-        gs.wait_for(lambda s: s.connected and s.landed_state == 1, 60.0)
+        # ready to fly, as a ground station sees it: HIL data flowing and home known (the
+        # vehicle may still be compiling its own kernels when the autopilot is warm)
+        gs.wait_for(lambda s: s.connected and s.landed_state == 1
+                    and math.isfinite(s.home_amsl_m), 300.0)
         assert gs.arm().accepted
         assert gs.takeoff(10.0).accepted
         gs.wait_for(lambda s: s.mode_name == "AUTO.LOITER" and s.altitude_m > 9.0, 90.0)

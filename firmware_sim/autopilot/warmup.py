@@ -60,7 +60,7 @@ def warm_up(make_autopilot: Callable[[], AutopilotAPI], steps: int = 400,
         t += dt_usec
         n += 1
     ap.command(400, [1.0, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN])
-    ap.command(22, [_NAN] * 6 + [10.0])
+    ap.command(22, [_NAN] * 7)  # MIS_TAKEOFF_ALT above home (param7 is AMSL: no number here)
     for k in range(steps):
         if stop is not None and stop():
             break
