@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 __all__ = [
     "EARTH_RADIUS_M",
     "N_ACTUATORS",
+    "HilRoundTrip",
     "HilState",
     "NavState",
     "decode_hil_state",
@@ -138,6 +139,86 @@ def decode_hil_state(h: HilState, home_lat_deg: float, home_lon_deg: float,
         vel_ned_m_s=np.array((h.vx * 0.01, h.vy * 0.01, h.vz * 0.01)),
         airspeed_m_s=h.ind_airspeed * 0.01,
     )
+
+
+class HilRoundTrip:
+    """``decode_hil_state(encode_hil_state(nav, *home), *home)`` in one call, bit for bit.
+
+    The in-process runner passes the vehicle state through the wire codec every control step
+    so that it flies on exactly the bits a SITL autopilot receives; this does the same
+    arithmetic, in the same order, without building the intermediate :class:`HilState` (about
+    a fifth of the codec pair's time). ``tests/test_interface.py`` checks it against the pair.
+
+    Parameters
+    ----------
+    home_lat_deg, home_lon_deg, home_alt_m : float
+        Home (the projection's origin): latitude and longitude [deg], altitude AMSL [m].
+    """
+
+    __slots__ = ("_alt0", "_cos", "_lat0", "_lon0", "_r_cos")
+
+    def __init__(self, home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> None:
+        self._lat0 = home_lat_deg
+        self._lon0 = home_lon_deg
+        self._alt0 = home_alt_m
+        # the same double both functions compute inline
+        self._cos = math.cos(math.radians(home_lat_deg))
+        self._r_cos = EARTH_RADIUS_M * self._cos
+
+    def __call__(self, time_usec: int, state: NDArray[np.float64],
+                 airspeed_m_s: float) -> NavState:
+        """The :class:`NavState` the autopilot decodes from the HIL_STATE_QUATERNION of a
+        rigid-body state.
+
+        Parameters
+        ----------
+        time_usec : int
+            Simulated time [us].
+        state : numpy.ndarray
+            At least 13 entries: position NED [m], velocity NED [m/s], quaternion
+            ``(w, x, y, z)`` body FRD -> NED, body rates [rad/s] (the vehicle's state order).
+        airspeed_m_s : float
+            Airspeed [m/s].
+
+        Returns
+        -------
+        NavState
+            Equal, bit for bit, to ``decode_hil_state(encode_hil_state(NavState(time_usec,
+            state[6:10], state[10:13], state[0:3], state[3:6], airspeed_m_s), *home), *home)``
+            (its four arrays are views of one 13-entry array).
+        """
+        pn, pe, pd, vn, ve, vd, q0, q1, q2, q3, w0, w1, w2 = state[:13].tolist()
+        lat0, lon0, alt0 = self._lat0, self._lon0, self._alt0
+        # encode (as encode_hil_state)
+        lat = lat0 + math.degrees(pn / EARTH_RADIUS_M)
+        lon = lon0 + math.degrees(pe / self._r_cos)
+        qw, qx, qy, qz, p, q, r = _F32X7.unpack(_F32X7.pack(q0, q1, q2, q3, w0, w1, w2))
+        ilat = round(lat * 1e7)
+        ilat = -2**31 if ilat < -2**31 else 2**31 - 1 if ilat > 2**31 - 1 else ilat
+        ilon = round(lon * 1e7)
+        ilon = -2**31 if ilon < -2**31 else 2**31 - 1 if ilon > 2**31 - 1 else ilon
+        ialt = round(1000.0 * (alt0 - pd))
+        ialt = -2**31 if ialt < -2**31 else 2**31 - 1 if ialt > 2**31 - 1 else ialt
+        ivx = round(100.0 * vn)
+        ivx = -32768 if ivx < -32768 else 32767 if ivx > 32767 else ivx
+        ivy = round(100.0 * ve)
+        ivy = -32768 if ivy < -32768 else 32767 if ivy > 32767 else ivy
+        ivz = round(100.0 * vd)
+        ivz = -32768 if ivz < -32768 else 32767 if ivz > 32767 else ivz
+        air = round(100.0 * airspeed_m_s)
+        air = 0 if air < 0 else 65535 if air > 65535 else air
+        # decode (as decode_hil_state)
+        n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        if not (n > 0.0 and math.isfinite(n)):
+            raise ValueError(f"HIL_STATE_QUATERNION attitude {(qw, qx, qy, qz)}: "
+                             "not a rotation quaternion")
+        a = np.array((
+            qw / n, qx / n, qy / n, qz / n, p, q, r,
+            math.radians(ilat * 1e-7 - lat0) * EARTH_RADIUS_M,
+            math.radians(ilon * 1e-7 - lon0) * EARTH_RADIUS_M * self._cos,
+            alt0 - ialt * 1e-3,
+            ivx * 0.01, ivy * 0.01, ivz * 0.01))
+        return NavState(int(time_usec), a[0:4], a[4:7], a[7:10], a[10:13], air * 0.01)
 
 
 def wire_commands(u: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:

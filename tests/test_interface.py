@@ -17,6 +17,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
     encode_hil_state,
     wire_commands,
 )
+from vtolftc.protocols.hil import HilRoundTrip
 from vtolftc.protocols.mavlink import make_codec
 
 HOME = (45.5027, 9.1566, 120.0)
@@ -64,6 +65,44 @@ def test_encoding_is_what_pymavlink_puts_on_the_wire():
         a, b = decode_hil_state(wire, *HOME), decode_hil_state(h, *HOME)
         assert np.array_equal(a.pos_ned_m, b.pos_ned_m)
         assert np.array_equal(a.q_wxyz, b.q_wxyz)
+
+
+def _bits(nav: NavState) -> tuple:
+    return (nav.time_usec, nav.q_wxyz.tobytes(), nav.omega_body_rad_s.tobytes(),
+            nav.pos_ned_m.tobytes(), nav.vel_ned_m_s.tobytes(),
+            np.float64(nav.airspeed_m_s).tobytes())
+
+
+@pytest.mark.parametrize("home", [HOME, (-33.9, 151.2, 3.0), (0.0, -179.9, -20.0)])
+def test_fused_round_trip_equals_the_codec_pair_bit_for_bit(home):
+    """HilRoundTrip (the in-process runner's) is decode(encode(.)) to the last bit, including
+    rounding ties, clipped fields and states far from home."""
+    rng = np.random.default_rng(3)
+    rt = HilRoundTrip(*home)
+    cases = []
+    for _ in range(300):
+        x = np.concatenate([rng.normal(scale=200.0, size=3), rng.normal(scale=10.0, size=3),
+                            rng.normal(size=4), rng.normal(size=3), rng.normal(size=15)])
+        x[6:10] /= np.linalg.norm(x[6:10])
+        cases.append((int(rng.integers(0, 10**9)), x, float(rng.uniform(0, 30))))
+    tie = np.zeros(13)
+    tie[3:6] = (0.125, -0.375, 0.005)   # 100 v on a .5 tie (round half to even)
+    tie[6] = 1.0
+    cases.append((7, tie, 0.125))
+    big = tie.copy()
+    big[3:6] = (400.0, -400.0, 1e4)     # clipped int16 velocities
+    big[0:3] = (3e7, -3e7, -1e7)        # clipped latitude/longitude/altitude
+    cases.append((8, big, 900.0))
+    cases.append((9, big, -5.0))
+    for t, x, air in cases:
+        ref = decode_hil_state(encode_hil_state(
+            NavState(t, x[6:10], x[10:13], x[0:3], x[3:6], air), *home), *home)
+        assert _bits(rt(t, x, air)) == _bits(ref)
+
+
+def test_fused_round_trip_rejects_a_zero_quaternion():
+    with pytest.raises(ValueError, match="quaternion"):
+        HilRoundTrip(*HOME)(0, np.zeros(13), 0.0)
 
 
 def test_out_of_range_values_are_clipped_not_wrapped():

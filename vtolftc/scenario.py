@@ -11,7 +11,8 @@ t = 22 s the case's faults (``fault_cases.toml``) injected into the vehicle; end
 
 The in-process runner is deterministic: vehicle at 1 kHz (RK4), autopilot at 250 Hz (4
 physics steps per control step), the autopilot fed ``decode_hil_state(encode_hil_state(...))``
-of the vehicle truth (bit-identical to what it receives over MAVLink HIL_STATE_QUATERNION),
+(fused into one call, ``HilRoundTrip``) of the vehicle truth (bit-identical to what it
+receives over MAVLink HIL_STATE_QUATERNION),
 its output passed through ``wire_commands`` (float32) before the vehicle: the very functions
 of the SITL processes (:mod:`vtolftc.protocols.hil`). ``hil_delay_s`` adds a one-way
 transport delay on the HIL state path: the autopilot gets the state of
@@ -44,13 +45,12 @@ from vtolftc.firmware_sim.autopilot.autopilot import (
 from vtolftc.firmware_sim.autopilot.interface import (
     CommandResult,
     NavState,
-    decode_hil_state,
-    encode_hil_state,
     wire_commands,
 )
 from vtolftc.firmware_sim.vehicle.faults import Fault, case_description, case_faults
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import Home
+from vtolftc.protocols.hil import HilRoundTrip
 from vtolftc.telemetry import RunObserver, TelemetrySample, VehicleTruth
 from vtolftc.telemetry.metrics import MetricsAccumulator
 
@@ -196,6 +196,7 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
     home = veh.sensor_model.home
     home_lat, home_lon, home_alt = float(home.lat_deg), float(home.lon_deg), float(home.alt_m)
     ap.set_home(home_lat, home_lon, home_alt)
+    round_trip = HilRoundTrip(home_lat, home_lon, home_alt)
     acc = MetricsAccumulator(window_start_s=scenario.transition_start_s
                              if scenario.window_start_s is None else scenario.window_start_s)
     result = RunResult(metrics={})
@@ -242,22 +243,18 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                     event(now, "fault", f"injected {a.fault.describe()}")
             t0 = pc()
             x = veh.x
-            # views of the state: encode_hil_state only reads them
             if noisy:
                 xe, air = veh.estimated_state()
             else:
                 xe, air = x, float(veh.fm[6])
-            # views of the state: encode_hil_state only reads them
-            truth_nav = NavState(now, xe[6:10], xe[10:13], xe[0:3], xe[3:6], air)
-            nav = decode_hil_state(encode_hil_state(truth_nav, home_lat, home_lon, home_alt),
-                                   home_lat, home_lon, home_alt)
+            # exactly decode_hil_state(encode_hil_state(...)): what a SITL autopilot receives
+            nav = round_trip(now, xe, air)
             nav_ap = nav
             if n_delay:  # the autopilot sees the delayed state, telemetry the current one
                 fifo.append(nav)
                 nav_ap = fifo.popleft() if len(fifo) > n_delay else fifo[0]
             t1 = pc()
             u = ap.step(nav_ap)
-            st = ap.status()
             t2 = pc()
             log = ap.event_log
             while n_events < len(log):
@@ -266,16 +263,18 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                 warn = "quad-chute" in text or "denied" in text or "forced" in text
                 event(te, "warning" if warn else "mode", text)
             cmds = wire_commands(u)
-            truth = None
             if obs:
+                st = ap.status()
                 truth = VehicleTruth(x[0:3].copy(), x[3:6].copy(), x[6:10].copy(),
                                      np.array(veh.euler_rad), x[10:13].copy(),
                                      float(veh.fm[6]), veh.actuator_positions,
                                      veh.effectiveness)
-            sample = TelemetrySample(now, nav, st, truth)
-            acc.add(sample)
-            for o in obs:
-                o.on_sample(sample)
+                sample = TelemetrySample(now, nav, st, truth)
+                acc.add(sample)
+                for o in obs:
+                    o.on_sample(sample)
+            else:  # nobody reads the status: the metrics take its fields directly
+                acc.add_step(now, nav, *ap.metrics_inputs(nav))
             t3 = pc()
             veh.step(cmds, n_sub)
             t4 = pc()

@@ -718,6 +718,20 @@ class Autopilot:
             float(self._airspeed), self._v.copy(), self._u.copy(), self._alloc_status,
             self.controller_name, self._message, self.navigator.custom_mode(mode))
 
+    def metrics_inputs(self, nav: NavState) -> tuple[FlightMode, bool, NDArray[np.float64],
+                                                     float, tuple[float, float, float] | None]:
+        """What the flight metrics read of :meth:`status`, without building it.
+
+        Returns ``(mode, armed, attitude_ref_rad, altitude_ref_m, euler_rad)``: the status
+        fields of those names (``attitude_ref_rad`` is the autopilot's own array: read it, do
+        not keep it) and, when the last step flew on ``nav`` itself, the ZYX Euler angles
+        [rad] it computed from ``nav.q_wxyz`` (else None). The in-process runner's path when
+        no observer wants the full status.
+        """
+        m = self.modes
+        euler = tuple(self._att.tolist()) if nav is self._last_nav else None
+        return m.mode, m.armed, self._ref, float(self._alt_ref), euler
+
     @property
     def allocation_stats(self) -> dict[str, object]:
         """The allocator's running statistics (counts per status, iterations, timing)."""

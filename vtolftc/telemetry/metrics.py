@@ -30,11 +30,13 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
+from vtolftc.protocols.hil import NavState
 from vtolftc.rotation import quat_to_euler
 from vtolftc.telemetry.samples import FlightMode, TelemetrySample
 
@@ -98,15 +100,38 @@ class MetricsAccumulator:
 
     def add(self, s: TelemetrySample) -> None:
         """Add one control step: errors, peaks, transition and crash detection."""
-        t = s.time_usec * 1e-6
+        st = s.status
+        self.add_step(s.time_usec, s.nav, st.mode, st.armed, st.attitude_ref_rad,
+                      st.altitude_ref_m)
+
+    def add_step(self, time_usec: int, nav: NavState, mode: FlightMode | int, armed: bool,
+                 attitude_ref_rad: NDArray[np.float64] | Sequence[float],
+                 altitude_ref_m: float,
+                 euler_rad: tuple[float, float, float] | None = None) -> None:
+        """:meth:`add` from the sample's parts (the in-process runner's path: no
+        :class:`AutopilotStatus` built when nobody else reads it).
+
+        Parameters
+        ----------
+        time_usec : int
+            Sample time [us].
+        nav : NavState
+            What the autopilot flew on.
+        mode, armed, attitude_ref_rad, altitude_ref_m
+            The :class:`AutopilotStatus` fields of the same names (roll, pitch, yaw
+            references [rad]; altitude reference above home [m]); read, never kept.
+        euler_rad : tuple, optional
+            ``quat_to_euler(nav.q_wxyz)`` when the caller has it already [rad].
+        """
+        t = time_usec * 1e-6
         self.t_last = t
-        nav, st = s.nav, s.status
-        roll, pitch, yaw = quat_to_euler(nav.q_wxyz)
+        roll, pitch, yaw = quat_to_euler(nav.q_wxyz) if euler_rad is None else euler_rad
         pos = nav.pos_ned_m
         h = -(pos.tolist()[2] if type(pos) is np.ndarray and pos.shape == (3,)
               else float(pos[2]))
-        mode = st.mode if type(st.mode) is FlightMode else FlightMode(st.mode)
-        if self._ground is None and st.armed:
+        if type(mode) is not FlightMode:
+            mode = FlightMode(mode)
+        if self._ground is None and armed:
             self._ground = h
         ground = self._ground if self._ground is not None else h
         if h - ground > 2.0:
@@ -125,10 +150,10 @@ class MetricsAccumulator:
             self.quad_chute = True
         self._prev_mode = mode
         self.n += 1
-        ref = st.attitude_ref_rad
+        ref = attitude_ref_rad
         r0, r1, r2 = ref.tolist() if type(ref) is np.ndarray and ref.shape == (3,) else (
             float(ref[0]), float(ref[1]), float(ref[2]))
-        e_h = float(st.altitude_ref_m) - h
+        e_h = float(altitude_ref_m) - h
         if t >= self.window_start_s:
             e0 = (r0 - roll) * _RAD_TO_DEG
             e1 = (r1 - pitch) * _RAD_TO_DEG
