@@ -21,13 +21,14 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from vtolftc.firmware_sim.autopilot.lqr import LQRGains, LQRGainsError
+from vtolftc.firmware_sim.autopilot.lqr import LQRAxisGains, LQRGains, LQRGainsError
 from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, wrap_angle
 from vtolftc.firmware_sim.autopilot.schedule import AXES, GainSchedule, GainScheduleError
 
@@ -77,7 +78,7 @@ class AttitudeController(Protocol):
 
     def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
                rates: NDArray[np.float64], airspeed_m_s: float,
-               sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]:
+               sat_hi: Sequence[bool], sat_lo: Sequence[bool]) -> NDArray[np.float64]:
         """Moment demand for one control step.
 
         Parameters
@@ -88,7 +89,7 @@ class AttitudeController(Protocol):
             body rates p, q, r, FRD (rad/s).
         airspeed_m_s : float
             airspeed (m/s), the scheduling variable.
-        sat_hi, sat_lo : numpy.ndarray
+        sat_hi, sat_lo : sequence of bool
             per axis, the allocator saturated the moment at its upper / lower limit last step
             (anti-windup: the integrators do not move further that way).
 
@@ -147,7 +148,7 @@ class ScheduledPPIDController:
 
     def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
                rates: NDArray[np.float64], airspeed_m_s: float,
-               sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]:
+               sat_hi: Sequence[bool], sat_lo: Sequence[bool]) -> NDArray[np.float64]:
         """Moment demand for one control step.
 
         Parameters
@@ -158,7 +159,7 @@ class ScheduledPPIDController:
             body rates p, q, r, FRD (rad/s).
         airspeed_m_s : float
             airspeed (m/s), the scheduling variable.
-        sat_hi, sat_lo : numpy.ndarray
+        sat_hi, sat_lo : sequence of bool
             per axis, the allocator saturated the moment at its upper / lower limit last step
             (anti-windup: the integrators do not move further that way).
 
@@ -210,6 +211,8 @@ class LQRAttitudeController:
         self.gains_path = gains_path if gains_path is not None else Path("<memory>")
         self.gains_sha256 = _sha256(gains_path) if gains_path is not None else ""
         self.integral_term = np.zeros(3)  # k_int * int(e) [N m], bumpless under scheduling
+        self._gains_cache: dict[float, dict[str, LQRAxisGains]] = {}
+        self._cached_gains: LQRGains | None = gains
 
     def reset(self) -> None:
         """Clear the integral terms of the three axes."""
@@ -217,7 +220,7 @@ class LQRAttitudeController:
 
     def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
                rates: NDArray[np.float64], airspeed_m_s: float,
-               sat_hi: NDArray[np.bool_], sat_lo: NDArray[np.bool_]) -> NDArray[np.float64]:
+               sat_hi: Sequence[bool], sat_lo: Sequence[bool]) -> NDArray[np.float64]:
         """Moment demand for one control step.
 
         Parameters
@@ -228,7 +231,7 @@ class LQRAttitudeController:
             body rates p, q, r, FRD (rad/s).
         airspeed_m_s : float
             airspeed (m/s), the scheduling variable.
-        sat_hi, sat_lo : numpy.ndarray
+        sat_hi, sat_lo : sequence of bool
             per axis, the allocator saturated the moment at its upper / lower limit last step
             (anti-windup: the integrators do not move further that way).
 
@@ -237,7 +240,9 @@ class LQRAttitudeController:
         numpy.ndarray
             moment demand (roll, pitch, yaw) about the body FRD axes (N m).
         """
-        g = self.gains.gains_at(airspeed_m_s)
+        g = self._gains_cache.get(airspeed_m_s) if self._cached_gains is self.gains else None
+        if g is None:
+            g = self._gains_at(airspeed_m_s)
         out = np.empty(3)
         rl, al, wl = _floats3(ref), _floats3(att), _floats3(rates)
         it = self.integral_term
@@ -251,6 +256,17 @@ class LQRAttitudeController:
                 it[k] += dI
             out[k] = gk.k_angle * e - gk.k_rate * wl[k] + it[k]
         return out
+
+    def _gains_at(self, airspeed_m_s: float) -> dict[str, LQRAxisGains]:
+        """``gains.gains_at`` memoised on the exact airspeed (as the P-PID controller's: the
+        measured airspeed comes in 0.01 m/s steps; the gains of a value never change)."""
+        if self._cached_gains is not self.gains or len(self._gains_cache) >= 20_000:
+            self._gains_cache = {}
+            self._cached_gains = self.gains
+        g = self.gains.gains_at(airspeed_m_s)
+        if airspeed_m_s == airspeed_m_s:  # never a NaN key
+            self._gains_cache[airspeed_m_s] = g
+        return g
 
 
 def make_controller(name: str, gains_dir: str | Path | None = None, dt: float = 0.004, *,

@@ -261,12 +261,15 @@ class Autopilot:
         self.modes = ModeMachine()
         self._event_log: list[tuple[int, str]] = []
         self._B = np.zeros((5, self.n_u))
+        self._B_of: NDArray[np.float64] | None = None  # the grid B that _B (Fz row 0) is of
         self._u = np.zeros(self.n_u)
         self._v = np.zeros(5)
         self._ref = np.zeros(3)
         self._att = np.zeros(3)
-        self._sat_hi = np.zeros(3, dtype=bool)
-        self._sat_lo = np.zeros(3, dtype=bool)
+        # per moment axis: the last allocation fell short upwards / downwards (plain lists of
+        # bool: read by the attitude controller's anti-windup every step)
+        self._sat_hi = [False, False, False]
+        self._sat_lo = [False, False, False]
         # control steps whose allocation fell short of a commanded moment (any axis)
         self.saturated_steps = 0
         self._time_usec = 0
@@ -427,8 +430,8 @@ class Autopilot:
     def _reset_loops(self) -> None:
         self.attitude.reset()
         self.mc_alt.reset()
-        self._sat_hi[:] = False
-        self._sat_lo[:] = False
+        self._sat_hi = [False, False, False]
+        self._sat_lo = [False, False, False]
 
     # ------------------------------------------------------------------------------------
     # Control step
@@ -594,9 +597,11 @@ class Autopilot:
         # differs from the exact one by < 1 % above 10 m/s, far below the faults' 20-50 %.
         B = self.effectiveness.matrix_on_grid(V, 0.1)
         if not use_fz:
+            if B is not self._B_of:  # the grid's B is cached and read-only: copy on change
+                np.copyto(self._B, B)
+                self._B[0, :] = 0.0
+                self._B_of = B
             B = self._B
-            np.copyto(B, self.effectiveness.matrix_on_grid(V, 0.1))
-            B[0, :] = 0.0
         v = self._v
         v[0] = fz_cmd
         v[1] = fx_cmd
@@ -692,17 +697,18 @@ class Autopilot:
         """Which moment axes the allocation could not achieve, and in which direction."""
         _, _, w0, w1, w2 = v.tolist()
         _, _, g0, g1, g2 = achieved.tolist()
-        hi_, lo_ = self._sat_hi, self._sat_lo
         tol = 0.02 + 0.02 * abs(w0)
-        hi_[0] = w0 > g0 + tol
-        lo_[0] = w0 < g0 - tol
+        h0 = w0 > g0 + tol
+        l0 = w0 < g0 - tol
         tol = 0.02 + 0.02 * abs(w1)
-        hi_[1] = w1 > g1 + tol
-        lo_[1] = w1 < g1 - tol
+        h1 = w1 > g1 + tol
+        l1 = w1 < g1 - tol
         tol = 0.02 + 0.02 * abs(w2)
-        hi_[2] = w2 > g2 + tol
-        lo_[2] = w2 < g2 - tol
-        if hi_[0] or lo_[0] or hi_[1] or lo_[1] or hi_[2] or lo_[2]:
+        h2 = w2 > g2 + tol
+        l2 = w2 < g2 - tol
+        self._sat_hi = [h0, h1, h2]
+        self._sat_lo = [l0, l1, l2]
+        if h0 or l0 or h1 or l1 or h2 or l2:
             self.saturated_steps += 1
 
     # ------------------------------------------------------------------------------------

@@ -46,11 +46,18 @@ import time
 import numba
 import numpy as np
 
-from vtolftc.firmware_sim.autopilot.allocation.interface import AllocationResult
+from vtolftc.firmware_sim.autopilot.allocation.interface import (
+    AllocationResult,
+    _vec_arg,
+    step_bounds,
+)
 from vtolftc.firmware_sim.autopilot.allocation.wls import (
+    _F64,
     _ST_FALLBACK,
+    _ST_INVALID_INPUT,
     _ST_SOLVED,
     WLSAllocator,
+    _prepare,
 )
 
 __all__ = ["ActiveSetAllocator", "box_qp"]
@@ -206,6 +213,29 @@ def _box_qp_active_set(H, q, lo, hi, u0, max_iter, tol):
 
 
 
+@numba.njit(cache=True)
+def _allocate_step(v, B, pref, umin_def, umax_def, umin_in, umax_in, prev, has_prev, rate,
+                   has_rate, dt, lo, hi, B_last, w_v2, reg, tri_r, tri_c, Hn, Px, BtW2s, scale,
+                   qn, u0, max_iter, tol):
+    """``step_bounds``, ``_prepare`` and ``_box_qp_active_set`` of one allocation step in one
+    compiled call (the same functions, so the same bits, without two Python round trips).
+
+    Returns ``(code, u, ok, iterations)``: ``code`` -1 for non-finite input (``u`` is then
+    ``u0`` untouched and nothing was solved), else ``_prepare``'s 0 / 1 (``B`` unchanged /
+    changed); ``lo``/``hi`` are written in every case.
+    """
+    prev_ok = step_bounds(umin_def, umax_def, umin_in, umax_in, prev, has_prev, rate,
+                          has_rate, dt, lo, hi)
+    if not prev_ok:
+        return -1, u0, False, 0
+    code = _prepare(v, B, pref, B_last, w_v2, reg, tri_r, tri_c, Hn, Px, BtW2s, scale, qn)
+    if code < 0:
+        return -1, u0, False, 0
+    u, ok, it = _box_qp_active_set(Hn, qn, lo, hi, u0, max_iter, tol)
+    return code, u, ok, it
+
+
+
 
 def box_qp(
     H: np.ndarray,
@@ -292,6 +322,56 @@ class ActiveSetAllocator(WLSAllocator):
             raise ValueError(f"max_iter must be >= 1, got {max_iter}")
         self.tol = float(tol)
         self.max_iter = int(max_iter)
+
+    def allocate(
+        self,
+        v: np.ndarray,
+        B: np.ndarray,
+        *,
+        u_min: np.ndarray | None = None,
+        u_max: np.ndarray | None = None,
+        u_pref: np.ndarray | None = None,
+        u_prev: np.ndarray | None = None,
+    ) -> AllocationResult:
+        """Allocate one step: ``WLSAllocator.allocate`` (same arguments, checks and results,
+        bit for bit) with the bounds, the QP update and the solve in one compiled call
+        (:func:`_allocate_step`). ``solve_time_s`` is that call's time."""
+        t0 = _perf_counter()
+        n_u = self.n_u
+        if type(v) is not np.ndarray or v.dtype != _F64:
+            v = np.asarray(v, dtype=float)
+        if type(B) is not np.ndarray or B.dtype != _F64:
+            B = np.asarray(B, dtype=float)
+        if v.shape != (self.n_v,):
+            raise ValueError(f"v: expected shape ({self.n_v},), got {v.shape}")
+        if B.shape != (self.n_v, n_u):
+            raise ValueError(f"B: expected shape ({self.n_v}, {n_u}), got {B.shape}")
+        umin_in = self.u_min if u_min is None else _vec_arg(u_min, n_u, "u_min")
+        umax_in = self.u_max if u_max is None else _vec_arg(u_max, n_u, "u_max")
+        last = self._u_last
+        prev = last if u_prev is None else _vec_arg(u_prev, n_u, "u_prev")
+        pref = self.u_pref if u_pref is None else _vec_arg(u_pref, n_u, "u_pref")
+        rate = self.rate_limit
+        lo = np.empty(n_u)
+        hi = np.empty(n_u)
+        u0 = last if last is not None else pref
+        t1 = _perf_counter()
+        code, u, ok, it = _allocate_step(
+            v, B, pref, self.u_min, self.u_max, umin_in, umax_in,
+            self._zeros_u if prev is None else prev, prev is not None,
+            self._zeros_u if rate is None else rate, rate is not None, self.dt, lo, hi,
+            self._B_last, self._w_v2, self._reg, self._tri_r, self._tri_c, self._Hn, self._Px,
+            self._BtW2s, self._scale, self._qn, u0, self.max_iter, self.tol)
+        t_solve = _perf_counter() - t1
+        if code < 0:
+            hold = last if last is not None else self.u_pref
+            return self._finish(np.clip(hold, lo, hi), v, B, _ST_INVALID_INPUT, 0, 0.0, t0,
+                                "non-finite input", False)
+        if ok:
+            return self._finish(u, v, B, _ST_SOLVED, it, t_solve, t0, "solved", True)
+        u = self._fallback(v, B, lo, hi, pref, u)
+        return self._finish(u, v, B, _ST_FALLBACK, it, t_solve, t0, "active set not converged",
+                            False)
 
     def _solve(self, v: np.ndarray, B: np.ndarray, pref: np.ndarray, lo: np.ndarray,
                hi: np.ndarray, B_changed: bool, t0: float) -> AllocationResult:
