@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.firmware_sim.autopilot.lqr import LQRAxisGains, LQRGains, LQRGainsError
-from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, wrap_angle
+from vtolftc.firmware_sim.autopilot.pid import _TWO_PI, CascadedPPID, PPIDGains, wrap_angle
 from vtolftc.firmware_sim.autopilot.schedule import AXES, GainSchedule, GainScheduleError
 
 __all__ = [
@@ -172,17 +172,61 @@ class ScheduledPPIDController:
             else None
         if g is None:
             g = self._gains_at(airspeed_m_s)
-        out = self._out
         rl, al, wl = _floats3(ref), _floats3(att), _floats3(rates)
-        for k, ax in enumerate(AXES):
-            pid = self.pids[k]
+        o3 = [0.0, 0.0, 0.0]
+        for k, pid in enumerate(self.pids):
+            gk = g[AXES[k]]
             before = pid.integral
-            o = pid.update(rl[k], al[k], wl[k], g[ax])
-            di = pid.integral - before
+            # pid.update(rl[k], al[k], wl[k], gk) inlined, statement for statement (the hot
+            # path: two method calls per axis and step saved); tests/test_attitude.py checks
+            # it against CascadedPPID.update bit for bit
+            pid.gains = gk
+            err = rl[k] - al[k]
+            if pid.wrap:
+                err = -((-err + math.pi) % _TWO_PI - math.pi)  # wrap_angle
+            r = gk.kp_angle * err + 0.0  # + rate_ff
+            lim = pid.rate_limit
+            if lim is not None:
+                r = min(max(r, -lim), lim)
+            # CascadedPPID.update_rate(r, wl[k])
+            e = r - wl[k]
+            e_prev = pid._e_prev
+            de = e - e_prev
+            tf = gk.tf_rate_s
+            if tf == pid._tf_cached:
+                a, b = pid._a, pid._b
+            else:
+                a, b = pid._filter_coeffs(tf)
+            derivative = a * pid.derivative + b * gk.kd_rate * de
+            pid.derivative = derivative
+            dt = pid.dt
+            dI = (0.5 * gk.ki_rate * dt * (e + e_prev) if pid.method == "tustin"
+                  else gk.ki_rate * dt * e)
+            p = gk.kp_rate * e
+            integral = before
+            u_min, u_max = pid.u_min, pid.u_max
+            u_test = p + integral + dI + derivative
+            if dI > 0.0 and u_test > u_max:
+                dI = max(0.0, u_max - (u_test - dI))
+            elif dI < 0.0 and u_test < u_min:
+                dI = min(0.0, u_min - (u_test - dI))
+            integral = min(max(integral + dI, u_min), u_max)
+            pid.integral = integral
+            o = p + integral + derivative
+            pid.output_unsat = o
+            pid.saturated = o >= u_max or o <= u_min
+            o = min(max(o, u_min), u_max)
+            pid._e_prev = e
+            pid.rate_ref = r
+            pid.output = o
+            # anti-windup from the allocation's saturation
+            di = integral - before
             if (di > 0.0 and sat_hi[k]) or (di < 0.0 and sat_lo[k]):
                 o -= di
                 pid.integral = before
-            out[k] = o
+            o3[k] = o
+        out = self._out
+        out[0], out[1], out[2] = o3
         return out.copy()
 
     def _gains_at(self, airspeed_m_s: float) -> dict[str, PPIDGains]:

@@ -261,6 +261,7 @@ class Autopilot:
         self.modes = ModeMachine()
         self._event_log: list[tuple[int, str]] = []
         self._B = np.zeros((5, self.n_u))
+        self._wing: tuple = (None,)  # (airframe, rho, wing constants) of _aero_estimate
         self._B_of: NDArray[np.float64] | None = None  # the grid B that _B (Fz row 0) is of
         self._u = np.zeros(self.n_u)
         self._v = np.zeros(5)
@@ -453,7 +454,11 @@ class Autopilot:
         self._have_nav = True
         self._last_nav = nav
         self._time_usec = int(nav.time_usec)
-        roll, pitch, yaw = quat_to_euler(q)
+        # quat_to_euler(q), inlined on the floats at hand (same expressions, same bits)
+        w_, x_, y_, z_ = ql
+        roll = math.atan2(2.0 * (w_ * x_ + y_ * z_), 1.0 - 2.0 * (x_ * x_ + y_ * y_))
+        pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w_ * y_ - z_ * x_))))
+        yaw = math.atan2(2.0 * (w_ * z_ + x_ * y_), 1.0 - 2.0 * (y_ * y_ + z_ * z_))
         att = self._att
         att[0], att[1], att[2] = roll, pitch, yaw
         rates = nav.omega_body_rad_s
@@ -653,10 +658,16 @@ class Autopilot:
         airframe file, linear lift clipped at CL_max)."""
         if V < 1.0:
             return 0.0, 0.0
-        w = self.airframe.wing
-        qS = self.effectiveness.dynamic_pressure(V) * w.area_m2
-        cl = min(max(w.CL0 + w.CL_alpha * alpha, -w.CL_max), w.CL_max)
-        cd = w.CD0 + w.induced_drag_factor * cl * cl
+        wing = self._wing
+        if wing[0] is not self.airframe:
+            w = self.airframe.wing
+            wing = self._wing = (self.airframe, self.effectiveness._rho, w.area_m2, w.CL0,
+                                 w.CL_alpha, w.CL_max, w.CD0, w.induced_drag_factor)
+        _, rho, area, cl0, cl_alpha, cl_max, cd0, k_i = wing
+        # effectiveness.dynamic_pressure(V) * area, inlined (V >= 1 here)
+        qS = 0.5 * rho * V * V * area
+        cl = min(max(cl0 + cl_alpha * alpha, -cl_max), cl_max)
+        cd = cd0 + k_i * cl * cl
         return qS * cl, qS * cd
 
     def _pusher_max_force(self, V: float) -> float:

@@ -48,6 +48,7 @@ import numpy as np
 
 from vtolftc.firmware_sim.autopilot.allocation.interface import (
     AllocationResult,
+    _new_result,
     _vec_arg,
     step_bounds,
 )
@@ -367,8 +368,22 @@ class ActiveSetAllocator(WLSAllocator):
             hold = last if last is not None else self.u_pref
             return self._finish(np.clip(hold, lo, hi), v, B, _ST_INVALID_INPUT, 0, 0.0, t0,
                                 "non-finite input", False)
-        if ok:
-            return self._finish(u, v, B, _ST_SOLVED, it, t_solve, t0, "solved", True)
+        if ok:  # _finish(u, v, B, _ST_SOLVED, it, t_solve, t0, "solved", True), inlined
+            va = B @ u
+            self._u_last = u
+            res = _new_result(u, va, va - v, _ST_SOLVED, it, t_solve, _perf_counter() - t0,
+                              "solved", True)
+            st = self.stats
+            st.calls += 1
+            st.counts[_ST_SOLVED] += 1
+            st.total_iterations += it
+            if it > st.max_iterations:
+                st.max_iterations = it
+            t_wall = res.wall_time_s
+            st.total_wall_time_s += t_wall
+            if t_wall > st.max_wall_time_s:
+                st.max_wall_time_s = t_wall
+            return res
         u = self._fallback(v, B, lo, hi, pref, u)
         return self._finish(u, v, B, _ST_FALLBACK, it, t_solve, t0, "active set not converged",
                             False)
@@ -379,8 +394,22 @@ class ActiveSetAllocator(WLSAllocator):
         t1 = _perf_counter()
         u, ok, it = _box_qp_active_set(self._Hn, self._qn, lo, hi, u0, self.max_iter, self.tol)
         t_solve = _perf_counter() - t1
-        if ok:
-            return self._finish(u, v, B, _ST_SOLVED, it, t_solve, t0, "solved", True)
+        if ok:  # _finish(u, v, B, _ST_SOLVED, it, t_solve, t0, "solved", True), inlined
+            va = B @ u
+            self._u_last = u
+            res = _new_result(u, va, va - v, _ST_SOLVED, it, t_solve, _perf_counter() - t0,
+                              "solved", True)
+            st = self.stats
+            st.calls += 1
+            st.counts[_ST_SOLVED] += 1
+            st.total_iterations += it
+            if it > st.max_iterations:
+                st.max_iterations = it
+            t_wall = res.wall_time_s
+            st.total_wall_time_s += t_wall
+            if t_wall > st.max_wall_time_s:
+                st.max_wall_time_s = t_wall
+            return res
         u = self._fallback(v, B, lo, hi, pref, u)
         return self._finish(u, v, B, _ST_FALLBACK, it, t_solve, t0, "active set not converged",
                             False)
