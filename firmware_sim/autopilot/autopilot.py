@@ -261,6 +261,8 @@ class Autopilot:
         self.modes = ModeMachine()
         self._event_log: list[tuple[int, str]] = []
         self._B = np.zeros((5, self.n_u))
+        self._B_grid_key: int | None = None  # matrix_on_grid key of _B_grid
+        self._B_grid: NDArray[np.float64] | None = None
         self._wing: tuple = (None,)  # (airframe, rho, wing constants) of _aero_estimate
         self._B_of: NDArray[np.float64] | None = None  # the grid B that _B (Fz row 0) is of
         self._u = np.zeros(self.n_u)
@@ -518,7 +520,12 @@ class Autopilot:
         pusher_hi = 1.0
         u_pref = self.u_pref_mc
         cos_tilt = max(0.5, math.cos(roll) * math.cos(pitch))
-        ub, _vb, wb = _body_velocity_f(ql[0], ql[1], ql[2], ql[3], vel[0], vel[1], vel[2])
+        # _body_velocity_f(*ql, *vel)[0] and [2], inlined (same expressions, same bits)
+        vn_, ve_, vd_ = vel
+        ub = ((1 - 2 * (y_ * y_ + z_ * z_)) * vn_ + 2 * (x_ * y_ + w_ * z_) * ve_
+              + 2 * (x_ * z_ - w_ * y_) * vd_)
+        wb = (2 * (x_ * z_ + w_ * y_) * vn_ + 2 * (y_ * z_ - w_ * x_) * ve_
+              + (1 - 2 * (x_ * x_ + y_ * y_)) * vd_)
         alpha = math.atan2(wb, ub) if ub > 1.0 else 0.0
         lift, drag = self._aero_estimate(V, alpha)
         fz_aero = -lift * math.cos(alpha) - drag * math.sin(alpha)  # body z, N
@@ -600,7 +607,11 @@ class Autopilot:
         # B(V) on a 0.1 m/s airspeed grid: the allocator rebuilds its Hessian only when B changes
         # (every ~12 steps in the transition instead of every step); the dynamic pressure
         # differs from the exact one by < 1 % above 10 m/s, far below the faults' 20-50 %.
-        B = self.effectiveness.matrix_on_grid(V, 0.1)
+        k_grid = round(V / 0.1) if V > 0.0 else 0  # matrix_on_grid's key (V is finite here)
+        if k_grid != self._B_grid_key:
+            self._B_grid = self.effectiveness.matrix_on_grid(V, 0.1)
+            self._B_grid_key = k_grid
+        B = self._B_grid
         if not use_fz:
             if B is not self._B_of:  # the grid's B is cached and read-only: copy on change
                 np.copyto(self._B, B)
