@@ -14,6 +14,13 @@ scenarios, 12 by default), so each one costs a full 60 s of simulation. Figures 
 
 Targets (issue 10): >= 100 scenarios/min on 2 cores, overhead < 5 % of a scenario.
 
+Measured (docs/campaigns/README.md, "Speeding up the in-process run"): the warm 60 s flight
+took 2.30 s on an idle core (26x real time) before the step was sped up; after, alternating
+old and new trees on the loaded machine (load 7-9), it costs 0.74-0.90 of that in CPU time
+(0.70 at load 4-6), i.e. ~1.6-2.1 s = 29-37x on an idle core, ~58-75 scenarios/min on 2
+cores before overhead: short of the target. Where a step goes now: autopilot ~63 % (attitude
+P-PID and allocation a quarter of it each), physics ~16 %, HIL codec ~9 %, metrics ~10 %.
+
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
 """
 
