@@ -21,7 +21,9 @@ those of one tune per job, bit for bit (the shipped gain files are reproduced ex
 Measured (2026-12-01, 2 cores shared with a campaign and two other sessions, load average
 5-13, so wall times are several times an idle machine's and barely comparable): robust,
 before 493 s (load 2.9 -> 5.4; tuning 452 s), after 420 s (load 5.4 -> 5.0; tuning 381 s);
-paper after 521 s wall at load 9 for 107 s of CPU (parent + workers). CPU time of single
+paper after 521 s wall at load 9 for 107 s of CPU (parent + workers). Before and after
+run side by side (same minutes, load 6-11): robust 1150 s -> 915 s wall, CPU (parent +
+workers) 345 s -> 220 s (1.57x less). CPU time of single
 tunes in-process (``time.process_time``, less load-dependent): SHIF roll 35.4 -> 25.5 s
 (before the last channel-assembly change), GS-SHIF roll point 3 4.5 -> 3.0 s. From the idle
 machine's 154 s (tuning 139 s) that puts the robust synthesis at roughly 90-100 s: the
