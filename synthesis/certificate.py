@@ -59,6 +59,7 @@ Three numbers per point and axis
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -98,6 +99,8 @@ __all__ = [
 PlantKind = Literal["lagged", "paper"]
 #: Frequencies of the sweep besides w = 0 [rad/s] (refined around the peak).
 SWEEP_OMEGAS = np.logspace(-3, 3, 37)
+#: The robust design's loop delays (8 ms modelled transport).
+DEFAULT_DELAYS = LoopDelays()
 #: Complex part added to the real scalars at the crossing frequencies (see mu_real_sweep).
 REGULARISATION = 1e-3
 #: Largest box scaling the grid margin searches (beyond: "> K_MAX").
@@ -120,7 +123,7 @@ def airspeed_pieces(af: Airframe, point: DesignPoint) -> list[tuple[float, float
         raise ValueError(f"design point {point.number}: empty airspeed range [{lo}, {hi}]")
     cuts = [float(v) for v in af.derivatives.airspeed_m_s if lo < float(v) < hi]
     edges = [lo, *cuts, hi]
-    return list(zip(edges[:-1], edges[1:], strict=True))
+    return list(itertools.pairwise(edges))
 
 
 @dataclass(frozen=True)
@@ -206,7 +209,7 @@ def _plant_tau(af: Airframe, plant: PlantKind, delays: LoopDelays) -> float | No
 
 def family(af: Airframe, axis: Axis, v_lo: float, v_hi: float,
            gamma_range: tuple[float, float] = GAMMA_RANGE, plant: PlantKind = "lagged",
-           delays: LoopDelays = LoopDelays()) -> ParametricFamily:
+           delays: LoopDelays = DEFAULT_DELAYS) -> ParametricFamily:
     """The exact polynomial parametrisation of ``axis`` on the airspeed piece
     [``v_lo``, ``v_hi``] (m/s; the tables must be linear on it, see :func:`airspeed_pieces`).
 
@@ -378,7 +381,7 @@ class GridCheck:
 def grid_check(af: Airframe, axis: Axis, point: DesignPoint, theta: Any,
                plant: PlantKind = "lagged", n: int = 41,
                gamma_range: tuple[float, float] = GAMMA_RANGE,
-               delays: LoopDelays = LoopDelays()) -> GridCheck:
+               delays: LoopDelays = DEFAULT_DELAYS) -> GridCheck:
     """Dense-grid verdict of the true model family (``axis_coefficients``) on the point's
     box, on the same plant as the LFT."""
     tau = _plant_tau(af, plant, delays)
@@ -530,10 +533,8 @@ def two_parameter_lower(M: NDArray[Any], n_v: int, k_max: float = K_MAX,
     best = math.inf
     for v in [*cands, *zero_g]:
         av, bv = ab(np.array([float(v)]))
-        if abs(bv[0]) <= 1e-12 * (1.0 + abs(av[0])):
-            g = 0.0
-        else:
-            g = float(np.real(-av[0] / bv[0]))
+        flat = abs(bv[0]) <= 1e-12 * (1.0 + abs(av[0]))
+        g = 0.0 if flat else float(np.real(-av[0] / bv[0]))
         t = max(abs(float(v)), abs(g))
         if t == 0.0 or t >= best:
             continue
@@ -549,18 +550,25 @@ def mu_real_sweep(fam: ParametricFamily, theta: Any,
                   seed: int = 0, rtol: float = 1e-3) -> MuSweep:
     """Mixed-mu bounds of M(j w) over w = 0 plus ``omegas`` (default :data:`SWEEP_OMEGAS`),
     refined ``refine`` times on a 7-point grid between the neighbours of each of the (up to
-    four) largest local maxima of the upper bound, and the :func:`vertex_crossings`.
+    three) largest local maxima of the upper bound, and the :func:`vertex_crossings`.
 
-    Only the peak matters for the certificate, so the D-G upper bound
-    (:func:`vtolftc.synthesis.mixed_mu.mixed_mu_upper`, cold-started at every frequency:
-    warm starts along the sweep were seen to stall in poor scalings) is solved tightly at
-    the frequency where the cheap D-only bound is largest and then, frequency by frequency,
-    only until it is below the running peak (``target``): every value is a valid upper
-    bound at its frequency, and the sweep's maximum is the certified peak (to ``rtol``).
-    The lower bound (:func:`two_parameter_lower`, exact for this structure up to its grid,
-    at w = 0, the vertex-crossing frequencies and the four largest upper values; at the
-    upper peak also :func:`vtolftc.synthesis.mixed_mu.mixed_mu_lower`; both verified real
-    perturbations) is zero at the other frequencies.
+    Only the peak matters for the certificate. The D-G upper bound
+    (:func:`vtolftc.synthesis.mixed_mu.mixed_mu_upper`) starts from a verified lower bound
+    at w = 0 as its ``target`` and is optimised, frequency by frequency in decreasing order
+    of the cheap D-only bound, only until it is below the current target (which rises only
+    when a frequency's bound converges above it); a warm start from the nearest solved
+    frequency is tried first, a cold start if that stalls above the target. Every value is
+    a valid upper bound at its frequency; the maximum over the sampled frequencies is the
+    certified peak (to ``rtol`` above the target). At the vertex-crossing frequencies the
+    bound is also taken with each real scalar given a complex part of relative size
+    :data:`REGULARISATION` (a larger family, continuous in frequency), which catches the
+    spikes of real mu there.
+
+    The lower bound (:func:`two_parameter_lower`, exact for this structure up to its grid;
+    at the upper peak also :func:`vtolftc.synthesis.mixed_mu.mixed_mu_lower` where the
+    first is more than 1 % below the upper bound; both verified real perturbations) is
+    computed at w = 0, the vertex-crossing frequencies and the four largest upper values,
+    and is zero at the other frequencies.
     """
     M = closed_loop_lft(fam, theta)
     crossings = vertex_crossings(fam, theta)
@@ -615,11 +623,11 @@ def mu_real_sweep(fam: ParametricFamily, theta: Any,
     W, UP = w, up
     for _ in range(refine):
         # every local maximum within 20 % of the peak
-        big = UP >= 0.8 * UP.max()
+        big = 0.8 * UP.max() <= UP
         left = np.concatenate([[True], UP[1:] >= UP[:-1]])
         right = np.concatenate([UP[:-1] >= UP[1:], [True]])
         order = np.nonzero(big & left & right)[0]
-        order = order[np.argsort(-UP[order])][:4]
+        order = order[np.argsort(-UP[order])][:3]
         loc_all = []
         for i in order:
             a = W[max(i - 1, 0)]
@@ -644,7 +652,7 @@ def mu_real_sweep(fam: ParametricFamily, theta: Any,
     for i in sorted(at):
         Mi = frequency_response(M, W[[i]])[0]
         LO[i] = two_parameter_lower(Mi, fam.n_v)
-        if i == iu:   # the general mixed lower bound too, at the certified peak
+        if i == iu and LO[i] < 0.99 * UP[i]:   # the general mixed lower bound too
             LO[i] = max(LO[i], mixed_mu_lower(Mi, blocks, n_starts=2, seed=seed)[0])
     il = int(np.argmax(LO))
     return MuSweep(W, LO, UP, float(LO[il]), float(W[il]), float(UP[iu]), float(W[iu]))
@@ -733,7 +741,7 @@ def _fin(x: float) -> float | None:
 def certify_point(af: Airframe, axis: Axis, point: DesignPoint, theta: Any,
                   plant: PlantKind = "lagged", *, grid_n: int = 41,
                   gamma_range: tuple[float, float] = GAMMA_RANGE,
-                  delays: LoopDelays = LoopDelays(), seed: int = 0,
+                  delays: LoopDelays = DEFAULT_DELAYS, seed: int = 0,
                   margin: bool = True) -> PointCertificate:
     """Mixed mu (every piece), the dense grid and the grid margin of one axis-point.
 

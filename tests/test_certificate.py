@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from vtolftc.airframe.loader import load_airframe
-from vtolftc.synthesis import certificate as C
+from vtolftc.synthesis import certificate as C  # noqa: N812
 from vtolftc.synthesis.hinfnorm import frequency_response
 from vtolftc.synthesis.loops import closed_loop
 from vtolftc.synthesis.models import attitude_model, axis_coefficients
@@ -123,7 +123,7 @@ def test_closed_form_real_mu_brackets():
     assert sw.peak_upper_frequency_rad_s == pytest.approx(2.0, rel=1e-3)
     i0 = int(np.nonzero(sw.omegas == 0.0)[0][0])
     assert sw.upper[i0] >= 0.5 * (1 - 1e-6)
-    klo, khi = C.grid_margin(fam, th)
+    _, khi = C.grid_margin(fam, th)
     assert 1.0 / khi == pytest.approx(1.5, rel=1e-3)
     M0 = frequency_response(C.closed_loop_lft(fam, th), np.array([0.0]))[0]
     assert C.zero_frequency_margin(M0, fam) == pytest.approx(2.0, abs=0.05)
