@@ -81,15 +81,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", choices=[r[0] for r in RUNS], action="append",
                     help="run only this design label (repeatable)")
     ap.add_argument("--out", type=Path, default=HERE, help="output directory")
+    ap.add_argument("--render", action="store_true",
+                    help="only rewrite CERTIFICATE.md from the existing certificate.json")
     args = ap.parse_args(argv)
     if not args.out.is_dir():
         print(f"--out {args.out}: not a directory; give an existing directory",
               file=sys.stderr)
         return 2
+    jpath = args.out / "certificate.json"
+    if args.render:
+        if not jpath.exists():
+            print(f"--render: {jpath} does not exist; run without --render first",
+                  file=sys.stderr)
+            return 2
+        render(args.out, json.loads(jpath.read_text())["records"])
+        return 0
     af = load_airframe()
     records: list[dict[str, Any]] = []
     times: dict[str, float] = {}
-    jpath = args.out / "certificate.json"
     for label, design, gdir, plant in RUNS:
         if args.only and label not in args.only:
             continue
@@ -107,12 +116,41 @@ def main(argv: list[str] | None = None) -> int:
                   f"({dt / len(recs):.2f} s each)", flush=True)
             _write_json(jpath, {"format": "vtolftc-certificate/1", "plants": PLANT_TEXT,
                                 "seconds": times, "records": records})
-    md = args.out / "CERTIFICATE.md"
-    text = (HERE / "certificate_head.md").read_text() if (
-        HERE / "certificate_head.md").exists() else "# Certificate\n"
-    md.write_text(text.rstrip() + "\n\n" + "\n".join(table(records)) + "\n")
-    print(f"wrote {md} and {jpath}")
+    render(args.out, records)
+    print(f"wrote {jpath}")
     return 0
+
+
+def summary(records: list[dict[str, Any]]) -> list[str]:
+    """Markdown rows: per design and controller, how many axis-points each test passes."""
+    out = ["| design | controller | plant | axis-points | lumped mu_RS < 1 | mixed mu upper < 1 "
+           "(certified) | grid stable | not certified |",
+           "|---|---|---|---:|---:|---:|---:|---|"]
+    keys: list[tuple[str, str]] = []
+    for r in records:
+        if (r["label"], r["controller"]) not in keys:
+            keys.append((r["label"], r["controller"]))
+    for label, ctrl in keys:
+        rs = [r for r in records if r["label"] == label and r["controller"] == ctrl]
+        lumped = sum(1 for r in rs if r["lumped_mu_rs"] is not None and r["lumped_mu_rs"] < 1)
+        cert = sum(1 for r in rs if r["certified"])
+        grid = sum(1 for r in rs if r["grid_stable"])
+        bad = ", ".join(f"{r['axis']} {r['point']} ({_f(r['mu_upper'], 2)})" for r in rs
+                        if not r["certified"]) or "-"
+        out.append(f"| {label} | {ctrl} | {rs[0]['plant']} | {len(rs)} | {lumped} | {cert} | "
+                   f"{grid} | {bad} |")
+    return out
+
+
+def render(out: Path, records: list[dict[str, Any]]) -> None:
+    """CERTIFICATE.md: the text of ``certificate_head.md``, the summary and the table."""
+    md = out / "CERTIFICATE.md"
+    head = HERE / "certificate_head.md"
+    text = head.read_text() if head.exists() else "# Certificate\n"
+    md.write_text(text.rstrip() + "\n\n## Summary (generated)\n\n" + "\n".join(summary(records))
+                  + "\n\n## Every axis-point (generated)\n\n" + "\n".join(table(records))
+                  + "\n")
+    print(f"wrote {md}")
 
 
 if __name__ == "__main__":
