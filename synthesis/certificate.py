@@ -668,7 +668,7 @@ class PieceResult:
     mu_upper: float
     mu_lower: float
     peak_frequency_rad_s: float
-    mu_upper_at_zero: float
+    mu_upper_at_zero: float          # upper bound at w = 0 (tight only if it is the peak)
     zero_frequency_k: float          # det(I - M(0) Delta) <= 0 first at this box scaling
     grid_k_lo: float                 # scaled-grid stable at this scaling
     grid_k_hi: float                 # ... an unstable member at this one (inf: none)
@@ -712,10 +712,13 @@ class PointCertificate:
 
     @property
     def verdict(self) -> str:
-        """"certified", "not certified (unstable member found)" or "not certified (bound
-        >= 1, no unstable grid member)"."""
+        """"certified", "not certified: centre unstable" (the nominal of a piece, at its
+        box centre, is unstable: mu is infinite), "not certified: unstable member" (the grid
+        or the lower bound found one) or "not certified: bound >= 1"."""
         if self.certified:
             return "certified"
+        if not all(p.centre_stable for p in self.pieces):
+            return "not certified: centre unstable"
         if not self.grid.stable or self.mu_lower >= 1.0:
             return "not certified: unstable member"
         return "not certified: bound >= 1"
@@ -731,6 +734,7 @@ class PointCertificate:
                 "grid_worst_airspeed_m_s": g.worst_airspeed_m_s,
                 "grid_worst_gamma": g.worst_gamma, "grid_mu": _fin(self.grid_mu),
                 "certified": self.certified, "verdict": self.verdict,
+                "centre_stable": all(p.centre_stable for p in self.pieces),
                 "pieces": [p.to_dict() for p in self.pieces]}
 
 

@@ -187,3 +187,22 @@ def test_box_with_reversed_effectiveness_is_not_certified(af, robust_gs):
     assert not c.grid.stable
     assert c.mu_upper >= 1.0 and not c.certified
     assert math.isfinite(c.mu_upper)
+
+
+@pytest.mark.slow
+def test_every_robust_shif_axis_point(af):
+    """The constant robust SHIF gains at all 21 axis-points: upper >= lower >= 0, upper >=
+    the grid's 1/k on every piece, and a grid with an unstable member is never certified
+    (yaw 1-3 are: the loop is conditionally stable and loses stability at hover below
+    about 0.66 of its yaw effectiveness)."""
+    doc = json.loads((GAINS / "shif.json").read_text())
+    recs = C.certify_schedule(af, doc, "lagged", grid_n=21)
+    assert len(recs) == 21
+    for r in recs:
+        assert r["mu_upper"] >= r["mu_lower"] >= 0.0
+        for q in r["pieces"]:
+            assert q["mu_upper"] >= (q["grid_mu"] or 0.0) * (1 - 1e-3)
+        if not r["grid_stable"]:
+            assert r["mu_upper"] >= 1.0 and not r["certified"]
+    assert {(r["axis"], r["point"]) for r in recs if not r["certified"]} == {
+        ("yaw", 1), ("yaw", 2), ("yaw", 3)}

@@ -68,6 +68,8 @@ def table(records: list[dict[str, Any]]) -> list[str]:
             f"**unstable** ({r['grid_unstable_members']}/{r['grid_members']}, worst "
             f"V {r['grid_worst_airspeed_m_s']:.2f}, gamma {r['grid_worst_gamma']:.2f})")
         verdict = r["verdict"] if r["certified"] else f"**{r['verdict']}**"
+        if not r.get("centre_stable", True):   # mu infinite: the nominal itself is unstable
+            r = {**r, "mu_upper": math.inf, "mu_lower": math.inf, "grid_mu": math.inf}
         out.append(
             f"| {r['label']} | {r['controller']} | {r['plant']} | {r['axis']} | {r['point']} | "
             f"{r['v_min_m_s']:g}-{r['v_max_m_s']:g} | {_f(r['lumped_mu_rs'])} | "
@@ -135,8 +137,10 @@ def summary(records: list[dict[str, Any]]) -> list[str]:
         lumped = sum(1 for r in rs if r["lumped_mu_rs"] is not None and r["lumped_mu_rs"] < 1)
         cert = sum(1 for r in rs if r["certified"])
         grid = sum(1 for r in rs if r["grid_stable"])
-        bad = ", ".join(f"{r['axis']} {r['point']} ({_f(r['mu_upper'], 2)})" for r in rs
-                        if not r["certified"]) or "-"
+        bad = ", ".join(
+            f"{r['axis']} {r['point']} ("
+            + (_f(r["mu_upper"], 2) if r.get("centre_stable", True) else "centre unstable")
+            + ")" for r in rs if not r["certified"]) or "-"
         out.append(f"| {label} | {ctrl} | {rs[0]['plant']} | {len(rs)} | {lumped} | {cert} | "
                    f"{grid} | {bad} |")
     return out
