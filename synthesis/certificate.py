@@ -68,6 +68,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.polynomial import polynomial as npoly
 from numpy.typing import NDArray
+from scipy.optimize import brentq
 
 from vtolftc.airframe.loader import Airframe
 from vtolftc.synthesis.hinfnorm import StateSpaceData, frequency_response
@@ -487,7 +488,7 @@ def two_parameter_lower(M: NDArray[Any], n_v: int, k_max: float = K_MAX,
     """Real-mu lower bound of M for the structure diag(dV I_n_v, dg): det(I - M Delta) is
     affine in dg, a(dV) + b(dV) dg, so for each dV of a fine grid on [-k_max, k_max] the
     only candidate is dg = -a / b, admissible where it is real (Im(a conj(b)) = 0: sign
-    changes, refined by bisection). Each candidate is verified (sigma_min(I - M Delta)
+    changes, refined by Brent's method). Each candidate is verified (sigma_min(I - M Delta)
     ~ 0); the value is 1 / the smallest max(|dV|, |dg|) found (0 if none)."""
     m = n_v + 1
     eye = np.eye(m)
@@ -508,28 +509,13 @@ def two_parameter_lower(M: NDArray[Any], n_v: int, k_max: float = K_MAX,
     f = np.imag(a * np.conj(b))
     cands = list(dv[np.abs(f) <= 1e-14 * (np.abs(a * b) + 1e-300)])
     for i in np.nonzero(np.sign(f[:-1]) * np.sign(f[1:]) < 0)[0]:
-        lo, hi = float(dv[i]), float(dv[i + 1])
-        flo = f[i]
-        for _ in range(50):
-            mid = 0.5 * (lo + hi)
-            fm = im(np.array([mid]))[0]
-            if np.sign(fm) == np.sign(flo):
-                lo, flo = mid, fm
-            else:
-                hi = mid
-        cands.append(0.5 * (lo + hi))
+        cands.append(brentq(lambda x: float(im(np.array([x]))[0]), float(dv[i]),
+                            float(dv[i + 1]), xtol=1e-13))
     # dg without effect at some dV (b = 0): det = a(dV) itself must vanish (dg = 0)
     ra = np.real(a)
-    zero_g = []
-    for i in np.nonzero(np.sign(ra[:-1]) * np.sign(ra[1:]) < 0)[0]:
-        lo, hi = float(dv[i]), float(dv[i + 1])
-        for _ in range(50):
-            mid = 0.5 * (lo + hi)
-            if np.sign(np.real(ab(np.array([mid]))[0][0])) == np.sign(ra[i]):
-                lo = mid
-            else:
-                hi = mid
-        zero_g.append(0.5 * (lo + hi))
+    zero_g = [brentq(lambda x: float(np.real(ab(np.array([x]))[0][0])), float(dv[i]),
+                     float(dv[i + 1]), xtol=1e-13)
+              for i in np.nonzero(np.sign(ra[:-1]) * np.sign(ra[1:]) < 0)[0]]
     best = math.inf
     for v in [*cands, *zero_g]:
         av, bv = ab(np.array([float(v)]))
@@ -566,7 +552,8 @@ def mu_real_sweep(fam: ParametricFamily, theta: Any,
 
     The lower bound (:func:`two_parameter_lower`, exact for this structure up to its grid;
     at the upper peak also :func:`vtolftc.synthesis.mixed_mu.mixed_mu_lower` where the
-    first is more than 1 % below the upper bound; both verified real perturbations) is
+    largest of the first is more than 1 % below the peak upper bound; both verified real
+    perturbations) is
     computed at w = 0, the vertex-crossing frequencies and the four largest upper values,
     and is zero at the other frequencies.
     """
@@ -652,8 +639,9 @@ def mu_real_sweep(fam: ParametricFamily, theta: Any,
     for i in sorted(at):
         Mi = frequency_response(M, W[[i]])[0]
         LO[i] = two_parameter_lower(Mi, fam.n_v)
-        if i == iu and LO[i] < 0.99 * UP[i]:   # the general mixed lower bound too
-            LO[i] = max(LO[i], mixed_mu_lower(Mi, blocks, n_starts=2, seed=seed)[0])
+    if LO.max() < 0.99 * UP[iu]:   # the general mixed lower bound too, at the peak
+        Mi = frequency_response(M, W[[iu]])[0]
+        LO[iu] = max(LO[iu], mixed_mu_lower(Mi, blocks, n_starts=2, seed=seed)[0])
     il = int(np.argmax(LO))
     return MuSweep(W, LO, UP, float(LO[il]), float(W[il]), float(UP[iu]), float(W[iu]))
 
