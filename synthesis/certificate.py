@@ -38,14 +38,19 @@ the LFT use the same plant.
 
 Three numbers per point and axis
 --------------------------------
-1. Mixed-mu **upper bound** (D-G scaling, :func:`vtolftc.synthesis.mixed_mu.mixed_mu_sweep`,
+1. Mixed-mu **upper bound** (D-G scaling, :func:`vtolftc.synthesis.mixed_mu.mixed_mu_upper`,
    numpy D-G: AB13MD takes 1 x 1 real blocks only, and splitting dV I_n into n independent
-   real scalars would be a larger family) over w = 0 and a log grid, refined around the
-   peak. w = 0 is included exactly (M(0) is real: a real closed-loop pole crossing the
-   origin), and :func:`zero_frequency_margin` checks det(I - M(0) Delta) over the box
-   directly. mu < 1 at every frequency certifies robust stability of the box.
-2. Mixed-mu **lower bound** (verified destabilising real perturbations,
-   :func:`vtolftc.synthesis.mixed_mu.mixed_mu_lower` at the peaks).
+   real scalars would be a larger family) over w = 0, a log grid refined around the largest
+   local maxima, and the frequencies where the family first loses stability towards the
+   box's vertices (:func:`vertex_crossings`: with two real parameters the peak of real mu
+   is smooth or a kink on a vertex ray; real mu is discontinuous in frequency, so there the
+   bound is also taken with a small complex part added to each real scalar). w = 0 is
+   included exactly (M(0) is real: a real closed-loop pole crossing the origin), and
+   :func:`zero_frequency_margin` checks det(I - M(0) Delta) over the box directly.
+   mu < 1 at every frequency certifies robust stability of the box (:func:`mu_real_sweep`).
+2. Mixed-mu **lower bound**: verified destabilising real perturbations
+   (:func:`two_parameter_lower`, exact for diag(dV I_n, dg) up to its grid, and
+   :func:`vtolftc.synthesis.mixed_mu.mixed_mu_lower` at the peak where that one falls short).
 3. **Dense grid** (:func:`grid_check`): closed-loop poles of the true model family (the
    airframe's interpolated tables through ``axis_coefficients``, not the LFT) on a 41 x 41
    grid over V x gamma: the verdict and the largest real part; and the **grid margin**: the
@@ -81,19 +86,26 @@ from vtolftc.synthesis.robust import LoopDelays, actuator_time_constant
 from vtolftc.synthesis.uncertainty import GAMMA_RANGE, DesignPoint
 
 __all__ = [
+    "GridCheck",
     "ParametricFamily",
     "PieceResult",
     "PlantKind",
     "PointCertificate",
     "airspeed_pieces",
     "certify_point",
+    "certify_schedule",
     "closed_loop_lft",
+    "design_points",
     "family",
+    "gains_at",
     "grid_check",
     "grid_margin",
     "mu_real_sweep",
     "plant_lft",
     "true_closed_loop_matrices",
+    "two_parameter_lower",
+    "upper_lft_plant",
+    "vertex_crossings",
     "zero_frequency_margin",
 ]
 
