@@ -21,8 +21,8 @@ old and new trees on the loaded machine (load 7-9), it costs 0.74-0.90 of that i
 cores before overhead: short of the target. Where a step goes now: autopilot ~63 % (attitude
 P-PID and allocation a quarter of it each), physics ~16 %, HIL codec ~9 %, metrics ~10 %.
 Second round (P-PID axes and LQR law one compiled call each): attitude update 11.9 -> 2.9 us
-per step; whole flights ~0.93 of the first round's CPU time (old mean 2.17 s, new 2.01 s at
-load 9-11), ~31-40x on an idle core, ~62-80 scenarios/min on 2 cores before overhead.
+per step; whole flights ~0.92 of the first round's CPU time (old mean 2.13 s, new 1.96 s at
+load 9-11), ~31-41x on an idle core, ~62-82 scenarios/min on 2 cores before overhead.
 
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
 """
