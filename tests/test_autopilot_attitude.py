@@ -192,7 +192,7 @@ def test_scheduled_ppid_compiled_step_equals_axis_loops_bit_for_bit():
     """The controller's own axes run as one compiled call on their state array
     (``_ppid3_step``): every output and every state attribute the axis objects show equals
     CascadedPPID.update per axis plus the anti-windup, bit for bit; resets, a deep copy and
-    writes to the objects' attributes act on that state."""
+    writes to the objects' attributes (state and constants) act on that state."""
     sched = GainSchedule.from_dict(sched_dict((0.0, 10.0, 20.0)))
     c = ScheduledPPIDController(sched, dt=0.004)
     ref_pids = [CascadedPPID(p.gains, p.dt, wrap=p.wrap, rate_limit=p.rate_limit,
@@ -212,6 +212,10 @@ def test_scheduled_ppid_compiled_step_equals_axis_loops_bit_for_bit():
             c.pids[0].integral = ref_pids[0].integral = 0.25
         if i == 1700:
             c = copy.deepcopy(c)
+        if i == 2200:  # and so are its constants
+            c.pids[2].rate_limit = ref_pids[2].rate_limit = 0.5
+            c.pids[1].u_min, c.pids[1].u_max = ref_pids[1].u_min, ref_pids[1].u_max = -0.2, 0.3
+            c.pids[0].method = ref_pids[0].method = "backward_euler"
         tau = c.update(ref, att, rates, V, hi, lo)
         g = sched.gains_at(V)
         for k, ax in enumerate(("roll", "pitch", "yaw")):

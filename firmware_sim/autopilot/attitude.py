@@ -240,11 +240,71 @@ class _ArrayPPID(CascadedPPID):
     array the compiled three-axis step works on. The whole array and the row index are
     kept (not a view), so a deep copy or pickle of the controller keeps them shared."""
 
-    def __init__(self, state: NDArray[np.float64], k: int, *args: object,
-                 **kwargs: object) -> None:
+    def __init__(self, state: NDArray[np.float64], const: NDArray[np.float64], k: int,
+                 *args: object, **kwargs: object) -> None:
         self._state = state
+        self._const = const
         self._k = k
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+
+    # the constants too (CascadedPPID's public attributes), so changing one acts on the
+    # compiled step as it does on CascadedPPID.update
+    @property
+    def wrap(self) -> bool:  # type: ignore[override]
+        """Wrap the angle error to (-pi, pi] (yaw)."""
+        return bool(self._const[self._k, 0] != 0.0)
+
+    @wrap.setter
+    def wrap(self, value: bool) -> None:
+        self._const[self._k, 0] = 1.0 if value else 0.0
+
+    @property
+    def rate_limit(self) -> float | None:  # type: ignore[override]
+        """Limit of the rate reference [rad/s], None for none."""
+        v = float(self._const[self._k, 1])
+        return None if v != v else v
+
+    @rate_limit.setter
+    def rate_limit(self, value: float | None) -> None:
+        self._const[self._k, 1] = math.nan if value is None else float(value)
+
+    @property
+    def dt(self) -> float:  # type: ignore[override]
+        """Control period [s]."""
+        return float(self._const[self._k, 2])
+
+    @dt.setter
+    def dt(self, value: float) -> None:
+        self._const[self._k, 2] = float(value)
+
+    @property
+    def method(self) -> str:  # type: ignore[override]
+        """Integration method, ``tustin`` or ``backward_euler``."""
+        return "tustin" if self._const[self._k, 3] != 0.0 else "backward_euler"
+
+    @method.setter
+    def method(self, value: str) -> None:
+        if value not in ("tustin", "backward_euler"):
+            raise ValueError(f"method must be 'tustin' or 'backward_euler', got {value!r}")
+        self._const[self._k, 3] = 1.0 if value == "tustin" else 0.0
+
+    @property
+    def u_min(self) -> float:  # type: ignore[override]
+        """Lower output limit [N m]."""
+        return float(self._const[self._k, 4])
+
+    @u_min.setter
+    def u_min(self, value: float) -> None:
+        self._const[self._k, 4] = float(value)
+
+    @property
+    def u_max(self) -> float:  # type: ignore[override]
+        """Upper output limit [N m]."""
+        return float(self._const[self._k, 5])
+
+    @u_max.setter
+    def u_max(self, value: float) -> None:
+        self._const[self._k, 5] = float(value)
 
     integral = _row_property(_S_INTEGRAL, "integral of ki e dt [N m]")
     derivative = _row_property(_S_DERIV, "filtered kd de/dt [N m]")
@@ -282,15 +342,13 @@ class ScheduledPPIDController:
         self.gains_sha256 = _sha256(gains_path) if gains_path is not None else ""
         g0 = schedule.gains_at(0.0)
         self._state = np.zeros((3, _N_STATE))
+        self._const = np.zeros((3, _N_CONST))
         self.pids: list[CascadedPPID] = [
-            _ArrayPPID(self._state, k, g0[ax], dt, wrap=(ax == "yaw"), rate_limit=rl,
-                       output_limit=1e6)
+            _ArrayPPID(self._state, self._const, k, g0[ax], dt, wrap=(ax == "yaw"),
+                       rate_limit=rl, output_limit=1e6)
             for k, (ax, rl) in enumerate(zip(AXES, rate_limits, strict=True))]
         # the compiled step runs while self.pids are still these three objects
         self._own = tuple(self.pids)
-        self._const = np.array([[float(p.wrap), math.nan if p.rate_limit is None
-                                 else p.rate_limit, p.dt, float(p.method == "tustin"),
-                                 p.u_min, p.u_max] for p in self.pids])
         self._out = np.zeros(3)
         self._gains_cache: dict[float, dict[str, PPIDGains]] = {}
         self._garr_cache: dict[int, tuple[dict[str, PPIDGains], NDArray[np.float64]]] = {}
