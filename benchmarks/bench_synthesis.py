@@ -13,6 +13,23 @@ then prints the per-stage wall times, the total, and the total without the repor
 (seven points, three channels each) + 3 SHIF tunes over the seven points, loop margins, mu
 (42 sweeps), gain files, report. ``--method paper``: the paper's design (six points).
 
+How the work is spread over the workers (both methods): the weights of every (axis, point)
+once, then every start of the three SHIF tunes (the longest jobs, submitted first) and every
+GS-SHIF tune as its own job; the SHIF starts are combined in start order, so the gains are
+those of one tune per job, bit for bit (the shipped gain files are reproduced exactly).
+
+Measured (2026-12-01, 2 cores shared with a campaign and two other sessions, load average
+5-13, so wall times are several times an idle machine's and barely comparable): robust,
+before 493 s (load 2.9 -> 5.4; tuning 452 s), after 420 s (load 5.4 -> 5.0; tuning 381 s);
+paper after 521 s wall at load 9 for 107 s of CPU (parent + workers). Before and after
+run side by side (same minutes, load 6-11): robust 1150 s -> 915 s wall, CPU (parent +
+workers) 345 s -> 220 s (1.57x less). CPU time of single
+tunes in-process (``time.process_time``, less load-dependent): SHIF roll 35.4 -> 25.5 s
+(before the last channel-assembly change), GS-SHIF roll point 3 4.5 -> 3.0 s. From the idle
+machine's 154 s (tuning 139 s) that puts the robust synthesis at roughly 90-100 s: the
+< 60 s target is not reached yet (what remains: the finite-difference derivatives, i.e.
+10 channel realisations per SLSQP Jacobian, and SLSQP's own QP on ~800 constraints).
+
 Usage: ``python benchmarks/bench_synthesis.py [--method robust|paper] [--starts N] [--jobs N]
 [--seed S] [--out DIR] [--no-report]``. The machine's load is printed with the times (the
 numbers mean little on a shared machine).

@@ -9,10 +9,15 @@
    frequencies with ``mu_sweep`` (AB13MD upper bound + power-iteration lower bound), with the
    numpy D-scaling (``method="dscale"``) and raw ``slycot.ab13md`` alone (upper bound only);
    and ``mixed_mu_sweep`` on a 10x10 M with two repeated real scalars (3x each) and two 2x2
-   complex blocks over 100 frequencies (the per-axis-point certification case).
+   complex blocks over 100 frequencies (a generic mixed case).
+3. The real-parametric certificate (``synthesis/certificate.py``): the mixed-mu sweep
+   (D-G upper bound, lower bound, w = 0, refinement, vertex crossings) of every airspeed
+   piece of one axis-point, over the 21 axis-points of the shipped robust GS-SHIF gains;
+   prints wall and CPU seconds per axis-point (mean, max), and the grid check's.
 
-Usage: ``python benchmarks/bench_toolbox.py [--repeat N]``. Timings are wall-clock on
-whatever else the machine is doing; run it on an idle machine for comparable figures.
+Usage: ``python benchmarks/bench_toolbox.py [--repeat N] [--only hinf|mu|certificate]``.
+Timings are wall-clock on whatever else the machine is doing; run it on an idle machine for
+comparable figures.
 """
 
 from __future__ import annotations
@@ -144,14 +149,48 @@ def bench_mu() -> None:
     print(f"  upper bound only                  {t_up:7.3f} s  peak {sw_up.peak_upper:.4f}")
 
 
+def bench_certificate() -> None:
+    import json
+    from pathlib import Path
+
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.synthesis import certificate as cert
+
+    af = load_airframe()
+    path = Path(__file__).resolve().parents[1] / "firmware_sim/autopilot/gains/gs-shif.json"
+    doc = json.loads(path.read_text())
+    walls, cpus, grid = [], [], []
+    for axis in ("roll", "pitch", "yaw"):
+        for i, p in enumerate(cert.design_points(doc)):
+            th = cert.gains_at(doc, axis, i)
+            t0, c0 = time.perf_counter(), time.process_time()
+            for lo, hi in cert.airspeed_pieces(af, p):
+                cert.mu_real_sweep(cert.family(af, axis, lo, hi), th)
+            walls.append(time.perf_counter() - t0)
+            cpus.append(time.process_time() - c0)
+            t0 = time.perf_counter()
+            cert.grid_check(af, axis, p, th)
+            grid.append(time.perf_counter() - t0)
+    print("\nreal-parametric mixed-mu sweep per axis-point (robust GS-SHIF, 21 axis-points, "
+          "1-3 airspeed pieces each)")
+    print(f"  wall  mean {np.mean(walls):6.3f} s  max {np.max(walls):6.3f} s")
+    print(f"  CPU   mean {np.mean(cpus):6.3f} s  max {np.max(cpus):6.3f} s")
+    print(f"  41x41 grid check (true model poles): mean {np.mean(grid) * 1e3:6.1f} ms")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=50, help="calls per timing (default 50)")
+    ap.add_argument("--only", choices=("hinf", "mu", "certificate"), help="one part only")
     args = ap.parse_args()
     if args.repeat < 1:
         ap.error("--repeat must be >= 1")
-    bench_hinf(args.repeat)
-    bench_mu()
+    if args.only in (None, "hinf"):
+        bench_hinf(args.repeat)
+    if args.only in (None, "mu"):
+        bench_mu()
+    if args.only in (None, "certificate"):
+        bench_certificate()
 
 
 if __name__ == "__main__":

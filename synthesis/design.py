@@ -45,7 +45,7 @@ markedly worse (yaw RMSE about 3 deg instead of 0.3 deg in the paper's case 1).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, as_completed
 from dataclasses import dataclass, field
 from typing import Any
@@ -63,7 +63,16 @@ from vtolftc.synthesis.loops import (
     closed_loop,
 )
 from vtolftc.synthesis.models import AXES, Axis, attitude_model
-from vtolftc.synthesis.structured import Parameter, TuneResult, TuningProblem, tune
+from vtolftc.synthesis.structured import (
+    Parameter,
+    StartRecord,
+    TuneResult,
+    TuningProblem,
+    collect_starts,
+    run_start,
+    start_jobs,
+    tune,
+)
 from vtolftc.synthesis.uncertainty import PAPER_DESIGN_POINTS, DesignPoint, UncertaintyWeight, cover
 
 __all__ = [
@@ -218,15 +227,21 @@ def _pick(res: TuneResult, channels: Sequence[CascadeChannel]) -> NDArray[np.flo
     return np.asarray(scored[0][2], float)
 
 
-def _tune(af: Airframe, axis: Axis, weights: list[AxisWeights], label: str, n_starts: int,
-          seed: int, max_iter: int) -> AxisDesign:
+def _problem(af: Airframe, axis: Axis, weights: list[AxisWeights],
+             ) -> tuple[TuningProblem, list[Any], list[CascadeChannel]]:
+    """The multi-model problem of ``axis`` over the points of ``weights`` (eq. 7-8)."""
     plants = [attitude_model(af, axis, w.point.airspeed_m_s) for w in weights]
     chans = [CascadeChannel(G, w.Ws, w.Wt.tf(), w.Wr) for G, w in zip(plants, weights,
                                                                       strict=True)]
     u_max = min(w.Wr.u_max_N_m for w in weights)
     pb = TuningProblem(parameters(af, axis, u_max), chans,
                        [f"{axis} point {w.point.number}" for w in weights])
-    res = tune(pb, n_starts=n_starts, seed=seed, max_iter=max_iter)
+    return pb, plants, chans
+
+
+def _design(axis: Axis, weights: list[AxisWeights], label: str, n_starts: int,
+            plants: list[Any], chans: list[CascadeChannel], res: TuneResult) -> AxisDesign:
+    """The design of a finished tune: tie-break, norms per point, poles."""
     theta = _pick(res, chans)
     per = [_norms(c, theta) for c in chans]
     norms = {k: max(p[k] for p in per) for k in per[0]}
@@ -236,6 +251,13 @@ def _tune(af: Airframe, axis: Axis, weights: list[AxisWeights], label: str, n_st
                                             strict=True)),
                       norms, stable, [[complex(z) for z in p] for p in poles], weights,
                       n_starts + 1, res.message, per)
+
+
+def _tune(af: Airframe, axis: Axis, weights: list[AxisWeights], label: str, n_starts: int,
+          seed: int, max_iter: int) -> AxisDesign:
+    pb, plants, chans = _problem(af, axis, weights)
+    res = tune(pb, n_starts=n_starts, seed=seed, max_iter=max_iter)
+    return _design(axis, weights, label, n_starts, plants, chans, res)
 
 
 def _seed(seed: int, axis: Axis, tag: int) -> int:
@@ -265,30 +287,81 @@ def _job(args: tuple[Any, ...]) -> tuple[tuple[str, int], AxisDesign]:
     return (axis, 0), design_shif(af, axis, n_starts=n_starts, seed=seed)
 
 
+def _weights_job(args: tuple[Any, ...]) -> tuple[tuple[str, DesignPoint], AxisWeights]:
+    af, axis, point = args
+    return (axis, point), weights_for(af, axis, point)
+
+
+def _gs_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], AxisDesign]:
+    """One GS-SHIF tune with its point's weights given (:func:`design_point`)."""
+    af, axis, w, n_starts, seed, max_iter = args
+    return (axis, w.point.number), _tune(af, axis, [w], f"point {w.point.number}", n_starts,
+                                         _seed(seed, axis, w.point.number), max_iter)
+
+
+def _start_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], StartRecord]:
+    axis, job = args
+    return (axis, int(job[1])), run_start(job)
+
+
 def run_designs(af: Airframe, *, n_starts: int = 6, seed: int = 0,
                 points: Sequence[DesignPoint] = PAPER_DESIGN_POINTS,
                 executor: Executor | None = None, shif: bool = True,
-                progress: Callable[[str], None] | None = None,
+                progress: Callable[[str], None] | None = None, max_iter: int = 40,
                 ) -> tuple[dict[Axis, list[AxisDesign]], dict[Axis, AxisDesign]]:
-    """All GS-SHIF tunes (axes x points) and, with ``shif``, the three SHIF tunes.
+    """All GS-SHIF tunes (axes x points) and, with ``shif``, the three SHIF tunes (over the
+    paper's six points, :func:`design_shif`'s default).
 
     Deterministic: each tune's seed derives from (seed, axis, point), whatever the execution
-    order. ``executor`` (e.g. a ``ProcessPoolExecutor``) runs the tunes in parallel;
-    ``progress`` is called with a label after each finished tune.
+    order. ``executor`` (e.g. a ``ProcessPoolExecutor``) runs the work in parallel, cut finer
+    than one job per tune so that every worker stays busy: the weights of every (axis,
+    point) once, then every start of the SHIF tunes (the longest jobs, first) and the
+    GS-SHIF tunes; a SHIF tune's start records are combined in start order
+    (:func:`vtolftc.synthesis.structured.collect_starts`), the same result bit for bit as
+    :func:`design_shif`. ``progress`` is called with a label after each finished tune.
     """
-    jobs: list[tuple[Any, ...]] = []
-    if shif:  # the longest jobs first
-        jobs += [("shif", af, ax, None, n_starts, seed) for ax in AXES]
-    jobs += [("gs", af, ax, p, n_starts, seed) for ax in AXES for p in points]
     results: dict[tuple[str, int], AxisDesign] = {}
-    if executor is None:
-        it: Iterable[tuple[tuple[str, int], AxisDesign]] = map(_job, jobs)
-    else:  # results as they finish (progress), stored by key (order-independent)
-        it = (f.result() for f in as_completed([executor.submit(_job, j) for j in jobs]))
-    for key, d in it:
+
+    def done(key: tuple[str, int], d: AxisDesign) -> None:
         results[key] = d
         if progress is not None:
             progress(f"{key[0]} {'SHIF' if key[1] == 0 else f'point {key[1]}'}")
+
+    if executor is None:
+        jobs: list[tuple[Any, ...]] = []
+        if shif:  # the longest jobs first
+            jobs += [("shif", af, ax, None, n_starts, seed) for ax in AXES]
+        jobs += [("gs", af, ax, p, n_starts, seed) for ax in AXES for p in points]
+        for key, d in map(_job, jobs):
+            done(key, d)
+    else:
+        need = list(points) + [p for p in PAPER_DESIGN_POINTS if shif and p not in points]
+        wfuts = [executor.submit(_weights_job, (af, ax, p)) for ax in AXES for p in need]
+        weights = dict(f.result() for f in wfuts)
+        shif_pb: dict[Axis, tuple[Any, ...]] = {}
+        records: dict[Axis, list[StartRecord]] = {ax: [] for ax in AXES}
+        futs = []
+        if shif:
+            for ax in AXES:
+                ws = [weights[(ax, p)] for p in PAPER_DESIGN_POINTS]
+                prob = _problem(af, ax, ws)
+                shif_pb[ax] = (ws, prob)
+                for job in start_jobs(prob[0], n_starts=n_starts, seed=_seed(seed, ax, 100),
+                                      max_iter=max_iter):
+                    futs.append(executor.submit(_start_job, (ax, job)))
+        futs += [executor.submit(_gs_job, (af, ax, weights[(ax, p)], n_starts, seed,
+                                           max_iter)) for ax in AXES for p in points]
+        for f in as_completed(futs):
+            key, r = f.result()
+            if isinstance(r, AxisDesign):
+                done(key, r)
+                continue
+            ax = key[0]
+            records[ax].append(r)
+            if len(records[ax]) == n_starts + 1:
+                ws, (pb, plants, chans) = shif_pb[ax]
+                res = collect_starts(pb, records[ax])
+                done((ax, 0), _design(ax, ws, "all points", n_starts, plants, chans, res))
     gs = {ax: [results[(ax, p.number)] for p in points] for ax in AXES}
     sh = {ax: results[(ax, 0)] for ax in AXES} if shif else {}
     return gs, sh

@@ -104,6 +104,18 @@ def as_state_space(sys: Any) -> StateSpaceData:
     ValueError
         For discrete-time systems, improper transfer functions, or inconsistent shapes.
     """
+    if (isinstance(sys, tuple) and len(sys) == 4
+            and all(type(x) is np.ndarray and x.dtype == np.float64 and x.ndim == 2
+                    for x in sys)):
+        # fast path (the tuners' channels): real 2-D arrays, copied exactly as below
+        A, B, C, D = (np.array(x, dtype=np.float64) for x in sys)
+        n = A.shape[0]
+        p, m = D.shape
+        if (A.shape == (n, n) and B.shape == (n, m) and C.shape == (p, n)
+                and np.isfinite(np.concatenate([A.ravel(), B.ravel(), C.ravel(),
+                                                D.ravel()])).all()):
+            return A, B, C, D
+        # otherwise the general path below says what is wrong
     if isinstance(sys, tuple | list):
         if len(sys) != 4:
             raise ValueError(

@@ -250,6 +250,36 @@ def _closed(Gd: StateSpaceData, theta: NDArray[np.float64]) -> ClosedLoop:
     return ClosedLoop(A, B, C, D)
 
 
+#: Closed loops of the last (plant, gains) pairs asked for by :class:`CascadeChannel`: the
+#: tuners evaluate several channels on the same plant at the same gains (eq. 8, disturbance and
+#: delay channels of one design point), so each loop is built once. Pure cache: the same
+#: function of the same numbers, hence the same result bit for bit.
+_CL_CACHE: dict[bytes, ClosedLoop] = {}
+_CL_CACHE_SIZE = 256
+
+
+def _plant_key(Gd: StateSpaceData) -> bytes:
+    """Exact identity of a plant realisation (shapes and every bit of A, B, C)."""
+    Ag, Bg, Cg, _ = Gd
+    return b"".join([np.asarray(Ag.shape, np.int64).tobytes(),
+                     np.asarray(Cg.shape, np.int64).tobytes(),
+                     np.ascontiguousarray(Ag, float).tobytes(),
+                     np.ascontiguousarray(Bg, float).tobytes(),
+                     np.ascontiguousarray(Cg, float).tobytes()])
+
+
+def _closed_cached(Gd: StateSpaceData, gkey: bytes, theta: NDArray[np.float64]) -> ClosedLoop:
+    """:func:`_closed` through :data:`_CL_CACHE` (the returned loop must not be modified)."""
+    key = gkey + np.ascontiguousarray(theta, float).tobytes()
+    cl = _CL_CACHE.get(key)
+    if cl is None:
+        cl = _closed(Gd, theta)
+        if len(_CL_CACHE) >= _CL_CACHE_SIZE:
+            _CL_CACHE.clear()
+        _CL_CACHE[key] = cl
+    return cl
+
+
 def closed_loop(G: Any, theta: Any) -> ClosedLoop:
     """Closed loop of plant ``G`` (moment -> [rate; angle]) and the P-PID gains ``theta``
     (sequence in :data:`PARAM_NAMES` order, or a mapping with those keys)."""
@@ -311,6 +341,7 @@ class CascadeChannel:
         self.outputs = [n for n, W in zip(names, self._W, strict=True) if W is not None]
         if self._Wd is not None:
             self.outputs.append("Wd*Sd")
+        self._gkey = _plant_key(self._G)
 
     def __getstate__(self) -> dict[str, Any]:
         return {"G": self._G, "Ws": self._W[0], "Wt": self._W[1], "Wr": self._W[2],
@@ -358,46 +389,51 @@ class CascadeChannel:
     def __call__(self, theta: NDArray[np.float64]) -> StateSpaceData:
         if not hasattr(self, "_A0"):
             self._template()
-        cl = _closed(self._G, np.asarray(theta, float))
-        Ws, Wt, Wr = self._W
-        off, ncl = self._off, self._ncl
+            self._plan()
+        cl = _closed_cached(self._G, self._gkey, np.asarray(theta, float))
+        ncl = self._ncl
         A, C = self._A0.copy(), self._C0.copy()
         B = np.zeros((A.shape[0], 1))
         D = np.zeros((C.shape[0], 1))
-        Ce, De = cl.C[0], cl.D[0, 0]           # e from r
-        Cu, Du = cl.C[1], cl.D[1, 0]           # u from r (u has no feed-through from d)
+        clC, clD = cl.C, cl.D
         A[:ncl, :ncl] = cl.A
         B[:ncl, 0] = cl.B[:, 0]
-        for W, k, Cx, Dx, name in ((Ws, 1, Ce, De, "Ws*S"), (Wr, 2, Cu, Du, "Wr*R")):
+        # the products below are np.outer's and the scalar products of the assembly they
+        # replace, element for element (same numbers, fewer temporaries)
+        for sl, bw, dw, r, out in self._rdriven:   # Ws S (e from r), Wr R (u from r)
+            Cx, Dx = clC[out], clD[out, 0]
+            A[sl, :ncl] = bw[:, None] * Cx[None, :]
+            B[sl, 0] = bw * Dx
+            C[r, :ncl] = dw * Cx
+            D[r, 0] = dw * Dx
+        for c2, sl, bw, dw, r, out, sign in self._ddriven:   # Wt T_u (-u/d), Wd e/d
+            Cx = -clC[out] if sign < 0 else clC[out]
+            A[c2, c2] = cl.A
+            B[c2, 0] = cl.B[:, 1]
+            A[sl, c2] = bw[:, None] * Cx[None, :]
+            C[r, c2] = (-dw * clC[out]) if sign < 0 else dw * Cx
+        return A, B, C, D
+
+    def _plan(self) -> None:
+        """Slices and weight numbers of :meth:`__call__` (after :meth:`_template`)."""
+        Ws, Wt, Wr = self._W
+        off = self._off
+        self._rdriven: list[tuple[Any, ...]] = []
+        for W, k, out, name in ((Ws, 1, 0, "Ws*S"), (Wr, 2, 1, "Wr*R")):
             if W is None:
                 continue
             _, Bw, _, Dw = W
-            sl = slice(off[k], off[k + 1])
-            A[sl, :ncl] = np.outer(Bw[:, 0], Cx)
-            B[sl, 0] = Bw[:, 0] * Dx
-            r = self._rows[name]
-            C[r, :ncl] = Dw[0, 0] * Cx
-            D[r, 0] = Dw[0, 0] * Dx
+            self._rdriven.append((slice(off[k], off[k + 1]), Bw[:, 0].copy(), Dw[0, 0],
+                                  self._rows[name], out))
+        self._ddriven: list[tuple[Any, ...]] = []
         if Wt is not None:
             _, Bw, _, Dw = Wt
-            c2 = slice(off[3], off[4])
-            A[c2, c2] = cl.A
-            B[c2, 0] = cl.B[:, 1]
-            sl = slice(off[4], off[5])
-            A[sl, c2] = np.outer(Bw[:, 0], -Cu)   # T_u = -u/d
-            r = self._rows["Wt*T"]
-            C[r, c2] = -Dw[0, 0] * Cu
+            self._ddriven.append((slice(off[3], off[4]), slice(off[4], off[5]),
+                                  Bw[:, 0].copy(), Dw[0, 0], self._rows["Wt*T"], 1, -1))
         if self._Wd is not None:
             _, Bw, _, Dw = self._Wd
-            Ced = cl.C[0]                          # e from d (no feed-through)
-            c3 = slice(off[5], off[6])
-            A[c3, c3] = cl.A
-            B[c3, 0] = cl.B[:, 1]
-            sl = slice(off[6], off[7])
-            A[sl, c3] = np.outer(Bw[:, 0], Ced)
-            r = self._rows["Wd*Sd"]
-            C[r, c3] = Dw[0, 0] * Ced
-        return A, B, C, D
+            self._ddriven.append((slice(off[5], off[6]), slice(off[6], off[7]),
+                                  Bw[:, 0].copy(), Dw[0, 0], self._rows["Wd*Sd"], 0, 1))
 
     def rows(self, theta: NDArray[np.float64]) -> dict[str, StateSpaceData]:
         """Each weighted function on its own (name -> (A, B, C, D))."""

@@ -52,7 +52,7 @@ paper's (:mod:`vtolftc.synthesis.baselines`).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, as_completed
 from dataclasses import dataclass
 from typing import Any
@@ -84,7 +84,16 @@ from vtolftc.synthesis.loops import (
     rate_controller,
 )
 from vtolftc.synthesis.models import AXES, Axis, attitude_model
-from vtolftc.synthesis.structured import Parameter, TuningProblem, tune
+from vtolftc.synthesis.structured import (
+    Parameter,
+    StartRecord,
+    TuneResult,
+    TuningProblem,
+    collect_starts,
+    run_start,
+    start_jobs,
+    tune,
+)
 from vtolftc.synthesis.uncertainty import (
     PAPER_DESIGN_POINTS,
     DesignPoint,
@@ -386,8 +395,10 @@ def _channels(af: Airframe, w: RobustWeights, G: Any, spec: RobustSpec,
     return out
 
 
-def _tune_robust(af: Airframe, axis: Axis, weights: list[RobustWeights], label: str,
-                 n_starts: int, seed: int, max_iter: int, spec: RobustSpec) -> AxisDesign:
+def _robust_problem(af: Airframe, axis: Axis, weights: list[RobustWeights], spec: RobustSpec,
+                    ) -> tuple[TuningProblem, list[ct.StateSpace], list[CascadeChannel],
+                               list[str], dict[str, dict[str, Any]]]:
+    """The tuning problem of ``axis`` over the points of ``weights`` (all their channels)."""
     plants = [w.plant(af) for w in weights]
     chans, names = [], []
     for G, w in zip(plants, weights, strict=True):
@@ -396,8 +407,14 @@ def _tune_robust(af: Airframe, axis: Axis, weights: list[RobustWeights], label: 
             names.append(f"{axis} point {w.point.number} {nm}")
     u_max = min(w.Wr.u_max_N_m for w in weights)
     params, why = robust_parameters(af, axis, u_max, spec)
-    pb = TuningProblem(params, chans, names)
-    res = tune(pb, n_starts=n_starts, seed=seed, max_iter=max_iter)
+    return TuningProblem(params, chans, names), plants, chans, names, why
+
+
+def _robust_design(axis: Axis, weights: list[RobustWeights], label: str, n_starts: int,
+                   spec: RobustSpec, plants: list[ct.StateSpace], chans: list[CascadeChannel],
+                   names: list[str], why: dict[str, dict[str, Any]], res: TuneResult,
+                   ) -> AxisDesign:
+    """The design of a finished tune: tie-break, unnormalised norms per point, poles."""
     eq8 = [c for c, n in zip(chans, names, strict=True) if n.endswith("eq8")]
     theta = _pick(res, eq8)
     per = []
@@ -417,6 +434,13 @@ def _tune_robust(af: Airframe, axis: Axis, weights: list[RobustWeights], label: 
                    list(weights), n_starts + 1, res.message, per)
     d.bounds = why  # type: ignore[attr-defined]
     return d
+
+
+def _tune_robust(af: Airframe, axis: Axis, weights: list[RobustWeights], label: str,
+                 n_starts: int, seed: int, max_iter: int, spec: RobustSpec) -> AxisDesign:
+    pb, plants, chans, names, why = _robust_problem(af, axis, weights, spec)
+    res = tune(pb, n_starts=n_starts, seed=seed, max_iter=max_iter)
+    return _robust_design(axis, weights, label, n_starts, spec, plants, chans, names, why, res)
 
 
 def robust_design_point(af: Airframe, axis: Axis, point: DesignPoint, *, n_starts: int = 4,
@@ -447,28 +471,86 @@ def _job(args: tuple[Any, ...]) -> tuple[tuple[str, int], AxisDesign]:
                                          spec=spec)
 
 
+def _weights_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], RobustWeights]:
+    af, axis, point, spec = args
+    return (axis, point.number), robust_weights(af, axis, point, spec)
+
+
+def _gs_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], AxisDesign]:
+    """One GS-SHIF tune with its point's weights given (:func:`robust_design_point`)."""
+    af, axis, w, n_starts, seed, max_iter, spec = args
+    return (axis, w.point.number), _tune_robust(af, axis, [w], f"point {w.point.number}",
+                                                n_starts, _seed(seed, axis, w.point.number),
+                                                max_iter, spec)
+
+
+def _start_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], StartRecord]:
+    """One start of a SHIF tune (:func:`vtolftc.synthesis.structured.start_jobs`)."""
+    axis, job = args
+    return (axis, int(job[1])), run_start(job)
+
+
 def run_robust_designs(af: Airframe, *, n_starts: int = 4, seed: int = 0,
                        points: Sequence[DesignPoint] = ROBUST_DESIGN_POINTS,
                        executor: Executor | None = None, shif: bool = True,
                        progress: Callable[[str], None] | None = None,
-                       spec: RobustSpec = RobustSpec(),
+                       spec: RobustSpec = RobustSpec(), max_iter: int = 40,
                        ) -> tuple[dict[Axis, list[AxisDesign]], dict[Axis, AxisDesign]]:
     """All robust GS-SHIF tunes (axes x points) and the SHIF tunes; deterministic as
-    :func:`vtolftc.synthesis.design.run_designs`."""
-    jobs: list[tuple[Any, ...]] = []
-    if shif:
-        jobs += [("shif", af, ax, None, tuple(points), n_starts, seed, spec) for ax in AXES]
-    jobs += [("gs", af, ax, p, tuple(points), n_starts, seed, spec) for ax in AXES
-             for p in points]
+    :func:`vtolftc.synthesis.design.run_designs`.
+
+    With an ``executor`` the work is cut finer than one job per tune, so that both workers
+    stay busy to the end: first the weights of every (axis, point), each computed once (a
+    SHIF tune needs the seven of its axis, a GS-SHIF tune its point's); then every start of
+    the SHIF tunes (the longest jobs, submitted first) and the GS-SHIF tunes. Each start is
+    the same deterministic local run as in :func:`vtolftc.synthesis.structured.tune` and the
+    records are combined in start order, so the result is the same, bit for bit, as one
+    :func:`robust_design_shif` / :func:`robust_design_point` call per tune (and as the
+    sequential run without an executor).
+    """
     results: dict[tuple[str, int], AxisDesign] = {}
-    if executor is None:
-        it: Iterable[tuple[tuple[str, int], AxisDesign]] = map(_job, jobs)
-    else:
-        it = (f.result() for f in as_completed([executor.submit(_job, j) for j in jobs]))
-    for key, d in it:
+
+    def done(key: tuple[str, int], d: AxisDesign) -> None:
         results[key] = d
         if progress is not None:
             progress(f"{key[0]} {'SHIF' if key[1] == 0 else f'point {key[1]}'}")
+
+    if executor is None:
+        jobs: list[tuple[Any, ...]] = []
+        if shif:
+            jobs += [("shif", af, ax, None, tuple(points), n_starts, seed, spec) for ax in AXES]
+        jobs += [("gs", af, ax, p, tuple(points), n_starts, seed, spec) for ax in AXES
+                 for p in points]
+        for key, d in map(_job, jobs):
+            done(key, d)
+    else:
+        wfuts = [executor.submit(_weights_job, (af, ax, p, spec)) for ax in AXES for p in points]
+        weights = dict(f.result() for f in wfuts)
+        shif_pb: dict[Axis, tuple[Any, ...]] = {}
+        records: dict[Axis, list[StartRecord]] = {ax: [] for ax in AXES}
+        futs = []
+        if shif:
+            for ax in AXES:
+                ws = [weights[(ax, p.number)] for p in points]
+                prob = _robust_problem(af, ax, ws, spec)
+                shif_pb[ax] = (ws, prob)
+                for job in start_jobs(prob[0], n_starts=n_starts, seed=_seed(seed, ax, 100),
+                                      max_iter=max_iter):
+                    futs.append(executor.submit(_start_job, (ax, job)))
+        futs += [executor.submit(_gs_job, (af, ax, weights[(ax, p.number)], n_starts, seed,
+                                           max_iter, spec)) for ax in AXES for p in points]
+        for f in as_completed(futs):
+            key, r = f.result()
+            if isinstance(r, AxisDesign):
+                done(key, r)
+                continue
+            ax = key[0]
+            records[ax].append(r)
+            if len(records[ax]) == n_starts + 1:
+                ws, (pb, plants, chans, names, why) = shif_pb[ax]
+                res = collect_starts(pb, records[ax])
+                done((ax, 0), _robust_design(ax, ws, "all points", n_starts, spec, plants,
+                                             chans, names, why, res))
     gs = {ax: [results[(ax, p.number)] for p in points] for ax in AXES}
     sh = {ax: results[(ax, 0)] for ax in AXES} if shif else {}
     return gs, sh

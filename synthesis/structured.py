@@ -61,9 +61,12 @@ __all__ = [
     "TuneResult",
     "TuningProblem",
     "closed_loops",
+    "collect_starts",
     "mixed_sensitivity",
     "mixed_sensitivity_channel",
     "pid",
+    "run_start",
+    "start_jobs",
     "tune",
 ]
 
@@ -278,6 +281,11 @@ class _Evaluator:
         self._cache: dict[bytes, list[StateSpaceData]] = {}
         self._dcache: dict[bytes, list[list[StateSpaceData]]] = {}
         self.shapes: list[tuple[int, ...]] | None = None
+        # SLSQP asks for the constraints and their Jacobian at the same point (in either
+        # order): the frequency responses, SVDs and eigen-decompositions of the last few
+        # points are kept so the second call reuses them (same numbers, computed once)
+        self._fcache: dict[bytes, list[tuple[Any, ...] | None]] = {}
+        self._ecache: dict[bytes, list[tuple[Any, ...] | None]] = {}
 
     def realize(self, theta: NDArray[np.float64]) -> list[StateSpaceData]:
         key = theta.tobytes()
@@ -341,16 +349,22 @@ class _Evaluator:
             for A, _, _, _ in self.realize(theta)
         )
 
-    def sigma_and_grad(
-        self, theta: NDArray[np.float64], omegas: list[NDArray[np.float64]], grad: bool
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-        """sigma_max(T_i(j w)) for all (i, w in omegas[i]) and its theta-gradient."""
+    def _responses(
+        self, theta: NDArray[np.float64], omegas: list[NDArray[np.float64]]
+    ) -> list[tuple[Any, ...] | None]:
+        """Per channel (Z, X, T, U, s, Vh, finite) at ``omegas[i]`` (None: no frequency)."""
+        key = theta.tobytes() + b"".join(
+            np.asarray(w.size, np.int64).tobytes() + w.tobytes() for w in omegas
+        )
+        r = self._fcache.get(key)
+        if r is not None:
+            return r
         sys = self.realize(theta)
-        dsys = self.derivatives(theta) if grad else None
-        sig_all, grad_all = [], []
+        r = []
         for i, (A, B, C, D) in enumerate(sys):
             w = omegas[i]
             if w.size == 0:
+                r.append(None)
                 continue
             n = A.shape[0]
             finite = np.isfinite(w)
@@ -360,9 +374,31 @@ class _Evaluator:
                 X = np.linalg.solve(Z, np.broadcast_to(B, (w.size, *B.shape)))
                 T = C @ X + D
             else:
+                Z = X = None
                 T = np.broadcast_to(D.astype(complex), (w.size, *D.shape)).copy()
             T[~finite] = D
             U, s, Vh = np.linalg.svd(T)
+            r.append((Z, X, T, U, s, Vh, finite))
+        if len(self._fcache) >= 4:
+            self._fcache.clear()
+        self._fcache[key] = r
+        return r
+
+    def sigma_and_grad(
+        self, theta: NDArray[np.float64], omegas: list[NDArray[np.float64]], grad: bool
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+        """sigma_max(T_i(j w)) for all (i, w in omegas[i]) and its theta-gradient."""
+        sys = self.realize(theta)
+        resp = self._responses(theta, omegas)
+        dsys = self.derivatives(theta) if grad else None
+        sig_all, grad_all = [], []
+        for i, (A, _, C, _) in enumerate(sys):
+            ri = resp[i]
+            if ri is None:
+                continue
+            w = omegas[i]
+            n = A.shape[0]
+            Z, X, T, U, s, Vh, finite = ri
             sig_all.append(s[:, 0])
             if not grad:
                 continue
@@ -380,6 +416,7 @@ class _Evaluator:
                     2,
                 )
                 CR[~finite] = 0.0
+                X = X.copy()
                 X[~finite] = 0.0
             for k in range(self.p):
                 dA, dB, dC, dD = dsys[i][k]
@@ -393,23 +430,39 @@ class _Evaluator:
         return sig, gr
 
     def abscissa_and_grad(
-        self, theta: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Spectral abscissa of every channel's A and its (generalised) gradient."""
+        self, theta: NDArray[np.float64], grad: bool = True
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+        """Spectral abscissa of every channel's A and (``grad``) its generalised gradient."""
         from scipy.linalg import eig
 
         sys = self.realize(theta)
-        dsys = self.derivatives(theta)
+        key = theta.tobytes()
+        eigs = self._ecache.get(key)
+        if eigs is None:
+            eigs = []
+            for A, _, _, _ in sys:
+                if A.size == 0:
+                    eigs.append(None)
+                    continue
+                lam, vl, vr = eig(A, left=True, right=True)
+                j = int(np.argmax(lam.real))
+                eigs.append((lam[j], vl[:, j], vr[:, j]))
+            if len(self._ecache) >= 4:
+                self._ecache.clear()
+            self._ecache[key] = eigs
         vals = np.full(len(sys), -1e6)
+        for i, e in enumerate(eigs):
+            if e is not None:
+                vals[i] = e[0].real
+        if not grad:
+            return vals, None
+        dsys = self.derivatives(theta)
         grads = np.zeros((len(sys), self.p))
-        for i, (A, _, _, _) in enumerate(sys):
-            if A.size == 0:
+        for i, e in enumerate(eigs):
+            if e is None:
                 continue
-            lam, vl, vr = eig(A, left=True, right=True)
-            j = int(np.argmax(lam.real))
-            x, y = vr[:, j], vl[:, j]
+            _, y, x = e
             den = np.vdot(y, x)
-            vals[i] = lam[j].real
             if abs(den) < 1e-14:
                 continue
             for k in range(self.p):
@@ -610,7 +663,7 @@ def _step(
     def cons_f(y: NDArray[np.float64], W: list[NDArray[np.float64]] = W) -> NDArray[np.float64]:
         th = unpack(y)
         sig, _ = ev.sigma_and_grad(th, W, False)
-        a, _ = ev.abscissa_and_grad(th)
+        a, _ = ev.abscissa_and_grad(th, grad=False)
         return np.concatenate([y[p] - sig, abs_target - a])
 
     def cons_j(
@@ -619,6 +672,7 @@ def _step(
         th = unpack(y)
         _, g = ev.sigma_and_grad(th, W, True)
         _, ga = ev.abscissa_and_grad(th)
+        assert ga is not None
         rows = []
         if g is not None:
             rows.append(np.hstack([-g * s, np.ones((g.shape[0], 1))]))
@@ -775,6 +829,53 @@ def tune(
     TuneResult
         The best start's theta, overall norm, per-channel norms and all start records.
     """
+    jobs = start_jobs(problem, n_starts=n_starts, seed=seed, max_iter=max_iter, tol=tol,
+                      max_freqs=max_freqs, trust_radius=trust_radius, spread=spread,
+                      start_sampler=start_sampler, time_limit=time_limit,
+                      progress=progress if map_fn is None else None,
+                      regularization=regularization)
+    opts = jobs[0][3]
+    records: list[StartRecord] = []
+    stopped = ""
+    if map_fn is None:
+        for job in jobs:
+            if opts.deadline is not None and time.monotonic() >= opts.deadline and records:
+                stopped = "time limit reached"
+                break
+            try:
+                records.append(run_start(job))
+            except KeyboardInterrupt:
+                opts.interrupted = True
+            if opts.interrupted:
+                stopped = "interrupted"
+                break
+        if not records:  # interrupted before the first start produced anything
+            th0 = np.clip(problem.initial, problem.lower, problem.upper)
+            records.append(StartRecord(0, th0, th0, math.inf, [math.inf], 0, "interrupted"))
+    else:
+        records = list(map_fn(run_start, jobs))
+    return collect_starts(problem, records, opts.t_start, stopped)
+
+
+def start_jobs(
+    problem: TuningProblem,
+    *,
+    n_starts: int = 0,
+    seed: int | None = 0,
+    max_iter: int = 60,
+    tol: float = 1e-7,
+    max_freqs: int = 40,
+    trust_radius: float = 1.0,
+    spread: float = 1.0,
+    start_sampler: Callable[[np.random.Generator], NDArray[np.float64]] | None = None,
+    time_limit: float | None = None,
+    progress: Callable[[Progress], None] | None = None,
+    regularization: float = 0.0,
+) -> list[tuple[Any, ...]]:
+    """The independent local runs of :func:`tune` (same arguments), one picklable job per
+    start, in start order: run each with :func:`run_start` (anywhere, in any order, e.g. in
+    worker processes) and combine the records with :func:`collect_starts`; the result is
+    :func:`tune`'s, bit for bit. ``progress`` only works in this process."""
     if n_starts < 0:
         raise ValueError(f"n_starts must be >= 0, got {n_starts}")
     if max_iter < 1:
@@ -786,7 +887,7 @@ def tune(
     t_start = time.monotonic()
     opts = _Options(max_iter, tol, max_freqs, trust_radius, 200 * len(problem.parameters) + 200,
                     None if time_limit is None else t_start + time_limit, float(regularization),
-                    progress if map_fn is None else None, t_start)
+                    progress, t_start)
     starts = [problem.initial]
     children = np.random.SeedSequence(seed).spawn(n_starts)
     for child in children:
@@ -797,27 +898,20 @@ def tune(
             else _sample_start(problem, rng, spread)
         )
         starts.append(th)
-    jobs = [(problem, i, th, opts) for i, th in enumerate(starts)]
-    records: list[StartRecord] = []
-    stopped = ""
-    if map_fn is None:
-        for job in jobs:
-            if opts.deadline is not None and time.monotonic() >= opts.deadline and records:
-                stopped = "time limit reached"
-                break
-            try:
-                records.append(_run_start(job))
-            except KeyboardInterrupt:
-                opts.interrupted = True
-            if opts.interrupted:
-                stopped = "interrupted"
-                break
-        if not records:  # interrupted before the first start produced anything
-            th0 = np.clip(problem.initial, problem.lower, problem.upper)
-            records.append(StartRecord(0, th0, th0, math.inf, [math.inf], 0, "interrupted"))
-    else:
-        records = list(map_fn(_run_start, jobs))
-    records.sort(key=lambda r: r.index)
+    return [(problem, i, th, opts) for i, th in enumerate(starts)]
+
+
+def run_start(job: tuple[Any, ...]) -> StartRecord:
+    """One local run of a :func:`start_jobs` job (picklable; a top-level function)."""
+    return _run_start(job)  # type: ignore[arg-type]
+
+
+def collect_starts(problem: TuningProblem, records: Sequence[StartRecord],
+                   t_start: float | None = None, stopped: str = "") -> TuneResult:
+    """The :class:`TuneResult` of the start records (any order) of :func:`start_jobs`."""
+    records = sorted(records, key=lambda r: r.index)
+    if t_start is None:
+        t_start = time.monotonic()
     if not stopped and any(r.status == "time limit reached" for r in records):
         stopped = "time limit reached"
     best = min(records, key=lambda r: (r.value, r.index))
@@ -837,7 +931,7 @@ def tune(
         channel_values=chan,
         channel_names=list(problem.channel_names or []),
         stable=stable,
-        starts=records,
+        starts=list(records),
         message=msg,
     )
 

@@ -112,6 +112,47 @@ def test_cascade_channel_rows_and_pickle(ds1):
         np.testing.assert_array_equal(a, b)
 
 
+def test_cascade_channel_assembly_is_the_obvious_one_bit_for_bit(ds1):
+    """The channel's fast assembly (shared closed loops, precomputed slices) gives the same
+    bits as building the loop anew and placing np.outer products, as the tuner did before:
+    the shipped gains depend on it."""
+    from vtolftc.synthesis.loops import _closed, _plant
+    from vtolftc.synthesis.robust import delay_weight
+
+    G = attitude_model(ds1, "roll", 6.0)
+    w = weights_for(ds1, "roll", PAPER_DESIGN_POINTS[2])
+    Wd = (np.array([[-0.004]]), np.array([[1.0]]), np.array([[0.3]]), np.array([[0.7]]))
+    chans = [CascadeChannel(G, w.Ws, w.Wt.tf(), w.Wr), CascadeChannel(G, Wd=Wd),
+             CascadeChannel(G, Wt=delay_weight(0.05)), CascadeChannel(G, w.Ws, Wd=Wd)]
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        th = np.array([rng.uniform(0.3, 8), rng.uniform(0.1, 30), rng.uniform(0.1, 90),
+                       rng.uniform(0, 2), rng.uniform(0.01, 1)])
+        cl = _closed(_plant(G), th)
+        for ch in chans:
+            A, B, C, D = ch(th)
+            Ws, Wt, Wr = ch._W
+            off, n = ch._off, ch._ncl
+            A2, C2 = ch._A0.copy(), ch._C0.copy()
+            B2, D2 = np.zeros_like(B), np.zeros_like(D)
+            A2[:n, :n], B2[:n, 0] = cl.A, cl.B[:, 0]
+            for W, k, o, name in ((Ws, 1, 0, "Ws*S"), (Wr, 2, 1, "Wr*R")):
+                if W is not None:
+                    sl, r = slice(off[k], off[k + 1]), ch._rows[name]
+                    A2[sl, :n] = np.outer(W[1][:, 0], cl.C[o])
+                    B2[sl, 0] = W[1][:, 0] * cl.D[o, 0]
+                    C2[r, :n] = W[3][0, 0] * cl.C[o]
+                    D2[r, 0] = W[3][0, 0] * cl.D[o, 0]
+            for W, k, name, Cx in ((Wt, 3, "Wt*T", -cl.C[1]), (ch._Wd, 5, "Wd*Sd", cl.C[0])):
+                if W is not None:
+                    c2, sl = slice(off[k], off[k + 1]), slice(off[k + 1], off[k + 2])
+                    A2[c2, c2], B2[c2, 0] = cl.A, cl.B[:, 1]
+                    A2[sl, c2] = np.outer(W[1][:, 0], Cx)
+                    C2[ch._rows[name], c2] = W[3][0, 0] * Cx
+            for x, y in zip((A, B, C, D), (A2, B2, C2, D2), strict=True):
+                assert x.tobytes() == y.tobytes()
+
+
 def test_moment_authority_by_hand(ds1):
     th = ds1.weight_N / 8
     dT = min(th, 35.0 - th)
