@@ -20,6 +20,9 @@ old and new trees on the loaded machine (load 7-9), it costs 0.74-0.90 of that i
 (0.70 at load 4-6), i.e. ~1.6-2.1 s = 29-37x on an idle core, ~58-75 scenarios/min on 2
 cores before overhead: short of the target. Where a step goes now: autopilot ~63 % (attitude
 P-PID and allocation a quarter of it each), physics ~16 %, HIL codec ~9 %, metrics ~10 %.
+Second round (P-PID axes and LQR law one compiled call each): attitude update 11.9 -> 2.9 us
+per step; whole flights ~0.92 of the first round's CPU time (old mean 2.13 s, new 1.96 s at
+load 9-11), ~31-41x on an idle core, ~62-82 scenarios/min on 2 cores before overhead.
 
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
 """

@@ -223,6 +223,9 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
 
     actions = sorted(scenario.actions, key=lambda a: a.t_s)
     i_act = 0
+    # the next action's time [us] (Action.t_usec, computed once, not every step)
+    act_usec = [a.t_usec for a in actions]
+    next_usec = act_usec[0] if act_usec else None
     n_steps = round(scenario.duration_s * control_hz)
     t_phys = t_enc = t_ap = t_obs = 0.0
     pc = time.perf_counter
@@ -231,9 +234,10 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
     try:
         for _ in range(n_steps):
             now = veh.time_usec
-            while i_act < len(actions) and actions[i_act].t_usec <= now:
+            while next_usec is not None and next_usec <= now:
                 a = actions[i_act]
                 i_act += 1
+                next_usec = act_usec[i_act] if i_act < len(act_usec) else None
                 if a.kind == "command":
                     res = ap.command(a.command_id, a.params)
                     event(now, "command", f"{a.label}: command {a.command_id} -> "
