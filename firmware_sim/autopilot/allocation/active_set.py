@@ -368,25 +368,31 @@ class ActiveSetAllocator(WLSAllocator):
             hold = last if last is not None else self.u_pref
             return self._finish(np.clip(hold, lo, hi), v, B, _ST_INVALID_INPUT, 0, 0.0, t0,
                                 "non-finite input", False)
-        if ok:  # _finish(u, v, B, _ST_SOLVED, it, t_solve, t0, "solved", True), inlined
-            va = B @ u
-            self._u_last = u
-            res = _new_result(u, va, va - v, _ST_SOLVED, it, t_solve, _perf_counter() - t0,
-                              "solved", True)
-            st = self.stats
-            st.calls += 1
-            st.counts[_ST_SOLVED] += 1
-            st.total_iterations += it
-            if it > st.max_iterations:
-                st.max_iterations = it
-            t_wall = res.wall_time_s
-            st.total_wall_time_s += t_wall
-            if t_wall > st.max_wall_time_s:
-                st.max_wall_time_s = t_wall
-            return res
+        if ok:
+            return self._solved(u, v, B, it, t_solve, t0)
         u = self._fallback(v, B, lo, hi, pref, u)
         return self._finish(u, v, B, _ST_FALLBACK, it, t_solve, t0, "active set not converged",
                             False)
+
+    def _solved(self, u: np.ndarray, v: np.ndarray, B: np.ndarray, it: int, t_solve: float,
+                t0: float) -> AllocationResult:
+        """``_finish(u, v, B, _ST_SOLVED, it, t_solve, t0, "solved", True)`` with the
+        bookkeeping written out (the hot path: a converged step)."""
+        va = B @ u
+        self._u_last = u
+        res = _new_result(u, va, va - v, _ST_SOLVED, it, t_solve, _perf_counter() - t0,
+                          "solved", True)
+        st = self.stats
+        st.calls += 1
+        st.counts[_ST_SOLVED] += 1
+        st.total_iterations += it
+        if it > st.max_iterations:
+            st.max_iterations = it
+        t_wall = res.wall_time_s
+        st.total_wall_time_s += t_wall
+        if t_wall > st.max_wall_time_s:
+            st.max_wall_time_s = t_wall
+        return res
 
     def _solve(self, v: np.ndarray, B: np.ndarray, pref: np.ndarray, lo: np.ndarray,
                hi: np.ndarray, B_changed: bool, t0: float) -> AllocationResult:
@@ -394,22 +400,8 @@ class ActiveSetAllocator(WLSAllocator):
         t1 = _perf_counter()
         u, ok, it = _box_qp_active_set(self._Hn, self._qn, lo, hi, u0, self.max_iter, self.tol)
         t_solve = _perf_counter() - t1
-        if ok:  # _finish(u, v, B, _ST_SOLVED, it, t_solve, t0, "solved", True), inlined
-            va = B @ u
-            self._u_last = u
-            res = _new_result(u, va, va - v, _ST_SOLVED, it, t_solve, _perf_counter() - t0,
-                              "solved", True)
-            st = self.stats
-            st.calls += 1
-            st.counts[_ST_SOLVED] += 1
-            st.total_iterations += it
-            if it > st.max_iterations:
-                st.max_iterations = it
-            t_wall = res.wall_time_s
-            st.total_wall_time_s += t_wall
-            if t_wall > st.max_wall_time_s:
-                st.max_wall_time_s = t_wall
-            return res
+        if ok:
+            return self._solved(u, v, B, it, t_solve, t0)
         u = self._fallback(v, B, lo, hi, pref, u)
         return self._finish(u, v, B, _ST_FALLBACK, it, t_solve, t0, "active set not converged",
                             False)
