@@ -11,8 +11,10 @@ a. **Input-disturbance objective.** Losing a lift rotor is more than a loss of e
    airframe file: weight minus the wing's lift at zero pitch, shared by the rotors with zero
    moment, min-norm). The channel ``||Wd e/d||_inf <= 1`` with the constant
    ``Wd = d_max / e_max`` (``e_max`` = :data:`EXCURSION_RAD`, 15 deg declared, designed with
-   the margin :data:`EXCURSION_DESIGN_FACTOR`) bounds the angle response to that moment; the
-   linear step response (:func:`disturbance_peak`) is reported next to it.
+   the margin :data:`EXCURSION_DESIGN_FACTOR`) bounds the angle response to that moment, and
+   below omega_b the weight rises as 1/w so the error must also recover at the tracking
+   bandwidth (:func:`disturbance_weight`); the linear step response
+   (:func:`disturbance_peak`) is reported next to it.
 b. **Loop delays in the design plant.** :func:`design_plant` = eq. 1-3 model x first-order
    actuator lag (the airframe's actuator time constant) with the loop's transport delay
    (:class:`LoopDelays`: 1.5 control periods of sample-hold and computation plus the declared
@@ -375,9 +377,16 @@ def _const(k: float) -> StateSpaceData:
 def disturbance_weight(w: RobustWeights) -> StateSpaceData:
     """Wd(s) = Wd (s + w_i) / (s + 0.01 w_i): d_max / e_max above w_i, rising as 1/w below
     it (down to 0.01 w_i), so the angle error a constant moment leaves must also decay at
-    least like an integrator of rate w_i = min(0.5, omega_b / 2) rad/s (without it the
-    optimiser can drop the integral gain: the proportional plateau alone meets the peak)."""
-    wi = min(0.5, w.Ws.omega_b_rad_s / 2.0)
+    least like an integrator of rate w_i = omega_b [rad/s] (the tracking bandwidth of Ws):
+    after a rotor-out the loop recovers as fast as it tracks a reference. Without the rise
+    the optimiser can drop the integral gain (the proportional plateau alone meets the peak).
+
+    The recovery rate matters in flight, not only the peak: with w_i = min(0.5, omega_b / 2)
+    (the design before) the hover pitch error of the worst rotor-out took 1.8 s to halve,
+    and in a 4 m/s crosswind with a gust the vehicle drifted backwards into reversed flow
+    and crashed (rotors 1b, 3b off in hover); with w_i = omega_b it halves in 0.8 s and
+    both fly (``docs/ds1-claims/README.md``)."""
+    wi = w.Ws.omega_b_rad_s
     # Wd (s + wi)/(s + e wi) = Wd + Wd wi (1 - e)/(s + e wi)
     e = 0.01
     return (np.array([[-e * wi]]), np.array([[1.0]]), np.array([[w.Wd * wi * (1 - e)]]),
