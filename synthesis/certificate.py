@@ -427,16 +427,35 @@ def grid_margin(fam: ParametricFamily, theta: Any, n: int = 41, k_max: float = K
     to ``k_max``; k_lo = k_hi = 0 if the centre itself is unstable)."""
     if _max_re_scaled(fam, theta, 0.0, 1) >= 0.0:
         return 0.0, 0.0
-    if _max_re_scaled(fam, theta, k_max, n) < 0.0:
+    if not _has_unstable_scaled(fam, theta, k_max, n):
         return k_max, math.inf
     lo, hi = 0.0, k_max
     for _ in range(iters):
         mid = 0.5 * (lo + hi)
-        if _max_re_scaled(fam, theta, mid, n) < 0.0:
-            lo = mid
-        else:
+        if _has_unstable_scaled(fam, theta, mid, n):
             hi = mid
+        else:
+            lo = mid
     return lo, hi
+
+
+def _has_unstable_scaled(fam: ParametricFamily, theta: Any, k: float, n: int) -> bool:
+    """Whether the n x n grid of the box scaled by k has a member with a pole in Re >= 0
+    (the same members and eigenvalues as :func:`_max_re_scaled`): the boundary ring of the
+    grid first, where the first unstable member of a growing box usually is, then the rest
+    in chunks, stopping at the first unstable one."""
+    d = np.linspace(-k, k, n)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    ring = np.maximum(np.abs(2 * i - (n - 1)), np.abs(2 * j - (n - 1))).ravel()
+    order = np.argsort(-ring, kind="stable")
+    dV, dg = d[i.ravel()[order]], d[j.ravel()[order]]
+    step = max(4 * n - 4, 1)
+    for a in range(0, dV.size, step):
+        D, K, b = fam.coefficients(dV[a:a + step], dg[a:a + step])
+        A = true_closed_loop_matrices(fam.inertia, D, K, b, fam.tau_s, theta)
+        if np.linalg.eigvals(A).real.max() >= 0.0:
+            return True
+    return False
 
 
 def zero_frequency_margin(M0: NDArray[Any], fam: ParametricFamily, n: int = 401,

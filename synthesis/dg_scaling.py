@@ -400,7 +400,7 @@ class MixedMuUpper:
         The scalings of the certificate, for the square (padded) M: D > 0 commutes with Delta,
         G Hermitian on the real blocks, M^H D M + j(G M - M^H G) <= value^2 D.
     method:
-        ``"ab13md"`` or ``"dg"`` (the numpy D-G optimisation).
+        ``"ab13md"`` or ``"dg"`` (the D-G optimisation of this module).
     params:
         Internal parametrisation of (D, G) for ``warm_start`` (``"dg"`` only), or AB13MD's
         ``x`` vector.
@@ -560,7 +560,8 @@ def mixed_mu_upper(
         The uncertainty structure (list of :class:`~vtolftc.synthesis.mu.Block`).
     method:
         ``"auto"`` (AB13MD where it applies, else ``"dg"``), ``"ab13md"`` (error if the
-        structure has repeated or non-square blocks) or ``"dg"`` (numpy D-G optimisation).
+        structure has repeated or non-square blocks) or ``"dg"`` (D-G optimisation: scipy BFGS
+        on the compiled objective of :mod:`vtolftc.synthesis.dg_kernel`).
     warm_start:
         A previous result for the same structure (a neighbouring frequency): its scalings
         start the optimiser.
