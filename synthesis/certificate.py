@@ -76,10 +76,11 @@ from numpy.typing import NDArray
 from scipy.optimize import brentq
 
 from vtolftc.airframe.loader import Airframe
+from vtolftc.synthesis.dg_scaling import BlockStructure
 from vtolftc.synthesis.hinfnorm import StateSpaceData, frequency_response
 from vtolftc.synthesis.lft import GeneralizedPlant, lft
 from vtolftc.synthesis.loops import PARAM_NAMES, rate_controller
-from vtolftc.synthesis.mixed_mu import mixed_mu_lower, mixed_mu_upper
+from vtolftc.synthesis.mixed_mu import mixed_mu_lower, mixed_mu_upper, mixed_mu_upper_start
 from vtolftc.synthesis.models import Axis, axis_coefficients
 from vtolftc.synthesis.mu import Block, MuSweep
 from vtolftc.synthesis.robust import LoopDelays, actuator_time_constant
@@ -426,16 +427,35 @@ def grid_margin(fam: ParametricFamily, theta: Any, n: int = 41, k_max: float = K
     to ``k_max``; k_lo = k_hi = 0 if the centre itself is unstable)."""
     if _max_re_scaled(fam, theta, 0.0, 1) >= 0.0:
         return 0.0, 0.0
-    if _max_re_scaled(fam, theta, k_max, n) < 0.0:
+    if not _has_unstable_scaled(fam, theta, k_max, n):
         return k_max, math.inf
     lo, hi = 0.0, k_max
     for _ in range(iters):
         mid = 0.5 * (lo + hi)
-        if _max_re_scaled(fam, theta, mid, n) < 0.0:
-            lo = mid
-        else:
+        if _has_unstable_scaled(fam, theta, mid, n):
             hi = mid
+        else:
+            lo = mid
     return lo, hi
+
+
+def _has_unstable_scaled(fam: ParametricFamily, theta: Any, k: float, n: int) -> bool:
+    """Whether the n x n grid of the box scaled by k has a member with a pole in Re >= 0
+    (the same members and eigenvalues as :func:`_max_re_scaled`): the boundary ring of the
+    grid first, where the first unstable member of a growing box usually is, then the rest
+    in chunks, stopping at the first unstable one."""
+    d = np.linspace(-k, k, n)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    ring = np.maximum(np.abs(2 * i - (n - 1)), np.abs(2 * j - (n - 1))).ravel()
+    order = np.argsort(-ring, kind="stable")
+    dV, dg = d[i.ravel()[order]], d[j.ravel()[order]]
+    step = max(4 * n - 4, 1)
+    for a in range(0, dV.size, step):
+        D, K, b = fam.coefficients(dV[a:a + step], dg[a:a + step])
+        A = true_closed_loop_matrices(fam.inertia, D, K, b, fam.tau_s, theta)
+        if np.linalg.eigvals(A).real.max() >= 0.0:
+            return True
+    return False
 
 
 def zero_frequency_margin(M0: NDArray[Any], fam: ParametricFamily, n: int = 401,
@@ -446,10 +466,14 @@ def zero_frequency_margin(M0: NDArray[Any], fam: ParametricFamily, n: int = 401,
     d = np.linspace(-k_max, k_max, n)
     dV, dg = np.meshgrid(d, d, indexing="ij")
     nv = fam.n_v
-    diag = np.concatenate([np.repeat(dV.reshape(-1, 1), nv, 1), dg.reshape(-1, 1)], 1)
     M = np.real(np.asarray(M0))
-    X = np.eye(nv + 1)[None] - M[None] * diag[:, None, :]
-    det = np.linalg.det(X)
+    # dg scales one column of M Delta: det(I - M Delta) = a(dV) + b(dV) dg exactly, so two
+    # determinants per dV give the whole row of the grid
+    rows = np.zeros((2, n, nv + 1))
+    rows[:, :, :nv] = d[None, :, None]
+    rows[1, :, nv] = 1.0
+    ab = np.linalg.det(np.eye(nv + 1)[None, None] - M[None, None] * rows[:, :, None, :])
+    det = (ab[0][:, None] + (ab[1] - ab[0])[:, None] * d[None, :]).ravel()
     bad = det <= 0.0
     if not np.any(bad):
         return math.inf
@@ -504,6 +528,7 @@ def two_parameter_lower(M: NDArray[Any], n_v: int, k_max: float = K_MAX,
     ~ 0); the value is 1 / the smallest max(|dV|, |dg|) found (0 if none)."""
     m = n_v + 1
     eye = np.eye(m)
+    M = np.asarray(M)
 
     def ab(dv: NDArray[np.float64]) -> tuple[NDArray[Any], NDArray[Any]]:
         d0 = np.concatenate([np.repeat(dv[:, None], n_v, 1), np.zeros((dv.size, 1))], 1)
@@ -512,34 +537,49 @@ def two_parameter_lower(M: NDArray[Any], n_v: int, k_max: float = K_MAX,
         a = np.linalg.det(eye[None] - M[None] * d0[:, None, :])
         return a, np.linalg.det(eye[None] - M[None] * d1[:, None, :]) - a
 
-    def im(dv: NDArray[np.float64]) -> NDArray[np.float64]:
-        a, b = ab(dv)
-        return np.imag(a * np.conj(b))
+    # one dV (Brent's iterations): both determinants in one stacked call, same arithmetic
+    pair = np.zeros((2, 1, m))
+    pair[1, 0, -1] = 1.0
+
+    def ab1(x: float) -> tuple[complex, complex]:
+        pair[:, 0, :n_v] = x
+        d = np.linalg.det(eye[None] - M[None] * pair)
+        return d[0], d[1] - d[0]
+
+    def im(x: float) -> float:
+        a, b = ab1(x)
+        return float(np.imag(a * np.conj(b)))
 
     dv = np.linspace(-k_max, k_max, n) if n_v > 0 else np.zeros(1)
     a, b = ab(dv)
     f = np.imag(a * np.conj(b))
     cands = list(dv[np.abs(f) <= 1e-14 * (np.abs(a * b) + 1e-300)])
     for i in np.nonzero(np.sign(f[:-1]) * np.sign(f[1:]) < 0)[0]:
-        cands.append(brentq(lambda x: float(im(np.array([x]))[0]), float(dv[i]),
-                            float(dv[i + 1]), xtol=1e-13))
+        cands.append(brentq(im, float(dv[i]), float(dv[i + 1]), xtol=1e-13))
     # dg without effect at some dV (b = 0): det = a(dV) itself must vanish (dg = 0)
     ra = np.real(a)
-    zero_g = [brentq(lambda x: float(np.real(ab(np.array([x]))[0][0])), float(dv[i]),
-                     float(dv[i + 1]), xtol=1e-13)
+    zero_g = [brentq(lambda x: float(np.real(ab1(x)[0])), float(dv[i]), float(dv[i + 1]),
+                     xtol=1e-13)
               for i in np.nonzero(np.sign(ra[:-1]) * np.sign(ra[1:]) < 0)[0]]
+    vs = np.array([float(v) for v in [*cands, *zero_g]])
+    if vs.size == 0:
+        return 0.0
+    # every candidate's dg = -a / b, then verified in increasing max(|dV|, |dg|): the first
+    # verified one is the smallest (the same as checking all of them)
+    av, bv = ab(vs)
+    flat = np.abs(bv) <= 1e-12 * (1.0 + np.abs(av))
+    g = np.where(flat, 0.0, np.real(-av / np.where(flat, 1.0, bv)))
+    t = np.maximum(np.abs(vs), np.abs(g))
+    mnorm = np.linalg.norm(M, 2)
     best = math.inf
-    for v in [*cands, *zero_g]:
-        av, bv = ab(np.array([float(v)]))
-        flat = abs(bv[0]) <= 1e-12 * (1.0 + abs(av[0]))
-        g = 0.0 if flat else float(np.real(-av[0] / bv[0]))
-        t = max(abs(float(v)), abs(g))
-        if t == 0.0 or t >= best:
+    for j in np.argsort(t, kind="stable"):
+        if t[j] == 0.0:
             continue
-        Delta = np.diag([float(v)] * n_v + [g])
+        Delta = np.diag([float(vs[j])] * n_v + [float(g[j])])
         smin = np.linalg.svd(eye - M @ Delta, compute_uv=False)[-1]
-        if smin <= 1e-8 * (1.0 + np.linalg.norm(M, 2) * t):
-            best = t
+        if smin <= 1e-8 * (1.0 + mnorm * float(t[j])):
+            best = float(t[j])
+            break
     return 0.0 if not math.isfinite(best) else 1.0 / best
 
 
@@ -575,6 +615,10 @@ def mu_real_sweep(fam: ParametricFamily, theta: Any,
                         crossings])
     w = np.unique(w)
     blocks = fam.blocks
+    # repeated real scalars: mixed_mu_upper is the numpy D-G bound, whose value without
+    # optimising (the ordering proxy below) is its start, computed directly; 1 x 1 real
+    # blocks only (AB13MD's case): the call itself
+    dg_only = BlockStructure(blocks).ab13md_spec() is None
     W = np.zeros(0)
     UP = np.zeros(0)
     peak = 0.0
@@ -582,7 +626,8 @@ def mu_real_sweep(fam: ParametricFamily, theta: Any,
 
     def solve(ws: NDArray[np.float64], base: float) -> tuple[NDArray[np.float64], float]:
         F = frequency_response(M, ws)
-        proxy = np.array([mixed_mu_upper(Fi, blocks, maxiter=0, target=math.inf).value
+        proxy = np.array([mixed_mu_upper_start(Fi, blocks) if dg_only else
+                          mixed_mu_upper(Fi, blocks, maxiter=0, target=math.inf).value
                           for Fi in F])
         up = np.zeros(ws.size)
         lw = np.log(np.maximum(ws, 1e-9))

@@ -5,6 +5,7 @@ and the block structure of possibly non-square M. The analysis functions built o
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -14,9 +15,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize
 
+from vtolftc.synthesis.dg_kernel import dg_objective
 from vtolftc.synthesis.mu_blocks import Block
 
-__all__ = ["BlockStructure", "MixedMuUpper", "mixed_mu_upper"]
+__all__ = ["BlockStructure", "MixedMuUpper", "mixed_mu_upper", "mixed_mu_upper_start"]
 
 
 # ------------------------------------------------------------------------------------------
@@ -229,6 +231,13 @@ class _DG:
         self.gu_r, self.gu_c, self.gu_re, self.gu_im = arr(gu_r), arr(gu_c), arr(gu_re), arr(gu_im)
         self.has_off = self.off_r.size > 0
         self.has_g = self.gd_pos.size > 0
+        # block index pairs of the Osborne start (np.ix_ of every pair of blocks)
+        idxs = [self._block_idx(k) for k in range(len(st.blocks))]
+        self.pair_ix = [[np.ix_(a, b) for b in idxs] for a in idxs]
+        # the index arrays in the order of the compiled objective's arguments
+        self.kernel_args = tuple(np.ascontiguousarray(a) for a in (
+            self.tpos, self.tpar, self.tcoef, self.off_r, self.off_c, self.off_re, self.off_im,
+            self.gd_pos, self.gd_par, self.gu_r, self.gu_c, self.gu_re, self.gu_im))
 
     def _block_idx(self, k: int) -> NDArray[np.intp]:
         r0 = sum(b.rows for b in self.st.blocks[:k])
@@ -297,9 +306,16 @@ class _DG:
 
 
 class _DGObjective:
-    def __init__(self, M: NDArray[Any], par: _DG):
-        self.M = M
+    """lambda_max and its smoothed value with gradient, for the optimiser.
+
+    ``compiled`` (default): :func:`vtolftc.synthesis.dg_kernel.dg_objective`; False: the numpy
+    reference (:meth:`_eig`, :meth:`_DG.gradient`), the same arithmetic.
+    """
+
+    def __init__(self, M: NDArray[Any], par: _DG, compiled: bool = True):
+        self.M = np.ascontiguousarray(M, dtype=complex)
         self.par = par
+        self.compiled = compiled
         self.smooth = 0.0
         self.best = math.inf
         self.best_x: NDArray[np.float64] | None = None
@@ -322,13 +338,18 @@ class _DGObjective:
         lam, U = np.linalg.eigh(H)
         return lam, U, N, Ti, tdiag, Gh
 
+    def _kernel(self, x: NDArray[np.float64], grad: bool) -> tuple[float, float, Any]:
+        return dg_objective(self.M, np.ascontiguousarray(x, dtype=float),
+                            *self.par.kernel_args, float(self.smooth), grad)
+
     def value(self, x: NDArray[np.float64]) -> float:
         try:
-            lam = self._eig(x)[0]
-        except (np.linalg.LinAlgError, ValueError):
+            lam = self._kernel(x, False)[0] if self.compiled else self._eig(x)[0][-1]
+            lmax = float(lam)
+        except (np.linalg.LinAlgError, ValueError, ZeroDivisionError):
             return math.inf
-        self._record(float(lam[-1]), x)
-        return float(lam[-1])
+        self._record(lmax, x)
+        return lmax
 
     def _record(self, val: float, x: NDArray[np.float64]) -> None:
         if val < self.best and math.isfinite(val):
@@ -339,6 +360,13 @@ class _DGObjective:
         self.nfev += 1
         if not np.all(np.isfinite(x)) or np.max(np.abs(x)) > 300:
             return 1e300, np.zeros_like(x)
+        if self.compiled:
+            try:
+                l1, f, g = self._kernel(x, True)
+            except (np.linalg.LinAlgError, ValueError, ZeroDivisionError):
+                return 1e300, np.zeros_like(x)
+            self._record(float(l1), x)
+            return float(f), g
         try:
             lam, U, N, Ti, tdiag, Gh = self._eig(x)
         except (np.linalg.LinAlgError, ValueError):
@@ -372,7 +400,7 @@ class MixedMuUpper:
         The scalings of the certificate, for the square (padded) M: D > 0 commutes with Delta,
         G Hermitian on the real blocks, M^H D M + j(G M - M^H G) <= value^2 D.
     method:
-        ``"ab13md"`` or ``"dg"`` (the numpy D-G optimisation).
+        ``"ab13md"`` or ``"dg"`` (the D-G optimisation of this module).
     params:
         Internal parametrisation of (D, G) for ``warm_start`` (``"dg"`` only), or AB13MD's
         ``x`` vector.
@@ -392,9 +420,8 @@ def _osborne_x(M: NDArray[Any], par: _DG, sweeps: int = 20) -> NDArray[np.float6
     """Block-Osborne balancing start (log d_k for every block, G = 0)."""
     st = par.st
     K = len(st.blocks)
-    idxs = [par._block_idx(k) for k in range(K)]
     A2 = np.abs(M) ** 2
-    Bn = np.array([[A2[np.ix_(idxs[k], idxs[l_])].sum() for l_ in range(K)] for k in range(K)])
+    Bn = np.array([[A2[ix].sum() for ix in row] for row in par.pair_ix])
     np.fill_diagonal(Bn, 0.0)
     d2 = np.ones(K)
     for _ in range(sweeps):
@@ -420,6 +447,13 @@ def _osborne_x(M: NDArray[Any], par: _DG, sweeps: int = 20) -> NDArray[np.float6
     return x
 
 
+@functools.lru_cache(maxsize=64)
+def _dg_parametrisation(blocks: tuple[Block, ...]) -> _DG:
+    """The (read-only) parametrisation of a square-block structure, built once per
+    structure: a frequency sweep calls the bound thousands of times with the same blocks."""
+    return _DG(BlockStructure(blocks))
+
+
 _WARM_STAGES = (1e-4, 0.0)
 
 
@@ -427,7 +461,7 @@ def _dg_upper(
     M: NDArray[Any], st: BlockStructure, x0: NDArray[np.float64] | None, target: float,
     rtol: float, maxiter: int,
 ) -> MixedMuUpper:
-    par = _DG(st)
+    par = _dg_parametrisation(st.blocks)
     obj = _DGObjective(M, par)
     starts = [np.zeros(par.n_params), _osborne_x(M, par)]
     if x0 is not None:
@@ -489,6 +523,23 @@ def _ab13md_upper(
 _UPPER_METHODS = ("auto", "ab13md", "dg")
 
 
+def mixed_mu_upper_start(M: Any, blocks: Sequence[Block] | BlockStructure) -> float:
+    """The D-G bound at the optimiser's starting scalings, without optimising: the smaller of
+    sigma_max(M) (D = I, G = 0) and the block-Osborne balanced D (G = 0).
+
+    A valid upper bound of mu(M) (each is a certificate), cheap, and exactly the value of
+    ``mixed_mu_upper(M, blocks, method="dg", maxiter=0, target=inf)``: a sweep uses it to
+    order frequencies and to skip those already below a known lower bound.
+    """
+    st = BlockStructure(blocks)
+    Mp, sq = st.pad(st.check(M))
+    par = _dg_parametrisation(sq.blocks)
+    obj = _DGObjective(Mp, par)
+    for x in (np.zeros(par.n_params), _osborne_x(Mp, par)):
+        obj.value(x)
+    return math.sqrt(max(obj.best, 0.0))
+
+
 def mixed_mu_upper(
     M: Any,
     blocks: Sequence[Block] | BlockStructure,
@@ -509,7 +560,8 @@ def mixed_mu_upper(
         The uncertainty structure (list of :class:`~vtolftc.synthesis.mu.Block`).
     method:
         ``"auto"`` (AB13MD where it applies, else ``"dg"``), ``"ab13md"`` (error if the
-        structure has repeated or non-square blocks) or ``"dg"`` (numpy D-G optimisation).
+        structure has repeated or non-square blocks) or ``"dg"`` (D-G optimisation: scipy BFGS
+        on the compiled objective of :mod:`vtolftc.synthesis.dg_kernel`).
     warm_start:
         A previous result for the same structure (a neighbouring frequency): its scalings
         start the optimiser.

@@ -52,7 +52,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize
 
-from vtolftc.synthesis.dg_scaling import BlockStructure, MixedMuUpper, mixed_mu_upper
+from vtolftc.synthesis.dg_scaling import (
+    BlockStructure,
+    MixedMuUpper,
+    mixed_mu_upper,
+    mixed_mu_upper_start,
+)
 from vtolftc.synthesis.mu import Block, MuSweep, _lower, _Structure, _verify
 
 __all__ = [
@@ -63,6 +68,7 @@ __all__ = [
     "mixed_mu_lower",
     "mixed_mu_sweep",
     "mixed_mu_upper",
+    "mixed_mu_upper_start",
 ]
 
 

@@ -206,3 +206,20 @@ def test_every_robust_shif_axis_point(af):
             assert r["mu_upper"] >= 1.0 and not r["certified"]
     assert {(r["axis"], r["point"]) for r in recs if not r["certified"]} == {
         ("yaw", 1), ("yaw", 2), ("yaw", 3)}
+
+
+@pytest.mark.parametrize("n_v", [0, 2, 3])
+def test_zero_frequency_margin_equals_the_brute_force_grid(n_v):
+    """det(I - M(0) Delta) from two determinants per dV (affine in dg) against one
+    determinant per grid point, on random real M and the same grid."""
+    rng = np.random.default_rng(40 + n_v)
+    fam = C.ParametricFamily("pitch", 1.0, np.ones(n_v + 1), np.zeros(1), 5.0, 1.0, 0.3,
+                             0.3, None)
+    assert fam.n_v == n_v
+    d = np.linspace(-C.K_MAX, C.K_MAX, 41)
+    for scale in (0.05, 0.3, 1.0):
+        M = scale * rng.normal(size=(n_v + 1, n_v + 1))
+        bad = [max(abs(v), abs(g)) for v in d for g in d
+               if np.linalg.det(np.eye(n_v + 1) - M @ np.diag([v] * n_v + [g])) <= 0.0]
+        ref = min(bad) if bad else math.inf
+        assert C.zero_frequency_margin(M, fam, n=41) == ref
