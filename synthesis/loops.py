@@ -284,8 +284,9 @@ def _closed_batch(Gd: StateSpaceData, thetas: NDArray[np.float64],
                   ) -> tuple[NDArray[np.float64], ...]:
     """:func:`_closed` of every row of ``thetas`` (nb, 5) at once: (A, B, C, D) stacked
     (nb, ., .). Each entry is the same IEEE operation on the same operands as in
-    :func:`_closed` (the products there have a single term: outer products and scalars),
-    so every slice equals ``_closed(Gd, thetas[i])`` bit for bit."""
+    :func:`_closed` (its matrix products have a single term: outer products and scalars;
+    a product's ``+ 0.0`` below is the matmul's accumulation from zero, which turns a -0.0
+    term into +0.0), so every slice equals ``_closed(Gd, thetas[i])`` bit for bit."""
     Ag, Bg, Cg, _ = Gd
     nb = thetas.shape[0]
     kpa, kp, ki, kd, tf = (thetas[:, j] for j in range(5))
@@ -299,13 +300,13 @@ def _closed_batch(Gd: StateSpaceData, thetas: NDArray[np.float64],
     Cq, Cth = Cg[0], Cg[1]
     Cy = kpa[:, None] * Cth[None, :] + Cq[None, :]          # (nb, ng)
     bg = Bg[:, 0]
-    bgdk = bg[None, :] * dk[:, None]                         # Bg @ Dk  (nb, ng)
+    bgdk = bg[None, :] * dk[:, None] + 0.0                   # Bg @ Dk  (nb, ng)
     A = np.zeros((nb, ng + 2, ng + 2))
-    A[:, :ng, :ng] = Ag[None] - bgdk[:, :, None] * Cy[:, None, :]
-    A[:, :ng, ng] = bg[None, :] * ki[:, None]                # Bg @ Ck
-    A[:, :ng, ng + 1] = bg[None, :] * c2[:, None]
-    A[:, ng, :ng] = -1.0 * Cy                                # -Bk @ Cy, Bk[0] = 1
-    A[:, ng + 1, :ng] = (-b2)[:, None] * Cy
+    A[:, :ng, :ng] = Ag[None] - (bgdk[:, :, None] * Cy[:, None, :] + 0.0)
+    A[:, :ng, ng] = bg[None, :] * ki[:, None] + 0.0          # Bg @ Ck
+    A[:, :ng, ng + 1] = bg[None, :] * c2[:, None] + 0.0
+    A[:, ng, :ng] = -1.0 * Cy + 0.0                          # -Bk @ Cy, Bk[0] = 1
+    A[:, ng + 1, :ng] = (-b2)[:, None] * Cy + 0.0
     A[:, ng + 1, ng + 1] = a22
     B = np.zeros((nb, ng + 2, 2))
     B[:, :ng, 0] = bgdk * kpa[:, None]
@@ -316,7 +317,7 @@ def _closed_batch(Gd: StateSpaceData, thetas: NDArray[np.float64],
     D = np.zeros((nb, 4, 2))
     C[:, 0, :ng] = -Cth[None, :]
     D[:, 0, 0] = 1.0
-    C[:, 1, :ng] = (-dk)[:, None] * Cy                       # -Dk @ Cy
+    C[:, 1, :ng] = (-dk)[:, None] * Cy + 0.0                 # -Dk @ Cy
     C[:, 1, ng] = ki
     C[:, 1, ng + 1] = c2
     D[:, 1, 0] = dk * kpa

@@ -15,7 +15,7 @@ import os
 import signal
 import time
 from collections.abc import Callable
-from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
@@ -176,6 +176,26 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
     executor: Executor | None = (ProcessPoolExecutor(jobs, initializer=_worker_init)
                                  if jobs > 1 else None)
     interrupted = False
+    # with workers, the mu analysis of a finished tune is queued at once, behind the tunes
+    # still waiting (the pool runs jobs in submission order): it fills the workers while the
+    # last, longest tunes finish. The same jobs as after the tuning, the same numbers.
+    pre_mu: dict[tuple[str, str, int], Future[AxisRobustness]] = {}
+    index = {p.number: i for i, p in enumerate(points)}
+
+    def queue_mu(key: tuple[str, int], d: Any) -> None:
+        if executor is None or not mu:
+            return
+        ax, num = key
+        if num == 0:
+            for i, p in enumerate(points):
+                if max(z.real for z in d.poles[i]) < 0:
+                    pre_mu[("shif", ax, i)] = executor.submit(
+                        _mu_job, (af, ax, p, d.theta, d.weights[i], seed))
+        elif d.stable:
+            i = index[num]
+            pre_mu[("gs", ax, i)] = executor.submit(
+                _mu_job, (af, ax, points[i], d.theta, d.weights[0], seed))
+
     try:
         t0 = time.perf_counter()
         if method == "robust":
@@ -183,10 +203,12 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
 
             gs, sh = run_robust_designs(af, n_starts=n_starts, seed=seed, points=points,
                                         executor=executor,
-                                        progress=lambda s: tick(f"tune {s}"))
+                                        progress=lambda s: tick(f"tune {s}"),
+                                        on_design=queue_mu)
         else:
             gs, sh = run_designs(af, n_starts=n_starts, seed=seed, points=points,
-                                 executor=executor, progress=lambda s: tick(f"tune {s}"))
+                                 executor=executor, progress=lambda s: tick(f"tune {s}"),
+                                 on_design=queue_mu)
         times[f"tuning ({3 * len(points)} GS-SHIF + 3 SHIF)"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -214,6 +236,7 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
         times["export (first)"] = time.perf_counter() - t0
 
         if mu:
+            # (with workers most of it already ran during the tuning's tail)
             t0 = time.perf_counter()
             jobs_mu: list[tuple[Any, ...]] = []
             for ax in AXES:
@@ -228,7 +251,10 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
             if executor is None:
                 pairs: Any = ((j, _mu_job(j[3])) for j in runnable)
             else:
-                futs = {executor.submit(_mu_job, j[3]): j for j in runnable}
+                futs = {(pre_mu.pop(j[:3], None) or executor.submit(_mu_job, j[3])): j
+                        for j in runnable}
+                for f in pre_mu.values():  # none expected: every queued job is runnable
+                    f.cancel()
                 pairs = ((futs[f], f.result()) for f in as_completed(futs))
             for j, r in pairs:
                 results[j[:3]] = r
