@@ -10,6 +10,7 @@ the analysis, so an interrupted run keeps the gains it has computed.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import os
 import signal
@@ -234,6 +235,18 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
         t0 = time.perf_counter()
         res.files = write_gain_files(res, out)
         times["export (first)"] = time.perf_counter() - t0
+        # the report's figures that need no mu are drawn by a worker meanwhile (queued
+        # behind the mu jobs; the same figures as drawn here). It gets a snapshot with
+        # dicts of its own: the pool pickles it later, in a thread, while res is filled.
+        plots_fut: Future[list[str]] | None = None
+        if report and executor is not None:
+            from vtolftc.synthesis.report import design_plots
+
+            snap = dataclasses.replace(res, mu_gs={}, mu_shif={}, times={}, files={},
+                                       settings=dict(res.settings),
+                                       margins_gs=dict(res.margins_gs),
+                                       margins_shif=dict(res.margins_shif))
+            plots_fut = executor.submit(design_plots, snap, out / "report")
 
         if mu:
             # (with workers most of it already ran during the tuning's tail)
@@ -275,7 +288,8 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
 
             t0 = time.perf_counter()
             res.times = times
-            res.files["report"] = write_report(res, out / "report")
+            res.files["report"] = write_report(
+                res, out / "report", None if plots_fut is None else plots_fut.result())
             times["report"] = time.perf_counter() - t0
             tick("report")
         res.times = times
