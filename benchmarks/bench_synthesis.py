@@ -30,6 +30,25 @@ machine's 154 s (tuning 139 s) that puts the robust synthesis at roughly 90-100 
 < 60 s target is not reached yet (what remains: the finite-difference derivatives, i.e.
 10 channel realisations per SLSQP Jacobian, and SLSQP's own QP on ~800 constraints).
 
+Second pass (2026-12-01, same shared machine). Profile of every tuning job run in one
+process (cProfile): the finite-difference realisations were 37 % of the tuning
+(``derivatives`` -> 690k ``CascadeChannel`` calls, 230k closed loops, 700k
+``as_state_space`` copies), the per-parameter gradient products 7 %, ``scipy.linalg.eig``
+with eigenvectors 10 %, the frequency responses (solves, SVDs) 14 %, SLSQP's Fortran 4 %,
+AB13DD 3 %. CPU per job (in-process): the three yaw SHIF starts are the longest (about
+12 % of the tuning each), far below the per-worker share, so the schedule was not the
+limit. Changes, all exact (byte-compared in ``tests/test_synthesis_design.py``): the
+2p perturbed realisations of a channel in one batched call
+(``CascadeChannel.realize_batch``), the gradient products stacked over the parameters,
+the mu jobs of a finished tune queued behind the running tunes, and the report's figures
+that need no mu drawn by a worker meanwhile. Back to back (load 6.5 -> 5.7): before 382 s
+wall, 233 s CPU (parent + workers; tuning 318 s, mu 35 s, report 28 s); after 285 s wall,
+174 s CPU (tuning 236 s, mu 28 s, report 18 s): 1.34x on both. Single tunes in-process
+(CPU): GS-SHIF roll 1 3.5 -> 2.2 s, yaw 1 8.2 -> 4.8 s, SHIF roll start 0 6.2 -> 3.3 s.
+The shipped gain files (both methods) are reproduced float for float. Still above 60 s on
+an idle machine (about 85 s expected: 114.5 s x 174/233): what remains is LAPACK
+(solves, SVDs, eig) on small matrices called one channel at a time, and SLSQP.
+
 Usage: ``python benchmarks/bench_synthesis.py [--method robust|paper] [--starts N] [--jobs N]
 [--seed S] [--out DIR] [--no-report]``. The machine's load is printed with the times (the
 numbers mean little on a shared machine).

@@ -308,6 +308,7 @@ def run_designs(af: Airframe, *, n_starts: int = 6, seed: int = 0,
                 points: Sequence[DesignPoint] = PAPER_DESIGN_POINTS,
                 executor: Executor | None = None, shif: bool = True,
                 progress: Callable[[str], None] | None = None, max_iter: int = 40,
+                on_design: Callable[[tuple[str, int], AxisDesign], None] | None = None,
                 ) -> tuple[dict[Axis, list[AxisDesign]], dict[Axis, AxisDesign]]:
     """All GS-SHIF tunes (axes x points) and, with ``shif``, the three SHIF tunes (over the
     paper's six points, :func:`design_shif`'s default).
@@ -318,12 +319,16 @@ def run_designs(af: Airframe, *, n_starts: int = 6, seed: int = 0,
     point) once, then every start of the SHIF tunes (the longest jobs, first) and the
     GS-SHIF tunes; a SHIF tune's start records are combined in start order
     (:func:`vtolftc.synthesis.structured.collect_starts`), the same result bit for bit as
-    :func:`design_shif`. ``progress`` is called with a label after each finished tune.
+    :func:`design_shif`. ``progress`` is called with a label after each finished tune,
+    ``on_design(key, design)`` with each finished design (key ``(axis, point number)``,
+    ``(axis, 0)`` for SHIF).
     """
     results: dict[tuple[str, int], AxisDesign] = {}
 
     def done(key: tuple[str, int], d: AxisDesign) -> None:
         results[key] = d
+        if on_design is not None:
+            on_design(key, d)
         if progress is not None:
             progress(f"{key[0]} {'SHIF' if key[1] == 0 else f'point {key[1]}'}")
 

@@ -280,6 +280,58 @@ def _closed_cached(Gd: StateSpaceData, gkey: bytes, theta: NDArray[np.float64]) 
     return cl
 
 
+def _closed_batch(Gd: StateSpaceData, thetas: NDArray[np.float64],
+                  ) -> tuple[NDArray[np.float64], ...]:
+    """:func:`_closed` of every row of ``thetas`` (nb, 5) at once: (A, B, C, D) stacked
+    (nb, ., .). Each entry is the same IEEE operation on the same operands as in
+    :func:`_closed` (its matrix products have a single term: outer products and scalars;
+    a product's ``+ 0.0`` below is the matmul's accumulation from zero, which turns a -0.0
+    term into +0.0), so every slice equals ``_closed(Gd, thetas[i])`` bit for bit."""
+    Ag, Bg, Cg, _ = Gd
+    nb = thetas.shape[0]
+    kpa, kp, ki, kd, tf = (thetas[:, j] for j in range(5))
+    ng = Ag.shape[0]
+    # rate_controller: Ak = [[0, 0], [0, -1/tf]], Bk = [1; 1/tf], Ck = [ki, -kd/tf],
+    # Dk = kp + kd/tf
+    a22 = -1.0 / tf
+    b2 = 1.0 / tf
+    c2 = -kd / tf
+    dk = kp + kd / tf
+    Cq, Cth = Cg[0], Cg[1]
+    Cy = kpa[:, None] * Cth[None, :] + Cq[None, :]          # (nb, ng)
+    bg = Bg[:, 0]
+    bgdk = bg[None, :] * dk[:, None] + 0.0                   # Bg @ Dk  (nb, ng)
+    A = np.zeros((nb, ng + 2, ng + 2))
+    A[:, :ng, :ng] = Ag[None] - (bgdk[:, :, None] * Cy[:, None, :] + 0.0)
+    A[:, :ng, ng] = bg[None, :] * ki[:, None] + 0.0          # Bg @ Ck
+    A[:, :ng, ng + 1] = bg[None, :] * c2[:, None] + 0.0
+    A[:, ng, :ng] = -1.0 * Cy + 0.0                          # -Bk @ Cy, Bk[0] = 1
+    A[:, ng + 1, :ng] = (-b2)[:, None] * Cy + 0.0
+    A[:, ng + 1, ng + 1] = a22
+    B = np.zeros((nb, ng + 2, 2))
+    B[:, :ng, 0] = bgdk * kpa[:, None]
+    B[:, :ng, 1] = bg[None, :]
+    B[:, ng, 0] = 1.0 * kpa
+    B[:, ng + 1, 0] = b2 * kpa
+    C = np.zeros((nb, 4, ng + 2))
+    D = np.zeros((nb, 4, 2))
+    C[:, 0, :ng] = -Cth[None, :]
+    D[:, 0, 0] = 1.0
+    C[:, 1, :ng] = (-dk)[:, None] * Cy + 0.0                 # -Dk @ Cy
+    C[:, 1, ng] = ki
+    C[:, 1, ng + 1] = c2
+    D[:, 1, 0] = dk * kpa
+    C[:, 2, :ng] = Cq[None, :]
+    C[:, 3, :ng] = Cth[None, :]
+    return A, B, C, D
+
+
+#: Stacked closed loops of the last (plant, batch of gains) asked for by
+#: :meth:`CascadeChannel.realize_batch` (the channels of one design point share them).
+_CLB_CACHE: dict[bytes, tuple[NDArray[np.float64], ...]] = {}
+_CLB_CACHE_SIZE = 64
+
+
 def closed_loop(G: Any, theta: Any) -> ClosedLoop:
     """Closed loop of plant ``G`` (moment -> [rate; angle]) and the P-PID gains ``theta``
     (sequence in :data:`PARAM_NAMES` order, or a mapping with those keys)."""
@@ -412,6 +464,44 @@ class CascadeChannel:
             B[c2, 0] = cl.B[:, 1]
             A[sl, c2] = bw[:, None] * Cx[None, :]
             C[r, c2] = (-dw * clC[out]) if sign < 0 else dw * Cx
+        return A, B, C, D
+
+    def realize_batch(self, thetas: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        """The channel at every row of ``thetas`` (nb, 5): (A, B, C, D) stacked (nb, ., .),
+        each slice equal to ``self(thetas[i])`` bit for bit (same element operations; used
+        for the tuner's finite-difference realisations, all at once)."""
+        if not hasattr(self, "_A0"):
+            self._template()
+            self._plan()
+        thetas = np.ascontiguousarray(thetas, float)
+        nb = thetas.shape[0]
+        key = self._gkey + np.asarray(thetas.shape, np.int64).tobytes() + thetas.tobytes()
+        cl = _CLB_CACHE.get(key)
+        if cl is None:
+            cl = _closed_batch(self._G, thetas)
+            if len(_CLB_CACHE) >= _CLB_CACHE_SIZE:
+                _CLB_CACHE.clear()
+            _CLB_CACHE[key] = cl
+        clA, clB, clC, clD = cl
+        ncl = self._ncl
+        A = np.repeat(self._A0[None], nb, axis=0)
+        C = np.repeat(self._C0[None], nb, axis=0)
+        B = np.zeros((nb, A.shape[1], 1))
+        D = np.zeros((nb, C.shape[1], 1))
+        A[:, :ncl, :ncl] = clA
+        B[:, :ncl, 0] = clB[:, :, 0]
+        for sl, bw, dw, r, out in self._rdriven:
+            Cx, Dx = clC[:, out], clD[:, out, 0]
+            A[:, sl, :ncl] = bw[None, :, None] * Cx[:, None, :]
+            B[:, sl, 0] = bw[None, :] * Dx[:, None]
+            C[:, r, :ncl] = dw * Cx
+            D[:, r, 0] = dw * Dx
+        for c2, sl, bw, dw, r, out, sign in self._ddriven:
+            Cx = -clC[:, out] if sign < 0 else clC[:, out]
+            A[:, c2, c2] = clA
+            B[:, c2, 0] = clB[:, :, 1]
+            A[:, sl, c2] = bw[None, :, None] * Cx[:, None, :]
+            C[:, r, c2] = (-dw * clC[:, out]) if sign < 0 else dw * Cx
         return A, B, C, D
 
     def _plan(self) -> None:

@@ -10,12 +10,13 @@ the analysis, so an interrupted run keeps the gains it has computed.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import os
 import signal
 import time
 from collections.abc import Callable
-from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
@@ -176,6 +177,26 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
     executor: Executor | None = (ProcessPoolExecutor(jobs, initializer=_worker_init)
                                  if jobs > 1 else None)
     interrupted = False
+    # with workers, the mu analysis of a finished tune is queued at once, behind the tunes
+    # still waiting (the pool runs jobs in submission order): it fills the workers while the
+    # last, longest tunes finish. The same jobs as after the tuning, the same numbers.
+    pre_mu: dict[tuple[str, str, int], Future[AxisRobustness]] = {}
+    index = {p.number: i for i, p in enumerate(points)}
+
+    def queue_mu(key: tuple[str, int], d: Any) -> None:
+        if executor is None or not mu:
+            return
+        ax, num = key
+        if num == 0:
+            for i, p in enumerate(points):
+                if max(z.real for z in d.poles[i]) < 0:
+                    pre_mu[("shif", ax, i)] = executor.submit(
+                        _mu_job, (af, ax, p, d.theta, d.weights[i], seed))
+        elif d.stable:
+            i = index[num]
+            pre_mu[("gs", ax, i)] = executor.submit(
+                _mu_job, (af, ax, points[i], d.theta, d.weights[0], seed))
+
     try:
         t0 = time.perf_counter()
         if method == "robust":
@@ -183,10 +204,12 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
 
             gs, sh = run_robust_designs(af, n_starts=n_starts, seed=seed, points=points,
                                         executor=executor,
-                                        progress=lambda s: tick(f"tune {s}"))
+                                        progress=lambda s: tick(f"tune {s}"),
+                                        on_design=queue_mu)
         else:
             gs, sh = run_designs(af, n_starts=n_starts, seed=seed, points=points,
-                                 executor=executor, progress=lambda s: tick(f"tune {s}"))
+                                 executor=executor, progress=lambda s: tick(f"tune {s}"),
+                                 on_design=queue_mu)
         times[f"tuning ({3 * len(points)} GS-SHIF + 3 SHIF)"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -212,8 +235,21 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
         t0 = time.perf_counter()
         res.files = write_gain_files(res, out)
         times["export (first)"] = time.perf_counter() - t0
+        # the report's figures that need no mu are drawn by a worker meanwhile (queued
+        # behind the mu jobs; the same figures as drawn here). It gets a snapshot with
+        # dicts of its own: the pool pickles it later, in a thread, while res is filled.
+        plots_fut: Future[list[str]] | None = None
+        if report and executor is not None:
+            from vtolftc.synthesis.report import design_plots
+
+            snap = dataclasses.replace(res, mu_gs={}, mu_shif={}, times={}, files={},
+                                       settings=dict(res.settings),
+                                       margins_gs=dict(res.margins_gs),
+                                       margins_shif=dict(res.margins_shif))
+            plots_fut = executor.submit(design_plots, snap, out / "report")
 
         if mu:
+            # (with workers most of it already ran during the tuning's tail)
             t0 = time.perf_counter()
             jobs_mu: list[tuple[Any, ...]] = []
             for ax in AXES:
@@ -228,7 +264,10 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
             if executor is None:
                 pairs: Any = ((j, _mu_job(j[3])) for j in runnable)
             else:
-                futs = {executor.submit(_mu_job, j[3]): j for j in runnable}
+                futs = {(pre_mu.pop(j[:3], None) or executor.submit(_mu_job, j[3])): j
+                        for j in runnable}
+                for f in pre_mu.values():  # none expected: every queued job is runnable
+                    f.cancel()
                 pairs = ((futs[f], f.result()) for f in as_completed(futs))
             for j, r in pairs:
                 results[j[:3]] = r
@@ -249,7 +288,8 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
 
             t0 = time.perf_counter()
             res.times = times
-            res.files["report"] = write_report(res, out / "report")
+            res.files["report"] = write_report(
+                res, out / "report", None if plots_fut is None else plots_fut.result())
             times["report"] = time.perf_counter() - t0
             tick("report")
         res.times = times

@@ -78,7 +78,10 @@ def _layout(fig: Any) -> None:
                         wspace=0.25, hspace=0.3)
 
 
-def _plots(res: SynthesisResult, out: Path) -> list[str]:
+def _plots(res: SynthesisResult, out: Path, parts: tuple[str, ...] = ("design", "mu"),
+           ) -> list[str]:
+    """The paper report's PNGs: ``design`` = weights and poles (known once the tunes are
+    done), ``mu`` = the structured singular values."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -88,7 +91,7 @@ def _plots(res: SynthesisResult, out: Path) -> list[str]:
     af = res.airframe
     om = np.logspace(-3, 3, 241)
     # fig. 3: uncertainty weights over the relative errors, all points
-    for ax in AXES:
+    for ax in AXES if "design" in parts else ():
         fig, axs = plt.subplots(2, 3, figsize=(13, 7), sharex=True)
         for k, d in enumerate(res.gs[ax]):
             a = axs.flat[k]
@@ -113,7 +116,7 @@ def _plots(res: SynthesisResult, out: Path) -> list[str]:
         plt.close(fig)
         names.append(name)
     # fig. 6: closed-loop poles
-    for ax in AXES:
+    for ax in AXES if "design" in parts else ():
         fig, a = plt.subplots(figsize=(7, 5))
         for d in res.gs[ax]:
             p = np.array(d.poles[0])
@@ -133,7 +136,7 @@ def _plots(res: SynthesisResult, out: Path) -> list[str]:
         plt.close(fig)
         names.append(name)
     # mu versus frequency
-    for ax in AXES:
+    for ax in AXES if "mu" in parts else ():
         if ax not in res.mu_gs:
             continue
         fig, axs = plt.subplots(2, 3, figsize=(13, 7), sharex=True)
@@ -160,14 +163,31 @@ def _plots(res: SynthesisResult, out: Path) -> list[str]:
     return names
 
 
-def write_report(res: SynthesisResult, out_dir: str | Path) -> Path:
-    """Write ``README.md`` and the PNGs into ``out_dir``; returns the markdown path."""
+def design_plots(res: SynthesisResult, out_dir: str | Path) -> list[str]:
+    """The report's PNGs that do not need the mu analysis (uncertainty weights, poles),
+    written into ``out_dir``; returns their names. Picklable work: the pipeline draws them
+    in a worker while the mu analysis finishes and passes the names to
+    :func:`write_report` (``design_pngs``)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
     if getattr(res, "method", "paper") == "robust":
-        return write_robust_report(res, out_dir)
+        return _plots_robust(res, out, ("design",))
+    return _plots(res, out, ("design",))
+
+
+def write_report(res: SynthesisResult, out_dir: str | Path,
+                 design_pngs: list[str] | None = None) -> Path:
+    """Write ``README.md`` and the PNGs into ``out_dir``; returns the markdown path.
+
+    ``design_pngs``: the names :func:`design_plots` returned for this ``res`` and
+    ``out_dir`` (those figures are then not drawn again)."""
+    if getattr(res, "method", "paper") == "robust":
+        return write_robust_report(res, out_dir, design_pngs)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     af = res.airframe
-    pngs = _plots(res, out)
+    pngs = (_plots(res, out) if design_pngs is None
+            else list(design_pngs) + _plots(res, out, ("mu",)))
     md: list[str] = [f"# Attitude synthesis report: {af.name}", ""]
     md += [f"Airframe file `{Path(af.source).name}`, sha256 `{af.sha256}`. Settings: "
            f"{res.settings.get('n_starts')} random starts + 1 classical start per tune, "
@@ -353,7 +373,10 @@ def _grid(n: int) -> tuple[int, int]:
     return (2, (n + 1) // 2) if n > 3 else (1, n)
 
 
-def _plots_robust(res: SynthesisResult, out: Path) -> list[str]:
+def _plots_robust(res: SynthesisResult, out: Path,
+                  parts: tuple[str, ...] = ("design", "mu")) -> list[str]:
+    """The robust report's PNGs: ``design`` = the weights, ``mu`` = the structured
+    singular values."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -364,7 +387,7 @@ def _plots_robust(res: SynthesisResult, out: Path) -> list[str]:
     om = np.logspace(-3, 3, 241)
     n = len(res.points)
     rows, cols = _grid(n)
-    for ax in AXES:
+    for ax in AXES if "design" in parts else ():
         fig, axs = plt.subplots(rows, cols, figsize=(3.3 * cols, 3.5 * rows), sharex=True)
         for k, d in enumerate(res.gs[ax]):
             a = axs.flat[k]
@@ -388,7 +411,7 @@ def _plots_robust(res: SynthesisResult, out: Path) -> list[str]:
         fig.savefig(out / name, dpi=80)
         plt.close(fig)
         names.append(name)
-    for ax in AXES:
+    for ax in AXES if "mu" in parts else ():
         if ax not in res.mu_gs:
             continue
         fig, axs = plt.subplots(rows, cols, figsize=(3.3 * cols, 3.5 * rows), sharex=True)
@@ -427,7 +450,8 @@ def _active_bounds(d: Any, tol: float = 5e-3) -> list[str]:
     return out
 
 
-def write_robust_report(res: SynthesisResult, out_dir: str | Path) -> Path:
+def write_robust_report(res: SynthesisResult, out_dir: str | Path,
+                        design_pngs: list[str] | None = None) -> Path:
     """Report of the robust method (``synthesis/robust.py``): points with their centred
     nominals, weights by rule beside table 2, rotor-out moments, norms, gains and active
     bounds, mu next to the disk and delay margins, SHIF and LQR."""
@@ -441,7 +465,8 @@ def write_robust_report(res: SynthesisResult, out_dir: str | Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     af = res.airframe
     spec = RobustSpec()
-    pngs = _plots_robust(res, out)
+    pngs = (_plots_robust(res, out) if design_pngs is None
+            else list(design_pngs) + _plots_robust(res, out, ("mu",)))
     md: list[str] = [f"# Attitude synthesis report (robust method): {af.name}", ""]
     md += [f"Airframe file `{Path(af.source).name}`, sha256 `{af.sha256}`. Settings: "
            f"{res.settings.get('n_starts')} random starts + 1 classical start per tune, "

@@ -504,6 +504,7 @@ def run_robust_designs(af: Airframe, *, n_starts: int = 4, seed: int = 0,
                        executor: Executor | None = None, shif: bool = True,
                        progress: Callable[[str], None] | None = None,
                        spec: RobustSpec = RobustSpec(), max_iter: int = 40,
+                       on_design: Callable[[tuple[str, int], AxisDesign], None] | None = None,
                        ) -> tuple[dict[Axis, list[AxisDesign]], dict[Axis, AxisDesign]]:
     """All robust GS-SHIF tunes (axes x points) and the SHIF tunes; deterministic as
     :func:`vtolftc.synthesis.design.run_designs`.
@@ -515,12 +516,16 @@ def run_robust_designs(af: Airframe, *, n_starts: int = 4, seed: int = 0,
     the same deterministic local run as in :func:`vtolftc.synthesis.structured.tune` and the
     records are combined in start order, so the result is the same, bit for bit, as one
     :func:`robust_design_shif` / :func:`robust_design_point` call per tune (and as the
-    sequential run without an executor).
+    sequential run without an executor). ``on_design(key, design)`` is called as each tune
+    finishes (key ``(axis, point number)``, ``(axis, 0)`` for SHIF), e.g. to queue its
+    analysis behind the tunes still running.
     """
     results: dict[tuple[str, int], AxisDesign] = {}
 
     def done(key: tuple[str, int], d: AxisDesign) -> None:
         results[key] = d
+        if on_design is not None:
+            on_design(key, d)
         if progress is not None:
             progress(f"{key[0]} {'SHIF' if key[1] == 0 else f'point {key[1]}'}")
 

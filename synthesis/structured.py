@@ -280,6 +280,9 @@ class _Evaluator:
         self.scales = problem.scales
         self._cache: dict[bytes, list[StateSpaceData]] = {}
         self._dcache: dict[bytes, list[list[StateSpaceData]]] = {}
+        # the same derivatives stacked over the parameters, (p, ., .) per channel (when the
+        # channels realise in batches), for the gradients' batched products
+        self._dstack: dict[bytes, list[tuple[NDArray[np.float64], ...]]] = {}
         self.shapes: list[tuple[int, ...]] | None = None
         # SLSQP asks for the constraints and their Jacobian at the same point (in either
         # order): the frequency responses, SVDs and eigen-decompositions of the last few
@@ -311,6 +314,57 @@ class _Evaluator:
         r = self._dcache.get(key)
         if r is not None:
             return r
+        stacks = self._derivatives_batch(theta)
+        if stacks is None:
+            out = self._derivatives_loop(theta)
+        else:
+            out = [[tuple(d[k] for d in st) for k in range(self.p)]  # type: ignore[misc]
+                   for st in stacks]
+        if len(self._dcache) > 1024:
+            self._dcache.clear()
+            self._dstack.clear()
+        self._dcache[key] = out
+        if stacks is not None:
+            self._dstack[key] = stacks
+        return out
+
+    def derivative_stacks(self, theta: NDArray[np.float64],
+                          ) -> list[tuple[NDArray[np.float64], ...]] | None:
+        """:meth:`derivatives` stacked over the parameters: per channel (dA, dB, dC, dD),
+        each (p, ., .); None when the channels were differentiated one point at a time."""
+        self.derivatives(theta)
+        return self._dstack.get(theta.tobytes())
+
+    def _derivatives_batch(self, theta: NDArray[np.float64],
+                           ) -> list[tuple[NDArray[np.float64], ...]] | None:
+        """:meth:`_derivatives_loop` through the channels' ``realize_batch`` (all 2p
+        perturbed points of a channel in one call): the same perturbed points, the same
+        element operations, hence the same numbers bit for bit. None when a channel has no
+        ``realize_batch`` or a perturbed realisation is not finite (the loop then raises
+        as :meth:`realize` does)."""
+        chans = self.pb.channels
+        if not all(hasattr(c, "realize_batch") for c in chans):
+            return None
+        p = self.p
+        hs = [1e-6 * max(abs(theta[k]), self.scales[k]) for k in range(p)]
+        pts = np.repeat(theta[None, :], 2 * p, axis=0)
+        for k, h in enumerate(hs):
+            pts[2 * k, k] += h
+            pts[2 * k + 1, k] -= h
+        h2 = (2 * np.array(hs))[:, None, None]
+        out: list[tuple[NDArray[np.float64], ...]] = []
+        for c in chans:
+            mats = c.realize_batch(pts)
+            ders = []
+            for X in mats:
+                if not np.isfinite(X).all():
+                    return None
+                ders.append((X[0::2] - X[1::2]) / h2)
+            out.append(tuple(ders))
+        return out
+
+    def _derivatives_loop(self, theta: NDArray[np.float64]) -> list[list[StateSpaceData]]:
+        """Central differences, one realisation of every channel per perturbed point."""
         per_param: list[list[StateSpaceData]] = []
         for k in range(self.p):
             h = 1e-6 * max(abs(theta[k]), self.scales[k])
@@ -324,11 +378,7 @@ class _Evaluator:
                     for sp, sm in zip(rp, rm, strict=True)
                 ]  # type: ignore[misc]
             )
-        out = [[per_param[k][i] for k in range(self.p)] for i in range(len(self.pb.channels))]
-        if len(self._dcache) > 1024:
-            self._dcache.clear()
-        self._dcache[key] = out
-        return out
+        return [[per_param[k][i] for k in range(self.p)] for i in range(len(self.pb.channels))]
 
     def exact(self, theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], list[float]]:
         vals, peaks = [], []
@@ -391,6 +441,7 @@ class _Evaluator:
         sys = self.realize(theta)
         resp = self._responses(theta, omegas)
         dsys = self.derivatives(theta) if grad else None
+        dstk = self.derivative_stacks(theta) if grad else None
         sig_all, grad_all = [], []
         for i, (A, _, C, _) in enumerate(sys):
             ri = resp[i]
@@ -418,12 +469,24 @@ class _Evaluator:
                 CR[~finite] = 0.0
                 X = X.copy()
                 X[~finite] = 0.0
+            uc = u.conj()
+            if dstk is not None:
+                # all parameters at once: the same products slice by slice (stacked matmul)
+                sA, sB, sC, sD = dstk[i]
+                dTs = np.broadcast_to(sD.astype(complex)[:, None], (self.p, *T.shape)).copy()
+                if n:
+                    dTs += sC[:, None] @ X[None] + CR[None] @ (sA[:, None] @ X[None]) \
+                        + CR[None] @ sB[:, None]
+                for k in range(self.p):
+                    g[:, k] = np.real(np.einsum("wi,wij,wj->w", uc, dTs[k], v))
+                grad_all.append(g)
+                continue
             for k in range(self.p):
                 dA, dB, dC, dD = dsys[i][k]
                 dT = np.broadcast_to(dD.astype(complex), T.shape).copy()
                 if n:
                     dT += dC @ X + CR @ (dA @ X) + CR @ dB
-                g[:, k] = np.real(np.einsum("wi,wij,wj->w", u.conj(), dT, v))
+                g[:, k] = np.real(np.einsum("wi,wij,wj->w", uc, dT, v))
             grad_all.append(g)
         sig = np.concatenate(sig_all) if sig_all else np.zeros(0)
         gr = np.concatenate(grad_all, axis=0) if grad and grad_all else None
@@ -457,6 +520,7 @@ class _Evaluator:
         if not grad:
             return vals, None
         dsys = self.derivatives(theta)
+        dstk = self.derivative_stacks(theta)
         grads = np.zeros((len(sys), self.p))
         for i, e in enumerate(eigs):
             if e is None:
@@ -465,8 +529,11 @@ class _Evaluator:
             den = np.vdot(y, x)
             if abs(den) < 1e-14:
                 continue
+            # dA_k x for every k: one stacked product when the derivatives are stacked
+            dAx = dstk[i][0] @ x if dstk is not None else [dsys[i][k][0] @ x
+                                                           for k in range(self.p)]
             for k in range(self.p):
-                grads[i, k] = float(np.real(np.vdot(y, dsys[i][k][0] @ x) / den))
+                grads[i, k] = float(np.real(np.vdot(y, dAx[k]) / den))
         return vals, grads
 
 
