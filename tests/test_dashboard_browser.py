@@ -75,7 +75,7 @@ def test_transition_from_the_browser(chromium, sitl, tmp_path):
                        "the autopilot link")
         assert st["vtol"] == "MC" and st["armed"] == "0"
         page.wait(lambda s: page.driver.execute_script(
-            "return document.querySelectorAll('canvas').length") > 0, 10, "the 3-D canvas")
+            "return document.querySelectorAll('canvas').length") > 0, 90, "the 3-D canvas")
 
         # the autopilot refuses a transition on the ground: the page must say so
         state, text, _ = page.press("Transition to fixed-wing")
