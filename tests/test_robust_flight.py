@@ -39,6 +39,48 @@ def test_hil_delay_line_feeds_the_autopilot_older_states(ds1):
         run_scenario(sc, airframe=ds1, hil_delay_s=-1.0)
 
 
+@pytest.mark.parametrize("tau", [0.5, 0.0])
+def test_attitude_gains_are_scheduled_on_the_low_passed_airspeed(ds1, tau):
+    """The attitude controller gets the airspeed through the FTC_SCHED_TAU first-order
+    low-pass (0: unfiltered), so the noise of the measurement does not move the gains
+    between design points from step to step; the mode logic still sees the raw value."""
+    from vtolftc.campaign.execute import vehicle_options
+
+    measured: list[float] = []
+    scheduled: list[float] = []
+
+    def setup(ap: Autopilot) -> None:
+        ap.params.set("FTC_SCHED_TAU", tau)
+        step, update = ap.step, ap.attitude.update
+
+        def spy_step(nav):
+            measured.append(float(nav.airspeed_m_s))
+            return step(nav)
+
+        def spy_update(ref, att, rates, v, *a):
+            scheduled.append(float(v))
+            return update(ref, att, rates, v, *a)
+
+        ap.step = spy_step  # type: ignore[method-assign]
+        ap.attitude.update = spy_update  # type: ignore[method-assign]
+
+    opts = vehicle_options(noise_level="typical", seed=3)
+    run_scenario(paper_scenario(0, 3.0, airframe=ds1), airframe=ds1, autopilot_setup=setup,
+                 vehicle_options=opts)
+    # the attitude loop runs from arming on (t = 1 s), every step
+    assert len(measured) == 750 and len(scheduled) == 500
+    m = np.array(measured[-len(scheduled):])
+    assert m.std() > 0.05                        # the measurement is noisy (0.3 m/s, clipped)
+    want = np.empty_like(m)
+    want[0] = m[0]
+    a = min(1.0, 0.004 / tau) if tau > 0 else 1.0
+    for k in range(1, len(m)):
+        want[k] = want[k - 1] + a * (m[k] - want[k - 1])
+    np.testing.assert_allclose(scheduled, want, rtol=0, atol=1e-12)
+    if tau > 0:
+        assert np.std(np.diff(scheduled)) < 0.05 * np.std(np.diff(m))
+
+
 def test_fixed_wing_allocator_keeps_the_lift_rotors_in_reserve(ds1):
     ap = Autopilot(ds1)
     B = ap.effectiveness.matrix(18.0).copy()

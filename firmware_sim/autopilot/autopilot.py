@@ -9,7 +9,9 @@
    nominal-aerodynamics feed-forward of the wing's lift) and forward force ``Fx`` (pusher ramp
    in the transition, airspeed hold in fixed-wing);
 3. the attitude controller (``gs-shif``, ``shif`` or ``lqr``, :mod:`.attitude`) gives the
-   moments ``[L, M, N]`` (N m);
+   moments ``[L, M, N]`` (N m), its gains scheduled on the measured airspeed through a
+   first-order low-pass of time constant ``FTC_SCHED_TAU`` (0.5 s; the modes, the
+   allocation and the outer loops use the raw value);
 4. ``ActiveSetAllocator`` maps ``v = [Fz, Fx, L, M, N]`` onto all 15 actuators at once with
    the nominal ``B(V)`` at the measured airspeed (:mod:`.effectiveness`), actuator position
    limits, rate limits as per-step bounds and a warm-started active-set solve (the paper's
@@ -152,6 +154,8 @@ _PARAMS: tuple[tuple[str, float, ParamType, float, float, str], ...] = (
     ("VT_B_TRANS_ARSP", 5.0, ParamType.REAL32, 0.0, 20.0,
      "airspeed completing the back transition, m/s"),
     ("FW_AIRSPD_TRIM", 18.0, ParamType.REAL32, 10.0, 40.0, "fixed-wing cruise airspeed, m/s"),
+    ("FTC_SCHED_TAU", 0.5, ParamType.REAL32, 0.0, 5.0,
+     "low-pass time constant of the airspeed that schedules the attitude gains, s (0: none)"),
     ("FW_AIRSPD_P", 0.6, ParamType.REAL32, 0.0, 10.0,
      "airspeed hold: forward acceleration per airspeed error, 1/s"),
     ("FW_AIRSPD_I", 0.1, ParamType.REAL32, 0.0, 10.0, "airspeed hold integral gain, 1/s^2"),
@@ -277,6 +281,8 @@ class Autopilot:
         self.saturated_steps = 0
         self._time_usec = 0
         self._airspeed = 0.0
+        # the airspeed the attitude gains are scheduled with (FTC_SCHED_TAU low-pass)
+        self._v_sched = math.nan
         self._alt_ref = 0.0
         self._alt = 0.0
         self._ground_alt = math.nan
@@ -601,7 +607,18 @@ class Autopilot:
         on_ground = mode == _M_TAKEOFF and h - self._ground_alt < 0.5
         if on_ground:
             self.attitude.reset()
-        tau = self.attitude.update(ref, att, rates, V, self._sat_hi, self._sat_lo)
+        # gains scheduled on a low-passed airspeed: the measurement's noise would otherwise
+        # move the gains between neighbouring design points from step to step (in hover
+        # between 0 and 1 m/s, whose pitch gains differ by 3x), a randomly time-varying
+        # controller that the design never analysed
+        tc = pp["FTC_SCHED_TAU"].value
+        vs = self._v_sched
+        if tc > 0.0 and math.isfinite(vs):
+            vs += min(1.0, self.dt / tc) * (V - vs)
+        else:
+            vs = V
+        self._v_sched = vs
+        tau = self.attitude.update(ref, att, rates, vs, self._sat_hi, self._sat_lo)
 
         # ---- allocation ---------------------------------------------------------------------
         # B(V) on a 0.1 m/s airspeed grid: the allocator rebuilds its Hessian only when B changes
