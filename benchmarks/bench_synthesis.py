@@ -49,6 +49,28 @@ The shipped gain files (both methods) are reproduced float for float. Still abov
 an idle machine (about 85 s expected: 114.5 s x 174/233): what remains is LAPACK
 (solves, SVDs, eig) on small matrices called one channel at a time, and SLSQP.
 
+Third pass (2026-12-01, the machine idle: load average 0.7-0.9 at the start). Before:
+90.3 s total (tuning 70.0 s, mu 9.0 s, report 10.3 s; 172 s user CPU). Profile of every
+tune in one process: sigma_max and its gradient 57 % (numpy solves, SVDs and the dT_k
+products on 11-13 state single-input channels, nearly all per-call overhead), the
+left/right eigenvectors of the abscissa constraint 16 % (two thirds of it in
+``scipy.linalg.eig``'s wrapper). In the mu jobs, the Python power iteration of the lower
+bound was 80 %; in the report, matplotlib's drawing of a Line2D per relative-error curve.
+Changes: a compiled kernel for single-input channels (``synthesis/freq_kernel.py``: one
+complex LU per frequency gives x and the row u^H C (jwI - A)^-1, the gradient from vectors
+instead of matrices), LAPACK dgeev called directly for the rightmost eigenpair (the same
+numbers as scipy's, bit for bit, tested), the power iteration compiled
+(``synthesis/power_kernel.py``, 50x on a 4 x 4), the error curves as one LineCollection,
+and the report's figures drawn by the workers one axis per job. After, same machine, same
+minutes: **41.7 s total** (tuning 32.8 s, mu 3.3 s, report 4.4 s; 85 s user CPU): 2.17x,
+and below the 60 s target. ``--method paper``: 22.3 s. The kernel agrees with the numpy
+path to round-off (4e-14 relative on the DS-1 channels), so the optimiser's path changes
+only in the last bits: against the shipped gain files (made by the numpy path) every gain
+agrees within 3.5e-5 relative (pitch point 1 tf_rate_s 0.0545392 -> 0.0545373, a flat
+direction) and every achieved gamma within 1.1e-7 relative, both methods. The shipped gains
+were kept (the slow test compares the achieved norms, rtol 2e-3): every flight result in
+``docs/`` was measured with them.
+
 Usage: ``python benchmarks/bench_synthesis.py [--method robust|paper] [--starts N] [--jobs N]
 [--seed S] [--out DIR] [--no-report]``. The machine's load is printed with the times (the
 numbers mean little on a shared machine).

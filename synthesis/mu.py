@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize, minimize_scalar
 
 from vtolftc.synthesis.mu_blocks import Block
+from vtolftc.synthesis.power_kernel import power_iteration, power_iteration_scalar
 
 __all__ = [
     "Block",
@@ -625,6 +626,22 @@ class _Power:
     def run(
         self, b: NDArray[Any], w: NDArray[Any], iters: int = 60, tol: float = 1e-10
     ) -> tuple[NDArray[Any], NDArray[Any]]:
+        """(a, w) after the iteration from (b, w): the compiled kernel of
+        :mod:`vtolftc.synthesis.power_kernel` (:meth:`run_numpy` is the reference)."""
+        st = self.st
+        M = np.ascontiguousarray(self.M, dtype=complex)
+        b = np.ascontiguousarray(b, dtype=complex)
+        w = np.ascontiguousarray(w, dtype=complex)
+        if st.scalar:
+            return power_iteration_scalar(M, b, w, iters, tol)
+        return power_iteration(M, b, w, iters, tol, st.K, st.blk_of_row, st.blk_of_col,
+                               st.full_row, st.full_col, st.rep_row, st.rep_col,
+                               st.rep_blk, st.is_real)
+
+    def run_numpy(
+        self, b: NDArray[Any], w: NDArray[Any], iters: int = 60, tol: float = 1e-10
+    ) -> tuple[NDArray[Any], NDArray[Any]]:
+        """:meth:`run` in numpy (the reference the kernel is tested against)."""
         st, M, Mh = self.st, self.M, self.Mh
         K = st.K
         has_rep = bool(st.rep_blocks)

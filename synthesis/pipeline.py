@@ -238,7 +238,7 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
         # the report's figures that need no mu are drawn by a worker meanwhile (queued
         # behind the mu jobs; the same figures as drawn here). It gets a snapshot with
         # dicts of its own: the pool pickles it later, in a thread, while res is filled.
-        plots_fut: Future[list[str]] | None = None
+        plots_futs: list[Future[list[str]]] = []
         if report and executor is not None:
             from vtolftc.synthesis.report import design_plots
 
@@ -246,7 +246,8 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
                                        settings=dict(res.settings),
                                        margins_gs=dict(res.margins_gs),
                                        margins_shif=dict(res.margins_shif))
-            plots_fut = executor.submit(design_plots, snap, out / "report")
+            plots_futs = [executor.submit(design_plots, snap, out / "report", (ax,))
+                          for ax in AXES]  # one job per axis: both workers draw
 
         if mu:
             # (with workers most of it already ran during the tuning's tail)
@@ -283,13 +284,22 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
             t0 = time.perf_counter()
             res.files = write_gain_files(res, out)
             times["export"] = time.perf_counter() - t0
+        mu_futs: list[Future[list[str]]] = []
+        if report and executor is not None:
+            from vtolftc.synthesis.report import mu_plots
+
+            # the mu figures too, one job per axis (res is not changed by the workers: each
+            # job gets a pickled copy; mu_gs / mu_shif are complete and no longer modified)
+            snap = dataclasses.replace(res, times={}, files={}, settings=dict(res.settings))
+            mu_futs = [executor.submit(mu_plots, snap, out / "report", (ax,)) for ax in AXES]
         if report:
             from vtolftc.synthesis.report import write_report
 
             t0 = time.perf_counter()
             res.times = times
-            res.files["report"] = write_report(
-                res, out / "report", None if plots_fut is None else plots_fut.result())
+            design_pngs = [n for f in plots_futs for n in f.result()] if plots_futs else None
+            mu_pngs = [n for f in mu_futs for n in f.result()] if mu_futs else None
+            res.files["report"] = write_report(res, out / "report", design_pngs, mu_pngs)
             times["report"] = time.perf_counter() - t0
             tick("report")
         res.times = times

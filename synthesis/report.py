@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from vtolftc.synthesis.export import atomic_write_text
 from vtolftc.synthesis.hinfnorm import frequency_response
@@ -72,14 +73,30 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
 
 
 def _layout(fig: Any) -> None:
-    """Fixed margins (``tight_layout`` costs about 2 s per figure with log axes)."""
+    """Fixed margins (``tight_layout`` costs about 2 s per figure with log axes). The titles
+    are placed with an explicit ``y=1.0`` for the same reason: matplotlib's automatic title
+    position measures every tick label of every axes at each draw (about 1.3 s per figure
+    of seven log-log panels)."""
     w, h = fig.get_size_inches()
     fig.subplots_adjust(left=0.8 / w, right=1 - 0.25 / w, bottom=0.6 / h, top=1 - 0.6 / h,
                         wspace=0.25, hspace=0.3)
 
 
+def _error_rows(a: Any, om: NDArray[np.float64], errors: NDArray[np.float64]) -> None:
+    """About 24 of the relative-error curves, thin and grey, as one artist (a line per curve
+    costs a Line2D each at every draw)."""
+    from matplotlib.collections import LineCollection
+
+    rows = errors[:: max(1, len(errors) // 24)]
+    a.add_collection(LineCollection(
+        [np.column_stack([om, np.maximum(r, 1e-6)]) for r in rows], colors="0.75",
+        linewidths=0.6))
+    a.set_xscale("log")
+    a.set_yscale("log")
+
+
 def _plots(res: SynthesisResult, out: Path, parts: tuple[str, ...] = ("design", "mu"),
-           ) -> list[str]:
+           axes: tuple[Axis, ...] = AXES) -> list[str]:
     """The paper report's PNGs: ``design`` = weights and poles (known once the tunes are
     done), ``mu`` = the structured singular values."""
     import matplotlib
@@ -91,17 +108,16 @@ def _plots(res: SynthesisResult, out: Path, parts: tuple[str, ...] = ("design", 
     af = res.airframe
     om = np.logspace(-3, 3, 241)
     # fig. 3: uncertainty weights over the relative errors, all points
-    for ax in AXES if "design" in parts else ():
+    for ax in axes if "design" in parts else ():
         fig, axs = plt.subplots(2, 3, figsize=(13, 7), sharex=True)
         for k, d in enumerate(res.gs[ax]):
             a = axs.flat[k]
             w = d.weights[0]
             rel = relative_error(af, ax, w.point, om)
-            for row in rel.errors[:: max(1, len(rel.errors) // 24)]:
-                a.loglog(om, np.maximum(row, 1e-6), color="0.75", lw=0.6)
+            _error_rows(a, om, rel.errors)
             a.loglog(om, rel.bound, "k--", lw=1, label="max relative error")
             a.loglog(om, w.Wt.magnitude(om), "r", lw=1.8, label="|W_t|")
-            a.set_title(f"{ax} point {w.point.number} ({w.point.airspeed_m_s:g} m/s)")
+            a.set_title(f"{ax} point {w.point.number} ({w.point.airspeed_m_s:g} m/s)", y=1.0)
             a.grid(True, alpha=0.3)
             a.set_ylim(1e-3, max(10.0, 2 * float(np.max(w.Wt.magnitude(om)))))
             if k == 0:
@@ -116,7 +132,7 @@ def _plots(res: SynthesisResult, out: Path, parts: tuple[str, ...] = ("design", 
         plt.close(fig)
         names.append(name)
     # fig. 6: closed-loop poles
-    for ax in AXES if "design" in parts else ():
+    for ax in axes if "design" in parts else ():
         fig, a = plt.subplots(figsize=(7, 5))
         for d in res.gs[ax]:
             p = np.array(d.poles[0])
@@ -127,7 +143,7 @@ def _plots(res: SynthesisResult, out: Path, parts: tuple[str, ...] = ("design", 
         a.set_xscale("symlog", linthresh=1.0)
         a.set_xlabel("real part [1/s] (symlog)")
         a.set_ylabel("imaginary part [rad/s]")
-        a.set_title(f"Nominal closed-loop poles, {ax} (GS-SHIF)")
+        a.set_title(f"Nominal closed-loop poles, {ax} (GS-SHIF)", y=1.0)
         a.grid(True, alpha=0.3)
         a.legend(fontsize=8)
         _layout(fig)
@@ -136,7 +152,7 @@ def _plots(res: SynthesisResult, out: Path, parts: tuple[str, ...] = ("design", 
         plt.close(fig)
         names.append(name)
     # mu versus frequency
-    for ax in AXES if "mu" in parts else ():
+    for ax in axes if "mu" in parts else ():
         if ax not in res.mu_gs:
             continue
         fig, axs = plt.subplots(2, 3, figsize=(13, 7), sharex=True)
@@ -148,7 +164,7 @@ def _plots(res: SynthesisResult, out: Path, parts: tuple[str, ...] = ("design", 
             a.semilogx(m.omegas, m.rp.lower, "r:", label="mu_Delta-hat lower")
             a.axhline(1.0, color="k", lw=0.8)
             pt = res.points[k]
-            a.set_title(f"{ax} point {pt.number} ({pt.airspeed_m_s:g} m/s)")
+            a.set_title(f"{ax} point {pt.number} ({pt.airspeed_m_s:g} m/s)", y=1.0)
             a.grid(True, alpha=0.3)
             if k == 0:
                 a.legend(fontsize=7)
@@ -163,31 +179,65 @@ def _plots(res: SynthesisResult, out: Path, parts: tuple[str, ...] = ("design", 
     return names
 
 
-def design_plots(res: SynthesisResult, out_dir: str | Path) -> list[str]:
-    """The report's PNGs that do not need the mu analysis (uncertainty weights, poles),
-    written into ``out_dir``; returns their names. Picklable work: the pipeline draws them
-    in a worker while the mu analysis finishes and passes the names to
-    :func:`write_report` (``design_pngs``)."""
+_PNG_KINDS = ("wt", "poles", "mu")
+
+
+def png_order(names: list[str]) -> list[str]:
+    """The report's PNG names in the report's order (kind: weights, poles, mu; then axis),
+    whichever order the per-axis jobs of :func:`design_plots` / :func:`mu_plots` finish."""
+    def key(n: str) -> tuple[int, int, str]:
+        kind, _, rest = n.partition("_")
+        ax = rest.removesuffix(".png")
+        return (_PNG_KINDS.index(kind) if kind in _PNG_KINDS else len(_PNG_KINDS),
+                AXES.index(ax) if ax in AXES else len(AXES), n)  # type: ignore[arg-type]
+    return sorted(names, key=key)
+
+
+def design_plots(res: SynthesisResult, out_dir: str | Path,
+                 axes: tuple[Axis, ...] = AXES) -> list[str]:
+    """The report's PNGs that do not need the mu analysis (uncertainty weights, poles) of
+    ``axes``, written into ``out_dir``; returns their names. Picklable work: the pipeline
+    draws them in the workers (one job per axis) while the mu analysis finishes and passes
+    the names to :func:`write_report` (``design_pngs``)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if getattr(res, "method", "paper") == "robust":
-        return _plots_robust(res, out, ("design",))
-    return _plots(res, out, ("design",))
+        return _plots_robust(res, out, ("design",), axes)
+    return _plots(res, out, ("design",), axes)
+
+
+def mu_plots(res: SynthesisResult, out_dir: str | Path,
+             axes: tuple[Axis, ...] = AXES) -> list[str]:
+    """The report's mu figures of ``axes`` (those with a GS-SHIF mu analysis in ``res``),
+    written into ``out_dir``; returns their names (``mu_pngs`` of :func:`write_report`)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if getattr(res, "method", "paper") == "robust":
+        return _plots_robust(res, out, ("mu",), axes)
+    return _plots(res, out, ("mu",), axes)
+
+
+def _pngs(res: SynthesisResult, out: Path, design_pngs: list[str] | None,
+          mu_pngs: list[str] | None) -> list[str]:
+    """The report's PNG names: those given, the others drawn here."""
+    names = (design_plots(res, out) if design_pngs is None else list(design_pngs))
+    names += mu_plots(res, out) if mu_pngs is None else list(mu_pngs)
+    return png_order(names)
 
 
 def write_report(res: SynthesisResult, out_dir: str | Path,
-                 design_pngs: list[str] | None = None) -> Path:
+                 design_pngs: list[str] | None = None,
+                 mu_pngs: list[str] | None = None) -> Path:
     """Write ``README.md`` and the PNGs into ``out_dir``; returns the markdown path.
 
-    ``design_pngs``: the names :func:`design_plots` returned for this ``res`` and
-    ``out_dir`` (those figures are then not drawn again)."""
+    ``design_pngs`` / ``mu_pngs``: the names :func:`design_plots` / :func:`mu_plots`
+    returned for this ``res`` and ``out_dir`` (those figures are then not drawn again)."""
     if getattr(res, "method", "paper") == "robust":
-        return write_robust_report(res, out_dir, design_pngs)
+        return write_robust_report(res, out_dir, design_pngs, mu_pngs)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     af = res.airframe
-    pngs = (_plots(res, out) if design_pngs is None
-            else list(design_pngs) + _plots(res, out, ("mu",)))
+    pngs = _pngs(res, out, design_pngs, mu_pngs)
     md: list[str] = [f"# Attitude synthesis report: {af.name}", ""]
     md += [f"Airframe file `{Path(af.source).name}`, sha256 `{af.sha256}`. Settings: "
            f"{res.settings.get('n_starts')} random starts + 1 classical start per tune, "
@@ -374,7 +424,8 @@ def _grid(n: int) -> tuple[int, int]:
 
 
 def _plots_robust(res: SynthesisResult, out: Path,
-                  parts: tuple[str, ...] = ("design", "mu")) -> list[str]:
+                  parts: tuple[str, ...] = ("design", "mu"),
+                  axes: tuple[Axis, ...] = AXES) -> list[str]:
     """The robust report's PNGs: ``design`` = the weights, ``mu`` = the structured
     singular values."""
     import matplotlib
@@ -387,18 +438,17 @@ def _plots_robust(res: SynthesisResult, out: Path,
     om = np.logspace(-3, 3, 241)
     n = len(res.points)
     rows, cols = _grid(n)
-    for ax in AXES if "design" in parts else ():
+    for ax in axes if "design" in parts else ():
         fig, axs = plt.subplots(rows, cols, figsize=(3.3 * cols, 3.5 * rows), sharex=True)
         for k, d in enumerate(res.gs[ax]):
             a = axs.flat[k]
             w = d.weights[0]
             rel = relative_error(af, ax, w.point, om, nominal=w.nominal)
-            for row in rel.errors[:: max(1, len(rel.errors) // 24)]:
-                a.loglog(om, np.maximum(row, 1e-6), color="0.75", lw=0.6)
+            _error_rows(a, om, rel.errors)
             a.loglog(om, rel.bound, "k--", lw=1, label="max relative error")
             a.loglog(om, w.Wt.magnitude(om), "r", lw=1.8, label="|W_t| (centred)")
             a.set_title(f"{ax} {w.point.number}: nominal {w.nominal[0]:.3g} m/s, "
-                        f"gamma {w.nominal[1]:.2f}", fontsize=8)
+                        f"gamma {w.nominal[1]:.2f}", fontsize=8, y=1.0)
             a.grid(True, alpha=0.3)
             a.set_ylim(1e-3, max(10.0, 2 * float(np.max(w.Wt.magnitude(om)))))
             if k == 0:
@@ -411,7 +461,7 @@ def _plots_robust(res: SynthesisResult, out: Path,
         fig.savefig(out / name, dpi=80)
         plt.close(fig)
         names.append(name)
-    for ax in AXES if "mu" in parts else ():
+    for ax in axes if "mu" in parts else ():
         if ax not in res.mu_gs:
             continue
         fig, axs = plt.subplots(rows, cols, figsize=(3.3 * cols, 3.5 * rows), sharex=True)
@@ -421,7 +471,7 @@ def _plots_robust(res: SynthesisResult, out: Path,
             a.semilogx(m.omegas, m.rp.upper, "r", label="mu_Delta-hat (RP)")
             a.axhline(1.0, color="k", lw=0.8)
             pt = res.points[k]
-            a.set_title(f"{ax} point {pt.number} ({pt.airspeed_m_s:g} m/s)", fontsize=8)
+            a.set_title(f"{ax} point {pt.number} ({pt.airspeed_m_s:g} m/s)", fontsize=8, y=1.0)
             a.grid(True, alpha=0.3)
             if k == 0:
                 a.legend(fontsize=7)
@@ -451,7 +501,8 @@ def _active_bounds(d: Any, tol: float = 5e-3) -> list[str]:
 
 
 def write_robust_report(res: SynthesisResult, out_dir: str | Path,
-                        design_pngs: list[str] | None = None) -> Path:
+                        design_pngs: list[str] | None = None,
+                        mu_pngs: list[str] | None = None) -> Path:
     """Report of the robust method (``synthesis/robust.py``): points with their centred
     nominals, weights by rule beside table 2, rotor-out moments, norms, gains and active
     bounds, mu next to the disk and delay margins, SHIF and LQR."""
@@ -465,8 +516,7 @@ def write_robust_report(res: SynthesisResult, out_dir: str | Path,
     out.mkdir(parents=True, exist_ok=True)
     af = res.airframe
     spec = RobustSpec()
-    pngs = (_plots_robust(res, out) if design_pngs is None
-            else list(design_pngs) + _plots_robust(res, out, ("mu",)))
+    pngs = _pngs(res, out, design_pngs, mu_pngs)
     md: list[str] = [f"# Attitude synthesis report (robust method): {af.name}", ""]
     md += [f"Airframe file `{Path(af.source).name}`, sha256 `{af.sha256}`. Settings: "
            f"{res.settings.get('n_starts')} random starts + 1 classical start per tune, "
