@@ -127,6 +127,7 @@ def test_shipped_specs_expand_to_the_documented_counts():
     assert counts["paper"] == 2 * 3
     assert counts["envelope"] == (n_single + n_double + n_partial + n_surf_push) * 3 * 3 * 2
     assert counts["envelope"] >= 1000
+    assert counts["envelope-paper-gains"] == counts["envelope"] // 3  # GS-SHIF only
 
 
 def test_expansion_is_deterministic_and_generators_are_complete():
