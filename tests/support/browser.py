@@ -43,6 +43,14 @@ window.__vtolftcObs.observe(document.body, {childList: true, subtree: true,
                                              attributes: true, attributeFilter: ['data-update']});
 """
 
+# Caps requestAnimationFrame at one frame per %g ms (installed before the page's scripts).
+_FPS_CAP_JS = """
+(() => { const dt = %g; let next = 0;
+  window.requestAnimationFrame = (cb) => { const now = performance.now();
+    next = Math.max(now, next + dt); return setTimeout(() => cb(performance.now()), next - now); };
+  window.cancelAnimationFrame = (id) => clearTimeout(id); })();
+"""
+
 
 def find_chromium() -> str | None:
     """Path of a Chromium binary (``$CHROMIUM`` first), None if there is none."""
@@ -70,6 +78,17 @@ def find_chromedriver() -> str | None:
     return None
 
 
+def _slow() -> tuple[type[BaseException], ...]:
+    """What a renderer that does not answer in time raises: chromedriver's TimeoutException
+    (after the page-load timeout), or urllib3's ReadTimeoutError when chromedriver itself
+    does not answer within Selenium's HTTP read timeout (120 s) on a starved machine. The
+    session stays usable: the command is answered later and the next one queues behind."""
+    from selenium.common.exceptions import TimeoutException
+    from urllib3.exceptions import ReadTimeoutError
+
+    return (TimeoutException, ReadTimeoutError)
+
+
 class DashboardPage:
     """A headless Chromium showing the dashboard at ``url``.
 
@@ -80,7 +99,7 @@ class DashboardPage:
     """
 
     def __init__(self, url: str, *, width: int = 1400, height: int = 900,
-                 timeout_s: float = 60.0) -> None:
+                 timeout_s: float = 60.0, max_fps: float | None = None) -> None:
         from selenium import webdriver
         from selenium.webdriver.chrome.options import Options
         from selenium.webdriver.chrome.service import Service
@@ -99,9 +118,33 @@ class DashboardPage:
                   "--disable-component-update", "--disable-sync"):
             opts.add_argument(a)
         self.driver = webdriver.Chrome(service=Service(driver), options=opts)
+        # chromedriver gives up on a renderer that does not answer after this timeout
+        # (TimeoutException, which the calls below retry); keep it under Selenium's own HTTP
+        # read timeout (120 s), which would otherwise fire first as a urllib3 error
         self.driver.set_page_load_timeout(timeout_s)
         self.driver.set_script_timeout(timeout_s)
-        self.driver.get(url)
+        if max_fps is not None:
+            # every animation frame of the page is a software-rendered WebGL frame: capped,
+            # the 3-D view still moves but leaves the CPU to the processes under test
+            self.driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument",
+                                        {"source": _FPS_CAP_JS % (1000.0 / max_fps)})
+        with contextlib.suppress(*_slow()):  # still loading: the waits that follow see it
+            self.driver.get(url)
+
+    # -- a renderer that is slow to answer --------------------------------------------------
+    def _call(self, fn: Callable[[], Any], timeout_s: float, what: str) -> Any:
+        """``fn()``, called again while the renderer does not answer in time (Selenium's
+        TimeoutException: software WebGL on a starved CPU can keep the page's renderer busy
+        for over a minute); AssertionError saying so after ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                return fn()
+            except _slow() as e:
+                if time.monotonic() >= deadline:
+                    raise AssertionError(f"page: the renderer did not answer within "
+                                         f"{timeout_s:g} s ({what}): {e}") from e
+                time.sleep(0.5)
 
     # -- reading -------------------------------------------------------------------------
     def status(self) -> dict[str, str] | None:
@@ -115,8 +158,6 @@ class DashboardPage:
     def wait(self, predicate: Callable[[dict[str, str]], bool], timeout_s: float,
              what: str) -> dict[str, str]:
         """Poll the status until ``predicate(status)``; AssertionError with the last status."""
-        from selenium.common.exceptions import TimeoutException
-
         deadline = time.monotonic() + timeout_s
         st: dict[str, str] | None = None
         while time.monotonic() < deadline:
@@ -124,40 +165,49 @@ class DashboardPage:
                 st = self.status()
                 if st is not None and predicate(st):
                     return st
-            except TimeoutException:
+            except _slow():
                 # the renderer did not answer in time (a starved CPU: software WebGL on a
                 # loaded machine); the page is still loading, not wrong: poll again
                 pass
             time.sleep(0.1)
         raise AssertionError(f"page: timed out after {timeout_s:g} s waiting for {what}; "
-                             f"last status {st}; commands {self.commands()[:3]}")
+                             f"last status {st}; commands "
+                             f"{self._call(self.commands, 180.0, 'the last results')[:3]}")
 
     # -- acting --------------------------------------------------------------------------
-    def click(self, text: str) -> None:
-        """Click the button labelled ``text`` (a real mouse click through the driver)."""
-        from selenium.webdriver.common.by import By
+    def click(self, text: str, timeout_s: float = 180.0) -> None:
+        """Click the button labelled ``text`` (a real mouse click through the driver), once:
+        finding it is retried while the renderer is slow to answer; a click whose
+        acknowledgement times out has been dispatched and is not repeated (the caller waits
+        for its result)."""
+        el = self._call(lambda: self.driver.execute_script(
+            "return Array.from(document.querySelectorAll('button'))"
+            ".find(b => b.innerText.trim() === arguments[0]) || null;", text),
+            timeout_s, f"finding the button {text!r}")
+        if el is None:
+            raise AssertionError(f"page: no button {text!r}")
+        with contextlib.suppress(*_slow()):
+            el.click()
 
-        for b in self.driver.find_elements(By.TAG_NAME, "button"):
-            if b.text.strip() == text:
-                b.click()
-                return
-        raise AssertionError(f"page: no button {text!r}")
-
-    def press(self, button: str, timeout_s: float = 10.0) -> tuple[str, str, int]:
-        """Click ``button`` and wait for the page to show the result of the command it sent:
-        (state, text, seq) with state accepted / refused / no answer / error."""
-        cmds = self.commands()
+    def press(self, button: str, timeout_s: float = 60.0) -> tuple[str, str, int]:
+        """Click ``button`` and wait (at most ``timeout_s`` after the click) for the page to
+        show the result of the command it sent: (state, text, seq) with state accepted /
+        refused / no answer / error."""
+        cmds = self._call(self.commands, 180.0, "reading the command results")
         seq0 = cmds[0][2] if cmds else 0
         self.click(button)
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            cmds = self.commands()
+            try:
+                cmds = self.commands()
+            except _slow():
+                continue                       # a busy renderer: ask again
             new = [c for c in cmds if c[2] > seq0 and c[0] != "pending"]
             if new:
                 return new[-1]                 # the oldest new one: this click's
             time.sleep(0.05)
         raise AssertionError(f"page: no result for {button!r} within {timeout_s:g} s: "
-                             f"{self.commands()[:3]}")
+                             f"{self._call(self.commands, 60.0, 'the last results')[:3]}")
 
     def press_until_accepted(self, button: str, timeout_s: float) -> tuple[str, str, int]:
         """Press ``button`` until its command is accepted (e.g. arming is refused while the
@@ -174,18 +224,20 @@ class DashboardPage:
 
     def start_update_counter(self) -> None:
         """Start counting, in the page, the status updates it displays."""
-        self.driver.execute_script(_COUNTER_JS)
+        self._call(lambda: self.driver.execute_script(_COUNTER_JS), 180.0,
+                   "starting the update counter")
 
     def update_rate(self) -> tuple[int, float]:
         """(updates seen since :meth:`start_update_counter`, seconds elapsed) in the page."""
-        n, ms = self.driver.execute_script(
-            "return [window.__vtolftcUpdates, performance.now() - window.__vtolftcT0];")
+        n, ms = self._call(lambda: self.driver.execute_script(
+            "return [window.__vtolftcUpdates, performance.now() - window.__vtolftcT0];"),
+            180.0, "reading the update counter")
         return int(n), float(ms) / 1000.0
 
     def screenshot(self, path: Path) -> Path:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        self.driver.save_screenshot(str(path))
+        self._call(lambda: self.driver.save_screenshot(str(path)), 180.0, "a screenshot")
         return path
 
     def screenshot_array(self) -> Any:
@@ -195,7 +247,7 @@ class DashboardPage:
         import numpy as np
         from PIL import Image
 
-        png = self.driver.get_screenshot_as_png()
+        png = self._call(self.driver.get_screenshot_as_png, 180.0, "a screenshot")
         return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
 
     def close(self) -> None:
