@@ -2,9 +2,14 @@
 environment, then the README's first command and a SITL flight run from outside the checkout by
 a user who cannot write to site-packages (so nothing may be generated there at run time).
 
-The venv sees the already installed dependencies (``--system-site-packages``) so that the test
-does not download numba and scipy again; the project itself comes only from the wheel, which the
-test checks by asking where every ``vtolftc`` package was imported from.
+The wheel venv borrows the dependencies of the environment that runs the tests (a ``.pth``
+file naming that environment's site-packages directories, after the venv's own), so that the
+test does not download numba and scipy again and works from a virtual environment as well as
+from a system Python: ``--system-site-packages`` would reach only the *base* interpreter's
+packages, which a venv user does not have. The directories are added as plain paths, so their
+``.pth`` files (the editable install of this checkout among them) are not run: the project
+itself comes only from the wheel, which the test checks by asking where every ``vtolftc``
+package was imported from.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ import os
 import shutil
 import subprocess
 import sys
+import sysconfig
 import tempfile
 from pathlib import Path
 
@@ -43,22 +49,31 @@ def _site_read_only(site: Path, cmd: list[str]) -> list[str]:
     return cmd
 
 
+def _dependency_dirs() -> list[str]:
+    """The running environment's site-packages directories (a venv's, or the system's)."""
+    paths = sysconfig.get_paths()
+    return list(dict.fromkeys(p for p in (paths["purelib"], paths["platlib"])
+                              if Path(p).is_dir()))
+
+
 @pytest.fixture(scope="module")
 def wheel_venv():
     base = Path(tempfile.mkdtemp(prefix="vtolftc-install-"))
     try:
         src, venv = base / "src", base / "venv"
         _tracked_copy(src)
-        subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)],
-                       check=True, timeout=300)
+        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
         py = venv / "bin" / "python"
+        site = Path(subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig."
+                                    "get_paths()['purelib'])"], capture_output=True, text=True,
+                                   check=True).stdout.strip())
         r = subprocess.run([str(py), "-m", "pip", "install", "--no-deps", "-q", str(src)],
                            capture_output=True, text=True, timeout=900)
         assert r.returncode == 0, r.stderr[-3000:]
         shutil.rmtree(src)  # nothing may still point into a source tree
-        site = Path(subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig."
-                                    "get_paths()['purelib'])"], capture_output=True, text=True,
-                                   check=True).stdout.strip())
+        # after the install, so that pip never sees this checkout's own (editable) install
+        (site / "zz_borrowed_dependencies.pth").write_text("".join(
+            f"{d}\n" for d in _dependency_dirs()))
         if os.geteuid() != 0:  # no root to drop: make site-packages read-only instead
             for p in [site, *site.rglob("*")]:
                 p.chmod(p.stat().st_mode & ~0o222)

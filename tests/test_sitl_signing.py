@@ -22,7 +22,9 @@ PASS = "sitl signing test"
 @pytest.fixture(scope="module")
 def signed(tmp_path_factory):
     port = free_udp_port()
-    cfg = SitlConfig(out_dir=tmp_path_factory.mktemp("sitl_signing"), hold_at_start=False,
+    # held at t = 0 for the whole module: these tests fly nothing, and a free-running lockstep
+    # simulation would stream and record for as long as they take
+    cfg = SitlConfig(out_dir=tmp_path_factory.mktemp("sitl_signing"), hold_at_start=True,
                      failure_injection=False, plots=False,
                      extra_autopilot_args=["--signing-passphrase", PASS,
                                            "--gcs-link", f"udp-server://127.0.0.1:{port}"])
@@ -50,9 +52,13 @@ def _frame(link, value: float) -> bytes:
 
 def _read(link) -> float:
     """MIS_TAKEOFF_ALT as the autopilot answers on ``link`` (PARAM_REQUEST_READ is allowed
-    unsigned). Echoes of earlier changes still queued are read away first."""
-    while link.recv(0.05):
-        pass
+    unsigned). Echoes of earlier changes still queued are read away first: what has arrived by
+    now, bounded by a count and a deadline (the link streams telemetry, so it is never silent).
+    """
+    deadline = time.monotonic() + 2.0
+    for _ in range(10_000):
+        if not link.recv(0.0) or time.monotonic() > deadline:
+            break
     for _ in range(5):
         link.send(link.codec.param_request_read_encode(1, 1, b"MIS_TAKEOFF_ALT", -1))
         m = link.recv_match("PARAM_VALUE", 1.0,
