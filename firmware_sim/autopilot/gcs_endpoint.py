@@ -923,7 +923,10 @@ class GcsEndpoint:
         self.on_event("command", f"{_cmd_label(cmd)} {_fmt_params(params)}")
 
         def answer() -> None:
-            self._last_message = after  # already reported with the ACK
+            if reason == after:
+                self._last_message = after  # reported with the ACK: not again
+            # else a new message (e.g. of an accepted command) goes out as a STATUSTEXT to
+            # every link when the worker sees the status
             self._ack(link, msg, cmd, res, reason)
 
         self._reply(answer)
