@@ -130,7 +130,17 @@ def test_takeoff_default_altitude_param_and_flight_sequence(ap):
         ap.step(nav(t))
         t += 0.004
     st = ap.status()
-    assert st.mode == FlightMode.IDLE and not st.armed
+    assert st.mode == FlightMode.IDLE and st.armed            # landed, rotors at idle
+    assert st.landed_state == LandedState.ON_GROUND
+    assert np.all(st.actuator_commands[:8] == pytest.approx(0.05))
+    landed_ms = ap.arming.landing_ms
+    assert 1100 < landed_ms < 1200                            # 1 s still on the ground
+    while ap.status().armed:                                  # COM_DISARM_LAND (2 s) later
+        ap.step(nav(t))
+        t += 0.004
+    assert t * 1e3 - landed_ms == pytest.approx(2000.0, abs=10.0)
+    st = ap.status()
+    assert st.mode == FlightMode.IDLE and st.message == "Disarmed by landing"
 
 
 def test_forced_disarm_in_air(ap):
@@ -195,7 +205,7 @@ def test_mode_machine_quad_chute_and_back_transition():
     assert m.mode == FlightMode.LAND                       # land after the back transition
     kw["landed"] = True
     m.update(8_000_000, airspeed_m_s=0.0, **kw)
-    assert m.mode == FlightMode.IDLE and not m.armed
+    assert m.mode == FlightMode.IDLE and m.armed            # the autopilot disarms later
 
 
 def test_nan_and_garbage_params_do_not_raise(ap):

@@ -47,8 +47,11 @@ def sitl(tmp_path, ds1):
 
     # duration: far beyond what the test needs (it closes the run); under load every wait
     # below may take its full time and the SITL must not end first
+    # COM_DISARM_PRFLT -1 (PX4: no pre-flight auto-disarm): under load a press of "Takeoff"
+    # may come more than the default 10 s after "Arm" was accepted
     run = SitlRun(SitlConfig(realtime=True, out_dir=tmp_path / "sitl", duration_s=900.0,
-                             startup_timeout_s=60.0))
+                             startup_timeout_s=60.0,
+                             extra_autopilot_args=["--param", "COM_DISARM_PRFLT=-1"]))
     dash = None
     try:
         run.start()

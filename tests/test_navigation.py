@@ -148,8 +148,8 @@ def test_takeoff_altitude_is_amsl_and_modes_are_reported_as_px4(flying):
     home_alt = Home().alt_m
     assert _mode(ap) == "AUTO.LOITER"                        # on the ground: Hold
     assert ap.command(400, [1.0]) == CommandResult.ACCEPTED
-    # QGroundControl's "30 m" sent as if relative would be below the ground: refused
-    assert ap.command(22, [math.nan] * 6 + [30.0]) == CommandResult.DENIED
+    # more than 500 m above home: refused
+    assert ap.command(22, [math.nan] * 6 + [home_alt + 600.0]) == CommandResult.DENIED
     assert ap.command(22, [math.nan] * 6 + [home_alt + 30.0]) == CommandResult.ACCEPTED
     _fly(ap, veh, 1.0)
     assert _mode(ap) == "AUTO.TAKEOFF"

@@ -39,16 +39,44 @@ def _fmt(v: float, nd: int = 2) -> str:
     return f"{v:.{nd}f}"
 
 
+def _airspeeds(text: str) -> list[float]:
+    """``--airspeeds`` as a list of airspeeds [m/s]: comma-separated numbers in [0, 60].
+
+    Raises
+    ------
+    UsageError
+        an empty list or item, an item that is not a number, or one outside [0, 60] m/s.
+    """
+    items = [s.strip() for s in text.split(",")]
+    if not any(items):
+        raise UsageError("--airspeeds: expected comma-separated airspeeds in m/s, e.g. 0,13,18")
+    speeds = []
+    for item in items:
+        try:
+            s = float(item)
+        except ValueError:
+            raise UsageError(f"--airspeeds: {item!r} is not a number (expected comma-separated "
+                             "airspeeds in m/s, e.g. 0,13,18)") from None
+        if not (math.isfinite(s) and 0.0 <= s <= 60.0):
+            raise UsageError(f"--airspeeds: {item!r} is not an airspeed in [0, 60] m/s")
+        speeds.append(s)
+    return speeds
+
+
 def cmd_trim(args: argparse.Namespace) -> int:
     """Trim table of the airframe at the paper's airspeeds (hover, transition, cruise)."""
     from vtolftc.firmware_sim.vehicle.trim import trim_table
 
     af = load_airframe(args.airframe)
-    speeds = [float(s) for s in args.airspeeds.split(",")] if args.airspeeds else [
+    speeds = _airspeeds(args.airspeeds) if args.airspeeds is not None else [
         0.0, 4.0, 7.0, 10.0, 13.0, 18.0]
-    for s in speeds:
-        if not (math.isfinite(s) and 0.0 <= s <= 60.0):
-            raise UsageError(f"--airspeeds: {s!r} is not an airspeed in [0, 60] m/s")
+    if not (math.isfinite(args.altitude) and -500.0 <= args.altitude <= 20_000.0):
+        raise UsageError(f"--altitude: {args.altitude!r} is not an altitude in "
+                         "[-500, 20000] m")
+    if not (math.isfinite(args.transition_pitch_deg)
+            and abs(args.transition_pitch_deg) <= 45.0):
+        raise UsageError(f"--transition-pitch-deg: {args.transition_pitch_deg!r} is not a "
+                         "pitch in [-45, 45] deg")
     rows = trim_table(af, speeds, altitude_m=args.altitude,
                       transition_pitch_rad=math.radians(args.transition_pitch_deg))
     if args.json:

@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 from vtolftc.airframe.loader import Airframe, load_airframe
 from vtolftc.firmware_sim.autopilot.allocation import ActiveSetAllocator, AllocationStatus
 from vtolftc.firmware_sim.autopilot.altitude import FixedWingAltitudeHold, MulticopterAltitudeHold
+from vtolftc.firmware_sim.autopilot.arming import ARMING_PARAMS, ArmingMonitor
 from vtolftc.firmware_sim.autopilot.attitude import AttitudeController, make_controller
 from vtolftc.firmware_sim.autopilot.battery import BatteryMonitor
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
@@ -65,7 +66,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
     ParamType,
 )
 from vtolftc.firmware_sim.autopilot.modes import ModeMachine, landed_state, vtol_state
-from vtolftc.firmware_sim.autopilot.navigator import Navigator
+from vtolftc.firmware_sim.autopilot.navigator import MS_COMPLETE, Navigator, NavMode
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.rotation import quat_to_euler
 
@@ -90,6 +91,10 @@ FORCE_DISARM_MAGIC = 21196  # PX4's force-disarm magic in param2 (not a MAVLink 
 MAV_VTOL_STATE_MC = mav.MAV_VTOL_STATE_MC
 MAV_VTOL_STATE_FW = mav.MAV_VTOL_STATE_FW
 ARMED_IDLE_THROTTLE = 0.05
+#: NAV_TAKEOFF's param7 giving less than this height above home [m] (below home, e.g. a
+#: relative altitude sent where PX4 reads AMSL, as MAVProxy's ``takeoff 30`` does) means
+#: the default takeoff altitude ``MIS_TAKEOFF_ALT`` (PX4 raises it to that minimum clearance).
+TAKEOFF_MIN_HEIGHT_M = 1.0
 
 #: ``AutopilotStatus.allocation_status`` text of each allocation status.
 _STATUS_NAMES: dict[AllocationStatus, str] = {st: st.name.lower() for st in AllocationStatus}
@@ -186,7 +191,7 @@ _PARAMS: tuple[tuple[str, float, ParamType, float, float, str], ...] = (
 def default_parameters() -> ParameterStore:
     """A fresh parameter store with every autopilot parameter at its default."""
     ps = ParameterStore()
-    for name, default, typ, lo, hi, desc in _PARAMS:
+    for name, default, typ, lo, hi, desc in (*_PARAMS, *ARMING_PARAMS):
         ps.register(name, default, typ, lo, hi, desc)
     return ps
 
@@ -303,6 +308,9 @@ class Autopilot:
         """Missions, RTL, loiter, reposition (:mod:`.navigator`)."""
         self.battery = BatteryMonitor(self.params, self._battery_failsafe)
         """Battery estimate and the low-battery failsafe (:mod:`.battery`)."""
+        self.arming = ArmingMonitor(self.params)
+        """Auto-disarm on the ground (COM_DISARM_PRFLT, COM_DISARM_LAND) and the flight
+        record of FLIGHT_INFORMATION (:mod:`.arming`)."""
 
     def battery_update(self, time_usec: int, voltage_v: float, current_a: float) -> None:
         """A power-module reading (pack voltage [V], current [A]) from the vehicle."""
@@ -329,8 +337,12 @@ class Autopilot:
 
         COMPONENT_ARM_DISARM 400: param1 1 arm (on the ground, once navigation data came),
         0 disarm (on the ground; in the air only with param2 = 21196). NAV_TAKEOFF 22: param7
-        the takeoff altitude AMSL as in PX4 (NaN: ``MIS_TAKEOFF_ALT`` above home; needs the
-        home position, :meth:`set_home`), armed and on the ground only. DO_VTOL_TRANSITION
+        the takeoff altitude AMSL as in PX4 (needs the home position, :meth:`set_home`); NaN,
+        or less than :data:`TAKEOFF_MIN_HEIGHT_M` above home: ``MIS_TAKEOFF_ALT`` above home
+        (STATUSTEXT "Using minimum takeoff altitude", as PX4); more than 500 m above home:
+        DENIED; armed and on the ground only. On the ground the vehicle disarms by itself
+        (:mod:`.arming`: ``COM_DISARM_PRFLT`` after arming, ``COM_DISARM_LAND`` after
+        landing). DO_VTOL_TRANSITION
         3000: param1 4 = to fixed-wing, 3 = to multicopter (in the air). NAV_LAND 21 (from
         fixed-wing: back transition first).
         DO_SET_MODE 176 with PX4 custom modes (param1 custom flag, param2 main, param3 sub):
@@ -363,14 +375,21 @@ class Autopilot:
                 return self._after(m.disarm(force=p[1] == FORCE_DISARM_MAGIC))
             return CommandResult.DENIED
         if cid == CMD_NAV_TAKEOFF:
+            default = self.params.get("MIS_TAKEOFF_ALT")
+            raised = ""
             if math.isfinite(p[6]):
                 if self.navigator.home is None:
                     self._note("takeoff denied: no home position yet (param7 is AMSL)")
                     return CommandResult.TEMPORARILY_REJECTED
                 alt = p[6] - self.navigator.home_alt
+                if alt < TAKEOFF_MIN_HEIGHT_M:  # below home (a relative altitude?): PX4's way
+                    raised = (f"Using minimum takeoff altitude: {default:.2f} m (param7 "
+                              f"{p[6]:g} m AMSL is {alt:.1f} m above home)")
+                    alt = default
             else:
-                alt = self.params.get("MIS_TAKEOFF_ALT")
-            if not 1.0 <= alt <= 500.0:
+                alt = default
+                raised = f"Using minimum takeoff altitude: {default:.2f} m"
+            if alt > 500.0:
                 self._note(f"takeoff denied: {alt:.1f} m above home (param7 is AMSL, home "
                            f"{self.navigator.home_alt:.1f} m)")
                 return CommandResult.DENIED
@@ -378,6 +397,9 @@ class Autopilot:
             if res == CommandResult.ACCEPTED:
                 self._takeoff_alt = alt
                 self._alt_ref = alt
+                if raised:
+                    self._drain_events()
+                    self._note(raised)
             return self._after(res)
         if cid == CMD_DO_VTOL_TRANSITION:
             if p[0] == MAV_VTOL_STATE_FW:
@@ -410,8 +432,20 @@ class Autopilot:
         return CommandResult.DENIED
 
     def _after(self, res: CommandResult) -> CommandResult:
+        m = self.modes
+        self.arming.track(self._time_usec, m.armed, m.mode)
         self._drain_events()
         return res
+
+    def _auto_disarm(self) -> None:
+        """PX4's auto-disarm on the ground (:mod:`.arming`), once per step."""
+        m = self.modes
+        nv = self.navigator
+        why = self.arming.check(self._time_usec, m.armed, m.mode,
+                                nv.nav_mode == NavMode.MISSION and nv.mission_state != MS_COMPLETE)
+        if why and m.disarm(force=False) == CommandResult.ACCEPTED:
+            self.arming.track(self._time_usec, m.armed, m.mode)
+            self._note(why)
 
     def _note(self, text: str) -> None:
         self.modes.events.append((self._time_usec, text))
@@ -500,6 +534,8 @@ class Autopilot:
             self._last_mode = mode
         self._drain_events()
         self.navigator.update(nav, yaw)
+        if m.armed or self.arming.armed:
+            self._auto_disarm()
 
         u = self._u
         if not m.armed or mode == _M_IDLE:

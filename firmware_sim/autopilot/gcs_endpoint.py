@@ -21,8 +21,13 @@ zenoh link). It is system 1, component 1 (MAV_COMP_ID_AUTOPILOT1) and does what
   (the navigation input), FAULT_INJECTION_STATUS (relayed from the vehicle), STATUSTEXT (mode
   changes, refusals, the autopilot's events). HEARTBEAT, SYS_STATUS and EXTENDED_SYS_STATE also
   go out on the wall clock (1 Hz) while simulated time stands still (no vehicle, or held).
+- ODOMETRY, ALTITUDE, WIND_COV, HIGHRES_IMU, SCALED_IMU, SYSTEM_TIME and FLIGHT_INFORMATION
+  (on request) with PX4's field semantics: :mod:`.gcs_telemetry`.
+- GET_MESSAGE_INTERVAL (510): MESSAGE_INTERVAL of that link.
 - REQUEST_MESSAGE (512) for AUTOPILOT_VERSION, HOME_POSITION and every streamed message;
-  REQUEST_AUTOPILOT_CAPABILITIES (520).
+  REQUEST_AUTOPILOT_CAPABILITIES (520), GET_HOME_POSITION (410) and
+  REQUEST_FLIGHT_INFORMATION (528) as PX4 answers them (REQUEST_MESSAGE of AUTOPILOT_VERSION,
+  HOME_POSITION, FLIGHT_INFORMATION).
 - PARAM protocol: PARAM_REQUEST_LIST, PARAM_REQUEST_READ (by name or index), PARAM_SET with
   the PARAM_VALUE echo on every link; INT32 values travel bytewise in the float (PX4,
   MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE). A refused PARAM_SET is echoed with the value
@@ -90,6 +95,11 @@ from vtolftc.firmware_sim.autopilot.gcs_services import (
     Px4Services,
     command_int_params,
 )
+from vtolftc.firmware_sim.autopilot.gcs_telemetry import (
+    TELEMETRY_MSG,
+    TELEMETRY_RATES_HZ,
+    TelemetryStreams,
+)
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
 from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotAPI,
@@ -134,8 +144,11 @@ CMD_ARM_DISARM = mav.MAV_CMD_COMPONENT_ARM_DISARM
 CMD_INJECT_FAILURE = mav.MAV_CMD_INJECT_FAILURE
 CMD_DO_VTOL_TRANSITION = mav.MAV_CMD_DO_VTOL_TRANSITION
 CMD_SET_MESSAGE_INTERVAL = mav.MAV_CMD_SET_MESSAGE_INTERVAL
+CMD_GET_MESSAGE_INTERVAL = mav.MAV_CMD_GET_MESSAGE_INTERVAL
 CMD_REQUEST_MESSAGE = mav.MAV_CMD_REQUEST_MESSAGE
 CMD_REQUEST_AUTOPILOT_CAPABILITIES = mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES
+CMD_GET_HOME_POSITION = mav.MAV_CMD_GET_HOME_POSITION
+CMD_REQUEST_FLIGHT_INFORMATION = mav.MAV_CMD_REQUEST_FLIGHT_INFORMATION
 CMD_INJECT_PARTIAL_LOSS = mav.MAV_CMD_INJECT_PARTIAL_LOSS
 FLIGHT_COMMANDS = (CMD_ARM_DISARM, CMD_NAV_TAKEOFF, CMD_DO_SET_MODE, CMD_DO_VTOL_TRANSITION,
                    CMD_NAV_LAND, mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, mav.MAV_CMD_DO_CHANGE_SPEED,
@@ -163,9 +176,11 @@ DEFAULT_RATES_HZ: dict[int, float] = {
     MSG["HOME_POSITION"]: 0.2, MSG["EXTENDED_SYS_STATE"]: 2.0,
     MSG["ACTUATOR_OUTPUT_STATUS"]: 10.0, MSG["FAULT_INJECTION_STATUS"]: 1.0,
     **STREAM_RATES_HZ,  # GPS_RAW_INT, MISSION_CURRENT, BATTERY_STATUS (gcs_services.py)
+    **TELEMETRY_RATES_HZ,  # ODOMETRY, ALTITUDE, WIND_COV, ... (gcs_telemetry.py)
 }
 MSG.update({name: getattr(mav, "MAVLINK_MSG_ID_" + name)
             for name in ("GPS_RAW_INT", "MISSION_CURRENT", "BATTERY_STATUS")})
+MSG.update(TELEMETRY_MSG)
 """Stream rates in Hz of simulated time (PX4-like, a little lower to spare the CPU)."""
 
 # SYS_STATUS sensor bits (MAV_SYS_STATUS_SENSOR)
@@ -182,6 +197,15 @@ _SENSORS_PRESENT = (_GYRO | _ACCEL | _MAG | _BARO | _DIFF | _GPS | _ANGULAR_RATE
                     | _ATTITUDE_CTRL | _MOTOR_OUTPUTS | _AHRS | _PREARM)
 
 SIM_HOLD_PARAM = "SIM_HOLD_MS"
+
+#: Commands that ask for one message: REQUEST_MESSAGE (param1 the id) and the older ones PX4
+#: still answers the same way (the message they stand for).
+_REQUEST_ONE: dict[int, float] = {
+    CMD_REQUEST_MESSAGE: math.nan,
+    CMD_REQUEST_AUTOPILOT_CAPABILITIES: float(MSG["AUTOPILOT_VERSION"]),
+    CMD_GET_HOME_POSITION: float(MSG["HOME_POSITION"]),
+    CMD_REQUEST_FLIGHT_INFORMATION: float(TELEMETRY_MSG["FLIGHT_INFORMATION"]),
+}
 
 
 def px4_mode_of(mode: FlightMode) -> tuple[int, int]:
@@ -321,6 +345,7 @@ class GcsEndpoint:
         self._snap = (None, self._status0)
         self._snap_seq = 0
         self.services = Px4Services(self)
+        self.telemetry = TelemetryStreams(self)
         for name in self.services.HANDLES - {"COMMAND_INT"}:  # missions, TIMESYNC, PING
             self.handlers.setdefault(name, self._on_service)
         self._threads: list[threading.Thread] = []
@@ -729,6 +754,8 @@ class GcsEndpoint:
                 fs.motor_failure, fs.motor_loss, fs.servo_failure, fs.servo_loss)
         if msg_id in STREAM_RATES_HZ:
             return self.services.build(msg_id)
+        if msg_id in TELEMETRY_RATES_HZ:
+            return self.telemetry.build(msg_id)
         if msg_id == MSG["ACTUATOR_OUTPUT_STATUS"]:
             out = [0.0] * 32
             out[: self.commands.size] = [float(x) for x in self.commands]
@@ -843,17 +870,16 @@ class GcsEndpoint:
             return
         if cmd == CMD_SET_MESSAGE_INTERVAL:
             res, reason = self._set_interval(index, params)
-        elif cmd == CMD_REQUEST_MESSAGE:
-            mid = params[0]
+        elif cmd == CMD_GET_MESSAGE_INTERVAL:
+            res, reason = self._get_interval(index, link, params[0])
+        elif cmd in _REQUEST_ONE:
+            mid = params[0] if cmd == CMD_REQUEST_MESSAGE else _REQUEST_ONE[cmd]
             if not math.isfinite(mid) or int(mid) not in MSG.values():
                 res, reason = CommandResult.UNSUPPORTED, ""
             elif not self._send_stream(int(mid), link):
                 res, reason = CommandResult.TEMPORARILY_REJECTED, "no data yet"
             else:
                 res, reason = CommandResult.ACCEPTED, ""
-        elif cmd == CMD_REQUEST_AUTOPILOT_CAPABILITIES:
-            self._send_stream(MSG["AUTOPILOT_VERSION"], link)
-            res, reason = CommandResult.ACCEPTED, ""
         else:
             res, reason = CommandResult.UNSUPPORTED, ""
         self._ack(link, msg, cmd, res, reason)
@@ -874,6 +900,16 @@ class GcsEndpoint:
         self._earliest_due[index] = 0
         return CommandResult.ACCEPTED, ""
 
+    def _get_interval(self, index: int, link: Link, mid: float) -> tuple[int, str]:
+        """GET_MESSAGE_INTERVAL (510): MESSAGE_INTERVAL with this link's interval [us] (-1 =
+        not streamed, as PX4), then the ACK; UNSUPPORTED for a message not served here."""
+        rates = self.rates_hz[index]
+        if not math.isfinite(mid) or int(mid) not in rates:
+            return CommandResult.UNSUPPORTED, ""
+        hz = rates[int(mid)]
+        link.send(link.codec.message_interval_encode(int(mid), round(1e6 / hz) if hz > 0 else -1))
+        return CommandResult.ACCEPTED, ""
+
     # ------------------------------------------------------------------ control-thread work
     def _flight_command(self, link: Link, msg: Any, cmd: int, params: list[float]) -> None:
         """Control thread: a flight command on the autopilot; the answer goes to the worker."""
@@ -887,7 +923,10 @@ class GcsEndpoint:
         self.on_event("command", f"{_cmd_label(cmd)} {_fmt_params(params)}")
 
         def answer() -> None:
-            self._last_message = after  # already reported with the ACK
+            if reason == after:
+                self._last_message = after  # reported with the ACK: not again
+            # else a new message (e.g. of an accepted command) goes out as a STATUSTEXT to
+            # every link when the worker sees the status
             self._ack(link, msg, cmd, res, reason)
 
         self._reply(answer)
@@ -1007,7 +1046,8 @@ def _cmd_label(cmd: int) -> str:
              CMD_NAV_LAND: "LAND", CMD_INJECT_FAILURE: "INJECT_FAILURE",
              CMD_INJECT_PARTIAL_LOSS: "INJECT_PARTIAL_LOSS",
              CMD_SET_MESSAGE_INTERVAL: "SET_MESSAGE_INTERVAL",
-             CMD_REQUEST_MESSAGE: "REQUEST_MESSAGE"}
+             CMD_REQUEST_MESSAGE: "REQUEST_MESSAGE", CMD_GET_HOME_POSITION: "GET_HOME_POSITION",
+             CMD_REQUEST_FLIGHT_INFORMATION: "REQUEST_FLIGHT_INFORMATION"}
     return names.get(int(cmd), f"CMD {int(cmd)}")
 
 

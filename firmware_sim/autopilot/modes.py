@@ -17,7 +17,9 @@ FIXED_WING          wing-borne cruise. ``transition(MC)`` -> BACK_TRANSITION; ``
                     BACK_TRANSITION then LAND.
 BACK_TRANSITION     pusher off, decelerate, rotors take over -> HOVER (or LAND) when the
                     airspeed is below ``VT_B_TRANS_ARSP`` or after ``VT_B_TRANS_DUR``.
-LAND                multicopter descent -> IDLE and disarmed once landed.
+LAND                multicopter descent -> IDLE once landed, still armed (rotors at idle:
+                    the autopilot disarms ``COM_DISARM_LAND`` seconds later, as PX4;
+                    :mod:`.arming`).
 =================== ==================================================================
 
 Commands that are not allowed in the current state are answered ``DENIED`` (and change
@@ -223,6 +225,4 @@ class ModeMachine:
                 self.land_after_back_transition = False
                 self.set_mode(nxt, f"back transition complete at {airspeed_m_s:.1f} m/s")
         elif m == _M_LAND and landed:
-            self.armed = False
             self.set_mode(FlightMode.IDLE, "landed")
-            self._say("disarmed after landing")
