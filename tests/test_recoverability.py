@@ -191,7 +191,7 @@ def test_ds1_hover_single_rotors_recoverable_all_off_is_the_whole_weight():
     assert healthy >= half >= off > 0
 
 
-def test_stuck_holds_the_position_and_wind_enters_the_demand():
+def test_stuck_holds_the_position_and_wind_is_demand():
     af = load_airframe()
     cruise = trim_condition(af, "wing", 18.0)
     m = wrench_model(af, cruise)
@@ -210,14 +210,24 @@ def test_stuck_holds_the_position_and_wind_enters_the_demand():
                                  for k, v in enumerate(cruise.actuator_positions)))
     assert recovery_margin(wrench_model(af, full), [("elevator", "stuck", 0.0), *lift]).margin \
         < -1.0
-    # a crosswind and its gust make the demand larger: the margin can only shrink
+    # a crosswind's forces and moments are demand: mirror images give mirror answers (rotor 1a
+    # is on the left, 4a on the right), the two sides differ, and a gust is the smaller of
+    # the steady and the peak wind
     hover = trim_condition(af, "hover")
-    calm = assess(af, [("rotor_1a", "off", 1.0)], hover, hold=_pushers(af)).margin
-    windy = assess(af, [("rotor_1a", "off", 1.0)], hover.with_wind((0.0, 4.0, 0.0)),
-                   gust_peaks_ned_m_s=[(0.0, 3.0, -1.0)], hold=_pushers(af)).margin
-    steady = assess(af, [("rotor_1a", "off", 1.0)], hover.with_wind((0.0, 4.0, 0.0)),
-                    hold=_pushers(af)).margin
-    assert windy <= steady < calm
+    P = _pushers(af)
+
+    def margin(rotor: str, wind: tuple[float, float, float]) -> float:
+        return recovery_margin(wrench_model(af, hover.with_wind(wind)), [(rotor, "off", 1.0)],
+                               hold=P).margin
+
+    left, right = margin("rotor_1a", (0.0, 4.0, 0.0)), margin("rotor_1a", (0.0, -4.0, 0.0))
+    assert left == pytest.approx(margin("rotor_4a", (0.0, -4.0, 0.0)), rel=1e-6)
+    assert right == pytest.approx(margin("rotor_4a", (0.0, 4.0, 0.0)), rel=1e-6)
+    assert abs(left - right) > 0.1
+    peak = margin("rotor_4a", (0.0, 7.0, -1.0))
+    gusty = assess(af, [("rotor_4a", "off", 1.0)], hover.with_wind((0.0, 4.0, 0.0)),
+                   gust_peaks_ned_m_s=[(0.0, 3.0, -1.0)], hold=P).margin
+    assert gusty == pytest.approx(min(right, peak), rel=1e-9)
 
 
 def test_thrust_reserve_is_the_hover_margin_of_the_campaign_notes():

@@ -26,22 +26,27 @@ vehicle.
 
 The demand
 ----------
-The trim to hold at the condition: all six body components of the wrench (FRD; ``Fx``,
-``Fy``, ``Fz`` in N, ``L``, ``M``, ``N`` in N m), gravity included, sum to zero. Besides the
-commands, the trim may change the pitch and the roll attitude by at most ``tilt_max``
-(default 10 deg) from the condition's, at the same velocity over the ground (linearised:
-``G``, the wrench's derivative by pitch and roll, read from the model by central
-differences): the weight then balances a horizontal force (the vehicle leans into it or
-banks), and in wing-borne flight a pitch change is an angle of attack change, which is how
-a wing makes its vertical force. So the weight is carried by the rotors in hover, by the wing
-and the rotors in a transition and by the wing in cruise, whatever the condition's state
-makes of it.
+The trim to hold at the condition (gravity included, FRD body axes): the forward force ``Fx``
+and the vertical force ``Fz`` (N) and the moments ``L``, ``M``, ``N`` (N m) sum to zero. The
+side force ``Fy`` is free: a vehicle that cannot balance it drifts sideways with the air
+mass, which neither its attitude nor its altitude minds. Besides the commands, the trim may
+change the pitch and the roll attitude by at most ``tilt_max`` (default 10 deg, PX4's
+``MPC_TILTMAX_AIR`` of the flight software) from the condition's, at the same velocity
+over the ground (linearised: ``G``, the wrench's slope in pitch and roll, read from the
+model as the secant over +-5 deg; a secant, not a tangent, because the model's moments jump
+where the angle of attack wraps at 180 deg, in hover with a tailwind): the weight then
+balances a forward force (the vehicle leans into it), and in wing-borne flight a pitch
+change is an angle of attack change, which is how a wing makes its vertical force. So the
+weight is carried by the rotors in hover, by the wing and the rotors in a transition and by
+the wing in cruise, whatever the condition's state makes of it.
 
 Wind: the condition's wind (NED, m/s) enters the air-relative velocity of the state, so its
 drag, side force and sideslip moments (C_lbeta, C_nbeta) are part of ``w0``, i.e. of the
-demand. A gust is one more condition (the steady wind plus the gust's peak, the 1 - cosine
-gust's amplitude): :func:`assess` takes the smallest margin of the steady and the peak winds.
-Not modelled: the rate and acceleration terms of a gust (a quasi-steady demand only).
+demand: give it the wind *relative to the vehicle's steady motion* (a hovering vehicle that
+holds its position feels the whole wind; one in forward flight drifts with the air mass and
+feels only a gust). A gust is one more condition (that wind plus the gust's peak, the
+1 - cosine gust's amplitude): :func:`assess` takes the smallest margin of them. Not modelled:
+the rate and acceleration terms of a gust (a quasi-steady demand only).
 
 The margin (rad/s^2)
 --------------------
@@ -50,12 +55,12 @@ With ``J_xx, J_yy, J_zz`` the principal inertias and ``m`` the mass of the physi
 - **margin >= 0**: the largest ``a`` such that, at the trim's attitude, every corner of the
   moment box ``[L, M, N]_trim + a (+-J_xx, +-J_yy, +-J_zz)`` can be produced, each by its
   own admissible commands, with every force component off its balance by at most ``a m``
-  (a transient of at most ``a`` m/s^2). In words: with the trim held, the vehicle can still
-  accelerate about every body axis by ``a`` rad/s^2, in both directions and all
+  (a transient of at most ``a`` m/s^2 on ``Fx``, ``Fz``). In words: with the trim held, the
+  vehicle can still accelerate about every body axis by ``a`` rad/s^2, in both directions and all
   combinations at once, without losing more than ``a`` m/s^2 of any force balance. Zero
   means the trim exists but some direction has no authority left.
 - **margin < 0**: no trim exists within ``tilt_max``; ``-a`` is the smallest ``e`` such that
-  every wrench component is met to within ``e`` times its scale (``m`` for the forces,
+  every demanded wrench component is met to within ``e`` times its scale (``m`` for the forces,
   the inertias for the moments): the uniform acceleration deficit (m/s^2 and rad/s^2) the
   fault leaves. ``-inf``: not even that LP could be solved.
 
@@ -87,6 +92,7 @@ from vtolftc.rotation import euler_to_quat
 __all__ = [
     "AXES",
     "DEFAULT_TILT_MAX_RAD",
+    "DEMAND",
     "RECOVERABLE_MIN_MARGIN",
     "FlightCondition",
     "Recoverability",
@@ -102,8 +108,11 @@ __all__ = [
 AXES = ("Fx", "Fy", "Fz", "L", "M", "N")
 #: Tilt of the attitude allowed to balance a horizontal force (rad).
 DEFAULT_TILT_MAX_RAD = math.radians(10.0)
-#: Smallest margin (1/s^2) called recoverable (see the module docstring).
+#: Smallest margin (rad/s^2) called recoverable (see the module docstring).
 RECOVERABLE_MIN_MARGIN = 0.05
+#: The wrench axes a trim must balance by default (the side force is free: drift).
+DEMAND = ("Fx", "Fz", "L", "M", "N")
+_ATTITUDE_STEP_RAD = math.radians(5.0)
 
 
 @dataclass(frozen=True)
@@ -196,7 +205,7 @@ def wrench_model(af: Airframe, cond: FlightCondition,
 
     Read from the vehicle's own equations of motion: ``w0`` at zero commands, ``B`` by a unit
     step of each actuator (exact: the wrench is affine in the positions at a fixed state),
-    ``G`` by central differences of the pitch and roll attitude (at the condition's actuator
+    ``G`` as the secant in pitch and roll over +-5 deg (at the condition's actuator
     positions, the velocity over the ground held).
     """
     wind = tuple(float(v) for v in cond.wind_ned_m_s)
@@ -224,7 +233,7 @@ def wrench_model(af: Airframe, cond: FlightCondition,
     if u_ref.shape != (n,):
         raise ValueError(f"actuator_positions of shape {u_ref.shape}: expected ({n},) in the "
                          f"order {', '.join(af.actuator_names)}")
-    h = 1e-4
+    h = _ATTITUDE_STEP_RAD
     G = np.stack([(wrench_at(u_ref, 0.0, h) - wrench_at(u_ref, 0.0, -h)) / (2 * h),
                   (wrench_at(u_ref, h) - wrench_at(u_ref, -h)) / (2 * h)], axis=1)
     J = pk.J
@@ -268,7 +277,7 @@ def _faulted(model: WrenchModel, faults: Iterable[Fault | tuple[str, str, float]
 
 
 def recovery_margin(model: WrenchModel, faults: Iterable[Fault | tuple[str, str, float]] = (),
-                    *, demand: Sequence[str] = AXES,
+                    *, demand: Sequence[str] = DEMAND,
                     tilt_max_rad: float = DEFAULT_TILT_MAX_RAD, hold: Iterable[str] = (),
                     threshold: float = RECOVERABLE_MIN_MARGIN) -> Recoverability:
     """The recovery margin of ``faults`` at the model's condition (one or two LPs).
@@ -280,8 +289,8 @@ def recovery_margin(model: WrenchModel, faults: Iterable[Fault | tuple[str, str,
     faults : iterable of Fault or (actuator, kind, loss)
         The fault set (kinds ``off``, ``stuck``, ``loss``).
     demand : sequence of str
-        The wrench axes that must balance (subset of :data:`AXES`, default all six); the
-        others are free. The box of the margin spans the moment axes among them.
+        The wrench axes that must balance (subset of :data:`AXES`, default :data:`DEMAND`);
+        the others are free. The box of the margin spans the moment axes among them.
     tilt_max_rad : float
         Largest change of pitch and of roll from the condition's attitude (rad).
     hold : iterable of str
@@ -423,7 +432,7 @@ def trim_condition(af: Airframe, mode: str, airspeed_m_s: float = 0.0,
 def assess(af: Airframe, faults: Iterable[Fault | tuple[str, str, float]],
            cond: FlightCondition, *, gust_peaks_ned_m_s: Iterable[Sequence[float]] = (),
            perturbation: Perturbation | None = None, hold: Iterable[str] = (),
-           demand: Sequence[str] = AXES, tilt_max_rad: float = DEFAULT_TILT_MAX_RAD,
+           demand: Sequence[str] = DEMAND, tilt_max_rad: float = DEFAULT_TILT_MAX_RAD,
            threshold: float = RECOVERABLE_MIN_MARGIN) -> Recoverability:
     """:func:`recovery_margin` at ``cond`` and, for each gust, at the steady wind plus the
     gust's peak (amplitude, NED, m/s): the smallest margin of them."""

@@ -12,9 +12,13 @@ airframe file as it is) flown once with GS-SHIF, up to the last injection time. 
 injection time it gives the speed over the ground along the heading, the pitch and the
 actuator positions (where a stuck actuator stays), and the autopilot's mode: in the
 multicopter modes (on the ground, takeoff, hover, back transition, land) the flight software
-keeps the pushers off, so the oracle holds them there too. The scenario's own steady wind,
-the peak of each of its gusts (steady wind + amplitude: the smaller margin counts) and its
-airframe perturbation then enter the oracle. One reference flight per campaign (a few
+keeps the pushers off, so the oracle holds them there too. The scenario's airframe
+perturbation and its wind then enter the oracle, as the wind relative to the vehicle's
+steady motion: in the multicopter modes the autopilot holds the position, so the whole
+steady wind and, as a second condition, the steady wind plus each gust's peak (amplitude);
+in forward flight (transition, fixed-wing) the vehicle drifts with the air mass (its
+airspeed is the reference flight's, its ground track is not held), so only each gust's peak.
+The smallest margin counts. One reference flight per campaign (a few
 seconds) and one or two LPs per distinct (fault set, phase, wind, perturbation), cached.
 """
 
@@ -137,8 +141,9 @@ def oracle_columns(scenarios: Sequence[CampaignScenario],
             if pc is None:
                 cache[k] = {"recoverable": False, "recovery_margin": math.nan}
             else:
-                cond = FlightCondition(pc.mode.lower(), pc.speed_m_s, pc.pitch_rad,
-                                       pc.wind_in_heading_frame(sc.wind.steady_ned_m_s),
+                steady = (pc.wind_in_heading_frame(sc.wind.steady_ned_m_s)
+                          if pc.multicopter else (0.0, 0.0, 0.0))
+                cond = FlightCondition(pc.mode.lower(), pc.speed_m_s, pc.pitch_rad, steady,
                                        pc.actuator_positions)
                 p = sc.perturbation
                 pert = (None if p.nominal else
