@@ -343,10 +343,13 @@ def write_report(out_dir: str | Path, t: pa.Table, *, title: str, description: s
         f"<td>{_fmt(r['crash_time_s'])}</td><td>{_fmt(r['max_attitude_excursion_deg'], 1)}</td>"
         f"<td><code>{html.escape(r['fly_command'])}</code></td></tr>" for r in w)
     gates = "".join(f"<li>{html.escape(g)}</li>" for g in gate_failures)
+    from vtolftc.firmware_sim.vehicle.recoverability import RECOVERABLE_MIN_MARGIN
+
     rec = recoverable_lines(t)
     oracle = ("<h2>Survived / recoverable per family and phase</h2><p>Recoverable: the "
               "actuators left can hold the trim at the scenario's flight condition with a "
-              "moment reserve of at least 0.05 rad/s^2 about every axis (the physical "
+              f"moment reserve about every axis (margin >= {RECOVERABLE_MIN_MARGIN:g} "
+              "rad/s^2; the physical "
               "oracle, <code>vtolftc.firmware_sim.vehicle.recoverability</code>); the "
               "recoverable column counts flight conditions, the controller columns "
               "survived / recoverable scenarios.</p>" + md_table(rec)) if rec else ""
