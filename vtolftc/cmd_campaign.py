@@ -120,7 +120,11 @@ def _oracle(todo: list[Any]) -> dict[str, dict[str, Any]]:
     from vtolftc.campaign.oracle import oracle_columns
 
     t0 = time.perf_counter()
-    cols = oracle_columns(todo)
+    try:
+        cols = oracle_columns(todo)
+    except Exception as exc:  # never lose a campaign to its judge: the rows say "not judged"
+        print(f"recoverability oracle: not judged ({type(exc).__name__}: {exc})", flush=True)
+        return {}
     n_rec = sum(c["recoverable"] for c in cols.values())
     print(f"recoverability oracle: {n_rec} of {len(cols)} scenarios recoverable "
           f"({time.perf_counter() - t0:.1f} s)", flush=True)
