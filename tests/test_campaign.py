@@ -533,3 +533,16 @@ def test_campaign_results_carry_the_oracle(small_reference):
     assert m["rotor_2a:off/calm"] < m["rotor_2a:loss=0.5/calm"]
     html_text = (Path(spec).parent / "pool" / "report.html").read_text(encoding="utf-8")
     assert "Survived / recoverable per family and phase" in html_text
+
+
+def test_a_failing_oracle_leaves_the_rows_not_judged(monkeypatch, capsys):
+    import vtolftc.campaign.oracle as oracle
+    from vtolftc.cmd_campaign import _oracle
+
+    def broken(todo):
+        raise RuntimeError("reference flight crashed")
+
+    monkeypatch.setattr(oracle, "oracle_columns", broken)
+    assert _oracle(expand(parse_spec(MINIMAL))) == {}
+    assert "recoverability oracle: not judged (RuntimeError: reference flight crashed)" \
+        in capsys.readouterr().out

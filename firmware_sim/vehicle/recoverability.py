@@ -435,9 +435,12 @@ def assess(af: Airframe, faults: Iterable[Fault | tuple[str, str, float]],
            cond: FlightCondition, *, gust_peaks_ned_m_s: Iterable[Sequence[float]] = (),
            perturbation: Perturbation | None = None, hold: Iterable[str] = (),
            demand: Sequence[str] = DEMAND, tilt_max_rad: float = DEFAULT_TILT_MAX_RAD,
-           threshold: float = RECOVERABLE_MIN_MARGIN) -> Recoverability:
+           threshold: float = RECOVERABLE_MIN_MARGIN,
+           model_cache: dict[tuple[object, ...], WrenchModel] | None = None) -> Recoverability:
     """:func:`recovery_margin` at ``cond`` and, for each gust, at the steady wind plus the
-    gust's peak (amplitude, NED, m/s): the smallest margin of them."""
+    gust's peak (amplitude, NED, m/s): the smallest margin of them. ``model_cache`` (a dict)
+    keeps the wrench models between calls on the same airframe (they do not depend on the
+    faults)."""
     faults = list(faults)
     hold = list(hold)
     winds = [np.asarray(cond.wind_ned_m_s, float)]
@@ -445,7 +448,14 @@ def assess(af: Airframe, faults: Iterable[Fault | tuple[str, str, float]],
               if any(float(v) != 0.0 for v in g)]
     out: Recoverability | None = None
     for w in winds:
-        r = recovery_margin(wrench_model(af, cond.with_wind(w), perturbation), faults,
+        c = cond.with_wind(w)
+        key = (c, perturbation)
+        model = None if model_cache is None else model_cache.get(key)
+        if model is None:
+            model = wrench_model(af, c, perturbation)
+            if model_cache is not None:
+                model_cache[key] = model
+        r = recovery_margin(model, faults,
                             demand=demand, tilt_max_rad=tilt_max_rad, hold=hold,
                             threshold=threshold)
         if out is None or r.margin < out.margin:

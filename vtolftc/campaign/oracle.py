@@ -133,6 +133,7 @@ def oracle_columns(scenarios: Sequence[CampaignScenario],
     af = load_airframe(first.airframe_path)
     pushers = [n for n in af.actuator_names if n.startswith("pusher_")]
     cache: dict[tuple[Any, ...], dict[str, Any]] = {}
+    models: dict[tuple[Any, ...], Any] = {}
     out: dict[str, dict[str, Any]] = {}
     for sc in scenarios:
         k = _key(sc)
@@ -151,7 +152,8 @@ def oracle_columns(scenarios: Sequence[CampaignScenario],
                 r = assess(af, sc.fault_set.faults, cond,
                            gust_peaks_ned_m_s=[pc.wind_in_heading_frame(g.amplitude_ned_m_s)
                                                for g in sc.wind.gusts],
-                           perturbation=pert, hold=pushers if pc.multicopter else ())
+                           perturbation=pert, hold=pushers if pc.multicopter else (),
+                           model_cache=models)
                 cache[k] = {"recoverable": bool(r.recoverable),
                             "recovery_margin": float(r.margin)}
         out[sc.scenario_id] = cache[k]
