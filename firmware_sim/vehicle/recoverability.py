@@ -54,14 +54,15 @@ With ``J_xx, J_yy, J_zz`` the principal inertias and ``m`` the mass of the physi
 
 - **margin >= 0**: the largest ``a`` such that, at the trim's attitude, every corner of the
   moment box ``[L, M, N]_trim + a (+-J_xx, +-J_yy, +-J_zz)`` can be produced, each by its
-  own admissible commands, with every force component off its balance by at most ``a m``
-  (a transient of at most ``a`` m/s^2 on ``Fx``, ``Fz``). In words: with the trim held, the
-  vehicle can still accelerate about every body axis by ``a`` rad/s^2, in both directions and all
-  combinations at once, without losing more than ``a`` m/s^2 of any force balance. Zero
+  own admissible commands, with each demanded force component (``Fx``, ``Fz``) off its
+  balance by at most ``a m`` (a transient of at most ``a`` m/s^2). In words: with the trim
+  held, the vehicle can still accelerate about every body axis by ``a`` rad/s^2, in both
+  directions and all combinations at once, without losing more than ``a`` m/s^2 of any
+  force balance. Zero
   means the trim exists but some direction has no authority left.
 - **margin < 0**: no trim exists within ``tilt_max``; ``-a`` is the smallest ``e`` such that
-  every demanded wrench component is met to within ``e`` times its scale (``m`` for the forces,
-  the inertias for the moments): the uniform acceleration deficit (m/s^2 and rad/s^2) the
+  every demanded wrench component is met to within ``e`` times its scale (``m`` for the
+  forces, the inertias for the moments): the uniform acceleration deficit (m/s^2 and rad/s^2) the
   fault leaves. ``-inf``: not even that LP could be solved.
 
 The verdict ``recoverable`` is ``margin >= RECOVERABLE_MIN_MARGIN`` = 0.001 rad/s^2: a trim
