@@ -546,3 +546,32 @@ def test_a_failing_oracle_leaves_the_rows_not_judged(monkeypatch, capsys):
     assert _oracle(expand(parse_spec(MINIMAL))) == {}
     assert "recoverability oracle: not judged (RuntimeError: reference flight crashed)" \
         in capsys.readouterr().out
+
+
+def test_oracle_rules_per_mode():
+    """In a transition the forward force is free (the transition accelerates); in hover the
+    pushers are held where the reference flight had them."""
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.campaign.oracle import PhaseCondition, judge
+    from vtolftc.firmware_sim.vehicle.recoverability import (
+        FlightCondition,
+        assess,
+        trim_condition,
+    )
+
+    af = load_airframe()
+    pos = list(trim_condition(af, "rotor-assisted", 4.0).actuator_positions)
+    i, j = af.actuator_index("pusher_left"), af.actuator_index("pusher_right")
+    pos[i] = pos[j] = 0.68          # the transition's pushers: far more than holds 4 m/s
+    stuck = [("pusher_left", "stuck", 0.0)]
+    trans = PhaseCondition(23.0, "FRONT_TRANSITION", 4.0, 0.0, 0.0, tuple(pos))
+    assert judge(af, stuck, trans).recoverable
+    # holding the airspeed as well (Fx balanced) the stuck pusher's yaw cannot be trimmed
+    assert not assess(af, stuck, FlightCondition("t", 4.0, 0.0, (0.0, 0.0, 0.0),
+                                                 tuple(pos))).recoverable
+    # the same positions in hover: pushers held at 68 %, their thrust cannot be leaned against
+    hover = PhaseCondition(15.0, "HOVER", 0.0, 0.0, 0.0, tuple(pos))
+    assert not judge(af, [], hover).recoverable
+    assert judge(af, [], PhaseCondition(15.0, "HOVER", 0.0, 0.0, 0.0,
+                                        tuple(0.0 if k in (i, j) else v
+                                              for k, v in enumerate(pos)))).recoverable

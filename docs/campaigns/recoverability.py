@@ -5,7 +5,8 @@
 The physical recoverability oracle (``vtolftc.firmware_sim.vehicle.recoverability``) for
 every k-subset of the lift rotors switched off, at the campaign's hover (15 s) and
 mid-transition (23 s) conditions, read from the same reference flight as ``vtolftc
-campaign`` (``vtolftc.campaign.oracle``), calm unless ``--wind`` (relative wind, NED m/s).
+campaign`` (``vtolftc.campaign.oracle``, its rules), calm unless ``--wind`` (a gust's peak,
+NED m/s, felt in every phase).
 Prints, per phase and k, how many subsets are recoverable (margin >= 0.001 rad/s^2) and the
 lowest margins.
 """
@@ -17,8 +18,7 @@ import itertools
 import sys
 
 from vtolftc.airframe.loader import AirframeError, load_airframe
-from vtolftc.campaign.oracle import reference_conditions
-from vtolftc.firmware_sim.vehicle.recoverability import FlightCondition, assess
+from vtolftc.campaign.oracle import judge, reference_conditions
 
 PHASES = (("hover", 15.0), ("mid-transition", 23.0))
 
@@ -28,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--airframe", default=None, help="airframe TOML (default: DS-1)")
     ap.add_argument("--k", type=int, nargs="+", default=[1, 2, 4],
                     help="numbers of rotors off at once (default 1 2 4)")
-    ap.add_argument("--wind", default="0,0,0", help="relative wind N,E,D (m/s)")
+    ap.add_argument("--wind", default="0,0,0", help="a gust's peak N,E,D (m/s)")
     ap.add_argument("--show", type=int, default=6, help="lowest margins shown per row")
     a = ap.parse_args(argv)
     try:
@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     conds = reference_conditions([t for _, t in PHASES], a.airframe)
-    pushers = [n for n in af.actuator_names if n.startswith("pusher_")]
+    models: dict = {}
     print("| phase | condition | rotors off | recoverable | lowest margins (rad/s^2) |")
     print("|---|---|---:|---:|---|")
     for phase, t in PHASES:
@@ -57,14 +57,12 @@ def main(argv: list[str] | None = None) -> int:
         if pc is None:
             print(f"| {phase} | not reached by the reference flight | | | |")
             continue
-        cond = FlightCondition(pc.mode.lower(), pc.speed_m_s, pc.pitch_rad, wind,
-                               pc.actuator_positions)
-        hold = pushers if pc.multicopter else []
         where = f"{pc.mode}, {pc.speed_m_s:.2f} m/s, pitch {pc.pitch_rad * 57.29578:.1f} deg"
         for k in a.k:
             res = []
             for off in itertools.combinations(lift, k):
-                r = assess(af, [(n, "off", 1.0) for n in off], cond, hold=hold)
+                r = judge(af, [(n, "off", 1.0) for n in off], pc, (0.0, 0.0, 0.0),
+                          [wind], model_cache=models)
                 res.append((r.margin, r.recoverable, "+".join(n[6:] for n in off)))
             res.sort()
             low = ", ".join(f"{lab} {m:.3f}" for m, _, lab in res[:a.show])
