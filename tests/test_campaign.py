@@ -404,3 +404,174 @@ def test_report_only_and_partial_folders(small_reference, tmp_path, capsys):
     # another spec's folder is refused
     other = _spec_file(tmp_path, SMALL.replace('name = "small"', 'name = "other"'), "o.toml")
     assert run(["campaign", str(other), "--out", str(out), "--resume"]) == 2
+
+
+# ----------------------------------------------------------------------------------------------
+# The physical recoverability oracle's columns
+# ----------------------------------------------------------------------------------------------
+
+ORACLE = """
+[campaign]
+name = "oracle"
+duration_s = 50.0
+controllers = ["gs-shif", "lqr"]
+phases = ["hover", "cruise", "transition"]
+
+[[faults]]
+family = "rotor-off"
+actuators = ["lift_rotors"]
+kinds = ["off"]
+
+[[faults]]
+family = "all-lift"
+generate = "list"
+sets = [["lift_rotors:off"]]
+
+[[wind]]
+name = "calm"
+
+[[wind]]
+name = "gust"
+steady_ned_m_s = [0.0, 4.0, 0.0]
+gusts = [{ after_fault_s = 1.0, duration_s = 3.0, amplitude_ned_m_s = [0.0, 3.0, -1.0] }]
+"""
+
+
+def _trim_conditions() -> dict:
+    """Phase conditions from the nominal trims (no reference flight): hover at 15 s,
+    wing-borne 18 m/s at 40 s; the transition (23 s) left out (the flight did not get there)."""
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.campaign.oracle import PhaseCondition
+    from vtolftc.firmware_sim.vehicle.recoverability import trim_condition
+
+    af = load_airframe()
+    out = {}
+    for t, mode, trim, v in ((15.0, "HOVER", "hover", 0.0), (40.0, "FIXED_WING", "wing", 18.0)):
+        c = trim_condition(af, trim, v)
+        out[t] = PhaseCondition(t, mode, c.speed_m_s, c.pitch_rad, 0.0, c.actuator_positions)
+    return out
+
+
+def test_oracle_columns_per_flight_condition():
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.campaign.oracle import oracle_columns
+    from vtolftc.campaign.report import recoverable_lines
+    from vtolftc.firmware_sim.vehicle.recoverability import (
+        RECOVERABLE_MIN_MARGIN,
+        FlightCondition,
+        assess,
+    )
+
+    scenarios = expand(parse_spec(ORACLE))
+    cols = oracle_columns(scenarios, _trim_conditions())
+    assert set(cols) == {s.scenario_id for s in scenarios}
+    by_cond: dict = {}
+    for s in scenarios:
+        c = cols[s.scenario_id]
+        if s.phase == "transition":  # not reached by the reference: not judged
+            assert math.isnan(c["recovery_margin"]) and c["recoverable"] is False
+            continue
+        assert c["recoverable"] == (c["recovery_margin"] >= RECOVERABLE_MIN_MARGIN)
+        # one verdict per flight condition, whatever the controller
+        by_cond.setdefault((s.faults_label, s.phase, s.wind.name), set()).add(
+            (c["recoverable"], c["recovery_margin"]))
+    assert all(len(v) == 1 for v in by_cond.values())
+    verdict = {k: next(iter(v)) for k, v in by_cond.items()}
+    g = load_airframe().gravity_m_s2
+    for r in ROTORS:
+        assert verdict[(f"{r}:off", "hover", "calm")][0]            # every single rotor
+        assert verdict[(f"{r}:off", "cruise", "gust")][0]           # the wing does not care
+    # the wind relative to the vehicle: in hover (position held) the steady wind and the
+    # steady wind plus the gust's peak; in cruise (drifting with the air) the gust's peak only
+    conds = _trim_conditions()
+    P = ["pusher_left", "pusher_right"]
+    hov = FlightCondition("hover", conds[15.0].speed_m_s, conds[15.0].pitch_rad,
+                          (0.0, 4.0, 0.0), conds[15.0].actuator_positions)
+    cru = FlightCondition("fixed_wing", conds[40.0].speed_m_s, conds[40.0].pitch_rad,
+                          (0.0, 0.0, 0.0), conds[40.0].actuator_positions)
+    af = load_airframe()
+    for r in ("rotor_1a", "rotor_3b"):
+        want_h = assess(af, [(r, "off", 1.0)], hov, gust_peaks_ned_m_s=[(0.0, 3.0, -1.0)],
+                        hold=P).margin
+        want_c = assess(af, [(r, "off", 1.0)], cru, gust_peaks_ned_m_s=[(0.0, 3.0, -1.0)],
+                        ).margin
+        assert verdict[(f"{r}:off", "hover", "gust")][1] == want_h
+        assert verdict[(f"{r}:off", "cruise", "gust")][1] == want_c
+    rec, margin = verdict[("lift_rotors:off", "hover", "calm")]
+    assert not rec and margin == pytest.approx(-g, rel=1e-6)        # nothing holds the weight
+    assert verdict[("lift_rotors:off", "cruise", "calm")][0]        # the wing alone flies
+    # the report's table: survived / recoverable per family and phase
+    rows = []
+    for s in scenarios:
+        rows.append({**_row(s.index, s.scenario_id, survived=s.controller == "gs-shif"),
+                     "controller": s.controller, "family": s.family, "phase": s.phase,
+                     "faults": s.faults_label, "wind": s.wind.name, "perturbation": "nominal",
+                     "seed": 0, **cols[s.scenario_id]})
+    from vtolftc.campaign.results import _table
+
+    lines = recoverable_lines(_table(rows))
+    assert lines[0] == "| family | phase | recoverable | gs-shif | lqr |"
+    assert "| rotor-off | hover | 16/16 | 16/16 (100 %) | 0/16 (0 %) |" in lines
+    assert "| all-lift | hover | 0/2 | —, +2 unrecoverable survived | — |" in lines
+    assert not any("transition" in ln for ln in lines)  # not judged: not counted
+
+
+@pytest.mark.slow
+def test_campaign_results_carry_the_oracle(small_reference):
+    spec, ref = small_reference
+    rows = ref.to_pylist()
+    verdicts: dict = {}
+    for r in rows:
+        assert r["recoverable"] is not None and math.isfinite(r["recovery_margin"])
+        verdicts.setdefault((r["faults"], r["phase"], r["wind"], r["perturbation"], r["seed"]),
+                            set()).add((r["recoverable"], r["recovery_margin"]))
+    assert all(len(v) == 1 for v in verdicts.values())  # the controllers share a verdict
+    # rotor 2a off or at half effectiveness, elevator stuck, 1 s into the transition: all
+    # recoverable for DS-1, with less margin for the rotor off than for the half loss
+    assert all(r["recoverable"] for r in rows)
+    m = {k[0] + "/" + k[2]: next(iter(v))[1] for k, v in verdicts.items()}
+    assert m["rotor_2a:off/calm"] < m["rotor_2a:loss=0.5/calm"]
+    html_text = (Path(spec).parent / "pool" / "report.html").read_text(encoding="utf-8")
+    assert "Survived / recoverable per family and phase" in html_text
+
+
+def test_a_failing_oracle_leaves_the_rows_not_judged(monkeypatch, capsys):
+    import vtolftc.campaign.oracle as oracle
+    from vtolftc.cmd_campaign import _oracle
+
+    def broken(todo):
+        raise RuntimeError("reference flight crashed")
+
+    monkeypatch.setattr(oracle, "oracle_columns", broken)
+    assert _oracle(expand(parse_spec(MINIMAL))) == {}
+    assert "recoverability oracle: not judged (RuntimeError: reference flight crashed)" \
+        in capsys.readouterr().out
+
+
+def test_oracle_rules_per_mode():
+    """In a transition the forward force is free (the transition accelerates); in hover the
+    pushers are held where the reference flight had them."""
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.campaign.oracle import PhaseCondition, judge
+    from vtolftc.firmware_sim.vehicle.recoverability import (
+        FlightCondition,
+        assess,
+        trim_condition,
+    )
+
+    af = load_airframe()
+    pos = list(trim_condition(af, "rotor-assisted", 4.0).actuator_positions)
+    i, j = af.actuator_index("pusher_left"), af.actuator_index("pusher_right")
+    pos[i] = pos[j] = 0.68          # the transition's pushers: far more than holds 4 m/s
+    stuck = [("pusher_left", "stuck", 0.0)]
+    trans = PhaseCondition(23.0, "FRONT_TRANSITION", 4.0, 0.0, 0.0, tuple(pos))
+    assert judge(af, stuck, trans).recoverable
+    # holding the airspeed as well (Fx balanced) the stuck pusher's yaw cannot be trimmed
+    assert not assess(af, stuck, FlightCondition("t", 4.0, 0.0, (0.0, 0.0, 0.0),
+                                                 tuple(pos))).recoverable
+    # the same positions in hover: pushers held at 68 %, their thrust cannot be leaned against
+    hover = PhaseCondition(15.0, "HOVER", 0.0, 0.0, 0.0, tuple(pos))
+    assert not judge(af, [], hover).recoverable
+    assert judge(af, [], PhaseCondition(15.0, "HOVER", 0.0, 0.0, 0.0,
+                                        tuple(0.0 if k in (i, j) else v
+                                              for k, v in enumerate(pos)))).recoverable

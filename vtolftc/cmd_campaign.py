@@ -94,7 +94,8 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         if todo:
-            _fly(args, spec, todo, writer, len(scenarios), n_done, n_surv)
+            oracle = _oracle(todo)
+            _fly(args, spec, todo, writer, len(scenarios), n_done, n_surv, oracle)
     except KeyboardInterrupt:
         writer.close()
         print(f"interrupted: {writer.written} new results written to {out}/parts; "
@@ -114,8 +115,24 @@ def _cpus() -> int:
     return os.cpu_count() or 1
 
 
+def _oracle(todo: list[Any]) -> dict[str, dict[str, Any]]:
+    """The physical oracle's columns of the scenarios to fly (one reference flight + LPs)."""
+    from vtolftc.campaign.oracle import oracle_columns
+
+    t0 = time.perf_counter()
+    try:
+        cols = oracle_columns(todo)
+    except Exception as exc:  # never lose a campaign to its judge: the rows say "not judged"
+        print(f"recoverability oracle: not judged ({type(exc).__name__}: {exc})", flush=True)
+        return {}
+    n_rec = sum(c["recoverable"] for c in cols.values())
+    print(f"recoverability oracle: {n_rec} of {len(cols)} scenarios recoverable "
+          f"({time.perf_counter() - t0:.1f} s)", flush=True)
+    return cols
+
+
 def _fly(args: argparse.Namespace, spec: Any, todo: list[Any], writer: Any, total: int,
-         n_done: int, n_surv: int) -> None:
+         n_done: int, n_surv: int, oracle: dict[str, dict[str, Any]] | None = None) -> None:
     from tqdm import tqdm
 
     from vtolftc.campaign.execute import run_dask, run_local
@@ -135,6 +152,7 @@ def _fly(args: argparse.Namespace, spec: Any, todo: list[Any], writer: Any, tota
                desc=spec.name, disable=args.no_progress, file=sys.stderr)
     try:
         for row in stream:
+            row.update((oracle or {}).get(row["scenario_id"], {}))
             writer.add(row)
             flown += 1
             survived += bool(row["survived"])
@@ -154,7 +172,13 @@ def _chain(first: list[Any], rest: Any) -> Any:
 
 def _finish(spec: Any, table: Any, out: Path, wall: float, n_flown: int, total: int) -> int:
     from vtolftc.campaign.execute import _airframe
-    from vtolftc.campaign.report import check_gates, summary_lines, worst, write_report
+    from vtolftc.campaign.report import (
+        check_gates,
+        recoverable_lines,
+        summary_lines,
+        worst,
+        write_report,
+    )
 
     rows = table.num_rows
     surv = sum(table.column("survived").to_pylist())
@@ -164,6 +188,11 @@ def _finish(spec: Any, table: Any, out: Path, wall: float, n_flown: int, total: 
     print()
     for line in summary_lines(table):
         print(line)
+    rec = recoverable_lines(table)
+    if rec:
+        print("\nsurvived / recoverable (the physical oracle) per family and phase:")
+        for line in rec:
+            print(line)
     failures = check_gates(spec.gates, table)
     report = write_report(out, table, title=f"Campaign {spec.name}",
                           description=spec.description + partial,

@@ -19,26 +19,25 @@ import argparse
 import itertools
 import sys
 
-import numpy as np
-from scipy.optimize import linprog
-
 from vtolftc.airframe.loader import load_airframe
+from vtolftc.firmware_sim.vehicle.recoverability import (
+    FlightCondition,
+    thrust_reserve,
+    wrench_model,
+)
 
 
 def hover_thrust_margin(af: object, off: tuple[int, ...], yaw: bool) -> float:
-    """Largest moment-balanced total lift-rotor thrust over the weight (dimensionless)."""
-    rotors = af.lift_rotors  # type: ignore[attr-defined]
-    x = np.array([float(r.position_m[0]) for r in rotors])
-    y = np.array([float(r.position_m[1]) for r in rotors])
-    k = np.array([r.torque_to_thrust_m * float(r.spin_axis[2]) for r in rotors])
-    ub = np.array([r.max_thrust_N for r in rotors], float)
-    ub[list(off)] = 0.0
-    rows = [y, x] + ([k] if yaw else [])
-    res = linprog(-np.ones(len(rotors)), A_eq=np.array(rows), b_eq=np.zeros(len(rows)),
-                  bounds=list(zip(np.zeros(len(rotors)), ub, strict=True)), method="highs")
-    if not res.success:
-        return 0.0
-    return float(-res.fun / af.weight_N)  # type: ignore[attr-defined]
+    """Largest moment-balanced total lift-rotor thrust over the weight (dimensionless).
+
+    The one home of this LP is :func:`vtolftc.firmware_sim.vehicle.recoverability.
+    thrust_reserve`: hover (no airspeed), only the lift rotors move, ``off`` (lift-rotor
+    indices) switched off, roll and pitch (and with ``yaw`` the yaw) moments held at zero.
+    """
+    model = wrench_model(af, FlightCondition("hover", 0.0))  # type: ignore[arg-type]
+    lift = [f"rotor_{r.name}" for r in af.lift_rotors]  # type: ignore[attr-defined]
+    return thrust_reserve(model, [(lift[i], "off", 1.0) for i in off],
+                          balanced=("L", "M", "N") if yaw else ("L", "M"), use=lift)
 
 
 def main(argv: list[str] | None = None) -> int:

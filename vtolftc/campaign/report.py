@@ -30,7 +30,8 @@ from vtolftc.campaign.outcome import ALTITUDE_TOLERANCE_M, ATTITUDE_TOLERANCE_DE
 from vtolftc.campaign.results import TIMING_COLUMNS
 from vtolftc.campaign.spec import Gate
 
-__all__ = ["check_gates", "compare", "summary_lines", "worst", "write_report"]
+__all__ = ["check_gates", "compare", "recoverable_lines", "summary_lines", "worst",
+           "write_report"]
 
 
 def _rows(t: pa.Table) -> list[dict[str, Any]]:
@@ -74,6 +75,43 @@ def summary_lines(t: pa.Table) -> list[str]:
         k, n = tot.get((c,), [0, 0])
         cells.append(f"**{k}/{n} ({100 * k / n:.0f} %)**" if n else "—")
     lines.append("| all | " + " | ".join(cells) + " |")
+    return lines
+
+
+def recoverable_lines(t: pa.Table) -> list[str]:
+    """Survival against the physical oracle, as a Markdown table: per family and phase, the
+    flight conditions the oracle calls recoverable (of those judged) and, per controller,
+    survived / recoverable (and how many unrecoverable ones it survived all the same).
+    Empty when no row was judged (results written before the oracle)."""
+    rows = [r for r in _rows(t) if r.get("recoverable") is not None
+            and r.get("recovery_margin") is not None and math.isfinite(r["recovery_margin"])]
+    if not rows:
+        return []
+    ctls = _ordered([r["controller"] for r in rows])
+    cond: dict[tuple[str, str], dict[tuple[Any, ...], bool]] = defaultdict(dict)
+    cnt: dict[tuple[str, str, str], list[int]] = defaultdict(lambda: [0, 0, 0])
+    for r in rows:
+        fp = (r["family"], r["phase"])
+        cond[fp][(r["faults"], r["wind"], r["perturbation"], r["seed"])] = bool(
+            r["recoverable"])
+        c = cnt[(*fp, r["controller"])]
+        if r["recoverable"]:
+            c[0] += bool(r["survived"])
+            c[1] += 1
+        else:
+            c[2] += bool(r["survived"])
+    lines = ["| family | phase | recoverable | " + " | ".join(ctls) + " |",
+             "|---|---|---:|" + "---:|" * len(ctls)]
+    for fp, conds in cond.items():
+        cells = []
+        for ctl in ctls:
+            k, n, extra = cnt.get((*fp, ctl), [0, 0, 0])
+            cell = f"{k}/{n} ({100 * k / n:.0f} %)" if n else "—"
+            if extra:
+                cell += f", +{extra} unrecoverable survived"
+            cells.append(cell)
+        lines.append(f"| {fp[0]} | {fp[1]} | {sum(conds.values())}/{len(conds)} | "
+                     + " | ".join(cells) + " |")
     return lines
 
 
@@ -305,6 +343,16 @@ def write_report(out_dir: str | Path, t: pa.Table, *, title: str, description: s
         f"<td>{_fmt(r['crash_time_s'])}</td><td>{_fmt(r['max_attitude_excursion_deg'], 1)}</td>"
         f"<td><code>{html.escape(r['fly_command'])}</code></td></tr>" for r in w)
     gates = "".join(f"<li>{html.escape(g)}</li>" for g in gate_failures)
+    from vtolftc.firmware_sim.vehicle.recoverability import RECOVERABLE_MIN_MARGIN
+
+    rec = recoverable_lines(t)
+    oracle = ("<h2>Survived / recoverable per family and phase</h2><p>Recoverable: the "
+              "actuators left can hold the trim at the scenario's flight condition with a "
+              f"moment reserve about every axis (margin >= {RECOVERABLE_MIN_MARGIN:g} "
+              "rad/s^2; the physical "
+              "oracle, <code>vtolftc.firmware_sim.vehicle.recoverability</code>); the "
+              "recoverable column counts flight conditions, the controller columns "
+              "survived / recoverable scenarios.</p>" + md_table(rec)) if rec else ""
     doc = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>body{{font-family:sans-serif;max-width:1200px;margin:2em auto}}
 table{{border-collapse:collapse;font-size:13px}}td,th{{border:1px solid #ccc;padding:3px 6px}}
@@ -315,6 +363,7 @@ code{{font-size:11px}}</style></head><body>
 within {ATTITUDE_TOLERANCE_DEG:g} deg of level.</p>
 {"<h2>Gates failed</h2><ul>" + gates + "</ul>" if gates else ""}
 <h2>Survival per family and controller</h2>{md_table(summary_lines(t))}
+{oracle}
 {"".join(f'<h2>{html.escape(c)}</h2><img src="{f}" alt="{html.escape(c)}">' for f, c in figs)}
 <h2>Worst scenarios</h2><table><tr><th>controller</th><th>family</th><th>faults</th>
 <th>phase</th><th>wind</th><th>outcome</th><th>crash (s)</th><th>max excursion (deg)</th>

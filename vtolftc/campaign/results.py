@@ -14,9 +14,11 @@ is never lost, and at most the rows of the unwritten batch are flown again by ``
 and sorts by index; :func:`write_final` writes ``results.parquet`` the same way (atomically).
 
 Columns (one row per scenario) are :data:`SCHEMA`: the scenario's axes, ``outcome`` /
-``survived`` (:mod:`vtolftc.campaign.outcome`), crash time, final errors, RMSEs over the
-window from the injection, largest attitude excursion and altitude loss, transition time,
-share of control steps whose allocation fell short of the commanded moments, and wall times.
+``survived`` (:mod:`vtolftc.campaign.outcome`), ``recoverable`` / ``recovery_margin`` (the
+physical oracle, :mod:`vtolftc.campaign.oracle`; a NaN margin: not judged), crash time,
+final errors, RMSEs over the window from the injection, largest attitude excursion and
+altitude loss, transition time, share of control steps whose allocation fell short of the
+commanded moments, and wall times.
 NaN marks a value that does not exist (no crash, no transition).
 """
 
@@ -47,6 +49,8 @@ SCHEMA = pa.schema([
     ("duration_s", pa.float64()),
     ("outcome", pa.string()),
     ("survived", pa.bool_()),
+    ("recoverable", pa.bool_()),       # the physical oracle's verdict (campaign/oracle.py)
+    ("recovery_margin", pa.float64()),  # rad/s^2; < 0: the trim's deficit, NaN: not judged
     ("crashed", pa.bool_()),
     ("crash_time_s", pa.float64()),
     ("final_altitude_error_m", pa.float64()),
