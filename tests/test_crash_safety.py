@@ -226,6 +226,10 @@ def test_autopilot_killed_mid_run_leaves_a_readable_run_folder(tmp_path, sig):
         assert _rrd_verify(ap / "run.rrd", footers=sig == signal.SIGTERM).returncode == 0
         rows = _rrd_rows(ap / "run.rrd")  # 50 Hz recording from the first step on
         assert rows >= 50 * (t_kill - times[0] - 1.0), (rows, t_kill, times[0])
+        rrd = _rrd_last_s(ap / "run.rrd")
+        rrd.pop("world/path", None)
+        assert rrd and t_kill - min(rrd.values()) <= 1.0, (t_kill, rrd)
+        assert t_kill - _ulog_last_s(ap / "flight.ulg") <= 1.0   # pyulog reads it
         events = [json.loads(x) for x in
                   (ap / "autopilot_events.jsonl").read_text().splitlines() if x.strip()]
         assert all("kind" in e for e in events)

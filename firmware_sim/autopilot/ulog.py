@@ -295,8 +295,10 @@ class ULogWriter:
         self._msg(b"D", struct.pack("<H", self._ids[topic]) + self._structs[topic].pack(*values))
 
     def _due(self, topic: str, t: int, period_us: int) -> bool:
-        if t - self._last.get(topic, -(1 << 62)) >= period_us:
-            self._last[topic] = t
+        """True once per ``period_us`` grid cell of simulated time (a step that skipped
+        ahead, as a loaded SITL autopilot does, still logs the cell it lands in)."""
+        if t >= self._last.get(topic, -(1 << 62)):
+            self._last[topic] = (t // period_us + 1) * period_us
             return True
         return False
 

@@ -171,7 +171,7 @@ class RerunRecorder:
         self._names: tuple[str, ...] = DEFAULT_ACTUATOR_NAMES
         self._started = False
         self._finished = False
-        self._last_logged_usec: int | None = None
+        self._next_usec: int | None = None
         self._last_mode: int | None = None
         self._n_faults = 0
         self._path_pts: list[tuple[float, float, float]] = []
@@ -317,9 +317,11 @@ class RerunRecorder:
         if not self._started:
             self.on_start({})
         t = int(sample.time_usec)
-        if self._last_logged_usec is not None and t - self._last_logged_usec < self._period_usec:
+        if self._next_usec is not None and t < self._next_usec:
             return
-        self._last_logged_usec = t
+        # one row per rate_hz grid cell of simulated time (a step that skipped ahead, as a
+        # loaded SITL autopilot does, still logs the cell it lands in)
+        self._next_usec = (t // self._period_usec + 1) * self._period_usec
         st = sample.status
         nav = sample.nav
         tr = sample.truth
