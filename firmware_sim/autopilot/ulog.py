@@ -25,7 +25,9 @@ topic                            rate    fields and source
 ``sensor_combined``              50 Hz   gyro_rad; accelerometer_m_s2: the HIL_SENSOR
                                          accelerometer when the autopilot has one (SITL), else
                                          the mean specific force over the 20 ms interval from
-                                         the velocity change (``*_integral_dt`` 20000 us)
+                                         the velocity change (``*_integral_dt`` 20000 us; the
+                                         simulated vehicle's velocity when the sample carries
+                                         it, in-process: a logged sensor, never fed back)
 ``vehicle_local_position``       50 Hz   x y z vx vy vz, ref_lat/lon/alt, xy/z/v_xy/v_z_valid
 ``actuator_outputs``             50 Hz   16 outputs (the 15 normalised commands)
 ``vehicle_gps_position``         10 Hz   lat/lon (1e-7 deg), alt (mm AMSL), vel_*_m_s, cog,
