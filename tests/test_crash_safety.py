@@ -156,6 +156,13 @@ def test_fly_sigkill_loses_at_most_1_5_s_in_every_file(tmp_path, t_kill):
     assert cfg["controller"] == "gs-shif"
     events = (out / "events.log").read_text().splitlines()
     assert events and all(re.match(r"\s*[0-9.]+ \S+", e) for e in events)
+    from vtolftc.telemetry.recording import read_recording
+
+    _, rrd_events = read_recording(out / "run.rrd", ["events"])["events"]
+    for line in events:                 # every event of the log that is old enough, in the rrd
+        t_s, _kind, text = line.split(maxsplit=2)
+        if float(t_s) <= reached - 1.5:
+            assert any(text in str(e) for e in rrd_events), (line, rrd_events[-3:])
     assert not (out / "metrics.json").exists()    # written at the end only, never half
     print(f"SIGKILL at t = {reached:.1f} s: lost {lost} s, path {reached - path_t:.2f} s")
 
