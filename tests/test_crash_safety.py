@@ -14,6 +14,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -123,6 +124,8 @@ def test_fly_sigkill_loses_at_most_1_5_s_in_every_file(tmp_path, t_kill):
                           "--progress", "0.1"], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, cwd=REPO)
     furthest = -1.0
+    watchdog = threading.Timer(600.0, p.kill)     # a hung run ends the reading loop below
+    watchdog.start()
     try:
         assert p.stdout is not None
         for line in p.stdout:
@@ -138,6 +141,7 @@ def test_fly_sigkill_loses_at_most_1_5_s_in_every_file(tmp_path, t_kill):
                 furthest = float(m.group(1))
         p.wait(timeout=60)
     finally:
+        watchdog.cancel()
         if p.poll() is None:
             p.kill()
             p.wait()
