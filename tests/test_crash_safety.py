@@ -1,15 +1,20 @@
 """Runs are crash-safe: ``vtolftc fly`` stops cleanly on SIGTERM and Ctrl-C, refuses to mix a
-new run into an old ``--out``; the SITL processes killed (SIGKILL) or stopped (SIGTERM) mid-run
-leave a run folder that reads back, with at most 1 s lost and a rerun file that verifies."""
+new run into an old ``--out``, and killed (SIGKILL) leaves every file readable (CSV, ULog by
+pyulog, ``.rrd`` by rerun's own reader, JSON) with at most 1.5 s of simulated time lost against
+the furthest time it reached (its progress lines); the SITL processes killed (SIGKILL) or
+stopped (SIGTERM) mid-run leave a run folder that reads back, with at most 1 s lost and a rerun
+file that verifies."""
 
 from __future__ import annotations
 
 import csv
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -88,6 +93,84 @@ def test_fly_stops_cleanly_on_signal(tmp_path, hand_gains, sig):
     assert _rrd_verify(out / "run.rrd", footers=True).returncode == 0
 
 
+def _ulog_last_s(path: Path) -> float:
+    """The newest timestamp [s] of the ULog's 50 Hz topics, read by pyulog."""
+    from pyulog import ULog
+
+    log = ULog(str(path))
+    names = ("vehicle_attitude", "vehicle_local_position", "vehicle_angular_velocity",
+             "sensor_combined", "actuator_outputs")
+    return min(float(log.get_dataset(n).data["timestamp"][-1]) for n in names) * 1e-6
+
+
+def _rrd_last_s(path: Path) -> dict[str, float]:
+    """Newest ``sim_time`` [s] of every time series in a recording (rerun's own reader)."""
+    from vtolftc.telemetry.recording import read_recording
+
+    data = read_recording(path)
+    return {ent: float(t[-1]) for ent, (t, _) in data.items()
+            if not ent.startswith(("events", "faults", "mode/state"))}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("t_kill", [31.0, 44.5])
+def test_fly_sigkill_loses_at_most_1_5_s_in_every_file(tmp_path, t_kill):
+    """SIGKILL in hover/transition/fixed-wing: every file parses, none lags the furthest
+    simulated time reached (the last progress line, printed every 0.1 s) by more than 1.5 s
+    (the flown path, a 5 Hz re-send of the pose, by at most 2 s)."""
+    out = tmp_path / "run"
+    p = subprocess.Popen([sys.executable, "-m", "vtolftc.cli", "fly", "--case", "1",
+                          "--duration", "600", "--out", str(out), "--no-plots",
+                          "--progress", "0.1"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, cwd=REPO)
+    furthest = -1.0
+    watchdog = threading.Timer(600.0, p.kill)     # a hung run ends the reading loop below
+    watchdog.start()
+    try:
+        assert p.stdout is not None
+        for line in p.stdout:
+            m = re.match(r"\s+t = ([0-9.]+) s", line)
+            if m:
+                furthest = float(m.group(1))
+                if furthest >= t_kill:
+                    p.kill()
+                    break
+        for line in p.stdout:      # what it printed before the kill landed
+            m = re.match(r"\s+t = ([0-9.]+) s", line)
+            if m:
+                furthest = float(m.group(1))
+        p.wait(timeout=60)
+    finally:
+        watchdog.cancel()
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode == -signal.SIGKILL and furthest >= t_kill, (p.returncode, furthest)
+    reached = furthest + 0.1          # the next progress line was never printed
+    lost = {"telemetry.csv": reached - _csv_times(out / "telemetry.csv")[-1],
+            "flight.ulg": reached - _ulog_last_s(out / "flight.ulg")}
+    rrd = _rrd_last_s(out / "run.rrd")
+    assert len(rrd) >= 20, sorted(rrd)
+    path_t = rrd.pop("world/path")
+    lost["run.rrd"] = reached - min(rrd.values())
+    assert all(0.0 <= v <= 1.5 for v in lost.values()), lost
+    assert reached - path_t <= 2.0, (reached, path_t)
+    assert _rrd_verify(out / "run.rrd", footers=False).returncode == 0
+    cfg = json.loads((out / "run.json").read_text())
+    assert cfg["controller"] == "gs-shif"
+    events = (out / "events.log").read_text().splitlines()
+    assert events and all(re.match(r"\s*[0-9.]+ \S+", e) for e in events)
+    from vtolftc.telemetry.recording import read_recording
+
+    _, rrd_events = read_recording(out / "run.rrd", ["events"])["events"]
+    for line in events:                 # every event of the log that is old enough, in the rrd
+        t_s, _kind, text = line.split(maxsplit=2)
+        if float(t_s) <= reached - 1.5:
+            assert any(text in str(e) for e in rrd_events), (line, rrd_events[-3:])
+    assert not (out / "metrics.json").exists()    # written at the end only, never half
+    print(f"SIGKILL at t = {reached:.1f} s: lost {lost} s, path {reached - path_t:.2f} s")
+
+
 def test_fly_out_refused_unless_overwrite_and_never_mixed(tmp_path, hand_gains, capsys):
     from vtolftc.cli import run
 
@@ -154,6 +237,10 @@ def test_autopilot_killed_mid_run_leaves_a_readable_run_folder(tmp_path, sig):
         assert _rrd_verify(ap / "run.rrd", footers=sig == signal.SIGTERM).returncode == 0
         rows = _rrd_rows(ap / "run.rrd")  # 50 Hz recording from the first step on
         assert rows >= 50 * (t_kill - times[0] - 1.0), (rows, t_kill, times[0])
+        rrd = _rrd_last_s(ap / "run.rrd")
+        rrd.pop("world/path", None)
+        assert rrd and t_kill - min(rrd.values()) <= 1.0, (t_kill, rrd)
+        assert t_kill - _ulog_last_s(ap / "flight.ulg") <= 1.0   # pyulog reads it
         events = [json.loads(x) for x in
                   (ap / "autopilot_events.jsonl").read_text().splitlines() if x.strip()]
         assert all("kind" in e for e in events)

@@ -217,6 +217,7 @@ def test_cli_fly_and_compare(tmp_path, hand_gains, capsys):
     assert (cmp_dir / "comparison.md").is_file() and (cmp_dir / "rmse.png").is_file()
     for c in CONTROLLERS:
         assert (cmp_dir / c / "telemetry.csv").is_file()
+        assert (cmp_dir / c / "flight.ulg").is_file()
 
 
 @pytest.mark.parametrize("argv, match", [
@@ -225,6 +226,8 @@ def test_cli_fly_and_compare(tmp_path, hand_gains, capsys):
     (["fly", "--gains", "/nonexistent/dir"], "--gains"),
     (["fly", "--fault", "rotor_9z:loss=0.5"], "unknown actuator"),
     (["fly", "--fault", "rotor_1a:loss=150"], "fraction"),
+    (["fly", "--progress", "-1"], "--progress"),
+    (["fly", "--progress", "nan"], "--progress"),
 ])
 def test_cli_bad_input_is_one_line_exit_2(argv, match, capsys):
     from vtolftc.cli import run

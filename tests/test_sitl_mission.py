@@ -91,6 +91,37 @@ def _check_ulog(path, rec):
     assert any("mission complete" in x for x in texts), texts[-5:]
     bat = log.get_dataset("battery_status").data
     assert bat["remaining"][-1] < bat["remaining"][0]
+    _check_ulog_sensors(log)
+
+
+def _check_ulog_sensors(log):
+    """Flight Review's map, rate and sensor topics, in SITL from HIL_GPS and HIL_SENSOR."""
+    lpos = log.get_dataset("vehicle_local_position").data
+    lat0, lon0, alt0 = lpos["ref_lat"][-1], lpos["ref_lon"][-1], lpos["ref_alt"][-1]
+    gps = log.get_dataset("vehicle_gps_position").data
+    assert np.all(gps["fix_type"] >= 3) and np.all(gps["satellites_used"] >= 6)
+    assert np.all(np.abs(gps["lat"] * 1e-7 - lat0) < 0.02)        # within about 2 km
+    assert np.all(np.abs(gps["lon"] * 1e-7 - lon0) < 0.03)
+    z = np.interp(gps["timestamp"], lpos["timestamp"], lpos["z"])
+    assert np.median(np.abs(gps["alt"] * 1e-3 - (alt0 - z))) < 1.0  # GPS on the estimate
+    glob = log.get_dataset("vehicle_global_position").data
+    assert np.all(np.abs(glob["lat"] - lat0) < 0.02)
+    sc = log.get_dataset("sensor_combined").data
+    first = sc["timestamp"] < sc["timestamp"][0] + 0.5e6         # on the ground, disarmed
+    assert np.allclose(np.mean(sc["accelerometer_m_s2[2]"][first]), -9.81, atol=0.3)
+    w = log.get_dataset("vehicle_angular_velocity").data
+    assert np.max(np.abs(w["xyz[2]"])) > 0.05                     # turns between the legs
+    rs = log.get_dataset("vehicle_rates_setpoint").data
+    assert np.all(np.isfinite(rs["roll"])) and np.max(np.abs(rs["roll"])) > 0.01
+    air = log.get_dataset("vehicle_air_data").data
+    z = np.interp(air["timestamp"], lpos["timestamp"], lpos["z"])
+    assert np.median(np.abs(air["baro_alt_meter"] - (alt0 - z))) < 2.0
+    vt = log.get_dataset("vtol_vehicle_status").data["vehicle_vtol_state"]
+    assert {1, 2, 3, 4} <= set(vt)                                 # MC, both transitions, FW
+    sp = log.get_dataset("position_setpoint_triplet").data
+    assert np.any(np.isfinite(sp["current.lat"]) & (sp["current.valid"] == 1))
+    assert 0 < np.max(log.get_dataset("cpuload").data["load"]) <= 1.0
+    assert "ver_sw" in log.msg_info_dict
 
 
 def test_vtol_mission_with_case1_faults_in_the_first_fixed_wing_leg_over_zenoh(tmp_path):

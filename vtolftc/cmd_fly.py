@@ -110,15 +110,63 @@ def prepare_out(path: Path, overwrite: bool, marker: tuple[str, ...] = ("run.jso
 
 
 def default_observers(run_dir: Path, args: argparse.Namespace) -> list[Any]:
-    """The observers of a run: the run-folder writer (telemetry, events, metrics, plots) and
+    """The observers of a run: the run-folder writer (telemetry, events, metrics, plots), the
+    autopilot's PX4 ULog ``flight.ulg`` (bound to the autopilot by :func:`_bind_autopilot`),
     the rerun recorder (``run.rrd`` always; a live viewer too with ``--rerun``), after the
-    stop-signal check."""
+    stop-signal check, and the progress lines (``--progress``)."""
+    from vtolftc.firmware_sim.autopilot.ulog import ULogWriter
     from vtolftc.telemetry.recording import RerunRecorder
     from vtolftc.telemetry.runfolder import RunFolderWriter
 
-    return [_StopRequest(),
-            RunFolderWriter(run_dir, plots=not getattr(args, "no_plots", False)),
-            RerunRecorder(run_dir / "run.rrd", live=bool(getattr(args, "rerun", False)))]
+    obs: list[Any] = [_StopRequest(),
+                      RunFolderWriter(run_dir, plots=not getattr(args, "no_plots", False)),
+                      ULogWriter(run_dir / "flight.ulg"),
+                      RerunRecorder(run_dir / "run.rrd",
+                                    live=bool(getattr(args, "rerun", False)))]
+    every = float(getattr(args, "progress", 0.0) or 0.0)
+    if every > 0:
+        obs.append(_Progress(every))
+    return obs
+
+
+def _bind_autopilot(observers: list[Any]) -> Any:
+    """``autopilot_setup`` for :func:`~vtolftc.scenario.run_scenario` that hands the run's
+    autopilot to the observers that read it (the ULog writer: parameters, mission, rates)."""
+    def setup(ap: Any) -> None:
+        for obs in observers:
+            bind = getattr(obs, "bind", None)
+            if bind is not None:
+                bind(ap)
+
+    return setup
+
+
+class _Progress:
+    """Run observer printing ``t = <s> s <mode> altitude <m> m airspeed <m/s>`` to stdout
+    (flushed) every ``every_s`` of simulated time: how far the flight got."""
+
+    def __init__(self, every_s: float) -> None:
+        self._period = max(1, round(every_s * 1e6))
+        self._next = 0
+
+    def on_start(self, info: dict[str, Any]) -> None:
+        """Nothing to do."""
+
+    def on_sample(self, sample: Any) -> None:
+        t = int(sample.time_usec)
+        if t < self._next:
+            return
+        self._next = t + self._period
+        st = sample.status
+        print(f"  t = {t * 1e-6:.2f} s  {st.mode.name}  altitude "
+              f"{-float(sample.nav.pos_ned_m[2]):.1f} m  airspeed "
+              f"{float(sample.nav.airspeed_m_s):.1f} m/s", flush=True)
+
+    def on_event(self, time_usec: int, kind: str, text: str) -> None:
+        """Nothing to do."""
+
+    def on_finish(self, metrics: dict[str, Any]) -> None:
+        """Nothing to do."""
 
 
 def _keep_viewer(observers: list[Any]) -> None:
@@ -135,6 +183,10 @@ def _check_common(args: argparse.Namespace) -> None:
 
     if not (math.isfinite(args.duration) and 0.0 < args.duration <= 3600.0):
         raise UsageError(f"--duration {args.duration!r}: expected seconds in (0, 3600]")
+    every = getattr(args, "progress", 0.0)
+    if not (math.isfinite(every) and 0.0 <= every <= 3600.0):
+        raise UsageError(f"--progress {every!r}: expected simulated seconds in [0, 3600] "
+                         "(0: off)")
     delay = getattr(args, "hil_delay_ms", 0.0)
     if not (math.isfinite(delay) and 0.0 <= delay <= 1000.0):
         raise UsageError(f"--hil-delay-ms {delay!r}: expected milliseconds in [0, 1000]")
@@ -163,7 +215,8 @@ def _fly_one(case: str, controller: str, args: argparse.Namespace, run_dir: Path
     observers = default_observers(run_dir, args)
     res = run_scenario(scen, controller, airframe=af, gains_dir=args.gains,
                        observers=observers, info=info, vehicle_options=vopts,
-                       hil_delay_s=getattr(args, "hil_delay_ms", 0.0) * 1e-3)
+                       hil_delay_s=getattr(args, "hil_delay_ms", 0.0) * 1e-3,
+                       autopilot_setup=_bind_autopilot(observers))
     if getattr(args, "rerun", False):
         _keep_viewer(observers)
     return res
@@ -437,6 +490,9 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--airframe", type=Path, default=None,
                    help="airframe TOML file (default: the shipped DS-1)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--progress", type=float, default=0.0, metavar="S",
+                   help="print the simulated time, mode, altitude and airspeed every S "
+                        "simulated seconds (default 0: off)")
 
 
 def _wrap(func: Any) -> Any:

@@ -257,6 +257,9 @@ def main(argv: list[str] | None = None) -> int:
         max_wall_s=args.max_wall, parent_pid=args.parent_pid,
         warmup=None if args.no_warmup else warm)
     proc.spin_s = max(0.0, args.spin_us) * 1e-6
+    for obs in observers:  # the ULog's sensor topics from HIL_SENSOR / HIL_GPS
+        if hasattr(obs, "hil"):
+            obs.hil = proc.hil
 
     def stop(_sig: int, _frame: Any) -> None:
         proc.running = False

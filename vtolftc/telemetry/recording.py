@@ -35,8 +35,16 @@ one ``send_columns`` call per entity and chunk is what keeps the recorder cheap.
 
 Cost: the flight loop only copies a decimated sample (``rate_hz``, default 50 Hz) into
 pre-allocated numpy buffers; the buffers go to rerun in columns (``send_columns``) every
-``chunk_rows`` rows (and at least every ``live_flush_s`` of wall time when live), so an
-interrupted run loses at most one chunk of samples and the file written so far stays readable.
+``file_flush_sim_s`` of simulated time (default 0.5 s; also when ``chunk_rows`` rows are
+buffered, and at least every ``live_flush_s`` of wall time when live). Rerun's file sink
+writes sent columns to the file at once (measured: a SIGKILL right after ``send_columns``
+keeps them); what is logged row by row (events, modes, faults, the path) leaves rerun's
+batcher within 8 ms of wall time (``ChunkBatcherConfig.LOW_LATENCY``), and a background
+thread asks rerun every 0.25 s of wall time to write what it holds. So a killed process
+(SIGKILL) loses about ``file_flush_sim_s`` of simulated time, however fast the simulation runs
+against the wall clock, and the file written so far stays readable. The flown path
+(``world/path``, the whole path so far each time) is re-sent at most every ``path_period_s``
+of simulated time (default 1 s) and at the end.
 ``benchmarks/bench_dashboard.py`` measures the cost per sample.
 """
 
@@ -60,6 +68,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 
 from vtolftc.protocols.hil import N_ACTUATORS
 from vtolftc.telemetry.samples import FlightMode, TelemetrySample
@@ -117,9 +126,13 @@ class RerunRecorder:
     live_flush_s
         with ``live``, the longest wall-clock wait before buffered rows are sent.
     file_flush_s
-        the longest wall-clock wait before buffered rows are sent to the file
-        (rerun's own batcher then writes them within its flush tick), so that a killed
-        process loses at most about this much of the recording.
+        the longest wall-clock wait before buffered rows are sent to the file (for a
+        simulation slower than real time).
+    file_flush_sim_s
+        the longest simulated time buffered before rows are sent and written to the file:
+        a killed process loses about this much (see the module docstring).
+    path_period_s
+        simulated time between two sends of the flown path.
     web_port, grpc_port
         ports of the web viewer and of its data server (live, headless).
     airframe
@@ -129,7 +142,8 @@ class RerunRecorder:
     def __init__(self, path: Path, *, live: bool = False, application_id: str = "vtolftc",
                  recording_id: str | None = None, rate_hz: float = 50.0, chunk_rows: int = 500,
                  live_flush_s: float = 0.2, web_port: int = 9090, grpc_port: int = 9876,
-                 airframe: Any = None, file_flush_s: float = 0.5) -> None:
+                 airframe: Any = None, file_flush_s: float = 0.5,
+                 file_flush_sim_s: float = 0.5, path_period_s: float = 1.0) -> None:
         import rerun as rr
 
         if not rate_hz > 0:
@@ -142,9 +156,17 @@ class RerunRecorder:
         self._period_usec = max(1, round(1e6 / rate_hz))
         self._chunk = max(1, int(chunk_rows))
         self._flush_s = min(live_flush_s, file_flush_s) if live else file_flush_s
+        # rows spanning this much simulated time are sent (the row period short of the span)
+        self._flush_span_usec = max(0, round(file_flush_sim_s * 1e6) - self._period_usec)
+        self._path_period_usec = max(0, round(path_period_s * 1e6))
+        self._last_path_usec: int | None = None
         self._airframe = airframe
+        # rows go out in columns (send_columns, written at once); what is logged row by
+        # row (events, modes, faults, the path) leaves rerun's batcher within 8 ms of wall
+        # time instead of its default 200 ms (seconds of simulated time in a fast run)
         self._rec = rr.RecordingStream(application_id,
-                                       recording_id=recording_id or str(uuid.uuid4()))
+                                       recording_id=recording_id or str(uuid.uuid4()),
+                                       batcher_config=rr.ChunkBatcherConfig.LOW_LATENCY())
         self._server: subprocess.Popen[bytes] | None = None
         sinks: list[Any] = [rr.FileSink(str(self.path))]
         if live:
@@ -155,7 +177,7 @@ class RerunRecorder:
         self._names: tuple[str, ...] = DEFAULT_ACTUATOR_NAMES
         self._started = False
         self._finished = False
-        self._last_logged_usec: int | None = None
+        self._next_usec: int | None = None
         self._last_mode: int | None = None
         self._n_faults = 0
         self._path_pts: list[tuple[float, float, float]] = []
@@ -301,9 +323,11 @@ class RerunRecorder:
         if not self._started:
             self.on_start({})
         t = int(sample.time_usec)
-        if self._last_logged_usec is not None and t - self._last_logged_usec < self._period_usec:
+        if self._next_usec is not None and t < self._next_usec:
             return
-        self._last_logged_usec = t
+        # one row per rate_hz grid cell of simulated time (a step that skipped ahead, as a
+        # loaded SITL autopilot does, still logs the cell it lands in)
+        self._next_usec = (t // self._period_usec + 1) * self._period_usec
         st = sample.status
         nav = sample.nav
         tr = sample.truth
@@ -336,7 +360,8 @@ class RerunRecorder:
         if mode != self._last_mode:
             self._last_mode = mode
             self._log_mode(t, mode)
-        if self._n >= self._chunk or time.monotonic() - self._last_flush_wall > self._flush_s:
+        if (self._n >= self._chunk or t - int(self._t[0]) >= self._flush_span_usec
+                or time.monotonic() - self._last_flush_wall > self._flush_s):
             self._flush()
 
     def on_event(self, time_usec: int, kind: str, text: str) -> None:
@@ -361,7 +386,7 @@ class RerunRecorder:
             return
         self._stop_flusher()
         try:
-            self._flush()
+            self._flush(final=True)
             rr = self._rr
             if metrics:
                 lines = []
@@ -383,12 +408,15 @@ class RerunRecorder:
                 print(f"rerun recorder: on_finish: {exc}", file=sys.stderr)
 
     def _flush_loop(self) -> None:
+        """Every 0.25 s of wall time, ask rerun to write what it holds (events logged while
+        the simulation stands still); a slow write (timeout) is tried again next time."""
         timeout = _flush_takes_timeout(self._rec)
         while not self._flusher_stop.wait(0.25):
             try:
                 self._rec.flush(timeout_sec=1.0) if timeout else self._rec.flush()
-            except Exception:
-                return
+            except Exception:  # a timeout on a loaded machine: keep going
+                if self._finished:
+                    return
 
     def _stop_flusher(self) -> None:
         self._flusher_stop.set()
@@ -431,8 +459,17 @@ class RerunRecorder:
         self._rec.log("mode/state", rr.StateChange(state=name))
         self._rec.log("events", rr.TextLog(f"[mode] {name}", level="INFO"))
 
-    def _flush(self) -> None:
-        """Send the buffered rows to rerun as columns and reset the buffers."""
+    def _scalar_descriptor(self) -> Any:
+        """The component descriptor of ``Scalars:scalars`` (looked up once)."""
+        desc = getattr(self, "_scalar_desc", None)
+        if desc is None:
+            col = next(iter(self._rr.Scalars.columns(scalars=np.zeros(1))))
+            desc = self._scalar_desc = col.component_descriptor()
+        return desc
+
+    def _flush(self, final: bool = False) -> None:
+        """Send the buffered rows to rerun as columns (its file sink writes them at once)
+        and reset the buffers; the path too, every ``path_period_s`` and at the end."""
         n = self._n
         self._last_flush_wall = time.monotonic()
         if n == 0:
@@ -443,11 +480,16 @@ class RerunRecorder:
             times = [rr.TimeColumn(_TIMELINE,
                                    duration=(self._t[:n] * 1000).astype("timedelta64[ns]"))]
 
+            scalar_desc = self._scalar_descriptor()
+
             def scalars(entity: str, values: np.ndarray) -> None:
-                cols = rr.Scalars.columns(scalars=np.ascontiguousarray(values).ravel())
-                if values.ndim == 2:
-                    cols = cols.partition(np.full(n, values.shape[1]))
-                rec.send_columns(entity, indexes=times, columns=cols)
+                # the arrow list column rr.Scalars.columns(...).partition(...) builds, made
+                # directly (a fraction of the cost: this runs for every entity and chunk)
+                width = values.shape[1] if values.ndim == 2 else 1
+                flat = pa.array(np.ascontiguousarray(values, dtype=np.float64).ravel())
+                offsets = pa.array(np.arange(0, (n + 1) * width, width, dtype=np.int32))
+                rec.send_columns(entity, indexes=times, columns=[
+                    _Column(scalar_desc, pa.ListArray.from_arrays(offsets, flat))])
 
             b = self._buf[:n]
             sl = self._sl
@@ -470,8 +512,11 @@ class RerunRecorder:
             q = b[:, sl["q"]]
             rec.send_columns("world/aircraft", indexes=times, columns=rr.Transform3D.columns(
                 translation=b[:, sl["pos"]], quaternion=q[:, [1, 2, 3, 0]]))
-            if self._path_pts:
-                rec.set_time(_TIMELINE, duration=np.timedelta64(int(self._t[n - 1]) * 1000, "ns"))
+            t_last = int(self._t[n - 1])
+            if self._path_pts and (final or self._last_path_usec is None
+                                   or t_last - self._last_path_usec >= self._path_period_usec):
+                self._last_path_usec = t_last
+                rec.set_time(_TIMELINE, duration=np.timedelta64(t_last * 1000, "ns"))
                 pts = self._path_pts
                 if len(pts) > 4000:           # keep a long run's path light
                     pts = [*pts[::math.ceil(len(pts) / 4000)], pts[-1]]
@@ -481,6 +526,24 @@ class RerunRecorder:
             print(f"rerun recorder: flush: {exc}", file=sys.stderr)
         finally:
             self._n = 0
+
+
+class _Column:
+    """A ready component column for ``send_columns``: its descriptor and arrow list array."""
+
+    __slots__ = ("_array", "_desc")
+
+    def __init__(self, desc: Any, array: Any) -> None:
+        self._desc = desc
+        self._array = array
+
+    def component_descriptor(self) -> Any:
+        """The component descriptor."""
+        return self._desc
+
+    def as_arrow_array(self) -> Any:
+        """One list (the scalars of a row) per row."""
+        return self._array
 
 
 def _flush_takes_timeout(rec: Any) -> bool:
