@@ -488,11 +488,13 @@ class Navigator:
                       self._p["VT_B_TRANS_DUR"].value)
             bt.start(self._t, pos, vel, float(nav.airspeed_m_s))
         elif old == FlightMode.BACK_TRANSITION:
-            meas = bt.finish(self._t, pos, vel, self._p["VT_B_DEC_ADAPT"].value)
+            meas = bt.finish(self._t, pos, vel, float(nav.airspeed_m_s),
+                             self._p["VT_B_DEC_ADAPT"].value)
             if meas is not None and math.isfinite(meas.decel_m_s2):
-                self._say(f"back transition: {meas.v0_m_s:.1f} -> {meas.v1_m_s:.1f} m/s over "
-                          f"{meas.distance_m:.0f} m ({meas.decel_m_s2:.2f} m/s^2); "
-                          f"planning with {bt.decel:.2f} m/s^2")
+                self._say(f"back transition: airspeed {meas.airspeed0_m_s:.1f} -> "
+                          f"{meas.airspeed1_m_s:.1f} m/s in {meas.duration_s:.1f} s over "
+                          f"{meas.distance_m:.0f} m ({meas.decel_m_s2:.2f} m/s^2); planning "
+                          f"with {bt.decel:.2f} m/s^2")
 
     def _brake_distance(self, tgt: tuple[float, float], nav: NavState) -> float:
         """Metres before ``tgt`` where a back transition must start to stop over it (ground
@@ -508,7 +510,8 @@ class Navigator:
                       self._p["VT_B_TRANS_DUR"].value)
         a_mc = self.ap.airframe.gravity_m_s2 * math.tan(math.radians(
             self._p["MPC_TILTMAX_AIR"].value))
-        return bt.distance(v_along, float(self.ap._airspeed), self._p["MPC_XY_P"].value, a_mc)
+        v_mc = self._mc_speed if math.isfinite(self._mc_speed) else self._p["MPC_XY_CRUISE"].value
+        return bt.distance(v_along, float(self.ap._airspeed), a_mc, v_mc)
 
     def _on_mode_change(self, old: FlightMode, new: FlightMode, yaw: float) -> None:
         if new == FlightMode.FIXED_WING:
