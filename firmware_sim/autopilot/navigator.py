@@ -19,20 +19,23 @@ reads the references it leaves:
 
 Mission items flown (MAV_CMD): NAV_TAKEOFF (22) and NAV_VTOL_TAKEOFF (84): multicopter climb
 to the item's altitude (AMSL, or relative in the relative frames), VTOL takeoff then aligns
-with its target (or the next waypoint) and transitions; DO_VTOL_TRANSITION (3000, param1 4 to
-fixed-wing, 3 to multicopter; reached when the transition is complete); NAV_WAYPOINT (16):
-fixed-wing L1 segment from the previous waypoint, reached within ``max(param2 or NAV_ACC_RAD,
-L1 distance)`` as PX4's fixed-wing acceptance; multicopter: within param2 or ``NAV_ACC_RAD``
-horizontally and ``NAV_MC_ALT_RAD`` vertically, then param1 seconds of hold; NAV_LOITER_TIME
-(19) / NAV_LOITER_UNLIM (17): circle of param3 (0: ``NAV_LOITER_RAD``, sign = direction:
-positive clockwise) in fixed-wing, position hold in multicopter, the time counted from
-reaching the circle; NAV_DELAY (93); DO_CHANGE_SPEED (178, param2 m/s, -1 no change);
-DO_JUMP (177, param1 target, param2 repeats); DO_LAND_START (189, a marker);
-NAV_RETURN_TO_LAUNCH (20); NAV_LAND (21) and NAV_VTOL_LAND (85): in fixed-wing an approach
-on the line to the land point, the back transition started at the braking distance
-``V^2 / (2 VT_B_DEC_MSS)`` before it, then multicopter to the point, descent
-(``MPC_LAND_SPEED``), touchdown detection and disarm (the autopilot's). Latitude and
-longitude 0 of a land item: land where it is.
+with its target (or the next waypoint) and transitions; DO_VTOL_TRANSITION (3000, param1 4
+to fixed-wing, 3 to multicopter; reached when the transition is complete); NAV_WAYPOINT
+(16): fixed-wing L1 segment from the previous waypoint, reached within ``max(param2 or
+NAV_ACC_RAD, L1 distance)`` as PX4's fixed-wing acceptance (at the braking distance when the
+next item is DO_VTOL_TRANSITION to multicopter, which then holds over the waypoint);
+multicopter: within param2 or ``NAV_ACC_RAD`` horizontally and ``NAV_MC_ALT_RAD``
+vertically, then param1 seconds of hold; NAV_LOITER_TIME (19) / NAV_LOITER_UNLIM (17):
+circle of param3 (0: ``NAV_LOITER_RAD``, sign = direction: positive clockwise) in
+fixed-wing, position hold in multicopter, the time counted from reaching the circle;
+NAV_DELAY (93); DO_CHANGE_SPEED (178, param2 m/s, -1 no change); DO_JUMP (177, param1
+target, param2 repeats); DO_LAND_START (189, a marker); NAV_RETURN_TO_LAUNCH (20); NAV_LAND
+(21) and NAV_VTOL_LAND (85): in fixed-wing an approach on the line to the land point, the
+back transition started at the braking distance before it (:mod:`.backtrans`: from the
+ground speed towards the point, the deceleration expected, ``VT_B_DEC_MSS``, then measured
+in flight, and the multicopter's stop), then multicopter to the point (no faster than it can
+stop), descent (``MPC_LAND_SPEED``), touchdown detection and disarm (the autopilot's).
+Latitude and longitude 0 of a land item: land where it is.
 
 RTL (mode AUTO.RTL, command NAV_RETURN_TO_LAUNCH 20, item 20, or a failsafe): climb to
 ``RTL_RETURN_ALT`` above home if lower, return to the nearest of home and the rally points,
