@@ -245,6 +245,16 @@ def test_transition_from_the_browser(chromium, sitl, tmp_path):
                   "the VTOL state to leave MC")
         after = page.wait(lambda s: s["vtol"] == "FW", 120, "fixed-wing")
         shot_after = page.screenshot_array()
+        # the view followed the aircraft: in the middle of a rendered view, panel shown
+        panel_left = page._call(lambda: page.driver.execute_script(_PANEL_LEFT_JS), 180.0,
+                                "the panel's position")
+        problems = view_problems(shot_after, panel_left)
+        deadline = time.monotonic() + 240.0
+        while problems and time.monotonic() < deadline:
+            time.sleep(1.0)
+            shot_after = page.screenshot_array()
+            problems = view_problems(shot_after, panel_left)
+        assert not problems, problems
         path = page.screenshot(tmp_path / "dashboard_after_transition.png")
         print(f"\nscreenshot: {path}")
         if os.environ.get("VTOLFTC_ARTIFACTS"):          # CI: keep it beyond pytest's tmp
