@@ -181,3 +181,20 @@ def test_rtl_from_fixed_wing_lands_at_home_without_a_leg_back(wind_n):
     print(out)
     assert over < 10.0 and landed < 10.0, out
     assert t[land] - t[bt_end] < 25.0, out
+
+
+def test_multicopter_carrot_is_no_faster_than_it_can_stop():
+    """The navigator's multicopter target leads by speed / MPC_XY_P, the speed capped by
+    MPC_XY_CRUISE far out and by sqrt(2 a d) near the point, a = g tan(MPC_TILTMAX_AIR) / 2
+    (the position loop alone would ask MPC_XY_P d, more than the tilt limit can brake)."""
+    ap = Autopilot(controller="gs-shif")
+    kp = ap.params.get("MPC_XY_P")
+    a = 0.5 * ap.airframe.gravity_m_s2 * math.tan(math.radians(ap.params.get(
+        "MPC_TILTMAX_AIR")))
+    nav = NavState(0, np.array([1.0, 0, 0, 0]), np.zeros(3), np.array([0.0, 0.0, -30.0]),
+                   np.zeros(3), 0.0)
+    ap.navigator._mc_goto((100.0, 0.0), nav)
+    assert ap._hold_ne[0] == pytest.approx(ap.params.get("MPC_XY_CRUISE") / kp)
+    ap.navigator._mc_goto((4.0, 0.0), nav)
+    assert ap._hold_ne[0] == pytest.approx(math.sqrt(2 * a * 4.0) / kp)
+    assert ap._hold_ne[0] < 4.0 and ap._hold_locked
