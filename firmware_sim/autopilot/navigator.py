@@ -126,7 +126,7 @@ NAV_PARAMS: tuple[tuple[str, float, ParamType, float, float, str], ...] = (
     ("MPC_XY_CRUISE", 5.0, ParamType.REAL32, 0.5, 20.0, "multicopter mission speed, m/s"),
     ("RTL_RETURN_ALT", 30.0, ParamType.REAL32, 5.0, 500.0, "RTL return altitude above home, m"),
     ("VT_B_DEC_MSS", 0.5, ParamType.REAL32, 0.1, 10.0,
-     "expected back-transition ground deceleration (where it starts before its point), m/s^2"),
+     "expected back-transition deceleration per distance flown (where it starts), m/s^2"),
     ("VT_B_DEC_ADAPT", 0.5, ParamType.REAL32, 0.0, 1.0,
      "weight of each measured back transition in the deceleration estimate (0: parameter)"),
     ("MIS_YAW_ERR", 5.0, ParamType.REAL32, 1.0, 90.0,
