@@ -5,7 +5,10 @@ autopilot as a ground station through :class:`vtolftc.gcs.client.GroundStation` 
 default, or any link URL). The page shows
 
 - the aircraft in 3-D (fuselage, wing, booms, rotors and pushers from the airframe file) at
-  its attitude and position, with the path it flew;
+  its attitude and position, with the path it flew; the view follows it: the aircraft stays
+  at the scene's origin and the world (ground grid, path, mission) moves the other way, so
+  every browser's camera, wherever the user turned it, keeps the aircraft in frame without
+  a camera round trip to the browser (which a loaded machine delays by seconds);
 - live traces of roll/pitch/yaw, altitude and airspeed (uPlot);
 - mode, armed state, VTOL state, airspeed, altitude and the link state (heartbeat age);
 - actuator bars: the eight lift rotors laid out as on the airframe (top view), the pushers and
@@ -36,13 +39,27 @@ import numpy as np
 from vtolftc.dashboard.model import DashboardModel, DashboardView
 from vtolftc.telemetry.geometry import aircraft_geometry, rotor_grid
 
-__all__ = ["FAULT_GROUPS", "Dashboard"]
+__all__ = ["FAULT_GROUPS", "SKY_HORIZON_RGB", "SKY_TOP_RGB", "Dashboard", "sky_gradient"]
 
 FAULT_GROUPS = ("ailerons", "rudders", "surfaces", "lift_rotors", "pushers")
 """Group names offered in the fault-injection dropdown after the single actuators."""
 
 _RGB_ROTOR = (240, 120, 40)
 _RGB_PUSHER = (60, 200, 90)
+
+
+SKY_TOP_RGB = (118, 166, 219)
+SKY_HORIZON_RGB = (214, 228, 240)
+
+
+def sky_gradient(rows: int = 64) -> np.ndarray:
+    """The 3-D view's background: (rows, 2, 3) uint8, :data:`SKY_TOP_RGB` at the top row
+    fading linearly to :data:`SKY_HORIZON_RGB` at the bottom (stretched over the view)."""
+    f = np.linspace(0.0, 1.0, rows)[:, None, None]
+    top = np.asarray(SKY_TOP_RGB, dtype=float)
+    bottom = np.asarray(SKY_HORIZON_RGB, dtype=float)
+    img = top + f * (bottom - top)
+    return np.repeat(np.round(img), 2, axis=1).astype(np.uint8)
 
 
 def _quat_from_z_to(axis: np.ndarray) -> tuple[float, float, float, float]:
@@ -151,8 +168,14 @@ class Dashboard:
     def _build_scene(self) -> None:
         sc = self.server.scene
         sc.set_up_direction("+z")
-        sc.add_grid("/ground", width=400.0, height=400.0, cell_size=5.0, section_size=25.0,
-                    plane="xy")
+        # a sky behind the scene: no part of the view is empty white (above the horizon the
+        # grid alone left a blank band), and a view not yet rendered is told from one rendered
+        sc.set_background_image(sky_gradient(), format="png")
+        # the world, drawn relative to the aircraft (see the module docstring)
+        self._world = sc.add_frame("/world", show_axes=False)
+        self._grid = sc.add_grid("/world/ground", width=400.0, height=400.0, cell_size=5.0,
+                                 section_size=25.0, plane="xy")
+        self._grid_at = (0.0, 0.0)
         self._aircraft = sc.add_frame("/aircraft", show_axes=False)
         boxes, discs = aircraft_geometry(self.airframe)
         for b in boxes:
@@ -173,7 +196,7 @@ class Dashboard:
         self._mission_current = None
 
         # where a new browser's camera starts (behind-left of the aircraft, above it); the
-        # update loop then moves every camera with the aircraft, keeping the user's offset
+        # aircraft stays at the origin, so the camera keeps it in view
         cam = self.server.initial_camera
         cam.position = (-8.0, -8.0, 5.0)
         cam.look_at = (0.0, 0.0, 0.0)
@@ -323,13 +346,13 @@ class Dashboard:
             pose = np.concatenate([view.pose_position, view.pose_wxyz])
             if self._last_pose is None or float(np.max(np.abs(pose - self._last_pose))) > 1e-3:
                 self._last_pose = pose        # a scene change costs the browser a render
-                self._aircraft.position = tuple(view.pose_position)
+                self._place_world(view.pose_position)
                 self._aircraft.wxyz = tuple(view.pose_wxyz)
             if view.path_changed and len(view.path) >= 2:
                 seg = np.stack([view.path[:-1], view.path[1:]], axis=1).astype(np.float32)
                 # re-created rather than resized: a growing point buffer is not redrawn whole
                 self._path = self.server.scene.add_line_segments(
-                    "/path", points=seg, colors=(250, 180, 20), thickness=3.0,
+                    "/world/path", points=seg, colors=(250, 180, 20), thickness=3.0,
                     thickness_units="screen")
             self._draw_mission(view)
             tr = view.traces
@@ -337,7 +360,6 @@ class Dashboard:
                 self._plot_att.data = (tr["t"], tr["roll"], tr["pitch"], tr["yaw"])
                 self._plot_alt.data = (tr["t"], tr["altitude"])
                 self._plot_air.data = (tr["t"], tr["airspeed"])
-        self._follow(view)
         self.updates += 1
         return view
 
@@ -372,7 +394,7 @@ class Dashboard:
             pts, _ = self._mission_pts
             if len(pts) >= 2:
                 seg = np.stack([pts[:-1], pts[1:]], axis=1).astype(np.float32)
-                sc.add_line_segments("/mission", points=seg, colors=(40, 120, 250),
+                sc.add_line_segments("/world/mission", points=seg, colors=(40, 120, 250),
                                      thickness=2.0, thickness_units="screen")
         if self._mission_pts is not None and view.mission_seq != self._mission_seq:
             self._mission_seq = view.mission_seq
@@ -380,21 +402,18 @@ class Dashboard:
             nxt = [k for k, s in enumerate(seqs) if s >= view.mission_seq]
             if nxt:
                 self._mission_current = sc.add_icosphere(
-                    "/mission_current", radius=3.0, color=(220, 40, 40),
+                    "/world/mission_current", radius=3.0, color=(220, 40, 40),
                     position=tuple(float(x) for x in pts[nxt[0]]))
 
-    def _follow(self, view: DashboardView) -> None:
-        """Keep each browser's camera on the aircraft, keeping the user's viewing offset
-        (viser's camera.position setter translates the camera and its look-at together)."""
-        target = np.asarray(view.pose_position, dtype=float)
-        for client in self.server.get_clients().values():
-            cam = client.camera
-            try:
-                delta = target - np.asarray(cam.look_at, dtype=float)
-                if float(np.linalg.norm(delta)) > 0.05:
-                    cam.position = tuple(np.asarray(cam.position, dtype=float) + delta)
-            except Exception:  # camera not reported yet
-                continue
+    def _place_world(self, aircraft_display: np.ndarray) -> None:
+        """Move the world so the aircraft (display frame, m) is at the scene's origin; the
+        400 m ground grid moves in whole sections (25 m) to stay under the aircraft."""
+        p = np.asarray(aircraft_display, dtype=float)
+        self._world.position = (-float(p[0]), -float(p[1]), -float(p[2]))
+        at = (round(float(p[0]) / 25.0) * 25.0, round(float(p[1]) / 25.0) * 25.0)
+        if at != self._grid_at:
+            self._grid_at = at
+            self._grid.position = (at[0], at[1], 0.0)
 
     def _update_loop(self) -> None:
         period = 1.0 / self.rate_hz

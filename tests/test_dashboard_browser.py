@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 from support.browser import find_chromedriver, find_chromium
 
 pytestmark = pytest.mark.slow
@@ -71,6 +72,150 @@ def _scene_change(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.mean(d > 30))
 
 
+# -- what a screenshot of the dashboard must show -------------------------------------------
+_PANEL_LEFT_JS = ("const e = document.getElementById('vtolftc-status');"
+                  "return e ? e.getBoundingClientRect().left : null;")
+_TOAST_W = 330     # the "software WebGL" notice at the top left of the view (not the scene)
+
+
+def _rotor_pixels(img: np.ndarray) -> np.ndarray:
+    """Mask of the rotor discs' colour (orange, lit, over the sky); not the path's yellow
+    (blue channel near 0), not the grey grid, not the blue sky."""
+    r, g, b = (img[..., k].astype(int) for k in range(3))
+    return (r >= 190) & (g >= 140) & (g <= 210) & (b >= 80) & (b <= 170) & (r - b >= 50)
+
+
+def view_problems(img: np.ndarray, panel_left: float) -> list[str]:
+    """What is wrong with a screenshot of the dashboard (empty list: nothing).
+
+    - the 3-D view, in six horizontal bands (right of the notice, left of the control panel):
+      no band may be mostly blank white (an unrendered canvas; the empty band above the
+      horizon before the sky);
+    - the aircraft inside the frame: at least 40 pixels of rotor colour, centred in the
+      middle half of the view (the camera looks at the aircraft);
+    - the control panel not blank (its pixels vary).
+    """
+    h, w, _ = img.shape
+    x1 = int(panel_left) - 10
+    out: list[str] = []
+    view = img[:, _TOAST_W:x1].astype(int)
+    for k in range(6):
+        band = view[k * h // 6:(k + 1) * h // 6]
+        white = float(np.mean(np.all(band > 240, axis=2)))
+        if white > 0.5:
+            out.append(f"band {k} of the 3-D view is {100 * white:.0f} % blank white")
+    m = _rotor_pixels(img[:, :x1])
+    n = int(m.sum())
+    if n < 40:
+        out.append(f"aircraft not in the frame ({n} rotor pixels)")
+    else:
+        ys, xs = np.nonzero(m)
+        cy, cx = float(ys.mean()), float(xs.mean())
+        if not (0.25 * w < cx < 0.75 * w and 0.25 * h < cy < 0.75 * h):
+            out.append(f"aircraft off centre at ({cx:.0f}, {cy:.0f}) px in {w}x{h}")
+    panel = img[:, x1 + 20:].astype(float)
+    if panel.size == 0 or float(panel.std()) < 10.0:
+        out.append("control panel blank")
+    return out
+
+
+def test_view_problems_tells_good_from_bad_screenshots():
+    """The screenshot checks against synthetic screenshots (no browser)."""
+    from vtolftc.dashboard.web import sky_gradient
+
+    h, w, panel = 577, 1100, 700
+    sky = np.asarray(Image.fromarray(sky_gradient()).resize((w, h))).copy()
+    sky[:, panel:] = 255
+    sky[40:60, panel + 30:] = (20, 150, 60)                # the panel's status line
+    good = sky.copy()
+    good[270:300, 530:570] = (225, 185, 130)               # rotor discs in the middle
+    assert view_problems(good, panel) == []
+    blank = np.full_like(good, 255)
+    blank[40:60, panel + 30:] = (20, 150, 60)
+    probs = view_problems(blank, panel)
+    assert any("band 0" in p for p in probs) and any("not in the frame" in p for p in probs)
+    off = sky.copy()
+    off[10:40, 600:640] = (225, 185, 130)                  # aircraft at the top edge
+    assert any("off centre" in p for p in view_problems(off, panel))
+    band = good.copy()
+    band[: h // 6, :panel] = 255                          # white above the horizon
+    assert view_problems(band, panel) == ["band 0 of the 3-D view is 100 % blank white"]
+    nopanel = good.copy()
+    nopanel[:, panel:] = 250
+    assert view_problems(nopanel, panel) == ["control panel blank"]
+
+
+@pytest.fixture
+def far_flight(ds1):
+    """The dashboard watching the kinematic stand-in autopilot (fast, no SITL)."""
+    from support.fake_autopilot import FakeAutopilot
+
+    from vtolftc.dashboard.web import Dashboard
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        udp = int(s.getsockname()[1])
+    dash = Dashboard(f"udp-server://127.0.0.1:{udp}", port=_free_tcp_port(), rate_hz=10.0,
+                     airframe=ds1)
+    ap = None
+    try:
+        ap = FakeAutopilot(f"udp-client://127.0.0.1:{udp}", speed=4.0)
+        yield dash, ap
+    finally:
+        if ap is not None:
+            ap.close()
+        dash.close()
+
+
+def _until(pred, timeout_s: float, what: str):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        v = pred()
+        if v:
+            return v
+        time.sleep(0.2)
+    raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}")
+
+
+def test_view_follows_the_aircraft_far_from_home(chromium, far_flight, tmp_path):
+    """Fixed-wing, hundreds of metres from home: every screenshot shows the aircraft in the
+    middle of a rendered 3-D view (sky above the horizon, no blank band) and the panel."""
+    from support.browser import DashboardPage
+
+    dash, ap = far_flight
+    with DashboardPage(dash.page_url, width=1100, height=720, max_fps=10.0) as page:
+        page.wait(lambda s: s["link"] == "ok", 180, "the link")
+        _until(lambda: dash.gs.arm().accepted, 60, "arming")
+        _until(lambda: dash.gs.takeoff(30.0).accepted, 60, "the takeoff")
+        _until(lambda: ap.stage == "hover", 120, "the hover")
+        _until(lambda: dash.gs.transition("fw").accepted, 60, "the transition")
+        page.wait(lambda s: float(s["north"]) > 300.0 and s["vtol"] == "FW", 240,
+                  "the aircraft 300 m north in the page")
+        panel_left = page._call(lambda: page.driver.execute_script(_PANEL_LEFT_JS), 180.0,
+                                "the panel's position")
+        assert panel_left is not None and 500 < panel_left < 1100, panel_left
+        # the first rendered frame may take a while on a loaded machine; after that, every
+        # screenshot must pass
+        problems: list[str] = []
+        deadline = time.monotonic() + 240.0
+        while time.monotonic() < deadline:
+            problems = view_problems(page.screenshot_array(), panel_left)
+            if not problems:
+                break
+            time.sleep(1.0)
+        assert not problems, problems
+        north0 = float(page.status()["north"])
+        for k in range(3):
+            time.sleep(2.0)
+            img = page.screenshot_array()
+            Image.fromarray(img).save(tmp_path / f"far_{k}.png")
+            assert view_problems(img, panel_left) == [], (k, view_problems(img, panel_left))
+        north1 = float(_until(page.status, 60, "the status")["north"])
+        print(f"\nfollowed the aircraft from {north0:.0f} m to {north1:.0f} m north: "
+              f"{tmp_path}")
+        assert north1 > north0 + 10.0                     # it kept flying away meanwhile
+
+
 def test_transition_from_the_browser(chromium, sitl, tmp_path):
     from support.browser import DashboardPage
 
@@ -103,6 +248,16 @@ def test_transition_from_the_browser(chromium, sitl, tmp_path):
                   "the VTOL state to leave MC")
         after = page.wait(lambda s: s["vtol"] == "FW", 120, "fixed-wing")
         shot_after = page.screenshot_array()
+        # the view followed the aircraft: in the middle of a rendered view, panel shown
+        panel_left = page._call(lambda: page.driver.execute_script(_PANEL_LEFT_JS), 180.0,
+                                "the panel's position")
+        problems = view_problems(shot_after, panel_left)
+        deadline = time.monotonic() + 240.0
+        while problems and time.monotonic() < deadline:
+            time.sleep(1.0)
+            shot_after = page.screenshot_array()
+            problems = view_problems(shot_after, panel_left)
+        assert not problems, problems
         path = page.screenshot(tmp_path / "dashboard_after_transition.png")
         print(f"\nscreenshot: {path}")
         if os.environ.get("VTOLFTC_ARTIFACTS"):          # CI: keep it beyond pytest's tmp

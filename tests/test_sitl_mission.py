@@ -131,3 +131,29 @@ def test_vtol_mission_with_case1_faults_in_the_first_fixed_wing_leg_over_zenoh(t
     assert rec["injected"]
     errs = _check(rec)
     print("cross-track per leg with faults:", errs)
+
+
+def test_two_back_transitions_stop_over_their_points_over_udp(tmp_path):
+    """The mission with two back transitions (:func:`back_transition_mission`) uploaded and
+    flown over UDP: the first stops over its waypoint, the second lands within 10 m of home,
+    neither flies past its point and back (planned from the deceleration achieved)."""
+    from vtolftc.mission_run import BT_LAST_WP_NE, BT_STOP_NE, back_transition_mission
+
+    items = back_transition_mission()
+    rec = fly_sitl_mission(tmp_path, items=items)
+    assert rec["upload_ack"] == 0
+    assert rec["reached"] == list(range(len(items))), rec["reached"]
+    pos = np.array(rec["pos"])[:, :2]
+    seq = np.array(rec["seq"])
+    # first stop, approached from the south: never north of the waypoint by 10 m or more
+    stop = pos[np.isin(seq, (3, 4))]
+    over1 = float(np.max(stop[:, 0])) - BT_STOP_NE[0]
+    # the landing, approached from the last waypoint
+    u = -np.asarray(BT_LAST_WP_NE) / np.hypot(*BT_LAST_WP_NE)
+    over2 = float(np.max(pos[seq == 7] @ u))
+    landed = float(np.hypot(*pos[-1]))
+    print(f"overshoot at the stop {over1:.1f} m, at the landing {over2:.1f} m, "
+          f"landed {landed:.1f} m from home")
+    assert over1 < 10.0 and over2 < 10.0
+    assert landed < 10.0
+    assert -rec["pos"][-1][2] < 0.5

@@ -39,6 +39,7 @@ from vtolftc.firmware_sim.autopilot.mission import (
     FRAME_MISSION,
     NAV_LAND,
     NAV_TAKEOFF,
+    NAV_VTOL_LAND,
     NAV_WAYPOINT,
     MissionItem,
 )
@@ -47,7 +48,8 @@ from vtolftc.firmware_sim.vehicle.faults import Fault
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import EARTH_RADIUS_M, Home
 
-__all__ = ["MissionRun", "path_errors", "rectangle_mission", "run_mission"]
+__all__ = ["MissionRun", "back_transition_mission", "path_errors", "rectangle_mission",
+           "run_mission"]
 
 NAN = math.nan
 
@@ -79,6 +81,41 @@ def rectangle_mission(home: Home | None = None, alt: float = 30.0, length: float
     return items
 
 
+BT_STOP_NE = (500.0, 0.0)
+"""Where :func:`back_transition_mission` stops the first time (m north, east of home)."""
+BT_LAST_WP_NE = (300.0, 700.0)
+"""Its last fixed-wing waypoint, the start of the landing approach to home."""
+
+
+def back_transition_mission(home: Home | None = None, alt: float = 30.0) -> list[MissionItem]:
+    """A mission with two back transitions, each to stop over a point.
+
+    NAV_TAKEOFF to ``alt``, DO_VTOL_TRANSITION to fixed-wing, NAV_WAYPOINT 500 m north,
+    DO_VTOL_TRANSITION to multicopter (the back transition stops over that waypoint), a
+    multicopter NAV_WAYPOINT there with 3 s of hold, DO_VTOL_TRANSITION to fixed-wing,
+    NAV_WAYPOINT at :data:`BT_LAST_WP_NE` and NAV_VTOL_LAND at home (the approach from that
+    waypoint, the back transition at the braking distance). Altitudes relative to home.
+    """
+    home = home or Home()
+    rel = FRAME_GLOBAL_RELATIVE_ALT_INT
+    hx, hy = _latlon(home, 0.0, 0.0)
+    ax, ay = _latlon(home, *BT_STOP_NE)
+    bx, by = _latlon(home, *BT_LAST_WP_NE)
+
+    def trans(seq: int, to: float) -> MissionItem:
+        return MissionItem(seq, FRAME_MISSION, DO_VTOL_TRANSITION, 1, to, 0.0, 0.0, 0.0, 0, 0,
+                           0.0)
+
+    return [MissionItem(0, rel, NAV_TAKEOFF, 1, 0.0, 0.0, 0.0, NAN, hx, hy, alt),
+            trans(1, 4.0),
+            MissionItem(2, rel, NAV_WAYPOINT, 1, 0.0, 0.0, 0.0, NAN, ax, ay, alt),
+            trans(3, 3.0),
+            MissionItem(4, rel, NAV_WAYPOINT, 1, 3.0, 0.0, 0.0, NAN, ax, ay, alt),
+            trans(5, 4.0),
+            MissionItem(6, rel, NAV_WAYPOINT, 1, 0.0, 0.0, 0.0, NAN, bx, by, alt),
+            MissionItem(7, rel, NAV_VTOL_LAND, 1, 0.0, 0.0, 0.0, NAN, hx, hy, 0.0)]
+
+
 @dataclass
 class MissionRun:
     """What an in-process mission flight gave (times in simulated seconds)."""
@@ -107,17 +144,19 @@ class MissionRun:
 def run_mission(items: Sequence[MissionItem], *, airframe: Airframe | None = None,
                 controller: str = "gs-shif", timeout_s: float = 400.0,
                 faults_at_item: tuple[int, float, Sequence[Fault]] | None = None,
-                sample_every: int = 25) -> MissionRun:
+                sample_every: int = 25,
+                wind_ned_m_s: Sequence[float] = (0.0, 0.0, 0.0)) -> MissionRun:
     """Fly ``items`` in-process (see the module docstring).
 
     ``faults_at_item`` = (seq, delay_s, faults): the faults act ``delay_s`` after item ``seq``
     became current (their own start times are replaced). Samples every ``sample_every``
-    control steps (default 10 Hz). The vehicle's battery (:mod:`.firmware_sim.vehicle.battery`)
+    control steps (default 10 Hz); ``wind_ned_m_s``: a steady wind (m/s, NED, the air's
+    velocity). The vehicle's battery (:mod:`.firmware_sim.vehicle.battery`)
     feeds the autopilot's battery monitor at 5 Hz, as the power module over the HIL link.
     """
     af = airframe if airframe is not None else load_airframe()
     ap = Autopilot(af, controller=controller)
-    veh = Vehicle(af)
+    veh = Vehicle(af, wind_ned_m_s=wind_ned_m_s)
     battery = BatteryModel(rho=af.air_density_kg_m3)
     bat_rows: list[tuple[float, float, float, float]] = []
     home = veh.sensor_model.home

@@ -19,20 +19,23 @@ reads the references it leaves:
 
 Mission items flown (MAV_CMD): NAV_TAKEOFF (22) and NAV_VTOL_TAKEOFF (84): multicopter climb
 to the item's altitude (AMSL, or relative in the relative frames), VTOL takeoff then aligns
-with its target (or the next waypoint) and transitions; DO_VTOL_TRANSITION (3000, param1 4 to
-fixed-wing, 3 to multicopter; reached when the transition is complete); NAV_WAYPOINT (16):
-fixed-wing L1 segment from the previous waypoint, reached within ``max(param2 or NAV_ACC_RAD,
-L1 distance)`` as PX4's fixed-wing acceptance; multicopter: within param2 or ``NAV_ACC_RAD``
-horizontally and ``NAV_MC_ALT_RAD`` vertically, then param1 seconds of hold; NAV_LOITER_TIME
-(19) / NAV_LOITER_UNLIM (17): circle of param3 (0: ``NAV_LOITER_RAD``, sign = direction:
-positive clockwise) in fixed-wing, position hold in multicopter, the time counted from
-reaching the circle; NAV_DELAY (93); DO_CHANGE_SPEED (178, param2 m/s, -1 no change);
-DO_JUMP (177, param1 target, param2 repeats); DO_LAND_START (189, a marker);
-NAV_RETURN_TO_LAUNCH (20); NAV_LAND (21) and NAV_VTOL_LAND (85): in fixed-wing an approach
-on the line to the land point, the back transition started at the braking distance
-``V^2 / (2 VT_B_DEC_MSS)`` before it, then multicopter to the point, descent
-(``MPC_LAND_SPEED``), touchdown detection and disarm (the autopilot's). Latitude and
-longitude 0 of a land item: land where it is.
+with its target (or the next waypoint) and transitions; DO_VTOL_TRANSITION (3000, param1 4
+to fixed-wing, 3 to multicopter; reached when the transition is complete); NAV_WAYPOINT
+(16): fixed-wing L1 segment from the previous waypoint, reached within ``max(param2 or
+NAV_ACC_RAD, L1 distance)`` as PX4's fixed-wing acceptance (at the braking distance when the
+next item is DO_VTOL_TRANSITION to multicopter, which then holds over the waypoint);
+multicopter: within param2 or ``NAV_ACC_RAD`` horizontally and ``NAV_MC_ALT_RAD``
+vertically, then param1 seconds of hold; NAV_LOITER_TIME (19) / NAV_LOITER_UNLIM (17):
+circle of param3 (0: ``NAV_LOITER_RAD``, sign = direction: positive clockwise) in
+fixed-wing, position hold in multicopter, the time counted from reaching the circle;
+NAV_DELAY (93); DO_CHANGE_SPEED (178, param2 m/s, -1 no change); DO_JUMP (177, param1
+target, param2 repeats); DO_LAND_START (189, a marker); NAV_RETURN_TO_LAUNCH (20); NAV_LAND
+(21) and NAV_VTOL_LAND (85): in fixed-wing an approach on the line to the land point, the
+back transition started at the braking distance before it (:mod:`.backtrans`: from the
+ground speed towards the point, the deceleration expected, ``VT_B_DEC_MSS``, then measured
+in flight, and the multicopter's stop), then multicopter to the point (no faster than it can
+stop), descent (``MPC_LAND_SPEED``), touchdown detection and disarm (the autopilot's).
+Latitude and longitude 0 of a land item: land where it is.
 
 RTL (mode AUTO.RTL, command NAV_RETURN_TO_LAUNCH 20, item 20, or a failsafe): climb to
 ``RTL_RETURN_ALT`` above home if lower, return to the nearest of home and the rally points,
@@ -53,6 +56,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from vtolftc.firmware_sim.autopilot.backtrans import BackTransitionPlanner
 from vtolftc.firmware_sim.autopilot.guidance import L1Guidance, roll_for_lateral_accel, wrap_pi
 from vtolftc.firmware_sim.autopilot.interface import (
     EARTH_RADIUS_M,
@@ -121,8 +125,10 @@ NAV_PARAMS: tuple[tuple[str, float, ParamType, float, float, str], ...] = (
     ("FW_AIRSPD_MAX", 22.0, ParamType.REAL32, 10.0, 40.0, "fixed-wing max airspeed, m/s"),
     ("MPC_XY_CRUISE", 5.0, ParamType.REAL32, 0.5, 20.0, "multicopter mission speed, m/s"),
     ("RTL_RETURN_ALT", 30.0, ParamType.REAL32, 5.0, 500.0, "RTL return altitude above home, m"),
-    ("VT_B_DEC_MSS", 2.0, ParamType.REAL32, 0.5, 10.0,
-     "back-transition deceleration (sets where it starts before a land point), m/s^2"),
+    ("VT_B_DEC_MSS", 0.5, ParamType.REAL32, 0.1, 10.0,
+     "expected back-transition deceleration per distance flown (where it starts), m/s^2"),
+    ("VT_B_DEC_ADAPT", 0.5, ParamType.REAL32, 0.0, 1.0,
+     "weight of each measured back transition in the deceleration estimate (0: parameter)"),
     ("MIS_YAW_ERR", 5.0, ParamType.REAL32, 1.0, 90.0,
      "heading error accepted before a mission front transition, deg"),
 )
@@ -195,6 +201,11 @@ class Navigator:
         self._last_mode = FlightMode.IDLE
         self.lateral_accel = 0.0
         self.cross_track_m = math.nan
+        self.backtrans = BackTransitionPlanner(self._p["VT_B_DEC_MSS"].value,
+                                               self._p["VT_B_TRANS_ARSP"].value
+                                               if "VT_B_TRANS_ARSP" in ap.params else 5.0)
+        """where back transitions start (braking distance) and what they achieved"""
+        self._bt_hold: tuple[float, float] | None = None
 
     # ------------------------------------------------------------------ geometry
     def set_home(self, lat_deg: float, lon_deg: float, alt_m: float) -> None:
@@ -340,6 +351,7 @@ class Navigator:
         self.goal = None
         self._fw = None
         self.phase = ""
+        self._bt_hold = None
 
     def _enter_hold(self, why: str = "") -> None:
         self._leave_auto(NavMode.LOITER)
@@ -444,6 +456,7 @@ class Navigator:
         mode = m.mode
         self._t = int(nav.time_usec)
         if mode != self._last_mode:
+            self._measure_back_transition(self._last_mode, mode, nav)
             self._on_mode_change(self._last_mode, mode, yaw)
             self._last_mode = mode
         self._fw = None
@@ -466,6 +479,42 @@ class Navigator:
         elif self.nav_mode == NavMode.LOITER and mode == FlightMode.HOVER \
                 and self._loiter_center is not None and math.isfinite(self._mc_speed):
             self._mc_goto(self._loiter_center, nav)
+
+    def _measure_back_transition(self, old: FlightMode, new: FlightMode,
+                                 nav: NavState) -> None:
+        """Start and end of every back transition: the planner measures what it achieved."""
+        bt = self.backtrans
+        pos = (float(nav.pos_ned_m[0]), float(nav.pos_ned_m[1]))
+        vel = (float(nav.vel_ned_m_s[0]), float(nav.vel_ned_m_s[1]))
+        if new == FlightMode.BACK_TRANSITION:
+            bt.set_params(self._p["VT_B_DEC_MSS"].value, self._p["VT_B_TRANS_ARSP"].value,
+                      self._p["VT_B_TRANS_DUR"].value)
+            bt.start(self._t, pos, vel, float(nav.airspeed_m_s))
+        elif old == FlightMode.BACK_TRANSITION:
+            meas = bt.finish(self._t, pos, vel, float(nav.airspeed_m_s),
+                             self._p["VT_B_DEC_ADAPT"].value)
+            if meas is not None and math.isfinite(meas.decel_m_s2):
+                self._say(f"back transition: airspeed {meas.airspeed0_m_s:.1f} -> "
+                          f"{meas.airspeed1_m_s:.1f} m/s in {meas.duration_s:.1f} s over "
+                          f"{meas.distance_m:.0f} m ({meas.decel_m_s2:.2f} m/s^2); planning "
+                          f"with {bt.decel:.2f} m/s^2")
+
+    def _brake_distance(self, tgt: tuple[float, float], nav: NavState) -> float:
+        """Metres before ``tgt`` where a back transition must start to stop over it (ground
+        speed towards it, the planner's deceleration, see :mod:`.backtrans`)."""
+        pos = (float(nav.pos_ned_m[0]), float(nav.pos_ned_m[1]))
+        dn, de = tgt[0] - pos[0], tgt[1] - pos[1]
+        d = math.hypot(dn, de)
+        if d < 1e-6:
+            return 0.0
+        v_along = (float(nav.vel_ned_m_s[0]) * dn + float(nav.vel_ned_m_s[1]) * de) / d
+        bt = self.backtrans
+        bt.set_params(self._p["VT_B_DEC_MSS"].value, self._p["VT_B_TRANS_ARSP"].value,
+                      self._p["VT_B_TRANS_DUR"].value)
+        a_mc = self.ap.airframe.gravity_m_s2 * math.tan(math.radians(
+            self._p["MPC_TILTMAX_AIR"].value))
+        v_mc = self._mc_speed if math.isfinite(self._mc_speed) else self._p["MPC_XY_CRUISE"].value
+        return bt.distance(v_along, float(self.ap._airspeed), a_mc, v_mc)
 
     def _on_mode_change(self, old: FlightMode, new: FlightMode, yaw: float) -> None:
         if new == FlightMode.FIXED_WING:
@@ -552,6 +601,14 @@ class Navigator:
                 self._loiter_center = (float(nav.pos_ned_m[0]), float(nav.pos_ned_m[1]))
             self._fw = ("loiter", self._loiter_center, self._p["NAV_LOITER_RAD"].value, 1)
 
+    def _back_transition_next(self, seq: int) -> bool:
+        """True when mission item ``seq + 1`` is DO_VTOL_TRANSITION to multicopter."""
+        items = self.store.mission
+        if self.nav_mode != NavMode.MISSION or not 0 <= seq + 1 < len(items):
+            return False
+        nxt = items[seq + 1]
+        return nxt.command == DO_VTOL_TRANSITION and nxt.param1 == 3.0
+
     def _next_nav_goal(self, seq: int) -> Goal | None:
         for it in self.store.mission[seq + 1:]:
             g = self.goal_of(it)
@@ -617,6 +674,12 @@ class Navigator:
                     self._set_phase("align")
                 return self._front_transition(g, nav, yaw, target)
             if mode in (FlightMode.HOVER, FlightMode.LAND, FlightMode.IDLE):
+                if self._bt_hold is not None and mode == FlightMode.HOVER:
+                    # braked for the waypoint before: hold over it (PX4 keeps the
+                    # waypoint as the multicopter's position setpoint)
+                    ap._hold_ne[0], ap._hold_ne[1] = self._bt_hold
+                    ap._hold_locked = True
+                self._bt_hold = None
                 return True
             if mode in (FlightMode.FIXED_WING, FlightMode.FRONT_TRANSITION):
                 m.transition(False)
@@ -704,11 +767,18 @@ class Navigator:
                 acc = g.params[1] if math.isfinite(g.params[1]) and g.params[1] > 0 \
                     else pp["NAV_ACC_RAD"].value
                 acc = max(acc, self.l1.l1_distance)
+                if self._back_transition_next(g.seq):
+                    # the next item brakes to a multicopter: reached where the back
+                    # transition must start to stop over this waypoint
+                    acc = self._brake_distance(tgt, nav)
                 alt_ok = (not math.isfinite(g.alt)
                           or abs(h - g.alt) < pp["NAV_FW_ALT_RAD"].value)
                 _, along = _along(self._seg_a, tgt, pos)
                 seg_len = math.hypot(tgt[0] - self._seg_a[0], tgt[1] - self._seg_a[1])
-                return bool((d <= acc or along >= seg_len) and alt_ok)
+                reached = bool((d <= acc or along >= seg_len) and alt_ok)
+                if reached and self._back_transition_next(g.seq):
+                    self._bt_hold = tgt
+                return reached
         elif mode in (FlightMode.HOVER, FlightMode.TAKEOFF):
             self._mc_goto(tgt, nav)
             acc = g.params[1] if (not loiter and math.isfinite(g.params[1])
@@ -735,6 +805,11 @@ class Navigator:
         dx, dy = tgt[0] - pos[0], tgt[1] - pos[1]
         d = math.hypot(dx, dy)
         v = self._mc_speed if math.isfinite(self._mc_speed) else self._p["MPC_XY_CRUISE"].value
+        # no faster than it can stop at half its largest deceleration (tilt-limited): the
+        # position loop alone (speed MPC_XY_P d) asks for more near the target and overshoots
+        a_stop = 0.5 * ap.airframe.gravity_m_s2 * math.tan(math.radians(
+            self._p["MPC_TILTMAX_AIR"].value))
+        v = min(v, math.sqrt(2.0 * a_stop * d))
         lead = v / max(self._p["MPC_XY_P"].value, 1e-3)
         if d > lead:
             ap._hold_ne[0] = pos[0] + dx / d * lead
@@ -768,9 +843,7 @@ class Navigator:
                 ap._alt_ref = g.alt
             if mode == FlightMode.FIXED_WING:
                 self._fw = ("segment", self._seg_a, tgt)
-                v = max(ap._airspeed, 1.0)
-                brake = v * v / (2.0 * pp["VT_B_DEC_MSS"].value)
-                if d <= brake:
+                if d <= self._brake_distance(tgt, nav):
                     m.transition(False)
                     ap._drain_events()
                     self._set_phase("back_transition")
