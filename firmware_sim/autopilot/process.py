@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import gc
 import math
 import os
 import sys
@@ -60,7 +59,11 @@ from vtolftc.firmware_sim.autopilot.interface import (
     FlightMode,
     LandedState,
 )
-from vtolftc.firmware_sim.autopilot.warmup import compiled_specialisations, new_specialisations
+from vtolftc.firmware_sim.autopilot.warmup import (
+    compiled_specialisations,
+    freeze_heap,
+    new_specialisations,
+)
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.link import Link
@@ -228,10 +231,7 @@ class AutopilotProcess:
                 print(f"autopilot: warm in {time.monotonic() - t0:.1f} s", file=self.log,
                       flush=True)
             self.compiled_at_ready = compiled_specialisations()
-            # numba's compiler leaves ~10^5 long-lived objects: a full garbage collection
-            # over them took 0.1-0.26 s inside a control step; frozen, it skips them
-            gc.collect()
-            gc.freeze()
+            freeze_heap()  # a full garbage collection would stall a step 0.1-0.26 s
             gcs.ready = True
             hil.tick(time.monotonic())  # the vehicle pins us on this heartbeat and starts
             for o in self.observers:

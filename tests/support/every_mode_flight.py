@@ -24,6 +24,7 @@ from vtolftc.firmware_sim.autopilot.mission import (
 )
 from vtolftc.firmware_sim.autopilot.warmup import (
     compiled_specialisations,
+    freeze_heap,
     new_specialisations,
     warm_up,
 )
@@ -40,6 +41,7 @@ def main() -> None:
     af = load_airframe()
     t0 = time.monotonic()
     warm_up(lambda: Autopilot(af))
+    freeze_heap()  # as the autopilot process does before it reports ready
     warm_s = time.monotonic() - t0
     before = compiled_specialisations()
     ap = Autopilot(af)
