@@ -18,6 +18,8 @@ import json
 import math
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -27,6 +29,11 @@ from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
 from vtolftc.firmware_sim.autopilot.interface import FlightMode
+from vtolftc.firmware_sim.autopilot.mission import (
+    FRAME_GLOBAL_RELATIVE_ALT_INT,
+    NAV_WAYPOINT,
+    MissionItem,
+)
 from vtolftc.firmware_sim.autopilot.warmup import (
     compiled_specialisations,
     new_specialisations,
@@ -35,6 +42,7 @@ from vtolftc.firmware_sim.autopilot.warmup import (
 from vtolftc.protocols import Link, Transport, make_codec
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.generated import constants as mav
+from vtolftc.protocols.netutil import free_udp_port
 
 HERE = Path(__file__).resolve().parent
 AP = "vtolftc.firmware_sim.autopilot."
@@ -193,3 +201,115 @@ def test_every_flight_and_fault_command_rejected_at_once_while_booting():
         (cid, mav.MAV_RESULT_TEMPORARILY_REJECTED) for cid, _ in cmds]
     assert not ep.has_pending() and not ap.status().armed
     ep.close()
+
+
+# ---------------------------------------------------------------------------- SITL, cold
+def _recv(conn, types, timeout_s, pred=lambda m: True):
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        m = conn.recv_match(type=types, blocking=True, timeout=0.1)
+        if (m is not None and m.get_srcSystem() == 1 and m.get_srcComponent() == 1
+                and pred(m)):
+            return m
+    return None
+
+
+@pytest.mark.slow
+def test_fresh_cache_sitl_flight_through_every_mode_never_stalls(tmp_path, monkeypatch):
+    """Real time, an empty numba cache for both processes. While the autopilot boots, each
+    command is answered TEMPORARILY_REJECTED within 0.5 s. Then: take-off to 10 m, hover,
+    front transition, fixed-wing past the rotor ramp, a rotor fault, AUTO.MISSION, AUTO.RTL
+    (back transition), land, disarm: no control step over 50 ms of CPU, no watchdog cut, no
+    numba specialisation compiled after STANDBY."""
+    from pymavlink import mavutil
+
+    from vtolftc.mission_sitl import pymavlink_upload
+    from vtolftc.sitl import SitlConfig, SitlRun
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "empty_numba_cache"))
+    port = free_udp_port()
+    out = tmp_path / "run"
+    cfg = SitlConfig(out_dir=out, realtime=True, plots=False, startup_timeout_s=600.0,
+                     vehicle_timeout_s=5.0, extra_autopilot_args=[
+                         "--gcs-link", f"udp-client://127.0.0.1:{port}",
+                         "--param", "MPC_LAND_SPEED=1.5"])  # a shorter test, same paths
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=245,
+                                      source_component=190, dialect="common")
+    boot_acks: list[tuple[int, int, float]] = []
+    try:
+        with SitlRun(cfg) as run:
+            failed: list[BaseException] = []
+
+            def start() -> None:
+                try:
+                    run.start()
+                except BaseException as exc:  # handed to the test thread
+                    failed.append(exc)
+
+            th = threading.Thread(target=start, daemon=True)
+            th.start()
+            hb = _recv(conn, ["HEARTBEAT"], 300.0)
+            assert hb is not None, "no heartbeat from the booting autopilot"
+            assert hb.system_status == mav.MAV_STATE_BOOT, hb  # cold: seconds of compiling
+            for cid, params in ((mav.MAV_CMD_NAV_TAKEOFF, [math.nan] * 7),
+                                (mav.MAV_CMD_DO_SET_MODE, [1.0, 4.0, 3.0, 0, 0, 0, 0]),
+                                (mav.MAV_CMD_COMPONENT_ARM_DISARM, [1.0, 0, 0, 0, 0, 0, 0])):
+                t0 = time.monotonic()
+                conn.mav.command_long_send(1, 1, cid, 0, *params)
+                ack = _recv(conn, ["COMMAND_ACK"], 5.0, lambda m, c=cid: m.command == c)
+                assert ack is not None, f"no COMMAND_ACK to {cid} while booting"
+                boot_acks.append((cid, int(ack.result), time.monotonic() - t0))
+            th.join(600.0)
+            assert not failed, failed
+            gs = run.gs
+            gs.wait_for(lambda s: s.connected and s.landed_state == 1
+                        and math.isfinite(s.home_amsl_m), 300.0)
+            home = _recv(conn, ["HOME_POSITION"], 30.0)
+            assert home is not None
+            lat = round(home.latitude + math.degrees(400.0 / 6_378_137.0) * 1e7)
+            wp = MissionItem(0, FRAME_GLOBAL_RELATIVE_ALT_INT, NAV_WAYPOINT, 1, 0.0, 0.0, 0.0,
+                             math.nan, lat, int(home.longitude), 10.0)
+            assert pymavlink_upload(conn, [wp]).type == 0
+            assert gs.arm().accepted
+            assert gs.takeoff(10.0).accepted
+            gs.wait_for(lambda s: s.mode_name == "AUTO.LOITER" and s.altitude_m > 8.5, 90.0)
+            assert gs.transition("fw").accepted
+            gs.wait_for(lambda s: s.vtol_state_name == "FW", 60.0)
+            t_fw = gs.snapshot().sim_time_s
+            gs.wait_for(lambda s: s.sim_time_s > t_fw + 3.0, 30.0)  # past VT_TRANS_P2_DUR
+            assert gs.inject("rotor_2b", 0.5).accepted
+            assert gs.set_mode("AUTO.MISSION").accepted
+            gs.wait_for(lambda s: s.mode_name == "AUTO.MISSION", 10.0)
+            t_m = gs.snapshot().sim_time_s
+            gs.wait_for(lambda s: s.sim_time_s > t_m + 4.0, 30.0)
+            assert gs.set_mode("AUTO.RTL").accepted
+            gs.wait_for(lambda s: s.mode_name == "AUTO.RTL", 10.0)
+            t_r = gs.snapshot().sim_time_s
+            gs.wait_for(lambda s: s.sim_time_s > t_r + 4.0, 30.0)
+            assert gs.land().accepted
+            gs.wait_for(lambda s: s.mode_name == "AUTO.LAND", 10.0)
+            gs.wait_for(lambda s: not s.armed and s.landed_state == 1, 180.0)
+    finally:
+        conn.close()
+    print("boot ACKs (command, result, s):", boot_acks)
+    assert [(c, r) for c, r, _ in boot_acks] == [
+        (mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_RESULT_TEMPORARILY_REJECTED),
+        (mav.MAV_CMD_DO_SET_MODE, mav.MAV_RESULT_TEMPORARILY_REJECTED),
+        (mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_RESULT_TEMPORARILY_REJECTED)]
+    assert max(dt for _, _, dt in boot_acks) < 0.5, boot_acks
+    summary = json.loads((out / "autopilot" / "autopilot_summary.json").read_text())
+    vehicle = json.loads((out / "vehicle" / "vehicle_summary.json").read_text())
+    print("autopilot step CPU max ms:", summary["step_cpu_max_ms"], "wall:",
+          summary["step_wall_us"], "numba:", summary["numba"])
+    assert summary["numba"]["specialisations_at_ready"] >= 2
+    assert summary["numba"]["compiled_after_ready"] == {}
+    assert summary["step_cpu_max_ms"] < 1e3 * STEP_CPU_MAX_S
+    # the vehicle outlives the autopilot at the end (stopped first): a trip after that is
+    # the stop, not the flight
+    events = [json.loads(x) for x in
+              (out / "vehicle" / "vehicle_events.jsonl").read_text().splitlines()]
+    trips = [e for e in events if e["event"] == "watchdog"
+             and e["time_s"] <= summary["sim_time_s"] + 0.4]
+    assert not trips, trips
+    assert vehicle["watchdog_trips"] <= 1
+    assert not summary["failsafe_events"], summary["failsafe_events"]
