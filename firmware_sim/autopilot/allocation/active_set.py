@@ -356,8 +356,8 @@ class ActiveSetAllocator(WLSAllocator):
             raise ValueError(f"v: expected shape ({self.n_v},), got {v.shape}")
         if B.shape != (self.n_v, n_u):
             raise ValueError(f"B: expected shape ({self.n_v}, {n_u}), got {B.shape}")
-        if B.flags.writeable or not B.flags.c_contiguous:
-            B = _readonly_c(B)  # one argument type for the kernel (warmup.py compiles it)
+        # one argument type for the kernel (warmup.py compiles it); B itself stays for B @ u
+        Bk = _readonly_c(B) if B.flags.writeable or not B.flags.c_contiguous else B
         if not v.flags.c_contiguous:
             v = np.ascontiguousarray(v)
         umin_in = self.u_min if u_min is None else _vec_arg(u_min, n_u, "u_min")
@@ -371,7 +371,7 @@ class ActiveSetAllocator(WLSAllocator):
         u0 = last if last is not None else pref
         t1 = _perf_counter()
         code, u, ok, it = _allocate_step(
-            v, B, pref, self.u_min, self.u_max, umin_in, umax_in,
+            v, Bk, pref, self.u_min, self.u_max, umin_in, umax_in,
             self._zeros_u if prev is None else prev, prev is not None,
             self._zeros_u if rate is None else rate, rate is not None, self.dt, lo, hi,
             self._B_last, self._w_v2, self._reg, self._tri_r, self._tri_c, self._Hn, self._Px,
