@@ -20,7 +20,7 @@ import time
 import pytest
 
 from vtolftc.firmware_sim.vehicle.process import VehicleProcess
-from vtolftc.protocols import SigningConfig, make_codec, open_link
+from vtolftc.protocols import SigningConfig, Transport, make_codec, open_link
 from vtolftc.protocols.hil_signing import HIL_KEY_ENV, hil_signing_from_env, new_hil_key
 from vtolftc.protocols.netutil import free_tcp_port, free_udp_port
 
@@ -226,3 +226,47 @@ def test_forged_heartbeat_first_race_refused_real_autopilot_arms_and_flies(tmp_p
     assert summary["link"]["dropped_signature"] >= 2  # the forgeries before the pinning
     assert summary["link"]["dropped_foreign"] > 0     # and from another address after it
     assert summary["sim_time_s"] > 5.0
+
+
+class _Memory(Transport):
+    kind = "memory"
+
+    def send_bytes(self, data: bytes) -> bool:
+        return True
+
+    def recv_datagrams(self, timeout_s):
+        return []
+
+    def ready(self) -> bool:
+        return True
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("signed", [True, False])
+def test_state_sent_again_is_not_a_replay(signed, tmp_path):
+    """Lockstep resends the last state when no answer came (lost, or held): on a signed link
+    it is signed anew, so the autopilot does not drop it as a replay."""
+    from vtolftc.protocols import Link
+
+    key = new_hil_key()
+    sig = hil_signing_from_env({HIL_KEY_ENV: key}) if signed else None
+    proc = VehicleProcess(f"udp-server://127.0.0.1:{free_udp_port()}", out_dir=tmp_path,
+                          signing=sig)
+    try:
+        first = proc.state_datagram()
+        second = proc.again(first)
+        third = proc.again(second)
+        rx = Link(_Memory(), system_id=1, component_id=1,
+                  signing=hil_signing_from_env({HIL_KEY_ENV: key}) if signed else None)
+        got: list = []
+        for d in (first, second, third):
+            rx._parse_datagram(d, got)
+        assert (second == first) is (not signed)
+        n = len([m for m in got if m.get_type() == "HIL_STATE_QUATERNION"])
+        assert n == 3 and rx.stats.dropped_signature == 0
+        if signed:
+            assert all(m.get_signed() for m in got)
+    finally:
+        proc.close()

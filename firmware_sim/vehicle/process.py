@@ -154,6 +154,7 @@ class VehicleProcess:
         self.gps_period_usec = round(1e6 / gps_rate_hz) if gps_rate_hz > 0 else 0
         self.log = log or sys.stderr
         self.signing = signing
+        self._state_msgs: list[Any] = []  # the messages of the last state datagram
         """MAVLink 2 signing of the HIL link (None: unsigned, the first autopilot wins)."""
         self.link = open_link(link_url, system_id=VEHICLE_SYSTEM_ID,
                               component_id=VEHICLE_COMPONENT_ID, allow_remote=allow_remote,
@@ -236,7 +237,16 @@ class VehicleProcess:
     def _pack(self, msg: Any) -> bytes:
         data = msg.pack(self.codec)
         self.codec.seq = (self.codec.seq + 1) & 0xFF
+        self._state_msgs.append(msg)
         return data
+
+    def again(self, datagram: bytes) -> bytes:
+        """The last state datagram, to send again: the same bytes; on a signed link the same
+        messages signed anew (the same bytes are a replay, which the autopilot drops)."""
+        if self.signing is None:
+            return datagram
+        msgs, self._state_msgs = self._state_msgs, []
+        return b"".join(self._pack(m) for m in msgs)
 
     def state_datagram(self) -> bytes:
         """HIL_SENSOR [+ HIL_GPS] [+ GPS_GLOBAL_ORIGIN] + HIL_STATE_QUATERNION at the current
@@ -246,6 +256,7 @@ class VehicleProcess:
         t = v.time_usec
         c = self.codec
         parts: list[bytes] = []
+        self._state_msgs = []
         if t >= self._next_origin:
             self._next_origin = t + 1_000_000
             h = self.home
@@ -531,8 +542,8 @@ class VehicleProcess:
                     if not self.running:
                         return 0
                     # lost on the way (e.g. sent before a zenoh subscriber matched) or the
-                    # autopilot holds: send the same bytes again (it answers a step once)
-                    link.send(datagram)
+                    # autopilot holds: send the same state again (it answers a step once)
+                    link.send(self.again(datagram))
                     if self._orphaned():
                         return EXIT_PEER_LOST
                     if time.monotonic() - self._last_peer > self.peer_timeout_s:
