@@ -94,7 +94,7 @@ def warm_up(make_autopilot: Callable[[], AutopilotAPI], steps: int = 400,
             if k >= min_steps and until():
                 return True
             alt = min(top_m, max(0.0, alt + climb_m_s * dt))
-            v_n = min(20.0, max(0.0, v_n + accel_m_s2 * dt))
+            v_n = min(v_top, max(0.0, v_n + accel_m_s2 * dt))
             if not step():
                 return False
         return True
@@ -109,24 +109,22 @@ def warm_up(make_autopilot: Callable[[], AutopilotAPI], steps: int = 400,
     ap.command(22, _NAN7)  # MIS_TAKEOFF_ALT above home (param7 is AMSL: no number here)
     top = float(ap.params.get("MIS_TAKEOFF_ALT"))
     ramp_s = float(ap.params.get("VT_TRANS_P2_DUR"))
-    plan: list[tuple[Callable[[], bool], float, float, int]] = [
-        # (until, climb m/s, acceleration m/s^2, minimum steps)
-        (lambda: mode() == FlightMode.HOVER, 15.0, 0.0, phase),           # take-off
-        (lambda: True, 0.0, 0.0, phase),                                   # hover
-    ]
-    for until, climb, accel, min_steps in plan:
-        if not fly(until, climb, accel, top, min_steps):
-            return n
+    v_top = float(ap.params.get("VT_ARSP_TRANS")) + 5.0  # beyond the transition airspeed
+    accel = v_top / 4.0  # there within 4 s, whatever the airframe's transition airspeed
+    if not fly(lambda: mode() == FlightMode.HOVER, 15.0, 0.0, top):       # take-off
+        return n
+    if not fly(lambda: True, 0.0, 0.0, top):                               # hover
+        return n
     ap.command(3000, [4.0, *_NAN7[:6]])                                    # front transition
-    if not fly(lambda: mode() == FlightMode.FIXED_WING, 0.0, 4.0, top):
+    if not fly(lambda: mode() == FlightMode.FIXED_WING, 0.0, accel, top):
         return n
     fw_steps = int((ramp_s + 1.0) / dt) + phase  # rotors bounded, then the reserve
     if not fly(lambda: True, 0.0, 2.0, top, fw_steps):
         return n
     ap.command(3000, [3.0, *_NAN7[:6]])                                    # back transition
-    if not fly(lambda: mode() == FlightMode.HOVER, 0.0, -4.0, top):
+    if not fly(lambda: mode() == FlightMode.HOVER, 0.0, -accel, top):
         return n
-    if not fly(lambda: True, 0.0, -4.0, top):                              # hover
+    if not fly(lambda: True, 0.0, -accel, top):                            # hover
         return n
     ap.command(21, _NAN7)                                                  # land
     fly(lambda: not ap.status().armed, -15.0, 0.0, top)
