@@ -313,3 +313,25 @@ def test_fresh_cache_sitl_flight_through_every_mode_never_stalls(tmp_path, monke
     assert not trips, trips
     assert vehicle["watchdog_trips"] <= 1
     assert not summary["failsafe_events"], summary["failsafe_events"]
+
+
+def test_summary_reports_what_was_compiled_after_ready():
+    """The process summary's ``numba`` entry lists every specialisation that appeared after
+    the recorded ready point (here: ready recorded as "nothing compiled")."""
+    from vtolftc.firmware_sim.autopilot.process import AutopilotProcess
+
+    af = load_airframe()
+    proc = AutopilotProcess(Autopilot(af), Link(_Capture(), system_id=1, component_id=1), [],
+                            actuators=ActuatorTable.from_names(af.actuator_names))
+    try:
+        s = proc.summary()
+        assert "numba" not in s and "part_mean_us" not in s  # not ready, no step yet
+        proc.compiled_at_ready = {}
+        warm_up(lambda: Autopilot(af), steps=40)
+        late = proc.summary()["numba"]["compiled_after_ready"]
+        assert late[AP + "allocation.active_set._allocate_step"], late
+        proc.compiled_at_ready = compiled_specialisations()
+        assert proc.summary()["numba"]["compiled_after_ready"] == {}
+    finally:
+        proc.gcs.close()
+        proc.hil.link.close()

@@ -151,10 +151,10 @@ class AutopilotProcess:
         self.step_wall_s: list[float] = []
         """Wall time of each control step (autopilot step, status, answer), s."""
         self.step_period_s: list[float] = []
+        """Wall time between the starts of consecutive control steps, s."""
         self.step_cpu_max_s = 0.0
         """Longest control step in CPU time of the control thread, s (unlike the wall time,
         blind to the scheduler's preemptions on a loaded machine; a compilation shows)."""
-        """Wall time between the starts of consecutive control steps, s."""
         self.part_wall_s = {"autopilot_step": 0.0, "status_and_answer": 0.0,
                             "after_answer": 0.0}
         """Wall time summed over the steps [s]: ``Autopilot.step``; status + encoding and
@@ -349,14 +349,14 @@ class AutopilotProcess:
             out["step_wall_us"] = {"mean": float(w.mean()), "median": float(np.median(w)),
                                    "p99": float(np.percentile(w, 99)), "max": float(w.max())}
             out["step_cpu_max_ms"] = self.step_cpu_max_s * 1e3
+            out["part_mean_us"] = {k: 1e6 * v / len(self.step_wall_s)
+                                   for k, v in self.part_wall_s.items()}
         if self.compiled_at_ready is not None:
             now = compiled_specialisations()
             out["numba"] = {
                 "specialisations_at_ready": sum(map(len, self.compiled_at_ready.values())),
                 "specialisations_at_end": sum(map(len, now.values())),
                 "compiled_after_ready": new_specialisations(self.compiled_at_ready, now)}
-            out["part_mean_us"] = {k: 1e6 * v / len(self.step_wall_s)
-                                   for k, v in self.part_wall_s.items()}
         if self.step_period_s:
             w = np.asarray(self.step_period_s) * 1e3
             out["step_period_ms"] = {"median": float(np.median(w)),
