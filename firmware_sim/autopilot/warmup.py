@@ -55,7 +55,8 @@ def warm_up(make_autopilot: Callable[[], AutopilotAPI], steps: int = 400,
     make_autopilot
         builds an autopilot configured like the real one.
     steps
-        scale of the flight, control steps (default 400: about 3000 steps in all).
+        scale of the flight, control steps (default 400: about 3600 steps in all, 1-2 s
+        once compiled).
     dt_usec
         control period, us.
     stop
