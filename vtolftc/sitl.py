@@ -34,6 +34,10 @@ Readiness: :meth:`SitlRun.start` returns once the autopilot's HEARTBEAT says
 MAV_STATE_STANDBY (warm: every compiled path compiled) and, in lockstep with the start hold,
 once it holds at t = 0; nothing is assumed from elapsed time.
 
+HIL link: signed (MAVLink 2) with a fresh random key per run, handed to both processes in
+their environment (``VTOLFTC_HIL_KEY``), so that no other local process can be pinned by the
+vehicle in the autopilot's place (``SitlConfig.hil_signing = False``: unsigned).
+
 Latency knob: ``SitlConfig.hil_delay_ms`` and ``hil_loss`` make the vehicle apply the
 autopilot's controls that many milliseconds (simulated time) after they arrived and drop that
 fraction of them (seeded), see :mod:`vtolftc.firmware_sim.vehicle.process`.
@@ -60,6 +64,7 @@ from pathlib import Path
 from typing import Any
 
 from vtolftc.gcs.client import CommandOutcome, GcsError, GroundStation
+from vtolftc.protocols.hil_signing import HIL_KEY_ENV, new_hil_key
 from vtolftc.protocols.netutil import free_tcp_port, free_udp_port
 
 __all__ = ["SitlConfig", "SitlError", "SitlResult", "SitlRun", "run_sitl"]
@@ -105,6 +110,9 @@ class SitlConfig:
     """Each process stops when the other is silent this long (wall s)."""
     extra_autopilot_args: list[str] = field(default_factory=list)
     extra_vehicle_args: list[str] = field(default_factory=list)
+    hil_signing: bool = True
+    """Sign the HIL link with a fresh random key for this run (``VTOLFTC_HIL_KEY`` in both
+    processes' environment): only this run's autopilot can be pinned by the vehicle."""
 
 
 @dataclass
@@ -144,6 +152,7 @@ class SitlRun:
         self._hold_cond = threading.Condition()
         self._hold_ms: int | None = None
         self.urls: dict[str, str] = {}
+        self._hil_key = new_hil_key() if config.hil_signing else None
 
     # ------------------------------------------------------------------ urls
     def _urls(self) -> tuple[str, str, str, str]:
@@ -165,6 +174,10 @@ class SitlRun:
         self._logs.append(log)
         env = dict(os.environ)
         env.setdefault("PYTHONUNBUFFERED", "1")
+        if self._hil_key is not None:
+            env[HIL_KEY_ENV] = self._hil_key
+        else:
+            env.pop(HIL_KEY_ENV, None)
         self.procs[name] = subprocess.Popen(
             [_python(), *args], stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             start_new_session=True, env=env)

@@ -55,7 +55,9 @@ zenoh link). It is system 1, component 1 (MAV_COMP_ID_AUTOPILOT1) and does what
   hold time in ms) and keeps serving commands and parameters until SIM_HOLD_MS is moved past
   the current time (or set to -1). Commands handled while held act at exactly that step.
 - HEARTBEAT system_status: BOOT until the autopilot is warm (:attr:`GcsEndpoint.ready`, every
-  compiled path compiled), then STANDBY (disarmed) / ACTIVE (armed), or CRITICAL / EMERGENCY
+  compiled path compiled; meanwhile every flight and fault command is answered at once
+  TEMPORARILY_REJECTED by the worker, as the control thread is busy compiling), then
+  STANDBY (disarmed) / ACTIVE (armed), or CRITICAL / EMERGENCY
   while a failsafe says so (:attr:`GcsEndpoint.mav_state`).
 
 Threads (the control step never waits for a ground station):
@@ -850,14 +852,15 @@ class GcsEndpoint:
             self._ack(link, msg, cmd, CommandResult.TEMPORARILY_REJECTED,
                       "busy: too many requests")
 
+        if cmd == CMD_ARM_DISARM and params[0] not in (0.0, 1.0):
+            self._ack(link, msg, cmd, CommandResult.DENIED, "param1 must be 0 or 1")
+            return
+        if not self.ready and (cmd in FLIGHT_COMMANDS or cmd in FAULT_COMMANDS):
+            # booting: the control thread is compiling and polls nothing; answer now
+            self._ack(link, msg, cmd, CommandResult.TEMPORARILY_REJECTED,
+                      "autopilot still starting (compiling)")
+            return
         if cmd in FLIGHT_COMMANDS:
-            if cmd == CMD_ARM_DISARM and params[0] not in (0.0, 1.0):
-                self._ack(link, msg, cmd, CommandResult.DENIED, "param1 must be 0 or 1")
-                return
-            if cmd == CMD_ARM_DISARM and params[0] == 1.0 and not self.ready:
-                self._ack(link, msg, cmd, CommandResult.TEMPORARILY_REJECTED,
-                          "autopilot still starting (compiling)")
-                return
             self.submit(index, msg, lambda: self._flight_command(link, msg, cmd, params),
                         busy)
             return

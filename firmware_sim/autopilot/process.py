@@ -18,8 +18,12 @@ the control step never waits for a ground station.
 Start-up. ``warmup`` (if given) runs first, while the ground-station worker already sends
 HEARTBEATs with MAV_STATE_BOOT and refuses arming; it compiles (or loads from numba's cache)
 every compiled path, so that the first real-time flight does not stall at the first
-allocation. Then the HEARTBEAT says STANDBY and the first HIL-link heartbeat goes out, on which
-the vehicle pins this autopilot and starts its clock.
+allocation (nor later: :func:`~vtolftc.firmware_sim.autopilot.warmup.warm_up` visits every
+mode; the specialisations are recorded here and any compiled after this point is reported in
+the summary's ``numba`` entry). Then the objects that exist are frozen out of the garbage
+collector (``gc.freeze``: a full collection over the compiler's objects would stall a control
+step for 0.1-0.26 s). Then the HEARTBEAT says STANDBY and the first HIL-link heartbeat goes
+out, on which the vehicle pins this autopilot and starts its clock.
 
 Failsafes (:mod:`vtolftc.firmware_sim.autopilot.failsafe`): checked every control step
 (attitude failure, crash) and every 20 ms of wall clock (data-link loss, HIL data loss),
@@ -54,6 +58,11 @@ from vtolftc.firmware_sim.autopilot.interface import (
     CommandResult,
     FlightMode,
     LandedState,
+)
+from vtolftc.firmware_sim.autopilot.warmup import (
+    compiled_specialisations,
+    freeze_heap,
+    new_specialisations,
 )
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.generated import constants as mav
@@ -143,6 +152,9 @@ class AutopilotProcess:
         """Wall time of each control step (autopilot step, status, answer), s."""
         self.step_period_s: list[float] = []
         """Wall time between the starts of consecutive control steps, s."""
+        self.step_cpu_max_s = 0.0
+        """Longest control step in CPU time of the control thread, s (unlike the wall time,
+        blind to the scheduler's preemptions on a loaded machine; a compilation shows)."""
         self.part_wall_s = {"autopilot_step": 0.0, "status_and_answer": 0.0,
                             "after_answer": 0.0}
         """Wall time summed over the steps [s]: ``Autopilot.step``; status + encoding and
@@ -152,6 +164,9 @@ class AutopilotProcess:
         self._finished = False
         self._sim_usec = 0
         self._held = False
+        self.compiled_at_ready: dict[str, list[str]] | None = None
+        """numba specialisations when the autopilot reported ready (``numba`` in the
+        summary lists any compiled after that: there should be none)."""
 
     def add_observer(self, obs: Any) -> None:
         """Add a run observer (gets ``on_start``, ``on_sample``, ``on_event``, ``on_finish``)."""
@@ -215,6 +230,8 @@ class AutopilotProcess:
                 self.warmup()
                 print(f"autopilot: warm in {time.monotonic() - t0:.1f} s", file=self.log,
                       flush=True)
+            self.compiled_at_ready = compiled_specialisations()
+            freeze_heap()  # a full garbage collection would stall a step 0.1-0.26 s
             gcs.ready = True
             hil.tick(time.monotonic())  # the vehicle pins us on this heartbeat and starts
             for o in self.observers:
@@ -227,6 +244,7 @@ class AutopilotProcess:
     def _loop(self, hil: HilBridge, gcs: GcsEndpoint, ap: AutopilotAPI) -> int:
         ever_connected = False
         pc = time.perf_counter
+        thread_time = time.thread_time
         next_duty = 0.0
         last_step_start = None
         failsafe = self.failsafe
@@ -254,6 +272,7 @@ class AutopilotProcess:
                 if gcs.hold_usec() is None or nav.time_usec < gcs.hold_usec():
                     hil.take()
                     t0 = pc()
+                    c0 = thread_time()
                     if last_step_start is not None:
                         self.step_period_s.append(t0 - last_step_start)
                     last_step_start = t0
@@ -262,6 +281,9 @@ class AutopilotProcess:
                     st = ap.status()
                     hil.send_controls(nav.time_usec, u, st.armed)
                     t2 = pc()
+                    cpu = thread_time() - c0
+                    if cpu > self.step_cpu_max_s:
+                        self.step_cpu_max_s = cpu
                     dt = t2 - t0
                     self.wall_in_step += dt
                     self.step_wall_s.append(dt)
@@ -325,9 +347,16 @@ class AutopilotProcess:
         if self.step_wall_s:
             w = np.asarray(self.step_wall_s) * 1e6
             out["step_wall_us"] = {"mean": float(w.mean()), "median": float(np.median(w)),
-                                   "p99": float(np.percentile(w, 99))}
+                                   "p99": float(np.percentile(w, 99)), "max": float(w.max())}
+            out["step_cpu_max_ms"] = self.step_cpu_max_s * 1e3
             out["part_mean_us"] = {k: 1e6 * v / len(self.step_wall_s)
                                    for k, v in self.part_wall_s.items()}
+        if self.compiled_at_ready is not None:
+            now = compiled_specialisations()
+            out["numba"] = {
+                "specialisations_at_ready": sum(map(len, self.compiled_at_ready.values())),
+                "specialisations_at_end": sum(map(len, now.values())),
+                "compiled_after_ready": new_specialisations(self.compiled_at_ready, now)}
         if self.step_period_s:
             w = np.asarray(self.step_period_s) * 1e3
             out["step_period_ms"] = {"median": float(np.median(w)),
@@ -358,6 +387,10 @@ class AutopilotProcess:
         m["sim_time_s"] = self._sim_usec * 1e-6
         m["failsafes"] = [e["text"] for e in self.failsafe_events]
         summary = self.summary()
+        late = summary.get("numba", {}).get("compiled_after_ready")
+        if late:
+            print(f"autopilot: numba compiled after ready (a stall in flight): {late}",
+                  file=self.log, flush=True)
         for o in self.observers:
             with contextlib.suppress(Exception):
                 o.on_finish(m)

@@ -31,7 +31,12 @@ Link integrity: the vehicle pins its autopilot. Until then it answers nothing an
 everything but a HEARTBEAT from system 1, component 1 (MAV_COMP_ID_AUTOPILOT1); the source
 address of the first one is pinned (UDP: the server then talks to that address only and drops,
 counting, every datagram from another one; zenoh has no addresses, there the system and
-component ids are checked). From then on only messages from system 1, component 1 count;
+component ids are checked). Ids and addresses prove nothing: any local process can send that
+HEARTBEAT first and be pinned. With a signed HIL link (``signing``, the key from
+``VTOLFTC_HIL_KEY``, :mod:`vtolftc.protocols.hil_signing`; ``vtolftc sitl`` makes a fresh key
+per run) both ends sign every frame and the link drops every frame unsigned, badly signed or
+replayed, so only a holder of the key can be pinned or be heard, over UDP and zenoh alike.
+From then on only messages from system 1, component 1 count;
 HIL_ACTUATOR_CONTROLS whose ``time_usec`` is not newer than the last applied controls, or lies
 in the vehicle's future, are rejected (counted in ``vehicle_summary.json``); fault commands
 come only from the pinned autopilot, which forwards them after its own SYS_FAILURE_EN and
@@ -85,7 +90,7 @@ from vtolftc.firmware_sim.vehicle.dynamics import N_RIGID
 from vtolftc.firmware_sim.vehicle.faults import Fault, FaultKind
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import SensorNoise
-from vtolftc.protocols import open_link
+from vtolftc.protocols import SigningConfig, open_link
 from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.hil import NavState, encode_hil_state
@@ -129,7 +134,8 @@ class VehicleProcess:
                  connect_timeout_s: float = 60.0, gps_rate_hz: float = 10.0,
                  allow_remote: bool = False, log: TextIO | None = None,
                  parent_pid: int | None = None, output_timeout_s: float = 0.5,
-                 hil_delay_ms: float = 0.0, hil_loss: float = 0.0) -> None:
+                 hil_delay_ms: float = 0.0, hil_loss: float = 0.0,
+                 signing: SigningConfig | None = None) -> None:
         self.airframe = airframe or load_airframe()
         self.parent_pid = parent_pid
         self._next_parent_check = 0.0
@@ -147,9 +153,12 @@ class VehicleProcess:
         self.connect_timeout_s = connect_timeout_s
         self.gps_period_usec = round(1e6 / gps_rate_hz) if gps_rate_hz > 0 else 0
         self.log = log or sys.stderr
+        self.signing = signing
+        self._state_msgs: list[Any] = []  # the messages of the last state datagram
+        """MAVLink 2 signing of the HIL link (None: unsigned, the first autopilot wins)."""
         self.link = open_link(link_url, system_id=VEHICLE_SYSTEM_ID,
                               component_id=VEHICLE_COMPONENT_ID, allow_remote=allow_remote,
-                              track_source=True)
+                              track_source=True, signing=signing)
         self.pinned: object = None
         """Source of the autopilot's first heartbeat (address, or "ids" on zenoh)."""
         self.rejected = {"not_pinned": 0, "foreign_ids": 0, "stale_controls": 0,
@@ -228,7 +237,16 @@ class VehicleProcess:
     def _pack(self, msg: Any) -> bytes:
         data = msg.pack(self.codec)
         self.codec.seq = (self.codec.seq + 1) & 0xFF
+        self._state_msgs.append(msg)
         return data
+
+    def again(self, datagram: bytes) -> bytes:
+        """The last state datagram, to send again: the same bytes; on a signed link the same
+        messages signed anew (the same bytes are a replay, which the autopilot drops)."""
+        if self.signing is None:
+            return datagram
+        msgs, self._state_msgs = self._state_msgs, []
+        return b"".join(self._pack(m) for m in msgs)
 
     def state_datagram(self) -> bytes:
         """HIL_SENSOR [+ HIL_GPS] [+ GPS_GLOBAL_ORIGIN] + HIL_STATE_QUATERNION at the current
@@ -238,6 +256,7 @@ class VehicleProcess:
         t = v.time_usec
         c = self.codec
         parts: list[bytes] = []
+        self._state_msgs = []
         if t >= self._next_origin:
             self._next_origin = t + 1_000_000
             h = self.home
@@ -310,12 +329,15 @@ class VehicleProcess:
         from_ap = (msg.get_srcSystem() == AUTOPILOT_SYSTEM_ID
                    and msg.get_srcComponent() == AUTOPILOT_COMPONENT_ID)
         if self.pinned is None:
-            if kind == "HEARTBEAT" and from_ap:
+            # signed link: the link already dropped what is unsigned, badly signed or
+            # replayed; the check here keeps that true whatever the link's configuration
+            if kind == "HEARTBEAT" and from_ap and (self.signing is None or msg.get_signed()):
                 src = self.link.source_of(msg)
                 self.pinned = src if src is not None else "ids"
                 if src is not None:
                     self.link.pin(src)
-                self._event("pinned", f"autopilot pinned at {self.pinned}")
+                how = "signed heartbeat" if self.signing is not None else "first heartbeat"
+                self._event("pinned", f"autopilot pinned at {self.pinned} ({how})")
                 self._last_peer = time.monotonic()
             else:
                 self.rejected["not_pinned"] += 1
@@ -491,8 +513,11 @@ class VehicleProcess:
         try:
             self.warm_up()
             if not self.wait_for_peer():
+                bad = self.link.stats.dropped_signature
+                hint = (f" ({bad} frames with no or a wrong signature: is VTOLFTC_HIL_KEY the "
+                        "same on both sides?)" if bad else "")
                 print(f"vehicle: no autopilot on {self.link!r} within "
-                      f"{self.connect_timeout_s:g} s", file=self.log, flush=True)
+                      f"{self.connect_timeout_s:g} s{hint}", file=self.log, flush=True)
                 return EXIT_PEER_LOST
             return self._run_lockstep() if self.lockstep else self._run_realtime()
         finally:
@@ -517,8 +542,8 @@ class VehicleProcess:
                     if not self.running:
                         return 0
                     # lost on the way (e.g. sent before a zenoh subscriber matched) or the
-                    # autopilot holds: send the same bytes again (it answers a step once)
-                    link.send(datagram)
+                    # autopilot holds: send the same state again (it answers a step once)
+                    link.send(self.again(datagram))
                     if self._orphaned():
                         return EXIT_PEER_LOST
                     if time.monotonic() - self._last_peer > self.peer_timeout_s:
@@ -599,6 +624,7 @@ class VehicleProcess:
                        for n, f in self.faults.items()},
             "link": self.link.stats.as_dict(),
             "pinned_autopilot": None if self.pinned is None else str(self.pinned),
+            "hil_signed": self.signing is not None,
             "rejected": dict(self.rejected), "watchdog_trips": self.watchdog_trips,
             "hil_delay_ms": self.delay_usec / 1000, "hil_loss": self.loss,
         }

@@ -15,6 +15,10 @@ client of those ports; ``--gcs-link`` adds any link (UDP or zenoh, several allow
 :mod:`vtolftc.firmware_sim.autopilot.process`; the failsafes in
 :mod:`vtolftc.firmware_sim.autopilot.failsafe`.
 
+HIL signing: with ``VTOLFTC_HIL_KEY`` (64 hexadecimal digits) in the environment the HIL link
+is signed both ways and unsigned frames are dropped; the vehicle then pins only an autopilot
+with the same key (:mod:`vtolftc.protocols.hil_signing`).
+
 Signing (``--signing-passphrase``): key = SHA-256 of the passphrase; outgoing frames signed;
 incoming frames need a valid signature except the few of
 :data:`~vtolftc.firmware_sim.autopilot.gcs_endpoint.UNSIGNED_ALLOWED`; one stream-timestamp
@@ -50,6 +54,7 @@ from vtolftc.firmware_sim.autopilot.process import AutopilotProcess
 from vtolftc.jsonio import json_safe
 from vtolftc.protocols import SigningConfig, StreamTimestamps, open_link
 from vtolftc.protocols.failure_units import ActuatorTable
+from vtolftc.protocols.hil_signing import hil_signing_from_env
 from vtolftc.protocols.link import Link
 
 __all__ = ["DEFAULT_GCS_LINKS", "main", "run_observers"]
@@ -199,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     links: list[Link] = []
     try:
         hil = open_link(args.hil_link, system_id=1, component_id=1,
-                        allow_remote=args.allow_remote)
+                        allow_remote=args.allow_remote, signing=hil_signing_from_env())
         links.append(hil)
         gcs_links = []
         for url in urls:

@@ -5,7 +5,9 @@
         [--output-timeout S] [--hil-delay-ms MS] [--hil-loss P]
 
 What it sends and accepts, the autopilot pinning, the output watchdog and the latency knob are
-documented in :mod:`vtolftc.firmware_sim.vehicle.process`. Exit status: 0 done or stopped by
+documented in :mod:`vtolftc.firmware_sim.vehicle.process`. With ``VTOLFTC_HIL_KEY`` (64
+hexadecimal digits) in the environment the HIL link is signed: only an autopilot with the same
+key is pinned (:mod:`vtolftc.protocols.hil_signing`). Exit status: 0 done or stopped by
 signal (SIGTERM, SIGINT), 2 bad arguments, 3 autopilot lost.
 """
 
@@ -20,6 +22,7 @@ from typing import Any
 
 from vtolftc.airframe.loader import AirframeError, load_airframe
 from vtolftc.firmware_sim.vehicle.process import VehicleProcess
+from vtolftc.protocols.hil_signing import hil_signing_from_env
 
 __all__ = ["main"]
 
@@ -83,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
     try:
+        signing = hil_signing_from_env()
         airframe = load_airframe(args.airframe) if args.airframe else load_airframe()
         proc = VehicleProcess(
             args.link, airframe=airframe, lockstep=args.lockstep, seed=args.seed,
@@ -90,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
             peer_timeout_s=args.peer_timeout, connect_timeout_s=args.connect_timeout,
             gps_rate_hz=args.gps_rate, allow_remote=args.allow_remote,
             parent_pid=args.parent_pid, output_timeout_s=args.output_timeout,
-            hil_delay_ms=args.hil_delay_ms, hil_loss=args.hil_loss)
+            hil_delay_ms=args.hil_delay_ms, hil_loss=args.hil_loss, signing=signing)
         proc.spin_s = max(0.0, args.spin_us) * 1e-6
     except (AirframeError, ValueError, OSError) as exc:
         print(f"vehicle: error: {exc}", file=sys.stderr)

@@ -275,6 +275,15 @@ def box_qp(
     return u, bool(ok), int(it)  # u stays within [lo, hi] by construction
 
 
+def _readonly_c(a: np.ndarray) -> np.ndarray:
+    """A read-only, C-contiguous view (or copy) of ``a``: the compiled kernels then see one
+    array type whether the caller's matrix is a cached read-only one or its own writable one
+    (each type would be compiled separately, a stall of seconds on a fresh install)."""
+    out = np.ascontiguousarray(a).view()
+    out.setflags(write=False)
+    return out
+
+
 class ActiveSetAllocator(WLSAllocator):
     """Weighted least-squares control allocation solved by the active-set ``box_qp`` alone.
 
@@ -347,6 +356,10 @@ class ActiveSetAllocator(WLSAllocator):
             raise ValueError(f"v: expected shape ({self.n_v},), got {v.shape}")
         if B.shape != (self.n_v, n_u):
             raise ValueError(f"B: expected shape ({self.n_v}, {n_u}), got {B.shape}")
+        # one argument type for the kernel (warmup.py compiles it); B itself stays for B @ u
+        Bk = _readonly_c(B) if B.flags.writeable or not B.flags.c_contiguous else B
+        if not v.flags.c_contiguous:
+            v = np.ascontiguousarray(v)
         umin_in = self.u_min if u_min is None else _vec_arg(u_min, n_u, "u_min")
         umax_in = self.u_max if u_max is None else _vec_arg(u_max, n_u, "u_max")
         last = self._u_last
@@ -358,7 +371,7 @@ class ActiveSetAllocator(WLSAllocator):
         u0 = last if last is not None else pref
         t1 = _perf_counter()
         code, u, ok, it = _allocate_step(
-            v, B, pref, self.u_min, self.u_max, umin_in, umax_in,
+            v, Bk, pref, self.u_min, self.u_max, umin_in, umax_in,
             self._zeros_u if prev is None else prev, prev is not None,
             self._zeros_u if rate is None else rate, rate is not None, self.dt, lo, hi,
             self._B_last, self._w_v2, self._reg, self._tri_r, self._tri_c, self._Hn, self._Px,
