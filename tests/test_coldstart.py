@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 import pytest
+from support.memory_link import CaptureTransport, parse, sent_messages
 
 from vtolftc.airframe.loader import load_airframe
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
@@ -39,7 +40,7 @@ from vtolftc.firmware_sim.autopilot.warmup import (
     new_specialisations,
     warm_up,
 )
-from vtolftc.protocols import Link, Transport, make_codec
+from vtolftc.protocols import Link, make_codec
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.netutil import free_udp_port
@@ -150,32 +151,14 @@ def test_flight_through_every_mode_compiles_nothing_after_warm_up():
 
 
 # ---------------------------------------------------------------------------- booting
-class _Capture(Transport):
-    kind = "memory"
-
-    def __init__(self) -> None:
-        self.sent: list[bytes] = []
-
-    def send_bytes(self, data: bytes) -> bool:
-        self.sent.append(data)
-        return True
-
-    def recv_datagrams(self, timeout_s):
-        return []
-
-    def ready(self) -> bool:
-        return True
-
-    def close(self) -> None:
-        pass
 
 
 def test_every_flight_and_fault_command_rejected_at_once_while_booting():
     """The worker answers alone (no ``poll`` by the control thread, which is compiling)."""
     af = load_airframe()
     ap = Autopilot(af)
-    link = Link(_Capture(), system_id=1, component_id=1)
-    hil = HilBridge(Link(_Capture(), system_id=1, component_id=1))
+    link = Link(CaptureTransport(), system_id=1, component_id=1)
+    hil = HilBridge(Link(CaptureTransport(), system_id=1, component_id=1))
     ep = GcsEndpoint(ap, hil, [link], actuators=ActuatorTable.from_names(af.actuator_names),
                      start=False, ready=False)
     ap.params.set("SYS_FAILURE_EN", 1)
@@ -185,18 +168,12 @@ def test_every_flight_and_fault_command_rejected_at_once_while_booting():
             (176, [1.0, 4.0, 3.0, 0, 0, 0, 0]), (3000, [4.0, 0, 0, 0, 0, 0, 0]),
             (21, [nan] * 7), (20, [nan] * 7), (420, [101, 1, 1, 0, 0, 0, 0]),
             (mav.MAV_CMD_INJECT_PARTIAL_LOSS, [101, 1, 0.5, 0, 0, 0, 0])]
-    parser = Link(_Capture())
     for cid, p in cmds:
         data = gs.command_long_encode(1, 1, cid, 0, *p).pack(gs)
         gs.seq = (gs.seq + 1) & 0xFF
-        msgs: list = []
-        parser._parse_datagram(data, msgs)
-        ep._inq[0].extend(msgs)
+        ep._inq[0].extend(parse([data]))
     ep.serve_once()
-    acks: list = []
-    for d in link.transport.sent:
-        parser._parse_datagram(d, acks)
-    acks = [m for m in acks if m.get_type() == "COMMAND_ACK"]
+    acks = [m for m in sent_messages(link.transport) if m.get_type() == "COMMAND_ACK"]
     assert [(a.command, a.result) for a in acks] == [
         (cid, mav.MAV_RESULT_TEMPORARILY_REJECTED) for cid, _ in cmds]
     assert not ep.has_pending() and not ap.status().armed
@@ -321,7 +298,8 @@ def test_summary_reports_what_was_compiled_after_ready():
     from vtolftc.firmware_sim.autopilot.process import AutopilotProcess
 
     af = load_airframe()
-    proc = AutopilotProcess(Autopilot(af), Link(_Capture(), system_id=1, component_id=1), [],
+    link = Link(CaptureTransport(), system_id=1, component_id=1)
+    proc = AutopilotProcess(Autopilot(af), link, [],
                             actuators=ActuatorTable.from_names(af.actuator_names))
     try:
         s = proc.summary()

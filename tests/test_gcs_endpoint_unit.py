@@ -5,50 +5,26 @@ thread polls."""
 from __future__ import annotations
 
 import pytest
+from support.memory_link import CaptureTransport, parse, sent_messages
 
 from vtolftc.airframe.loader import load_airframe
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
-from vtolftc.protocols import Link, Transport, make_codec
+from vtolftc.protocols import Link, make_codec
 from vtolftc.protocols.failure_units import ActuatorTable
 
 
-class _Capture(Transport):
-    kind = "memory"
-
-    def __init__(self) -> None:
-        self.sent: list[bytes] = []
-
-    def send_bytes(self, data: bytes) -> bool:
-        self.sent.append(data)
-        return True
-
-    def recv_datagrams(self, timeout_s):
-        return []
-
-    def ready(self) -> bool:
-        return True
-
-    def close(self) -> None:
-        pass
-
-
-def _msgs(transport: _Capture) -> list:
-    reader = Link(_Capture())
-    out: list = []
-    for d in transport.sent:
-        reader._parse_datagram(d, out)
-    transport.sent.clear()
-    return out
+def _msgs(transport: CaptureTransport) -> list:
+    return sent_messages(transport)
 
 
 @pytest.fixture()
 def ep():
     af = load_airframe()
     ap = Autopilot(af)
-    links = [Link(_Capture(), system_id=1, component_id=1) for _ in range(2)]
-    hil = HilBridge(Link(_Capture(), system_id=1, component_id=1))
+    links = [Link(CaptureTransport(), system_id=1, component_id=1) for _ in range(2)]
+    hil = HilBridge(Link(CaptureTransport(), system_id=1, component_id=1))
     e = GcsEndpoint(ap, hil, links, actuators=ActuatorTable.from_names(af.actuator_names),
                     start=False)
     yield e
@@ -56,12 +32,7 @@ def ep():
 
 
 def _inject(ep, index: int, msgs) -> None:
-    q = ep._inq[index]
-    parser = Link(_Capture())
-    for data in msgs:
-        out: list = []
-        parser._parse_datagram(data, out)
-        q.extend(out)
+    ep._inq[index].extend(parse(list(msgs)))
 
 
 def _pack(codec, msg) -> bytes:

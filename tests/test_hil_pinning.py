@@ -18,9 +18,10 @@ import threading
 import time
 
 import pytest
+from support.memory_link import CaptureTransport
 
 from vtolftc.firmware_sim.vehicle.process import VehicleProcess
-from vtolftc.protocols import SigningConfig, Transport, make_codec, open_link
+from vtolftc.protocols import SigningConfig, make_codec, open_link
 from vtolftc.protocols.hil_signing import HIL_KEY_ENV, hil_signing_from_env, new_hil_key
 from vtolftc.protocols.netutil import free_tcp_port, free_udp_port
 
@@ -228,20 +229,6 @@ def test_forged_heartbeat_first_race_refused_real_autopilot_arms_and_flies(tmp_p
     assert summary["sim_time_s"] > 5.0
 
 
-class _Memory(Transport):
-    kind = "memory"
-
-    def send_bytes(self, data: bytes) -> bool:
-        return True
-
-    def recv_datagrams(self, timeout_s):
-        return []
-
-    def ready(self) -> bool:
-        return True
-
-    def close(self) -> None:
-        pass
 
 
 @pytest.mark.parametrize("signed", [True, False])
@@ -258,7 +245,7 @@ def test_state_sent_again_is_not_a_replay(signed, tmp_path):
         first = proc.state_datagram()
         second = proc.again(first)
         third = proc.again(second)
-        rx = Link(_Memory(), system_id=1, component_id=1,
+        rx = Link(CaptureTransport(), system_id=1, component_id=1,
                   signing=hil_signing_from_env({HIL_KEY_ENV: key}) if signed else None)
         got: list = []
         for d in (first, second, third):

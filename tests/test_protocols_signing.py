@@ -8,37 +8,22 @@ import hashlib
 import struct
 
 import pytest
+from support.memory_link import CaptureTransport
 
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import UNSIGNED_ALLOWED
-from vtolftc.protocols import Link, SigningConfig, StreamTimestamps, Transport, make_codec
+from vtolftc.protocols import Link, SigningConfig, StreamTimestamps, make_codec
 from vtolftc.protocols.mavlink import signing_timestamp_now
 
 KEY = hashlib.sha256(b"correct horse").digest()
 OTHER_KEY = hashlib.sha256(b"battery staple").digest()
 
 
-class _Memory(Transport):
-    """A transport that only parses what the test hands to the link."""
-
-    kind = "memory"
-
-    def send_bytes(self, data: bytes) -> bool:
-        return True
-
-    def recv_datagrams(self, timeout_s):
-        return []
-
-    def ready(self) -> bool:
-        return True
-
-    def close(self) -> None:
-        pass
 
 
 def _autopilot_links(n: int = 2) -> list[Link]:
     table = StreamTimestamps()
     cfg = SigningConfig(KEY, allow_unsigned=lambda mid: mid in UNSIGNED_ALLOWED)
-    return [Link(_Memory(), system_id=1, component_id=1, signing=cfg, stream_table=table)
+    return [Link(CaptureTransport(), system_id=1, component_id=1, signing=cfg, stream_table=table)
             for _ in range(n)]
 
 
@@ -111,7 +96,7 @@ def test_plain_pymavlink_is_locked_out_by_the_forged_frame():
     s.timestamp = signing_timestamp_now()
     s.allow_unsigned_callback = None
     signer = _signer()
-    link = Link(_Memory(), codec=plain)
+    link = Link(CaptureTransport(), codec=plain)
     assert len(_feed(link, _param_set(signer))) == 1
     far = signing_timestamp_now() + 30 * 365 * 24 * 3600 * 100_000
     assert _feed(link, _forge_future(_param_set(signer), far)) == []

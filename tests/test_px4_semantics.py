@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 import pytest
+from support.memory_link import CaptureTransport, parse, sent_messages
 
 from vtolftc.airframe.loader import load_airframe
 from vtolftc.firmware_sim.autopilot.arming import ArmingMonitor
@@ -27,7 +28,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
     NavState,
     ParameterStore,
 )
-from vtolftc.protocols import Link, Transport, make_codec
+from vtolftc.protocols import Link, make_codec
 from vtolftc.protocols.failure_units import ActuatorTable
 
 NAN = math.nan
@@ -177,41 +178,18 @@ def test_arming_monitor_landing_and_mission():
 
 
 # ------------------------------------------------------------------ the endpoint
-class _Capture(Transport):
-    kind = "memory"
-
-    def __init__(self) -> None:
-        self.sent: list[bytes] = []
-
-    def send_bytes(self, data: bytes) -> bool:
-        self.sent.append(data)
-        return True
-
-    def recv_datagrams(self, timeout_s):
-        return []
-
-    def ready(self) -> bool:
-        return True
-
-    def close(self) -> None:
-        pass
 
 
 def _msgs(link: Link) -> list:
-    reader = Link(_Capture())
-    out: list = []
-    for d in link.transport.sent:
-        reader._parse_datagram(d, out)
-    link.transport.sent.clear()
-    return out
+    return sent_messages(link.transport)
 
 
 @pytest.fixture()
 def ep():
     af = load_airframe()
     a = Autopilot(af)
-    links = [Link(_Capture(), system_id=1, component_id=1) for _ in range(2)]
-    hil = HilBridge(Link(_Capture(), system_id=1, component_id=1))
+    links = [Link(CaptureTransport(), system_id=1, component_id=1) for _ in range(2)]
+    hil = HilBridge(Link(CaptureTransport(), system_id=1, component_id=1))
     e = GcsEndpoint(a, hil, links, actuators=ActuatorTable.from_names(af.actuator_names),
                     start=False)
     yield e
@@ -226,9 +204,7 @@ def _command(ep, cmd: int, *params: float, link: int = 0) -> list:
     p = list(params) + [0.0] * (7 - len(params))
     data = _GS.command_long_encode(1, 1, cmd, 0, *p).pack(_GS)
     _GS.seq = (_GS.seq + 1) & 0xFF
-    out: list = []
-    Link(_Capture())._parse_datagram(data, out)
-    ep._inq[link].extend(out)
+    ep._inq[link].extend(parse([data]))
     ep.serve_once()
     return _msgs(ep.links[link])
 
