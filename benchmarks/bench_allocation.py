@@ -58,7 +58,7 @@ from vtolftc.firmware_sim.autopilot.allocation import (
     WLSAllocator,
     step_bounds,
 )
-from vtolftc.firmware_sim.autopilot.allocation.wls import _ST_FALLBACK, _ST_SOLVED
+from vtolftc.firmware_sim.autopilot.allocation.wls import ST_FALLBACK, ST_SOLVED
 
 try:
     import daqp
@@ -198,11 +198,11 @@ class DAQPAllocator(WLSAllocator):
         x, _, flag, info = daqp.solve(self._Hn, self._qn, self._A, hi, lo, **kw)
         if flag > 0:
             self._lam = info["lam"]
-            return self._finish(np.clip(x, lo, hi), v, B, _ST_SOLVED, int(info["iterations"]),
+            return self._finish(np.clip(x, lo, hi), v, B, ST_SOLVED, int(info["iterations"]),
                                 float(info["solve_time"]), t0, "solved", False)
         self._lam = None
         u = self._fallback(v, B, lo, hi, pref, x if np.all(np.isfinite(x)) else None)
-        return self._finish(u, v, B, _ST_FALLBACK, int(info["iterations"]), 0.0, t0,
+        return self._finish(u, v, B, ST_FALLBACK, int(info["iterations"]), 0.0, t0,
                             f"daqp exit flag {flag}", False)
 
 

@@ -159,13 +159,14 @@ def weights_for(af: Airframe, axis: Axis, point: DesignPoint,
                        ControlWeight(R_MAX_RAD, u_max, OMEGA_A_RAD_S))
 
 
-def _inertia(af: Airframe, axis: Axis) -> float:
+def axis_inertia(af: Airframe, axis: Axis) -> float:
+    """The principal moment of inertia of ``axis`` (kg m^2, FRD body axes)."""
     return float(np.diag(af.inertia_kg_m2)[AXES.index(axis)])
 
 
 def parameters(af: Airframe, axis: Axis, u_max: float) -> list[Parameter]:
     """The five tunable gains with bounds and the classical start (module docstring)."""
-    J = _inertia(af, axis)
+    J = axis_inertia(af, axis)
     wr = min(6.0, math.sqrt(4.0 * u_max / (R_MAX_RAD * J)))
     kp = J * wr
     return [
@@ -202,7 +203,9 @@ class AxisDesign:
         return np.array([self.gains[k] for k in PARAM_NAMES])
 
 
-def _norms(ch: CascadeChannel, theta: NDArray[np.float64]) -> dict[str, float]:
+def achieved_norms(ch: CascadeChannel, theta: NDArray[np.float64]) -> dict[str, float]:
+    """The exact H-infinity norm of the channel (``"gamma"``) and of each of its weighted rows
+    (e.g. ``"Ws*S"``) at the gains ``theta``, by name."""
     out = {"gamma": hinf_norm(ch(theta)).value}
     for name, sys in ch.rows(theta).items():
         out[name] = hinf_norm(sys).value
@@ -216,7 +219,7 @@ def _secondary(ch: CascadeChannel, theta: NDArray[np.float64]) -> float:
     return hinf_norm((A, B, C[keep], D[keep])).value if keep else 0.0
 
 
-def _pick(res: TuneResult, channels: Sequence[CascadeChannel]) -> NDArray[np.float64]:
+def pick_start(res: TuneResult, channels: Sequence[CascadeChannel]) -> NDArray[np.float64]:
     """Tie-break among near-optimal starts (module docstring)."""
     if not res.stable:
         return res.theta
@@ -242,8 +245,8 @@ def _problem(af: Airframe, axis: Axis, weights: list[AxisWeights],
 def _design(axis: Axis, weights: list[AxisWeights], label: str, n_starts: int,
             plants: list[Any], chans: list[CascadeChannel], res: TuneResult) -> AxisDesign:
     """The design of a finished tune: tie-break, norms per point, poles."""
-    theta = _pick(res, chans)
-    per = [_norms(c, theta) for c in chans]
+    theta = pick_start(res, chans)
+    per = [achieved_norms(c, theta) for c in chans]
     norms = {k: max(p[k] for p in per) for k in per[0]}
     poles = [closed_loop(G, theta).poles for G in plants]
     stable = all(float(np.max(p.real)) < 0 for p in poles)
@@ -260,7 +263,8 @@ def _tune(af: Airframe, axis: Axis, weights: list[AxisWeights], label: str, n_st
     return _design(axis, weights, label, n_starts, plants, chans, res)
 
 
-def _seed(seed: int, axis: Axis, tag: int) -> int:
+def point_seed(seed: int, axis: Axis, tag: int) -> int:
+    """The random-start seed of one tune: independent streams per (seed, axis, point tag)."""
     return int(np.random.SeedSequence([seed, AXES.index(axis), tag]).generate_state(1)[0])
 
 
@@ -269,7 +273,7 @@ def design_point(af: Airframe, axis: Axis, point: DesignPoint, *, n_starts: int 
     """Tune one axis at one design point (eq. 7-8 for the nominal model of the point)."""
     w = weights_for(af, axis, point)
     return _tune(af, axis, [w], f"point {point.number}", n_starts,
-                 _seed(seed, axis, point.number), max_iter)
+                 point_seed(seed, axis, point.number), max_iter)
 
 
 def design_shif(af: Airframe, axis: Axis, points: Sequence[DesignPoint] = PAPER_DESIGN_POINTS,
@@ -277,7 +281,7 @@ def design_shif(af: Airframe, axis: Axis, points: Sequence[DesignPoint] = PAPER_
     """One constant P-PID for ``axis`` minimising the max over all points of the stacked
     norm (multi-model minimax, the same weights per point as GS-SHIF)."""
     ws = [weights_for(af, axis, p) for p in points]
-    return _tune(af, axis, ws, "all points", n_starts, _seed(seed, axis, 100), max_iter)
+    return _tune(af, axis, ws, "all points", n_starts, point_seed(seed, axis, 100), max_iter)
 
 
 def _job(args: tuple[Any, ...]) -> tuple[tuple[str, int], AxisDesign]:
@@ -296,7 +300,7 @@ def _gs_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], AxisDesign]:
     """One GS-SHIF tune with its point's weights given (:func:`design_point`)."""
     af, axis, w, n_starts, seed, max_iter = args
     return (axis, w.point.number), _tune(af, axis, [w], f"point {w.point.number}", n_starts,
-                                         _seed(seed, axis, w.point.number), max_iter)
+                                         point_seed(seed, axis, w.point.number), max_iter)
 
 
 def _start_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], StartRecord]:
@@ -351,7 +355,7 @@ def run_designs(af: Airframe, *, n_starts: int = 6, seed: int = 0,
                 ws = [weights[(ax, p)] for p in PAPER_DESIGN_POINTS]
                 prob = _problem(af, ax, ws)
                 shif_pb[ax] = (ws, prob)
-                for job in start_jobs(prob[0], n_starts=n_starts, seed=_seed(seed, ax, 100),
+                for job in start_jobs(prob[0], n_starts=n_starts, seed=point_seed(seed, ax, 100),
                                       max_iter=max_iter):
                     futs.append(executor.submit(_start_job, (ax, job)))
         futs += [executor.submit(_gs_job, (af, ax, weights[(ax, p)], n_starts, seed,

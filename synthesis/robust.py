@@ -71,10 +71,10 @@ from vtolftc.synthesis.design import (
     TABLE2,
     AxisDesign,
     AxisWeights,
-    _inertia,
-    _norms,
-    _pick,
-    _seed,
+    achieved_norms,
+    axis_inertia,
+    pick_start,
+    point_seed,
 )
 from vtolftc.synthesis.hinfnorm import StateSpaceData, as_state_space, frequency_response
 from vtolftc.synthesis.loops import (
@@ -268,7 +268,7 @@ def sensitivity_rule(af: Airframe, axis: Axis, point: DesignPoint, u_max: float,
                      d_max: float, spec: RobustSpec = RobustSpec(),
                      ) -> tuple[SensitivityWeight, dict[str, float]]:
     """Ws of the documented rule (module docstring, d) and the numbers behind it."""
-    J = _inertia(af, axis)
+    J = axis_inertia(af, axis)
     w_act = 1.0 / actuator_time_constant(af)
     w_u = math.sqrt(max(u_max - d_max, 1e-3 * u_max) / (J * R_MAX_RAD))
     wb = min(w_act / 8.0, w_u / 2.0)
@@ -292,7 +292,7 @@ def robust_parameters(af: Airframe, axis: Axis, u_max: float, spec: RobustSpec =
                       ) -> tuple[list[Parameter], dict[str, dict[str, Any]]]:
     """The five gains with physical bounds (module docstring, g), the classical start, and
     where each bound comes from."""
-    J = _inertia(af, axis)
+    J = axis_inertia(af, axis)
     w_act = 1.0 / actuator_time_constant(af)
     hf = high_frequency_gain_bound(af, u_max, spec)
     tf_min = max(0.01, 2.5 * spec.delays.control_period_s)
@@ -425,14 +425,14 @@ def _robust_design(axis: Axis, weights: list[RobustWeights], label: str, n_start
                    ) -> AxisDesign:
     """The design of a finished tune: tie-break, unnormalised norms per point, poles."""
     eq8 = [c for c, n in zip(chans, names, strict=True) if n.endswith("eq8")]
-    theta = _pick(res, eq8)
+    theta = pick_start(res, eq8)
     per = []
     for G, w in zip(plants, weights, strict=True):
-        n = _norms(CascadeChannel(G, w.Ws, w.Wt.tf(), w.Wr), theta)
+        n = achieved_norms(CascadeChannel(G, w.Ws, w.Wt.tf(), w.Wr), theta)
         if w.Wd > 0:
-            n["Wd*Sd"] = _norms(CascadeChannel(G, Wd=disturbance_weight(w)), theta)["gamma"]
-        n["Wdelay*T"] = _norms(CascadeChannel(G, Wt=delay_weight(spec.delays.extra_margin_s)),
-                               theta)["gamma"]
+            n["Wd*Sd"] = achieved_norms(CascadeChannel(G, Wd=disturbance_weight(w)), theta)["gamma"]
+        wt = delay_weight(spec.delays.extra_margin_s)
+        n["Wdelay*T"] = achieved_norms(CascadeChannel(G, Wt=wt), theta)["gamma"]
         n["tuned objective"] = float(res.value)
         per.append(n)
     norms = {k: max(p.get(k, 0.0) for p in per) for k in per[0] | per[-1]}
@@ -458,7 +458,7 @@ def robust_design_point(af: Airframe, axis: Axis, point: DesignPoint, *, n_start
     """Tune one axis at one point with the robust channels."""
     w = robust_weights(af, axis, point, spec)
     return _tune_robust(af, axis, [w], f"point {point.number}", n_starts,
-                        _seed(seed, axis, point.number), max_iter, spec)
+                        point_seed(seed, axis, point.number), max_iter, spec)
 
 
 def robust_design_shif(af: Airframe, axis: Axis,
@@ -467,7 +467,7 @@ def robust_design_shif(af: Airframe, axis: Axis,
                        spec: RobustSpec = RobustSpec()) -> AxisDesign:
     """One constant P-PID over all points with the robust channels of every point."""
     ws = [robust_weights(af, axis, p, spec) for p in points]
-    return _tune_robust(af, axis, ws, "all points", n_starts, _seed(seed, axis, 100),
+    return _tune_robust(af, axis, ws, "all points", n_starts, point_seed(seed, axis, 100),
                         max_iter, spec)
 
 
@@ -489,7 +489,7 @@ def _gs_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], AxisDesign]:
     """One GS-SHIF tune with its point's weights given (:func:`robust_design_point`)."""
     af, axis, w, n_starts, seed, max_iter, spec = args
     return (axis, w.point.number), _tune_robust(af, axis, [w], f"point {w.point.number}",
-                                                n_starts, _seed(seed, axis, w.point.number),
+                                                n_starts, point_seed(seed, axis, w.point.number),
                                                 max_iter, spec)
 
 
@@ -548,7 +548,7 @@ def run_robust_designs(af: Airframe, *, n_starts: int = 4, seed: int = 0,
                 ws = [weights[(ax, p.number)] for p in points]
                 prob = _robust_problem(af, ax, ws, spec)
                 shif_pb[ax] = (ws, prob)
-                for job in start_jobs(prob[0], n_starts=n_starts, seed=_seed(seed, ax, 100),
+                for job in start_jobs(prob[0], n_starts=n_starts, seed=point_seed(seed, ax, 100),
                                       max_iter=max_iter):
                     futs.append(executor.submit(_start_job, (ax, job)))
         futs += [executor.submit(_gs_job, (af, ax, weights[(ax, p.number)], n_starts, seed,

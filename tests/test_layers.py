@@ -4,7 +4,13 @@ The layer table below is the one place the layers are written down. Every module
 ``vtolftc`` namespace must be in it; a module may import only modules of its own group or of a
 lower layer. Groups of one layer are siblings that never import each other (the autopilot never
 imports the vehicle nor the synthesis: passive FTC, and the gains reach it as files). Every
-import counts, also those inside functions and under ``TYPE_CHECKING``.
+import counts, also those inside functions and under ``TYPE_CHECKING``, and so does a module
+loaded by name: a string that is exactly the name of one of the namespace's modules
+(``importlib.import_module("vtolftc.cmd_fly")``, a table of command modules, ``python -m
+vtolftc.processes.vehicle``).
+
+No module takes a private name (``_x``) from another module: what another module needs is
+public, or it is not needed.
 """
 
 from __future__ import annotations
@@ -20,7 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: Bottom up: (layer, group, module patterns). Patterns match a module and its sub-modules.
 LAYERS: list[tuple[int, str, tuple[str, ...]]] = [
-    (0, "base", ("vtolftc", "vtolftc.rotation", "vtolftc.jsonio", "vtolftc.airframe")),
+    (0, "base", ("vtolftc", "vtolftc.rotation", "vtolftc.jsonio", "vtolftc.errors",
+                "vtolftc.airframe")),
     (1, "protocols", ("vtolftc.protocols",)),
     (2, "telemetry", ("vtolftc.telemetry",)),
     (3, "autopilot", ("vtolftc.firmware_sim", "vtolftc.firmware_sim.autopilot")),
@@ -82,7 +89,46 @@ def _imports(path: Path, module: str, known: set[str]) -> set[str]:
                 base = ".".join([*anchor, base] if base else anchor)
             out.add(base)
             out |= {f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in known}
+    out |= {n.value for n in ast.walk(tree)
+            if isinstance(n, ast.Constant) and isinstance(n.value, str) and n.value in known}
     return {m for m in out if m == "vtolftc" or m.startswith("vtolftc.")}
+
+
+def _private_imports(path: Path, module: str, known: set[str]) -> list[str]:
+    """``from other import _name`` and ``other_module._name`` in ``path``: private names taken
+    from another module of the namespace (a sub-module named ``_x`` is a module, not a name)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    is_pkg = path.name == "__init__.py"
+    out: list[str] = []
+    aliases: dict[str, str] = {}
+
+    def private(name: str) -> bool:
+        return name.startswith("_") and not name.startswith("__")
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = module.split(".") if is_pkg else module.split(".")[:-1]
+                anchor = anchor[: len(anchor) - node.level + 1]
+                base = ".".join([*anchor, base] if base else anchor)
+            if not (base == "vtolftc" or base.startswith("vtolftc.")) or base == module:
+                continue
+            for a in node.names:
+                if f"{base}.{a.name}" in known:
+                    aliases[a.asname or a.name] = f"{base}.{a.name}"
+                elif private(a.name):
+                    out.append(f"{module}:{node.lineno} takes {base}.{a.name}")
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name in known and a.asname:
+                    aliases[a.asname] = a.name
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                and node.value.id in aliases and private(node.attr)
+                and aliases[node.value.id] != module):
+            out.append(f"{module}:{node.lineno} takes {aliases[node.value.id]}.{node.attr}")
+    return out
 
 
 def _graph() -> dict[str, set[str]]:
@@ -180,6 +226,36 @@ def test_the_check_catches_a_forbidden_import(tmp_path, src, expect):
     assert deps and all(_group(d) is not None for d in deps)
     layer, group = _group("vtolftc.firmware_sim.autopilot.x")
     assert any(_group(d)[0] > layer or _group(d)[1] != group for d in deps)
+
+
+def test_no_private_name_crosses_a_module():
+    mods = _modules()
+    known = set(mods)
+    bad = [hit for name, f in mods.items() for hit in _private_imports(f, name, known)]
+    assert not bad, "private names taken from other modules:\n" + "\n".join(sorted(bad))
+
+
+@pytest.mark.parametrize("src, hits", [
+    ("from vtolftc.firmware_sim.autopilot.pid import _TWO_PI, CascadedPPID\n", 1),
+    ("def f():\n    from .pid import _x\n", 1),
+    ("from vtolftc.firmware_sim.autopilot import pid\nY = pid._e_prev\n", 1),
+    ("import vtolftc.firmware_sim.autopilot.pid as p\nY = p._x\n", 1),
+    ("from vtolftc.firmware_sim.autopilot.pid import CascadedPPID\nz = CascadedPPID()._a\n", 0),
+    ("from vtolftc.firmware_sim.autopilot.x import _own\n", 0),  # its own module
+])
+def test_the_check_catches_a_private_name(tmp_path, src, hits):
+    f = tmp_path / "x.py"
+    f.write_text(src)
+    known = set(_modules())
+    assert len(_private_imports(f, "vtolftc.firmware_sim.autopilot.x", known)) == hits
+
+
+def test_a_module_loaded_by_name_is_an_import(tmp_path):
+    f = tmp_path / "x.py"
+    f.write_text('import importlib\nMODS = ("vtolftc.dashboard.web",)\n'
+                 'def f():\n    return importlib.import_module(MODS[0])\n')
+    deps = _imports(f, "vtolftc.firmware_sim.autopilot.x", set(_modules()))
+    assert "vtolftc.dashboard.web" in deps
 
 
 def test_cycle_finder_finds_a_cycle():

@@ -15,12 +15,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from vtolftc.airframe.loader import AirframeError, load_airframe
+from vtolftc.errors import UsageError
 from vtolftc.firmware_sim.vehicle.faults import FaultError
-
-
-class UsageError(Exception):
-    """Bad input from the user: printed as one line, exit status 2."""
-
 
 # Each of these modules defines ``register(subparsers)``, adding its sub-command(s) with
 # ``set_defaults(func=...)``; the functions raise UsageError / RuntimeError as described above.

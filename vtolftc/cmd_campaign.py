@@ -21,9 +21,10 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from vtolftc.errors import UsageError
+
 
 def _usage(msg: str) -> Exception:
-    from vtolftc.cli import UsageError
 
     return UsageError(msg)
 
@@ -171,7 +172,7 @@ def _chain(first: list[Any], rest: Any) -> Any:
 
 
 def _finish(spec: Any, table: Any, out: Path, wall: float, n_flown: int, total: int) -> int:
-    from vtolftc.campaign.execute import _airframe
+    from vtolftc.campaign.execute import cached_airframe
     from vtolftc.campaign.report import (
         check_gates,
         recoverable_lines,
@@ -196,7 +197,7 @@ def _finish(spec: Any, table: Any, out: Path, wall: float, n_flown: int, total: 
     failures = check_gates(spec.gates, table)
     report = write_report(out, table, title=f"Campaign {spec.name}",
                           description=spec.description + partial,
-                          airframe=_airframe(spec.airframe_path),
+                          airframe=cached_airframe(spec.airframe_path),
                           gate_failures=failures)
     print("\nworst scenarios (re-fly with the command shown):")
     for r in worst(table, 5):

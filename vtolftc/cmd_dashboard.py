@@ -9,11 +9,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+from vtolftc.errors import UsageError
+
 __all__ = ["cmd_dashboard", "register"]
 
 
 def _check_host(host: str, allow_remote: bool) -> None:
-    from vtolftc.cli import UsageError
 
     if host == "localhost":
         return
@@ -28,7 +29,6 @@ def _check_host(host: str, allow_remote: bool) -> None:
 
 def cmd_dashboard(args: argparse.Namespace) -> int:
     """Serve the web dashboard and connect to the autopilot as a ground station."""
-    from vtolftc.cli import UsageError
 
     _check_host(args.host, args.allow_remote)
     if not 0 <= args.port <= 65535:

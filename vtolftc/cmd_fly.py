@@ -27,6 +27,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from vtolftc.errors import UsageError
+
 CONTROLLER_NAMES = ("gs-shif", "shif", "lqr")
 _PAPER_TABLE4 = {
     "1": {"lqr": (0.2997, 4.7117, 1.432, 6.6718), "shif": (0.2817, 1.2638, 0.6627, 1.683),
@@ -80,7 +82,6 @@ def _stop_on_signals() -> Iterator[None]:
 def prepare_out(path: Path, overwrite: bool, marker: tuple[str, ...] = ("run.json",)) -> Path:
     """Create the output folder; an existing one only with ``overwrite`` (then emptied first,
     if it holds a previous run or nothing). Raises UsageError with one line otherwise."""
-    from vtolftc.cli import UsageError
 
     path = Path(path)
     if path.exists():
@@ -179,7 +180,6 @@ def _keep_viewer(observers: list[Any]) -> None:
 
 
 def _check_common(args: argparse.Namespace) -> None:
-    from vtolftc.cli import UsageError
 
     if not (math.isfinite(args.duration) and 0.0 < args.duration <= 3600.0):
         raise UsageError(f"--duration {args.duration!r}: expected seconds in (0, 3600]")
@@ -223,7 +223,6 @@ def _fly_one(case: str, controller: str, args: argparse.Namespace, run_dir: Path
 
 
 def _floats(text: str, n: int, what: str, unit: str) -> tuple[float, ...]:
-    from vtolftc.cli import UsageError
 
     try:
         v = tuple(float(x) for x in text.split(","))
@@ -239,7 +238,6 @@ def _vehicle_options(args: argparse.Namespace) -> dict[str, Any]:
     ``--inertia-scale``, ``--cg-offset``, ``--noise`` and ``--noise-seed`` (as a campaign
     scenario flies them, see :func:`vtolftc.campaign.execute.vehicle_options`)."""
     from vtolftc.campaign.execute import vehicle_options
-    from vtolftc.cli import UsageError
 
     wind = (_floats(args.wind, 3, "--wind", "N,E,D (m/s)")
             if getattr(args, "wind", None) else (0.0, 0.0, 0.0))
@@ -267,7 +265,6 @@ def _check_controller(controller: str, args: argparse.Namespace) -> None:
     """Load the controller's gain file once, so that a missing or invalid file is reported
     (exit 2) before anything is flown or written."""
     from vtolftc.airframe.loader import load_airframe
-    from vtolftc.cli import UsageError
     from vtolftc.firmware_sim.autopilot.attitude import ControllerError, make_controller
 
     af = load_airframe(getattr(args, "airframe", None))
@@ -431,7 +428,6 @@ def comparison_plot(case: str, results: dict[str, dict[str, Any]], path: Path) -
 
 
 def _case(text: str) -> str:
-    from vtolftc.cli import UsageError
 
     t = text.strip().removeprefix("case")
     if t not in ("0", "1", "2"):

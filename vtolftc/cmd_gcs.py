@@ -21,6 +21,8 @@ import math
 import time
 from typing import Any
 
+from vtolftc.errors import UsageError
+
 __all__ = ["register"]
 
 
@@ -83,7 +85,6 @@ def _status_line(s: Any) -> str:
 
 def cmd_gcs(args: argparse.Namespace) -> int:
     """Connect, run one action, print the result."""
-    from vtolftc.cli import UsageError
     from vtolftc.gcs.client import GcsError, GroundStation
     from vtolftc.protocols import SigningConfig, parse_link_url
 

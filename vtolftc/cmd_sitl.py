@@ -19,6 +19,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+from vtolftc.errors import UsageError
+
 __all__ = ["METRIC_ROWS", "register"]
 
 METRIC_ROWS = (
@@ -72,7 +74,6 @@ def _fmt(v: Any) -> str:
 def _start_dashboard(args: argparse.Namespace, cfg: Any, af: Any) -> Any:
     """Serve the dashboard on its own ground-station link (a free loopback UDP port that the
     autopilot is told to stream to), before the processes start."""
-    from vtolftc.cli import UsageError
     from vtolftc.protocols.netutil import free_udp_port
 
     if not 0 <= args.dashboard_port <= 65535:
@@ -88,7 +89,6 @@ def _start_dashboard(args: argparse.Namespace, cfg: Any, af: Any) -> Any:
 
 def cmd_sitl(args: argparse.Namespace) -> int:
     """Start the processes, fly, stop, print the metrics."""
-    from vtolftc.cli import UsageError
 
     if args.transport not in ("udp", "zenoh"):
         raise UsageError(f"--transport {args.transport!r}: expected udp or zenoh")

@@ -21,9 +21,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from vtolftc.errors import UsageError
+
 
 def _check(args: argparse.Namespace) -> None:
-    from vtolftc.cli import UsageError
 
     if args.starts is None:
         args.starts = 2 if args.method == "robust" else 4

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.firmware_sim.autopilot.lqr import LQRAxisGains, LQRGains, LQRGainsError
-from vtolftc.firmware_sim.autopilot.pid import _TWO_PI, CascadedPPID, PPIDGains, wrap_angle
+from vtolftc.firmware_sim.autopilot.pid import TWO_PI, CascadedPPID, PPIDGains, wrap_angle
 from vtolftc.firmware_sim.autopilot.schedule import AXES, GainSchedule, GainScheduleError
 
 __all__ = [
@@ -422,7 +422,7 @@ class ScheduledPPIDController:
             pid.gains = gk
             err = rl[k] - al[k]
             if pid.wrap:
-                err = -((-err + math.pi) % _TWO_PI - math.pi)  # wrap_angle
+                err = -((-err + math.pi) % TWO_PI - math.pi)  # wrap_angle
             r = gk.kp_angle * err + 0.0  # + rate_ff
             lim = pid.rate_limit
             if lim is not None:

@@ -58,12 +58,12 @@ __all__ = [
 ]
 
 Method = Literal["tustin", "backward_euler"]
-_TWO_PI = 2.0 * math.pi
+TWO_PI = 2.0 * math.pi
 
 
 def wrap_angle(x: float) -> float:
     """Wrap an angle [rad] to (-pi, pi]."""
-    return -((-x + math.pi) % _TWO_PI - math.pi)
+    return -((-x + math.pi) % TWO_PI - math.pi)
 
 
 @dataclass(frozen=True, slots=True)

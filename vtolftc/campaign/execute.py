@@ -32,7 +32,7 @@ __all__ = ["fly_scenario", "run_dask", "run_local", "vehicle_options"]
 _AIRFRAMES: dict[str | None, Any] = {}
 
 
-def _airframe(path: str | None) -> Any:
+def cached_airframe(path: str | None) -> Any:
     """The airframe (loaded once per process and path)."""
     af = _AIRFRAMES.get(path)
     if af is None:
@@ -92,7 +92,7 @@ def fly_scenario(sc: CampaignScenario) -> dict[str, Any]:
         "duration_s": sc.duration_s, "fly_command": sc.fly_command(),
     }
     try:
-        af = _airframe(sc.airframe_path)
+        af = cached_airframe(sc.airframe_path)
         faults = [Fault(a, kind, loss, sc.fault_time_s) for a, kind, loss in sc.fault_set.faults]
         scen = paper_scenario(0, sc.duration_s, airframe=af, extra_faults=faults,
                               window_start_s=sc.window_start_s)
@@ -146,7 +146,7 @@ def _worker_init(airframe_path: str | None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # the parent handles Ctrl-C
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
-    _airframe(airframe_path)
+    cached_airframe(airframe_path)
 
 
 def run_local(scenarios: Sequence[CampaignScenario], jobs: int | None = None,

@@ -48,17 +48,17 @@ import numpy as np
 
 from vtolftc.firmware_sim.autopilot.allocation.interface import (
     AllocationResult,
-    _new_result,
-    _vec_arg,
+    new_result,
     step_bounds,
+    vec_arg,
 )
 from vtolftc.firmware_sim.autopilot.allocation.wls import (
-    _F64,
-    _ST_FALLBACK,
-    _ST_INVALID_INPUT,
-    _ST_SOLVED,
+    F64,
+    ST_FALLBACK,
+    ST_INVALID_INPUT,
+    ST_SOLVED,
     WLSAllocator,
-    _prepare,
+    prepare_wls,
 )
 
 __all__ = ["ActiveSetAllocator", "box_qp"]
@@ -67,7 +67,7 @@ _perf_counter = time.perf_counter
 
 
 @numba.njit(cache=True)
-def _box_qp_active_set(H, q, lo, hi, u0, max_iter, tol):
+def box_qp_active_set(H, q, lo, hi, u0, max_iter, tol):
     n = q.size
     u = np.empty(n)
     state = np.zeros(n, dtype=np.int8)  # 0 free, -1 at lo, +1 at hi, 2 fixed (lo == hi)
@@ -218,21 +218,21 @@ def _box_qp_active_set(H, q, lo, hi, u0, max_iter, tol):
 def _allocate_step(v, B, pref, umin_def, umax_def, umin_in, umax_in, prev, has_prev, rate,
                    has_rate, dt, lo, hi, B_last, w_v2, reg, tri_r, tri_c, Hn, Px, BtW2s, scale,
                    qn, u0, max_iter, tol):
-    """``step_bounds``, ``_prepare`` and ``_box_qp_active_set`` of one allocation step in one
+    """``step_bounds``, ``prepare_wls`` and ``box_qp_active_set`` of one allocation step in one
     compiled call (the same functions, so the same bits, without two Python round trips).
 
     Returns ``(code, u, ok, iterations)``: ``code`` -1 for non-finite input (``u`` is then
-    ``u0`` untouched and nothing was solved), else ``_prepare``'s 0 / 1 (``B`` unchanged /
+    ``u0`` untouched and nothing was solved), else ``prepare_wls``'s 0 / 1 (``B`` unchanged /
     changed); ``lo``/``hi`` are written in every case.
     """
     prev_ok = step_bounds(umin_def, umax_def, umin_in, umax_in, prev, has_prev, rate,
                           has_rate, dt, lo, hi)
     if not prev_ok:
         return -1, u0, False, 0
-    code = _prepare(v, B, pref, B_last, w_v2, reg, tri_r, tri_c, Hn, Px, BtW2s, scale, qn)
+    code = prepare_wls(v, B, pref, B_last, w_v2, reg, tri_r, tri_c, Hn, Px, BtW2s, scale, qn)
     if code < 0:
         return -1, u0, False, 0
-    u, ok, it = _box_qp_active_set(Hn, qn, lo, hi, u0, max_iter, tol)
+    u, ok, it = box_qp_active_set(Hn, qn, lo, hi, u0, max_iter, tol)
     return code, u, ok, it
 
 
@@ -271,7 +271,7 @@ def box_qp(
         ``(u, ok, iterations)``; ``u`` is within the bounds; ``ok`` is True when the KKT test
         passed.
     """
-    u, ok, it = _box_qp_active_set(H, q, lo, hi, u0, max_iter, tol)
+    u, ok, it = box_qp_active_set(H, q, lo, hi, u0, max_iter, tol)
     return u, bool(ok), int(it)  # u stays within [lo, hi] by construction
 
 
@@ -348,9 +348,9 @@ class ActiveSetAllocator(WLSAllocator):
         (:func:`_allocate_step`). ``solve_time_s`` is that call's time."""
         t0 = _perf_counter()
         n_u = self.n_u
-        if type(v) is not np.ndarray or v.dtype != _F64:
+        if type(v) is not np.ndarray or v.dtype != F64:
             v = np.asarray(v, dtype=float)
-        if type(B) is not np.ndarray or B.dtype != _F64:
+        if type(B) is not np.ndarray or B.dtype != F64:
             B = np.asarray(B, dtype=float)
         if v.shape != (self.n_v,):
             raise ValueError(f"v: expected shape ({self.n_v},), got {v.shape}")
@@ -360,11 +360,11 @@ class ActiveSetAllocator(WLSAllocator):
         Bk = _readonly_c(B) if B.flags.writeable or not B.flags.c_contiguous else B
         if not v.flags.c_contiguous:
             v = np.ascontiguousarray(v)
-        umin_in = self.u_min if u_min is None else _vec_arg(u_min, n_u, "u_min")
-        umax_in = self.u_max if u_max is None else _vec_arg(u_max, n_u, "u_max")
+        umin_in = self.u_min if u_min is None else vec_arg(u_min, n_u, "u_min")
+        umax_in = self.u_max if u_max is None else vec_arg(u_max, n_u, "u_max")
         last = self._u_last
-        prev = last if u_prev is None else _vec_arg(u_prev, n_u, "u_prev")
-        pref = self.u_pref if u_pref is None else _vec_arg(u_pref, n_u, "u_pref")
+        prev = last if u_prev is None else vec_arg(u_prev, n_u, "u_prev")
+        pref = self.u_pref if u_pref is None else vec_arg(u_pref, n_u, "u_pref")
         rate = self.rate_limit
         lo = np.empty(n_u)
         hi = np.empty(n_u)
@@ -379,25 +379,25 @@ class ActiveSetAllocator(WLSAllocator):
         t_solve = _perf_counter() - t1
         if code < 0:
             hold = last if last is not None else self.u_pref
-            return self._finish(np.clip(hold, lo, hi), v, B, _ST_INVALID_INPUT, 0, 0.0, t0,
+            return self._finish(np.clip(hold, lo, hi), v, B, ST_INVALID_INPUT, 0, 0.0, t0,
                                 "non-finite input", False)
         if ok:
             return self._solved(u, v, B, it, t_solve, t0)
         u = self._fallback(v, B, lo, hi, pref, u)
-        return self._finish(u, v, B, _ST_FALLBACK, it, t_solve, t0, "active set not converged",
+        return self._finish(u, v, B, ST_FALLBACK, it, t_solve, t0, "active set not converged",
                             False)
 
     def _solved(self, u: np.ndarray, v: np.ndarray, B: np.ndarray, it: int, t_solve: float,
                 t0: float) -> AllocationResult:
-        """``_finish(u, v, B, _ST_SOLVED, it, t_solve, t0, "solved", True)`` with the
+        """``_finish(u, v, B, ST_SOLVED, it, t_solve, t0, "solved", True)`` with the
         bookkeeping written out (the hot path: a converged step)."""
         va = B @ u
         self._u_last = u
-        res = _new_result(u, va, va - v, _ST_SOLVED, it, t_solve, _perf_counter() - t0,
+        res = new_result(u, va, va - v, ST_SOLVED, it, t_solve, _perf_counter() - t0,
                           "solved", True)
         st = self.stats
         st.calls += 1
-        st.counts[_ST_SOLVED] += 1
+        st.counts[ST_SOLVED] += 1
         st.total_iterations += it
         if it > st.max_iterations:
             st.max_iterations = it
@@ -411,10 +411,10 @@ class ActiveSetAllocator(WLSAllocator):
                hi: np.ndarray, B_changed: bool, t0: float) -> AllocationResult:
         u0 = self._u_last if self._u_last is not None else pref
         t1 = _perf_counter()
-        u, ok, it = _box_qp_active_set(self._Hn, self._qn, lo, hi, u0, self.max_iter, self.tol)
+        u, ok, it = box_qp_active_set(self._Hn, self._qn, lo, hi, u0, self.max_iter, self.tol)
         t_solve = _perf_counter() - t1
         if ok:
             return self._solved(u, v, B, it, t_solve, t0)
         u = self._fallback(v, B, lo, hi, pref, u)
-        return self._finish(u, v, B, _ST_FALLBACK, it, t_solve, t0, "active set not converged",
+        return self._finish(u, v, B, ST_FALLBACK, it, t_solve, t0, "active set not converged",
                             False)

@@ -188,7 +188,7 @@ class Allocator(Protocol):
 _F64 = np.dtype(np.float64)
 
 
-def _as_vec(x: Any, n: int, name: str) -> np.ndarray:
+def as_vec(x: Any, n: int, name: str) -> np.ndarray:
     """``x`` as a float64 vector of shape (n,) (a scalar is broadcast); ValueError otherwise."""
     a = np.asarray(x, dtype=float)
     if a.ndim == 0:
@@ -198,11 +198,11 @@ def _as_vec(x: Any, n: int, name: str) -> np.ndarray:
     return a
 
 
-def _vec_arg(x: Any, n: int, name: str) -> np.ndarray:
-    """``_as_vec`` with a fast exit for a float64 array of shape (n,) (no copy either way)."""
+def vec_arg(x: Any, n: int, name: str) -> np.ndarray:
+    """``as_vec`` with a fast exit for a float64 array of shape (n,) (no copy either way)."""
     if type(x) is np.ndarray and x.dtype == _F64 and x.shape == (n,):
         return x
-    return _as_vec(x, n, name)
+    return as_vec(x, n, name)
 
 
 @numba.njit(cache=True)
@@ -276,7 +276,7 @@ _AR_FIELDS = ("u", "v_achieved", "residual", "status", "iterations", "solve_time
  _set_pol) = (AllocationResult.__dict__[f].__set__ for f in _AR_FIELDS)
 
 
-def _new_result(u: np.ndarray, va: np.ndarray, res: np.ndarray, status: AllocationStatus,
+def new_result(u: np.ndarray, va: np.ndarray, res: np.ndarray, status: AllocationStatus,
                 iters: int, t_solve: float, t_wall: float, st_str: str,
                 polished: bool) -> AllocationResult:
     """``AllocationResult(...)`` (same fields, same order) without the frozen dataclass's

@@ -22,7 +22,7 @@ from vtolftc.firmware_sim.autopilot.allocation.interface import (
     AllocationResult,
     AllocationStatus,
     AllocatorStats,
-    _as_vec,
+    as_vec,
 )
 
 __all__ = ["PseudoInverseAllocator"]
@@ -69,13 +69,13 @@ class PseudoInverseAllocator:
         self.u_trim = (
             np.clip(0.0, self.u_min, self.u_max)
             if u_trim is None
-            else _as_vec(u_trim, self.n_u, "u_trim")
+            else as_vec(u_trim, self.n_u, "u_trim")
         )
         self.thrust_axis = thrust_axis
         self.roll_axis = roll_axis
         self.pitch_axis = pitch_axis
         self.yaw_axis = yaw_axis
-        self.weights_u = None if weights_u is None else _as_vec(weights_u, self.n_u, "weights_u")
+        self.weights_u = None if weights_u is None else as_vec(weights_u, self.n_u, "weights_u")
         self._B_cached: np.ndarray | None = None
         self._pinv: np.ndarray | None = None
         self.stats = AllocatorStats()

@@ -42,13 +42,13 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from vtolftc.firmware_sim.autopilot.allocation.active_set import _box_qp_active_set
+from vtolftc.firmware_sim.autopilot.allocation.active_set import box_qp_active_set
 from vtolftc.firmware_sim.autopilot.allocation.interface import AllocationResult
 from vtolftc.firmware_sim.autopilot.allocation.wls import (
-    _F64,
-    _ST_FALLBACK,
-    _ST_SOLVED,
-    _ST_SOLVED_INACCURATE,
+    F64,
+    ST_FALLBACK,
+    ST_SOLVED,
+    ST_SOLVED_INACCURATE,
     WLSAllocator,
 )
 
@@ -86,7 +86,7 @@ def _polish_duals(H, q, lo, hi, x, do_polish, max_iter, tol, lam):
             break
     if not (do_polish and finite):
         return x, finite, False
-    u, ok, _ = _box_qp_active_set(H, q, lo, hi, x, max_iter, tol)
+    u, ok, _ = box_qp_active_set(H, q, lo, hi, x, max_iter, tol)
     if not ok:
         return x, finite, False
     g = H @ u + q
@@ -181,7 +181,7 @@ class QPAllocator(WLSAllocator):
         res = self._prob.solve(raise_error=False)
         info = res.info
         x = res.x  # a new array per call; only read before the next solve
-        if type(x) is not np.ndarray or x.dtype != _F64:
+        if type(x) is not np.ndarray or x.dtype != F64:
             x = np.array(x, dtype=float)
         return x, info.status, int(info.status_val), int(info.iter), float(info.solve_time)
 
@@ -207,19 +207,19 @@ class QPAllocator(WLSAllocator):
         u, x_finite, polished = _polish_duals(self._Hn, qn, lo, hi, x, self.polish, 60,
                                               self.polish_tol, lam)
         if polished:
-            status = _ST_SOLVED  # the active-set optimality test passed
+            status = ST_SOLVED  # the active-set optimality test passed
         elif st_val == _OSQP_SOLVED and x_finite:
             u = np.clip(x, lo, hi)
-            status = _ST_SOLVED
+            status = ST_SOLVED
         elif st_val == _OSQP_SOLVED_INACCURATE and x_finite:
             u = np.clip(x, lo, hi)
-            status = _ST_SOLVED_INACCURATE
+            status = ST_SOLVED_INACCURATE
         else:
             u = self._fallback(v, B, lo, hi, pref, x if x_finite else None)
-            status = _ST_FALLBACK
+            status = ST_FALLBACK
             lam = -(self._Hn @ u + qn)
             lam[(u > lo) & (u < hi)] = 0.0
-        if polished or status == _ST_FALLBACK:
+        if polished or status == ST_FALLBACK:
             # restart the next ADMM solve from the returned point (duals: λ = -(Hn u + qn))
             try:
                 self._warm_start(u, lam)

@@ -45,27 +45,27 @@ from vtolftc.firmware_sim.autopilot.allocation.interface import (
     AllocationResult,
     AllocationStatus,
     AllocatorStats,
-    _as_vec,
-    _new_result,
-    _vec_arg,
+    as_vec,
+    new_result,
     step_bounds,
+    vec_arg,
 )
 from vtolftc.firmware_sim.autopilot.allocation.pseudo_inverse import PseudoInverseAllocator
 
 __all__ = ["WLSAllocator"]
 
-_F64 = np.dtype(np.float64)
+F64 = np.dtype(np.float64)
 _perf_counter = time.perf_counter
 # AllocationStatus members as module constants for the per-step path (an Enum class
 # attribute costs ~75 ns in Python 3.11)
-_ST_SOLVED = AllocationStatus.SOLVED
-_ST_SOLVED_INACCURATE = AllocationStatus.SOLVED_INACCURATE
-_ST_FALLBACK = AllocationStatus.FALLBACK
-_ST_INVALID_INPUT = AllocationStatus.INVALID_INPUT
+ST_SOLVED = AllocationStatus.SOLVED
+ST_SOLVED_INACCURATE = AllocationStatus.SOLVED_INACCURATE
+ST_FALLBACK = AllocationStatus.FALLBACK
+ST_INVALID_INPUT = AllocationStatus.INVALID_INPUT
 
 
 @numba.njit(cache=True)
-def _prepare(v, B, pref, B_last, w_v2, reg, tri_r, tri_c, Hn, Px, BtW2s, scale, qn):
+def prepare_wls(v, B, pref, B_last, w_v2, reg, tri_r, tri_c, Hn, Px, BtW2s, scale, qn):
     """Validate the step's data and build the normalised QP (compiled).
 
     Returns -1 for non-finite input (nothing written), 0 when ``B`` equals ``B_last`` (only
@@ -185,8 +185,8 @@ class WLSAllocator:
             raise ValueError(f"n_v must be >= 1, got {n_v}")
         self.n_v = int(n_v)
         self.n_u = int(n_u)
-        self.w_v = np.ones(n_v) if w_v is None else _as_vec(w_v, n_v, "w_v").copy()
-        self.w_u = np.ones(n_u) if w_u is None else _as_vec(w_u, n_u, "w_u").copy()
+        self.w_v = np.ones(n_v) if w_v is None else as_vec(w_v, n_v, "w_v").copy()
+        self.w_u = np.ones(n_u) if w_u is None else as_vec(w_u, n_u, "w_u").copy()
         if np.any(self.w_v <= 0) or not np.all(np.isfinite(self.w_v)):
             raise ValueError(f"w_v must be finite and > 0, got {self.w_v}")
         if np.any(self.w_u <= 0) or not np.all(np.isfinite(self.w_u)):
@@ -197,12 +197,12 @@ class WLSAllocator:
         self.u_pref = (
             np.clip(0.0, self.u_min, self.u_max)
             if u_pref is None
-            else _as_vec(u_pref, n_u, "u_pref").copy()
+            else as_vec(u_pref, n_u, "u_pref").copy()
         )
         if not np.all(np.isfinite(self.u_pref)):
             raise ValueError("u_pref must be finite")
         if rate_limit is not None:
-            rate_limit = _as_vec(rate_limit, n_u, "rate_limit").copy()
+            rate_limit = as_vec(rate_limit, n_u, "rate_limit").copy()
             if np.any(rate_limit <= 0) or np.any(np.isnan(rate_limit)):
                 raise ValueError("rate_limit must be > 0 (inf = unlimited)")
         self.rate_limit = rate_limit
@@ -243,7 +243,7 @@ class WLSAllocator:
     def reset(self, u0: np.ndarray | None = None) -> None:
         """Forget the previous command and the solver state (warm start); optionally set the
         previous command to ``u0`` (n_u,)."""
-        self._u_last = None if u0 is None else _as_vec(u0, self.n_u, "u0").copy()
+        self._u_last = None if u0 is None else as_vec(u0, self.n_u, "u0").copy()
         self._B_last.fill(np.nan)
 
     @property
@@ -299,18 +299,18 @@ class WLSAllocator:
         t0 = _perf_counter()
         n_u = self.n_u
         # float64 ndarrays of the right shape (the autopilot's case) pass without copies
-        if type(v) is not np.ndarray or v.dtype != _F64:
+        if type(v) is not np.ndarray or v.dtype != F64:
             v = np.asarray(v, dtype=float)
-        if type(B) is not np.ndarray or B.dtype != _F64:
+        if type(B) is not np.ndarray or B.dtype != F64:
             B = np.asarray(B, dtype=float)
         if v.shape != (self.n_v,):
             raise ValueError(f"v: expected shape ({self.n_v},), got {v.shape}")
         if B.shape != (self.n_v, n_u):
             raise ValueError(f"B: expected shape ({self.n_v}, {n_u}), got {B.shape}")
 
-        umin_in = self.u_min if u_min is None else _vec_arg(u_min, n_u, "u_min")
-        umax_in = self.u_max if u_max is None else _vec_arg(u_max, n_u, "u_max")
-        prev = self._u_last if u_prev is None else _vec_arg(u_prev, n_u, "u_prev")
+        umin_in = self.u_min if u_min is None else vec_arg(u_min, n_u, "u_min")
+        umax_in = self.u_max if u_max is None else vec_arg(u_max, n_u, "u_max")
+        prev = self._u_last if u_prev is None else vec_arg(u_prev, n_u, "u_prev")
         lo = np.empty(n_u)
         hi = np.empty(n_u)
         rate = self.rate_limit
@@ -327,10 +327,10 @@ class WLSAllocator:
             lo,
             hi,
         )
-        pref = self.u_pref if u_pref is None else _vec_arg(u_pref, n_u, "u_pref")
+        pref = self.u_pref if u_pref is None else vec_arg(u_pref, n_u, "u_pref")
         code = -1
         if prev_ok:
-            code = _prepare(
+            code = prepare_wls(
                 v,
                 B,
                 pref,
@@ -351,7 +351,7 @@ class WLSAllocator:
                 np.clip(hold, lo, hi),
                 v,
                 B,
-                _ST_INVALID_INPUT,
+                ST_INVALID_INPUT,
                 0,
                 0.0,
                 t0,
@@ -387,12 +387,12 @@ class WLSAllocator:
         st_str: str,
         polished: bool,
     ) -> AllocationResult:
-        if status == _ST_INVALID_INPUT:  # report finite numbers only
+        if status == ST_INVALID_INPUT:  # report finite numbers only
             B = np.nan_to_num(B, nan=0.0, posinf=0.0, neginf=0.0)
             v = np.nan_to_num(v, nan=0.0, posinf=0.0, neginf=0.0)
         va = B @ u
         self._u_last = u
-        res = _new_result(u, va, va - v, status, iters, t_solve, _perf_counter() - t0, st_str,
+        res = new_result(u, va, va - v, status, iters, t_solve, _perf_counter() - t0, st_str,
                           polished)
         self.stats.record(res)
         return res
