@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from vtolftc.geodesy import FlatEarth
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.rotation import euler_to_quat, quat_mul
 
@@ -50,7 +51,6 @@ def ned_to_display(p: Sequence[float] | np.ndarray) -> np.ndarray:
     return a * np.array([1.0, -1.0, -1.0])
 
 
-_EARTH_RADIUS_M = 6_378_137.0
 _RELATIVE_FRAMES = (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 _NAV_COMMANDS = (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_LOITER_UNLIM,
                  mav.MAV_CMD_NAV_LOITER_TIME, mav.MAV_CMD_NAV_LAND, mav.MAV_CMD_NAV_TAKEOFF,
@@ -63,12 +63,11 @@ def mission_points_display(items: Sequence[Any], home_lat_deg: float, home_lon_d
     messages or anything with seq, frame, command, x, y (degE7) and z (m)) and their seqs.
     Flat-earth projection about home (the autopilot's); lat/lon 0 (land here) is skipped."""
     pts, seqs = [], []
-    cos_lat = math.cos(math.radians(home_lat_deg))
+    proj = FlatEarth(home_lat_deg, home_lon_deg)
     for it in items:
         if int(it.command) not in _NAV_COMMANDS or (it.x == 0 and it.y == 0):
             continue
-        n = math.radians(it.x * 1e-7 - home_lat_deg) * _EARTH_RADIUS_M
-        e = math.radians(it.y * 1e-7 - home_lon_deg) * _EARTH_RADIUS_M * cos_lat
+        n, e = proj.to_local(it.x * 1e-7, it.y * 1e-7)
         h = float(it.z) if int(it.frame) in _RELATIVE_FRAMES else float(it.z) - home_alt_m
         pts.append(ned_to_display((n, e, -h)))
         seqs.append(int(it.seq))

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from vtolftc.geodesy import EARTH_RADIUS_M, FlatEarth
+
 __all__ = [
     "EARTH_RADIUS_M",
     "N_ACTUATORS",
@@ -38,7 +40,6 @@ __all__ = [
 N_ACTUATORS = 15
 """Actuators carried in HIL_ACTUATOR_CONTROLS slots 0..14 (8 lift rotors, 2 pushers, 5 surfaces)."""
 
-EARTH_RADIUS_M = 6_378_137.0
 """Radius of the flat-earth projection about home [m] (WGS-84 equatorial radius)."""
 
 
@@ -98,9 +99,7 @@ def encode_hil_state(nav: NavState, home_lat_deg: float, home_lon_deg: float,
     same bits.
     """
     pn, pe, pd = nav.pos_ned_m.tolist()
-    lat = home_lat_deg + math.degrees(pn / EARTH_RADIUS_M)
-    lon = home_lon_deg + math.degrees(
-        pe / (EARTH_RADIUS_M * math.cos(math.radians(home_lat_deg))))
+    lat, lon = FlatEarth(home_lat_deg, home_lon_deg).to_global(pn, pe)
     qw, qx, qy, qz, p, q, r = _F32X7.unpack(
         _F32X7.pack(*nav.q_wxyz.tolist(), *nav.omega_body_rad_s.tolist()))
     vn, ve, vd = nav.vel_ned_m_s.tolist()
@@ -122,9 +121,7 @@ def encode_hil_state(nav: NavState, home_lat_deg: float, home_lon_deg: float,
 def decode_hil_state(h: HilState, home_lat_deg: float, home_lon_deg: float,
                      home_alt_m: float) -> NavState:
     """Inverse of :func:`encode_hil_state` (up to the wire's resolution: about 1 cm, 1 cm/s)."""
-    pn = math.radians(h.lat * 1e-7 - home_lat_deg) * EARTH_RADIUS_M
-    pe = (math.radians(h.lon * 1e-7 - home_lon_deg) * EARTH_RADIUS_M
-          * math.cos(math.radians(home_lat_deg)))
+    pn, pe = FlatEarth(home_lat_deg, home_lon_deg).to_local(h.lat * 1e-7, h.lon * 1e-7)
     pd = home_alt_m - h.alt * 1e-3
     qw, qx, qy, qz = h.attitude_quaternion
     n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
@@ -161,8 +158,8 @@ class HilRoundTrip:
         self._lat0 = home_lat_deg
         self._lon0 = home_lon_deg
         self._alt0 = home_alt_m
-        # the same double both functions compute inline
-        self._cos = math.cos(math.radians(home_lat_deg))
+        # the same doubles as geodesy.FlatEarth (the codec pair's projection), fused here
+        self._cos = FlatEarth(home_lat_deg, home_lon_deg).cos_lat0
         self._r_cos = EARTH_RADIUS_M * self._cos
 
     def __call__(self, time_usec: int, state: NDArray[np.float64],

@@ -26,8 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: Bottom up: (layer, group, module patterns). Patterns match a module and its sub-modules.
 LAYERS: list[tuple[int, str, tuple[str, ...]]] = [
-    (0, "base", ("vtolftc", "vtolftc.rotation", "vtolftc.jsonio", "vtolftc.errors",
-                "vtolftc.airframe")),
+    (0, "base", ("vtolftc", "vtolftc.rotation", "vtolftc.geodesy", "vtolftc.jsonio",
+                "vtolftc.errors", "vtolftc.airframe")),
     (1, "protocols", ("vtolftc.protocols",)),
     (2, "telemetry", ("vtolftc.telemetry",)),
     (3, "autopilot", ("vtolftc.firmware_sim", "vtolftc.firmware_sim.autopilot")),

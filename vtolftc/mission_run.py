@@ -46,7 +46,8 @@ from vtolftc.firmware_sim.autopilot.mission import (
 from vtolftc.firmware_sim.vehicle.battery import BatteryModel, vehicle_power_w
 from vtolftc.firmware_sim.vehicle.faults import Fault
 from vtolftc.firmware_sim.vehicle.model import Vehicle
-from vtolftc.firmware_sim.vehicle.sensors import EARTH_RADIUS_M, Home
+from vtolftc.firmware_sim.vehicle.sensors import Home
+from vtolftc.geodesy import FlatEarth
 
 __all__ = ["MissionRun", "back_transition_mission", "path_errors", "rectangle_mission",
            "run_mission"]
@@ -55,9 +56,7 @@ NAN = math.nan
 
 
 def _latlon(home: Home, north: float, east: float) -> tuple[int, int]:
-    lat = home.lat_deg + math.degrees(north / EARTH_RADIUS_M)
-    lon = home.lon_deg + math.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(
-        home.lat_deg))))
+    lat, lon = FlatEarth(home.lat_deg, home.lon_deg).to_global(north, east)
     return round(lat * 1e7), round(lon * 1e7)
 
 
@@ -227,11 +226,10 @@ def path_errors(items: Sequence[MissionItem], t: np.ndarray, pos_ned: np.ndarray
     docstring): ``{seq: {"rms_m", "max_m", "samples"}}``."""
     home = home or Home()
     pts: list[tuple[int, np.ndarray]] = []
+    proj = FlatEarth(home.lat_deg, home.lon_deg)
     for it in items:
         if it.command in (NAV_WAYPOINT, NAV_TAKEOFF):
-            n = math.radians(it.lat_deg - home.lat_deg) * EARTH_RADIUS_M
-            e = math.radians(it.lon_deg - home.lon_deg) * EARTH_RADIUS_M * math.cos(
-                math.radians(home.lat_deg))
+            n, e = proj.to_local(it.lat_deg, it.lon_deg)
             pts.append((it.seq, np.array([n, e])))
     legs = [(pts[k][1], pts[k + 1][1]) for k in range(len(pts) - 1)]
     out: dict[int, dict[str, float]] = {}

@@ -496,11 +496,8 @@ class Autopilot:
         self._have_nav = True
         self._last_nav = nav
         self._time_usec = int(nav.time_usec)
-        # quat_to_euler(q), inlined on the floats at hand (same expressions, same bits)
+        roll, pitch, yaw = quat_to_euler(ql)
         w_, x_, y_, z_ = ql
-        roll = math.atan2(2.0 * (w_ * x_ + y_ * z_), 1.0 - 2.0 * (x_ * x_ + y_ * y_))
-        pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w_ * y_ - z_ * x_))))
-        yaw = math.atan2(2.0 * (w_ * z_ + x_ * y_), 1.0 - 2.0 * (y_ * y_ + z_ * z_))
         att = self._att
         att[0], att[1], att[2] = roll, pitch, yaw
         rates = nav.omega_body_rad_s

@@ -52,6 +52,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
     ParamType,
 )
 from vtolftc.protocols.generated import constants as mav
+from vtolftc.rotation import quat_to_euler
 
 __all__ = ["FAILSAFE_PARAMS", "FailsafeEvent", "FailsafeMonitor", "register_failsafe_params"]
 
@@ -93,13 +94,6 @@ class FailsafeEvent:
     text: str
     severity: int
     action: str = ""
-
-
-def _euler_rp(q: object) -> tuple[float, float]:
-    w, x, y, z = (float(v) for v in q)  # type: ignore[attr-defined]
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    return roll, pitch
 
 
 def register_failsafe_params(params: ParameterStore) -> None:
@@ -165,7 +159,7 @@ class FailsafeMonitor:
                 self._clear()
             return out
         h = -float(nav.pos_ned_m[2]) - self._ground_alt
-        roll, pitch = _euler_rp(nav.q_wxyz)
+        roll, pitch, _ = quat_to_euler(nav.q_wxyz)
         finite = math.isfinite(h) and math.isfinite(roll) and math.isfinite(pitch)
         flying = st.mode in _FLYING
         if h > 2.0:

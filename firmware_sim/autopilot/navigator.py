@@ -59,7 +59,6 @@ from typing import Any
 from vtolftc.firmware_sim.autopilot.backtrans import BackTransitionPlanner
 from vtolftc.firmware_sim.autopilot.guidance import L1Guidance, roll_for_lateral_accel, wrap_pi
 from vtolftc.firmware_sim.autopilot.interface import (
-    EARTH_RADIUS_M,
     CommandResult,
     FlightMode,
     NavState,
@@ -83,6 +82,7 @@ from vtolftc.firmware_sim.autopilot.mission import (
     MissionItem,
     MissionStore,
 )
+from vtolftc.geodesy import FlatEarth
 from vtolftc.protocols.generated import constants as mav
 
 __all__ = ["NAV_PARAMS", "Goal", "NavMode", "Navigator"]
@@ -222,16 +222,12 @@ class Navigator:
         :func:`vtolftc.firmware_sim.autopilot.interface.encode_hil_state`)."""
         if self.home is None:
             raise ValueError("no home position yet")
-        lat0, lon0, _ = self.home
-        n = math.radians(lat_deg - lat0) * EARTH_RADIUS_M
-        e = math.radians(lon_deg - lon0) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
-        return n, e
+        return FlatEarth(self.home[0], self.home[1]).to_local(lat_deg, lon_deg)
 
     def to_global(self, north: float, east: float) -> tuple[float, float]:
         """Inverse of :meth:`to_local` (degrees)."""
         lat0, lon0, _ = self.home if self.home is not None else (0.0, 0.0, 0.0)
-        return (lat0 + math.degrees(north / EARTH_RADIUS_M),
-                lon0 + math.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(lat0)))))
+        return FlatEarth(lat0, lon0).to_global(north, east)
 
     def goal_of(self, item: MissionItem) -> Goal:
         """Goal of ``item``: north, east from home (m, local NED) and height above home (m)."""

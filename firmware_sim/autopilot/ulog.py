@@ -69,6 +69,11 @@ import time
 from pathlib import Path
 from typing import Any, BinaryIO
 
+import numpy as np
+
+from vtolftc.geodesy import FlatEarth
+from vtolftc.rotation import dcm, euler_to_quat
+
 __all__ = ["NESTED", "TOPICS", "ULogWriter"]
 
 _HEADER_MAGIC = b"ULog\x01\x12\x35"
@@ -164,7 +169,6 @@ _SP_TYPE = {21: SETPOINT_TYPE_LAND, 85: SETPOINT_TYPE_LAND, 22: SETPOINT_TYPE_TA
 _GRAVITY = 9.80665
 _NAN_SETPOINT = (0, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan,
                  math.nan, math.nan, False, SETPOINT_TYPE_IDLE)
-EARTH_RADIUS_M = 6_378_137.0   # the flat-earth projection of the HIL codec
 
 
 def _fmt_of(fields: list[tuple[str, str]]) -> str:
@@ -354,7 +358,7 @@ class ULogWriter:
             q = [float(x) for x in nav.q_wxyz]
             self._data("vehicle_attitude", t, *q)
             r, p, y = (float(x) for x in st.attitude_ref_rad)
-            self._data("vehicle_attitude_setpoint", t, r, p, y, *_quat(r, p, y))
+            self._data("vehicle_attitude_setpoint", t, r, p, y, *euler_to_quat(r, p, y).tolist())
             pos, vel = nav.pos_ned_m, nav.vel_ned_m_s
             home = self._home()
             ok = math.isfinite(home[0])
@@ -449,7 +453,7 @@ class ULogWriter:
             else:
                 a = (0.0, 0.0, -_GRAVITY)
             self._prev_vel = (t, (vn, ve, vd))
-            acc = _rotate_to_body(q, a)
+            acc = tuple((dcm(q).T @ np.asarray(a)).tolist())
         self._data("sensor_combined", t, *gyro, 20_000, 0, *acc, 20_000, 0, 0)
 
     def _gps(self, t: int, nav: Any, home: tuple[float, float, float]) -> None:
@@ -563,27 +567,4 @@ def _to_global(home: tuple[float, float, float], north: float, east: float
                ) -> tuple[float, float]:
     """(lat, lon) [deg] of a point ``north``, ``east`` [m] of home (flat earth, as the HIL
     codec and the navigator project)."""
-    lat0 = home[0]
-    return (lat0 + math.degrees(north / EARTH_RADIUS_M),
-            home[1] + math.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(lat0)))))
-
-
-def _rotate_to_body(q: list[float], v: tuple[float, float, float]
-                    ) -> tuple[float, float, float]:
-    """``v`` (NED) in body FRD axes for the attitude quaternion ``q`` (w, x, y, z; body ->
-    NED): R(q)^T v."""
-    w, x, y, z = q
-    r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
-    r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
-    r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
-    return (r00 * v[0] + r10 * v[1] + r20 * v[2], r01 * v[0] + r11 * v[1] + r21 * v[2],
-            r02 * v[0] + r12 * v[1] + r22 * v[2])
-
-
-def _quat(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    """ZYX Euler angles [rad] -> quaternion (w, x, y, z)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
+    return FlatEarth(home[0], home[1]).to_global(north, east)

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-EARTH_RADIUS_M = 6_378_137.0
+from vtolftc.geodesy import FlatEarth
+
 SEA_LEVEL_PRESSURE_HPA = 1013.25
 SEA_LEVEL_TEMPERATURE_C = 15.0
 
@@ -123,12 +124,10 @@ class SensorModel:
         p_abs = pressure_at_altitude_hpa(alt) + float(self._n(n.baro_hpa))
         q_dyn_hpa = 0.5 * self.rho * airspeed_m_s**2 / 100.0 + float(self._n(n.diff_pressure_hpa))
         ias = math.sqrt(max(0.0, 2.0 * q_dyn_hpa * 100.0 / 1.225))
-        lat0 = math.radians(self.home.lat_deg)
         pn = float(pos_ned[0]) + float(self._n(n.gps_pos_m))
         pe = float(pos_ned[1]) + float(self._n(n.gps_pos_m))
         pd = float(pos_ned[2]) + float(self._n(n.gps_pos_m))
-        lat = self.home.lat_deg + math.degrees(pn / EARTH_RADIUS_M)
-        lon = self.home.lon_deg + math.degrees(pe / (EARTH_RADIUS_M * math.cos(lat0)))
+        lat, lon = FlatEarth(self.home.lat_deg, self.home.lon_deg).to_global(pn, pe)
         return SensorSample(
             time_usec=int(time_usec),
             accel_m_s2=np.asarray(specific_force_body, dtype=float) + self._n(n.accel_m_s2, 3),
