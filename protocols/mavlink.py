@@ -54,6 +54,8 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+from vtolftc.jsonio import atomic_write_text
+
 __all__ = [
     "DIALECT_NAME",
     "DIALECT_XML",
@@ -226,12 +228,7 @@ def generate_constants(target: Path, module: ModuleType | None = None) -> Path:
     lines.append("# message ids")
     for name in sorted(n for n in dir(d) if n.startswith("MAVLINK_MSG_ID_")):
         lines.append(f"{name} = {int(getattr(d, name))}")
-    target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(f".{target.name}.tmp")
-    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    os.replace(tmp, target)
-    return target
+    return atomic_write_text(target, "\n".join(lines) + "\n")
 
 
 def dialect() -> ModuleType:

@@ -20,11 +20,9 @@ an interrupted run never leaves a truncated file behind.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
@@ -33,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from vtolftc.airframe.loader import Airframe
+from vtolftc.jsonio import atomic_write_text
 from vtolftc.synthesis.loops import PARAM_NAMES
 from vtolftc.synthesis.models import AXES
 
@@ -85,28 +84,6 @@ def jsonable(x: Any) -> Any:
     return x
 
 
-def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
-    """Write ``text`` to ``path`` atomically (temp file + rename in the same directory).
-
-    The file gets the permissions a plain ``open(path, "w")`` would give (0666 less the
-    umask), not the owner-only mode of the temporary file."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, p)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    return p
 
 
 def write_json(path: str | os.PathLike[str], doc: Mapping[str, Any]) -> Path:

@@ -21,13 +21,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from vtolftc.airframe.loader import load_airframe
+from vtolftc.jsonio import atomic_write_text
 from vtolftc.synthesis.certificate import certify_schedule
 
 HERE = Path(__file__).resolve().parent
@@ -44,9 +44,7 @@ PLANT_TEXT = {"lagged": "eq. 1-3 + lag 1/((tau_act + 8 ms) s + 1)", "paper": "eq
 
 
 def _write_json(path: Path, doc: Any) -> None:
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(doc, indent=1, allow_nan=False))
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False))
 
 
 def _f(x: Any, nd: int = 3) -> str:

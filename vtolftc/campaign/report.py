@@ -29,6 +29,7 @@ import pyarrow as pa
 from vtolftc.campaign.outcome import ALTITUDE_TOLERANCE_M, ATTITUDE_TOLERANCE_DEG
 from vtolftc.campaign.results import TIMING_COLUMNS
 from vtolftc.campaign.spec import Gate
+from vtolftc.jsonio import atomic_write_text
 
 __all__ = ["check_gates", "compare", "recoverable_lines", "summary_lines", "worst",
            "write_report"]
@@ -369,11 +370,7 @@ within {ATTITUDE_TOLERANCE_DEG:g} deg of level.</p>
 <th>phase</th><th>wind</th><th>outcome</th><th>crash (s)</th><th>max excursion (deg)</th>
 <th>re-fly</th></tr>{wrows}</table></body></html>
 """
-    path = out / "report.html"
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(doc, encoding="utf-8")
-    tmp.replace(path)
-    return path
+    return atomic_write_text(out / "report.html", doc)
 
 
 # --------------------------------------------------------------------------------------------

@@ -24,7 +24,6 @@ NaN marks a value that does not exist (no crash, no transition).
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Iterable
 from pathlib import Path
@@ -32,6 +31,8 @@ from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
+
+from vtolftc.jsonio import atomic_write
 
 __all__ = ["SCHEMA", "TIMING_COLUMNS", "PartWriter", "read_results", "write_final"]
 
@@ -93,12 +94,7 @@ def _table(rows: Iterable[dict[str, Any]]) -> pa.Table:
 
 
 def _atomic_write(table: pa.Table, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as fh:
-        pq.write_table(table, fh)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    atomic_write(path, lambda fh: pq.write_table(table, fh))
 
 
 class PartWriter:

@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import signal
 import sys
 from pathlib import Path
@@ -51,7 +50,7 @@ from vtolftc.firmware_sim.autopilot.failsafe import register_failsafe_params
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import UNSIGNED_ALLOWED
 from vtolftc.firmware_sim.autopilot.interface import AutopilotAPI, ParamError
 from vtolftc.firmware_sim.autopilot.process import AutopilotProcess
-from vtolftc.jsonio import json_safe
+from vtolftc.jsonio import atomic_write_text, json_safe
 from vtolftc.protocols import SigningConfig, StreamTimestamps, open_link
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.hil_signing import hil_signing_from_env
@@ -171,9 +170,7 @@ def run_observers(out: Path, plots: bool = True, autopilot: Any = None) -> list[
 
 def _write_json(path: Path, data: Any) -> None:
     """Write JSON atomically (a crash never leaves half a file)."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(json_safe(data), indent=2))
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(json_safe(data), indent=2))
 
 
 def main(argv: list[str] | None = None) -> int:
