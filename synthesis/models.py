@@ -24,9 +24,10 @@ import control as ct
 import numpy as np
 
 from vtolftc.airframe.loader import Airframe
+from vtolftc.rotation import ATTITUDE_AXES
 
 Axis = Literal["roll", "pitch", "yaw"]
-AXES: tuple[Axis, ...] = ("roll", "pitch", "yaw")
+AXES: tuple[Axis, ...] = ATTITUDE_AXES  # type: ignore[assignment]
 
 
 @dataclass(frozen=True)

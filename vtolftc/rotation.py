@@ -15,7 +15,12 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["dcm", "euler_to_quat", "quat_mul", "quat_to_euler"]
+__all__ = ["ATTITUDE_AXES", "dcm", "euler_to_quat", "quat_mul", "quat_to_euler"]
+
+#: The attitude axes in the order of :func:`quat_to_euler`'s angles (body FRD: roll about x,
+#: pitch about y, yaw about z); every per-axis table of the project (gains, designs, plots)
+#: uses this order.
+ATTITUDE_AXES: tuple[str, str, str] = ("roll", "pitch", "yaw")
 
 
 def quat_to_euler(q: Sequence[float] | NDArray[np.float64]) -> tuple[float, float, float]:

@@ -71,6 +71,7 @@ import numpy as np
 import pyarrow as pa
 
 from vtolftc.protocols.hil import N_ACTUATORS
+from vtolftc.rotation import ATTITUDE_AXES
 from vtolftc.telemetry.samples import FlightMode, TelemetrySample
 
 __all__ = ["DEFAULT_ACTUATOR_NAMES", "RerunRecorder", "actuator_entity", "read_recording"]
@@ -80,7 +81,7 @@ DEFAULT_ACTUATOR_NAMES: tuple[str, ...] = (
     "rotor_4b", "pusher_left", "pusher_right", "aileron_left", "aileron_right", "elevator",
     "rudder_left", "rudder_right",
 )
-_AXES = ("roll", "pitch", "yaw")
+_AXES = ATTITUDE_AXES
 _VIRTUAL = ("Fz", "Fx", "L", "M", "N")
 _TIMELINE = "sim_time"
 
