@@ -142,3 +142,24 @@ def test_declared_extras_pull_in_their_distributions():
     assert "distributed" in names
     with pytest.raises(KeyError):
         declared.names(["no-such-extra"])
+
+
+def test_the_flight_software_runs_without_the_optional_osqp():
+    """OSQP is an extra: without it the autopilot builds and steps (its allocator is the
+    active-set solver) and only the OSQP comparison allocator refuses, with the install hint."""
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['osqp'] = None\n"
+            "from vtolftc.firmware_sim.autopilot.autopilot import Autopilot\n"
+            "from vtolftc.firmware_sim.autopilot.allocation import QPAllocator\n"
+            "import numpy as np\n"
+            "ap = Autopilot()\n"
+            "try:\n"
+            "    QPAllocator(5, np.zeros(3), np.ones(3))\n"
+            "except ImportError as e:\n"
+            "    print('refused:', e)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "refused: QPAllocator needs OSQP" in r.stdout and "vtol-ftc[osqp]" in r.stdout

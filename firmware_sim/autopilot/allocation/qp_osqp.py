@@ -1,5 +1,10 @@
 """QP allocation with OSQP (ADMM), finished by the compiled active-set solver ("polish").
 
+Not the allocator that flies (that is ``active_set.ActiveSetAllocator``): kept as the
+independent comparison of the tests and benchmarks, with the same API. OSQP is an optional
+dependency (``pip install "vtol-ftc[osqp]"``; the ``test`` extra includes it): without it this
+module imports and :class:`QPAllocator` raises ``ImportError`` with that hint.
+
 Solves the problem of ``wls`` every control step with OSQP through its public Python API, in
 the OSQP form ``min 1/2 u'P u + q'u  s.t.  l <= A u <= h`` with ``P = Hn`` (dense upper
 triangle, fixed sparsity pattern), ``q = qn``, ``A = I``. ``B`` may change every step
@@ -39,8 +44,12 @@ from typing import Any
 
 import numba
 import numpy as np
-import osqp
 import scipy.sparse as sp
+
+try:
+    import osqp
+except ImportError:  # optional: pip install "vtol-ftc[osqp]"
+    osqp = None
 
 from vtolftc.firmware_sim.autopilot.allocation.active_set import box_qp_active_set
 from vtolftc.firmware_sim.autopilot.allocation.interface import AllocationResult
@@ -67,8 +76,9 @@ _DEFAULT_OSQP_SETTINGS: dict[str, Any] = {
     "warm_starting": True,
     "scaling": 10,
 }
-_OSQP_SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
-_OSQP_SOLVED_INACCURATE = int(osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
+_OSQP_SOLVED = int(osqp.SolverStatus.OSQP_SOLVED) if osqp is not None else 1
+_OSQP_SOLVED_INACCURATE = (int(osqp.SolverStatus.OSQP_SOLVED_INACCURATE) if osqp is not None
+                           else 2)
 
 
 @numba.njit(cache=True)
@@ -135,6 +145,9 @@ class QPAllocator(WLSAllocator):
         pitch_axis: int | None = 3,
         yaw_axis: int | None = 4,
     ) -> None:
+        if osqp is None:
+            raise ImportError("QPAllocator needs OSQP: pip install \"vtol-ftc[osqp]\" (the "
+                              "allocator that flies, ActiveSetAllocator, does not)")
         super().__init__(n_v, u_min, u_max, w_v=w_v, w_u=w_u, eps=eps, u_pref=u_pref,
                          rate_limit=rate_limit, dt=dt, thrust_axis=thrust_axis,
                          roll_axis=roll_axis, pitch_axis=pitch_axis, yaw_axis=yaw_axis)
