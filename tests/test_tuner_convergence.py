@@ -89,6 +89,17 @@ def test_every_start_stabilises_with_a_far_too_large_scale(name: str) -> None:
     assert all(math.isfinite(s.value) for s in res.starts)
 
 
+def test_plant_scaled_static_gain_keeps_the_unit_step() -> None:
+    """The plant scale sets the random starts and the bounds, the step unit stays 1 (on HE3
+    plant-scaled steps stall at 0.94, unit steps reach 0.82; ``bench_compleib.py``)."""
+    P = compleib("HE3")
+    prm = StaticGain("K", 4, 6, plant=P).parameters()
+    np.testing.assert_allclose([p.sample_sd for p in prm], P.gain_scale().ravel())
+    assert all(p.scale == 1.0 for p in prm)
+    explicit = StaticGain("K", 4, 6, plant=P, scale=2.0).parameters()
+    assert all(p.scale == 2.0 and p.sample_sd == 2.0 for p in explicit)
+
+
 _QUICK = ["AC2", "AC4", "AC6", "AC7", "AC8", "AC15", "HE1"]
 
 
