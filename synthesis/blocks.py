@@ -24,7 +24,9 @@ Scales, bounds and starts: matrix entries get ``scale`` (the step unit and the s
 deviation of random starts, ``Parameter.sample_sd``) from the plant when the block is given
 ``plant=`` (:meth:`GeneralizedPlant.gain_scale`), and the bounds |K_ij| <= ``bound`` (default
 1e3 x scale): a minimiser can then no longer drift to 1e5-1e10 gains on problems whose infimum
-is only approached at infinity. All entries are real; units are those of the plant signals.
+is only approached at infinity. A :class:`StaticGain` with a plant-derived scale keeps the unit
+step (``Parameter.scale`` 1): the plant scale sets its random starts and bounds only. All
+entries are real; units are those of the plant signals.
 """
 
 from __future__ import annotations
@@ -88,7 +90,8 @@ class TunableBlock:
         return len(self.parameters())
 
     def _matrix_params(
-        self, label: str, initial: NDArray[Any], scale: NDArray[Any], bound: NDArray[Any]
+        self, label: str, initial: NDArray[Any], scale: NDArray[Any], bound: NDArray[Any],
+        step_unit: float | None = None,
     ) -> list[Parameter]:
         out = []
         r, c = initial.shape
@@ -97,7 +100,8 @@ class TunableBlock:
                 s = float(scale[i, j])
                 b = float(bound[i, j])
                 x0 = float(np.clip(initial[i, j], -b, b))
-                out.append(Parameter(f"{self.name}.{label}[{i},{j}]", x0, -b, b, scale=s,
+                out.append(Parameter(f"{self.name}.{label}[{i},{j}]", x0, -b, b,
+                                     scale=s if step_unit is None else step_unit,
                                      sample_sd=s))
         return out
 
@@ -116,7 +120,8 @@ class StaticGain(TunableBlock):
         Start value (default zeros).
     plant:
         If given (and ``scale`` is None), entry scales from :meth:`GeneralizedPlant.gain_scale`
-        (the block must then map all the plant's measurements to all its controls).
+        for the random starts and the bounds (the optimiser's step unit stays 1); the block
+        must then map all the plant's measurements to all its controls.
     scale:
         Typical magnitude per entry (scalar or n_out x n_in); default 1 or the plant's.
     bound:
@@ -152,7 +157,11 @@ class StaticGain(TunableBlock):
 
     def parameters(self) -> list[Parameter]:
         """The gain matrix entries ``K[i,j]``, row-major, as parameters."""
-        return self._matrix_params("K", self._initial, self._scale, self._bound)
+        # a plant-derived scale sets the random starts and the bounds, not the optimiser's
+        # step unit: on COMPleib HE3 (||A|| = 9.8 from a gravity coupling, eigenvalues below
+        # 1.01 rad/s) plant-scaled steps stall at 0.94 where unit steps reach 0.82 (issue 23)
+        unit = 1.0 if self.scale is None and self.plant is not None else None
+        return self._matrix_params("K", self._initial, self._scale, self._bound, unit)
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
         """Static gain: no states, ``D = theta`` reshaped to (n_out, n_in)."""

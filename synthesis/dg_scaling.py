@@ -18,7 +18,13 @@ from scipy.optimize import minimize
 from vtolftc.synthesis.dg_kernel import dg_objective
 from vtolftc.synthesis.mu_blocks import Block
 
-__all__ = ["BlockStructure", "MixedMuUpper", "mixed_mu_upper", "mixed_mu_upper_start"]
+__all__ = [
+    "BlockStructure",
+    "MixedMuUpper",
+    "certified_value",
+    "mixed_mu_upper",
+    "mixed_mu_upper_start",
+]
 
 
 # ------------------------------------------------------------------------------------------
@@ -497,7 +503,12 @@ def _dg_upper(
         x = obj.best_x if obj.best_x is not None else np.asarray(res.x)
     assert obj.best_x is not None
     D, G = par.matrices(obj.best_x)
-    return MixedMuUpper(math.sqrt(max(obj.best, 0.0)), D, G, "dg", obj.best_x)
+    cert = certified_value(M, D, G)
+    if not math.isfinite(cert):  # the scalings cannot be checked: fall back to D = I, G = 0
+        D, G = np.eye(M.shape[0], dtype=complex), np.zeros_like(D)
+        cert = float(np.linalg.norm(M, 2))
+    # the value the returned (D, G) prove, recomputed outside the optimiser's kernel
+    return MixedMuUpper(max(math.sqrt(max(obj.best, 0.0)), cert), D, G, "dg", obj.best_x)
 
 
 def _ab13md_upper(
@@ -516,8 +527,51 @@ def _ab13md_upper(
         return None
     d = np.asarray(d, float)
     g = np.asarray(g, float)
-    return MixedMuUpper(float(mu), np.diag(d**2).astype(complex), np.diag(g).astype(complex),
-                        "ab13md", np.asarray(xo, float))
+    if not (np.all(np.isfinite(d)) and np.all(d > 0) and np.all(np.isfinite(g))):
+        return None
+    D, G = np.diag(d**2).astype(complex), np.diag(g).astype(complex)
+    cert = certified_value(M, D, G)
+    # AB13MD's value is kept where its scalings prove it (to rounding); where they do not
+    # (e.g. a value of 0 for M = 6.78j with one real scalar, returned with D = 1, G = 0) the
+    # caller falls back to the D-G optimiser
+    if not cert <= float(mu) * (1.0 + _CERT_RTOL) + _CERT_ATOL * float(np.linalg.norm(M, 2)):
+        return None
+    return MixedMuUpper(max(float(mu), cert), D, G, "ab13md", np.asarray(xo, float))
+
+
+_CERT_RTOL = 1e-6
+_CERT_ATOL = 1e-9
+
+
+def certified_value(M: Any, D: Any, G: Any | None = None) -> float:
+    """The mu upper bound that the scalings (D, G) prove for the square M.
+
+    beta = sqrt(max(lambda_max(M^H D M + j(G M - M^H G), D), 0)), the largest generalised
+    eigenvalue with D > 0: then M^H D M + j(G M - M^H G) <= beta^2 D, which implies
+    mu(M) <= beta when D commutes with the structure and G is Hermitian on its real blocks
+    (module :mod:`.mixed_mu`). Returns ``inf`` when D is not numerically positive definite.
+
+    Parameters
+    ----------
+    M:
+        Square complex matrix (the padded M for non-square structures).
+    D, G:
+        The scalings (G = None or 0 for a pure D scaling).
+    """
+    from scipy.linalg import eigh
+
+    M = np.asarray(M, dtype=complex)
+    D = np.asarray(D, dtype=complex)
+    H = M.conj().T @ D @ M
+    if G is not None:
+        GM = np.asarray(G, dtype=complex) @ M
+        H = H + 1j * (GM - GM.conj().T)
+    try:
+        lam = eigh(0.5 * (H + H.conj().T), 0.5 * (D + D.conj().T), eigvals_only=True)
+    except (np.linalg.LinAlgError, ValueError):
+        return math.inf
+    top = float(lam[-1])
+    return math.sqrt(max(top, 0.0)) if math.isfinite(top) else math.inf
 
 
 _UPPER_METHODS = ("auto", "ab13md", "dg")
@@ -573,7 +627,10 @@ def mixed_mu_upper(
     Returns
     -------
     MixedMuUpper
-        ``value`` >= mu(M), with the (D, G) certificate.
+        ``value`` >= mu(M), with the (D, G) certificate. Every certificate is checked before
+        it is returned (:func:`certified_value`): ``value`` is at least what (D, G) prove,
+        and AB13MD's result is replaced by the D-G optimiser's where its scalings do not
+        prove AB13MD's value.
     """
     st = BlockStructure(blocks)
     Mc = st.check(M)

@@ -480,18 +480,6 @@ def _ab13md_spec(st: _Structure) -> tuple[NDArray[Any], NDArray[Any]] | None:
     return np.array(nblock), np.array(itype)
 
 
-def _certified_dg(M: NDArray[Any], D: NDArray[Any], G: NDArray[Any] | None) -> float:
-    """sqrt(lambda_max(M^H D M + j(G M - M^H G), D)), the bound certified by (D, G)."""
-    from scipy.linalg import eigh
-
-    H = M.conj().T @ D @ M
-    if G is not None:
-        GM = G @ M
-        H = H + 1j * (GM - GM.conj().T)
-    lam = eigh(0.5 * (H + H.conj().T), D, eigvals_only=True)
-    return math.sqrt(max(float(lam[-1]), 0.0))
-
-
 def _upper_any(
     M: NDArray[Any],
     st: _Structure,
@@ -511,28 +499,23 @@ def _upper_any(
             "method='dg' (real blocks) or 'dscale' for this structure"
         )
     if method in ("auto", "ab13md") and spec is not None:
-        from slycot import ab13md
+        from vtolftc.synthesis.dg_scaling import _ab13md_upper
 
-        try:  # cold start only: chained AB13MD warm starts can hang (see mixed_mu)
-            _, d, g, xo = ab13md(M, spec[0], spec[1])
-            d = np.asarray(d, float)
-            ok = bool(np.all(np.isfinite(d)) and np.all(d > 0))
-        except Exception:
-            ok = False
-        if ok:
+        # cold start only: chained AB13MD warm starts can hang (see mixed_mu); None when
+        # AB13MD fails or its (D, G) do not prove its value: then the D-G optimiser below
+        res_ab = _ab13md_upper(M, spec, None)
+        if res_ab is not None:
+            d = np.sqrt(np.real(np.diag(res_ab.D)))
             Dl = np.diag(d).astype(complex)
-            G = np.diag(np.asarray(g, float)).astype(complex) if st.has_real else None
-            if G is None:
-                val = float(np.linalg.norm((d[:, None] * M) / d[None, :], 2))
-            else:
-                val = _certified_dg(M, np.diag(d**2).astype(complex), G)
+            G = res_ab.G if st.has_real else None
             x = np.log(d[st.row_starts])
-            return val, DScaling(Dl, Dl.copy(), x, G, "ab13md", np.asarray(xo, float))
-    if st.has_real and method in ("auto", "dg"):
+            return res_ab.value, DScaling(Dl, Dl.copy(), x, G, "ab13md", res_ab.params)
+    if st.has_real and method in ("auto", "dg", "ab13md"):
         from vtolftc.synthesis.dg_scaling import BlockStructure, _dg_upper
 
         x0 = warm.warm if warm is not None and warm.method == "dg" else None
-        res = _dg_upper(M, BlockStructure(st.blocks), x0, target, rtol, max(maxiter, 100))
+        # the budget of mixed_mu_upper (200 per stage), so that the two agree
+        res = _dg_upper(M, BlockStructure(st.blocks), x0, target, rtol, max(maxiter, 200))
         T = np.linalg.cholesky(res.D).conj().T  # D = T^H T
         return res.value, DScaling(T, T.copy(), np.zeros(st.n_params), res.G, "dg",
                                    res.params)

@@ -640,6 +640,16 @@ def _same_freq(w1: float, w2: float) -> bool:
     return abs(w1 - w2) <= 1e-6 * max(abs(w1), abs(w2), 1e-9)
 
 
+ITER_CAP = 1000
+"""Safety cap on the iterations of one start when :func:`tune` runs to convergence
+(``max_iter=None``): the stationarity and progress tests below stop well before it."""
+
+PROGRESS_WINDOW = 15
+PROGRESS_TOL = 1e-4
+"""With ``max_iter=None`` a start also stops when its objective fell by less than
+PROGRESS_TOL (relative) over the last PROGRESS_WINDOW iterations (no progress)."""
+
+
 @dataclass
 class _Options:
     max_iter: int
@@ -652,6 +662,7 @@ class _Options:
     progress: Callable[[Progress], None] | None = None
     t_start: float = 0.0
     interrupted: bool = False
+    to_convergence: bool = False  # max_iter=None: stop on stationarity / progress
 
 
 @dataclass(frozen=True)
@@ -756,8 +767,9 @@ def _local(
     add_freqs(theta, peaks, 0.5 * f)
     radius = opts.trust_radius
     it = 0
-    status = "max_iter reached"
+    status = "max_iter reached" if not opts.to_convergence else "iteration cap reached"
     margin = pb.stability_margin
+    f_iter = [f]  # objective after every iteration (accepted or not), for the progress test
     abs_target = -max(margin, 0.0) - 1e-9
     while it < opts.max_iter:
         if opts.deadline is not None and time.monotonic() >= opts.deadline:
@@ -773,6 +785,7 @@ def _local(
                 index, it + 1, status,
             )
             it += 1
+            f_iter.append(f)
             if opts.progress is not None and f < f_old:
                 opts.progress(Progress(index, it, f, theta.copy(),
                                        time.monotonic() - opts.t_start))
@@ -781,6 +794,11 @@ def _local(
             status = "interrupted"
             break
         if stop:
+            break
+        if (opts.to_convergence and it >= PROGRESS_WINDOW
+                and f_iter[-1 - PROGRESS_WINDOW] - f <= PROGRESS_TOL * abs(f)):
+            status = (f"converged (no progress: < {PROGRESS_TOL:g} relative decrease in "
+                      f"{PROGRESS_WINDOW} iterations)")
             break
     return theta, f, history, it, status
 
@@ -903,6 +921,45 @@ def _sample_start(
     return th
 
 
+SHRINK_STEPS = 40
+"""Plant-scaled random starts (``Parameter.sample_sd``) that are less stable than the initial
+point are pulled halfway back to it up to SHRINK_STEPS times (see :func:`_no_less_stable`)."""
+
+
+def _abscissa(ev: _Evaluator, theta: NDArray[np.float64]) -> float:
+    try:
+        a = ev.abscissa(theta)
+    except (np.linalg.LinAlgError, ValueError):
+        return math.inf
+    return a if math.isfinite(a) else math.inf
+
+
+def _no_less_stable(
+    ev: _Evaluator, theta: NDArray[np.float64], a0: float
+) -> NDArray[np.float64]:
+    """A random start scaled so that it is no less stable than the initial point.
+
+    The deviation of the plant-scaled entries (``sample_sd``) from their initial values is
+    halved while the largest closed-loop spectral abscissa exceeds max(a0, -margin), a0 the
+    initial point's: a stabilising initial point then gives stabilising random starts, an
+    unstable one starts no worse off than the initial point does (a plant scale that is too
+    large for the loop, e.g. one set by a large ||A|| of fast modes, no longer throws every
+    start far outside the stabilising set). Other parameters are left as drawn.
+    """
+    pb = ev.pb
+    mask = np.array([p.sample_sd is not None for p in pb.parameters])
+    if not mask.any():
+        return theta
+    target = max(a0, -pb.stability_margin)
+    x0 = np.clip(pb.initial, pb.lower, pb.upper)
+    th = theta.copy()
+    for _ in range(SHRINK_STEPS):
+        if _abscissa(ev, th) <= target + 1e-9 * max(abs(target), 1.0):
+            break
+        th = np.where(mask, x0 + 0.5 * (th - x0), th)
+    return th
+
+
 def _run_start(args: tuple[TuningProblem, int, NDArray[np.float64], _Options]) -> StartRecord:
     pb, index, theta0, opts = args
     ev = _Evaluator(pb)
@@ -918,7 +975,7 @@ def tune(
     *,
     n_starts: int = 0,
     seed: int | None = 0,
-    max_iter: int = 60,
+    max_iter: int | None = None,
     tol: float = 1e-7,
     max_freqs: int = 40,
     trust_radius: float = 1.0,
@@ -941,7 +998,12 @@ def tune(
     seed:
         Seed of the random starts (``SeedSequence(seed).spawn``); same seed, same result.
     max_iter, tol:
-        Outer iterations per start and relative-decrease tolerance.
+        Outer iterations per start and relative-decrease tolerance. ``None`` (default): run
+        each start to convergence: until a step is stationary for the frequency model, the
+        decrease falls below ``tol``, the trust region collapses, or the objective fell by
+        less than ``PROGRESS_TOL`` over the last ``PROGRESS_WINDOW`` iterations (at most
+        ``ITER_CAP`` iterations). An int is a hard cap (the stationarity tests still apply,
+        the progress test does not).
     max_freqs:
         Cap on the size of each channel's active frequency set.
     trust_radius:
@@ -1008,7 +1070,7 @@ def start_jobs(
     *,
     n_starts: int = 0,
     seed: int | None = 0,
-    max_iter: int = 60,
+    max_iter: int | None = None,
     tol: float = 1e-7,
     max_freqs: int = 40,
     trust_radius: float = 1.0,
@@ -1024,25 +1086,32 @@ def start_jobs(
     :func:`tune`'s, bit for bit. ``progress`` only works in this process."""
     if n_starts < 0:
         raise ValueError(f"n_starts must be >= 0, got {n_starts}")
-    if max_iter < 1:
-        raise ValueError(f"max_iter must be >= 1, got {max_iter}")
+    if max_iter is not None and max_iter < 1:
+        raise ValueError(f"max_iter must be >= 1 (or None: to convergence), got {max_iter}")
     if time_limit is not None and not time_limit > 0:
         raise ValueError(f"time_limit must be > 0 s (or None), got {time_limit}")
     if not (regularization >= 0 and math.isfinite(regularization)):
         raise ValueError(f"regularization must be a finite float >= 0, got {regularization}")
     t_start = time.monotonic()
-    opts = _Options(max_iter, tol, max_freqs, trust_radius, 200 * len(problem.parameters) + 200,
+    opts = _Options(ITER_CAP if max_iter is None else max_iter, tol, max_freqs, trust_radius,
+                    200 * len(problem.parameters) + 200,
                     None if time_limit is None else t_start + time_limit, float(regularization),
-                    progress, t_start)
+                    progress, t_start, to_convergence=max_iter is None)
     starts = [problem.initial]
     children = np.random.SeedSequence(seed).spawn(n_starts)
+    ev: _Evaluator | None = None
+    a0 = math.inf
     for child in children:
         rng = np.random.default_rng(child)
-        th = (
-            problem._check_theta(start_sampler(rng))
-            if start_sampler is not None
-            else _sample_start(problem, rng, spread)
-        )
+        if start_sampler is not None:
+            th = problem._check_theta(start_sampler(rng))
+        else:
+            th = _sample_start(problem, rng, spread)
+            if any(p.sample_sd is not None for p in problem.parameters):
+                if ev is None:
+                    ev = _Evaluator(problem)
+                    a0 = _abscissa(ev, np.clip(problem.initial, problem.lower, problem.upper))
+                th = _no_less_stable(ev, th, a0)
         starts.append(th)
     return [(problem, i, th, opts) for i, th in enumerate(starts)]
 

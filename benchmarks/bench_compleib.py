@@ -1,0 +1,80 @@
+"""COMPleib static-output-feedback benchmark of the structured H-infinity tuner (issue 23).
+
+For each problem (``tests/support/compleib.py``): ``tune`` of a static gain u = K y built with
+``StaticGain(..., plant=P)`` (plant-scaled random starts), 5 starts (the initial K = 0 and 4
+random ones, seed 0), ``max_iter`` as given (default: to convergence). The closed-loop norm
+of the best K is re-computed with raw ``slycot.ab13dd``. Prints, per problem: the best norm,
+the slycot norm, the value before issue 23's fix (``BEFORE_ISSUE_23``), each start's value,
+iterations and status, the number of starts that stabilised, and the wall time.
+
+Usage: ``python benchmarks/bench_compleib.py [NAME ...] [--max-iter N] [--starts N]``.
+Timings are wall-clock on whatever else the machine is doing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from slycot import ab13dd
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+from support.compleib import BEFORE_ISSUE_23, NAMES, compleib
+
+from vtolftc.synthesis.blocks import StaticGain, lft_problem
+from vtolftc.synthesis.lft import lft
+from vtolftc.synthesis.structured import tune
+
+
+def slycot_norm(sys_: tuple[np.ndarray, ...]) -> float:
+    """||(A, B, C, D)||_inf by raw SLICOT AB13DD (inf if A is not Hurwitz)."""
+    A, B, C, D = sys_
+    if np.max(np.linalg.eigvals(A).real) >= 0:
+        return math.inf
+    n, m, p = A.shape[0], B.shape[1], C.shape[0]
+    return float(ab13dd("C", "I", "N", "D", n, m, p, A, np.eye(n), B, C, D, tol=1e-10)[0])
+
+
+def run(name: str, n_random: int, max_iter: int | None) -> dict[str, object]:
+    """Tune problem ``name``; the measured numbers as a dict."""
+    P = compleib(name)
+    nu, ny = P.B2.shape[1], P.C2.shape[0]
+    pb = lft_problem(P, StaticGain("K", nu, ny, plant=P))
+    t0 = time.perf_counter()
+    res = tune(pb, n_starts=n_random, seed=0, max_iter=max_iter)
+    wall = time.perf_counter() - t0
+    K = res.theta.reshape(nu, ny)
+    return {"name": name, "value": res.value, "slycot": slycot_norm(lft(P, K)),
+            "before": BEFORE_ISSUE_23.get(name, math.nan), "wall_s": wall,
+            "stabilised": sum(math.isfinite(s.value) for s in res.starts),
+            "starts": [(s.index, s.value, s.iterations, s.status) for s in res.starts]}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("names", nargs="*", default=list(NAMES))
+    ap.add_argument("--max-iter", type=int, default=None)
+    ap.add_argument("--starts", type=int, default=4, help="random starts besides K = 0")
+    a = ap.parse_args(argv)
+    bad = [n for n in a.names if n not in NAMES]
+    if bad:
+        print(f"unknown COMPleib problem(s) {bad}; available: {', '.join(NAMES)}",
+              file=sys.stderr)
+        return 2
+    for name in a.names:
+        r = run(name, a.starts, a.max_iter)
+        print(f"{name:5s} best {r['value']:.5f} slycot {r['slycot']:.5f} before "
+              f"{r['before']:.5f} stabilised {r['stabilised']}/{a.starts + 1} "
+              f"{r['wall_s']:.1f} s", flush=True)
+        for i, v, it, st in r["starts"]:  # type: ignore[union-attr]
+            print(f"      start {i}: {v:.5f} after {it} iterations ({st})", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
