@@ -463,10 +463,13 @@ def _dg_parametrisation(blocks: tuple[Block, ...]) -> _DG:
 _WARM_STAGES = (1e-4, 0.0)
 
 
-def _dg_upper(
+def dg_upper_bound(
     M: NDArray[Any], st: BlockStructure, x0: NDArray[np.float64] | None, target: float,
     rtol: float, maxiter: int,
 ) -> MixedMuUpper:
+    """The D-G optimiser's upper bound of mixed mu of ``M`` (from the start ``x0``, or the
+    identity and Osborne starts), stopping once ``target`` is proven or within ``rtol``; the
+    value returned is the one the returned (D, G) prove (:func:`certified_value`)."""
     par = _dg_parametrisation(st.blocks)
     obj = _DGObjective(M, par)
     starts = [np.zeros(par.n_params), _osborne_x(M, par)]
@@ -511,9 +514,11 @@ def _dg_upper(
     return MixedMuUpper(max(math.sqrt(max(obj.best, 0.0)), cert), D, G, "dg", obj.best_x)
 
 
-def _ab13md_upper(
+def ab13md_upper_bound(
     M: NDArray[Any], spec: tuple[NDArray[Any], NDArray[Any]], x: NDArray[np.float64] | None
 ) -> MixedMuUpper | None:
+    """SLICOT AB13MD's upper bound (``spec``: its block sizes and types), or None when AB13MD
+    fails or its (D, G) do not prove its value."""
     from slycot import ab13md
 
     try:
@@ -581,9 +586,11 @@ def mixed_mu_upper_start(M: Any, blocks: Sequence[Block] | BlockStructure) -> fl
     """The D-G bound at the optimiser's starting scalings, without optimising: the smaller of
     sigma_max(M) (D = I, G = 0) and the block-Osborne balanced D (G = 0).
 
-    A valid upper bound of mu(M) (each is a certificate), cheap, and exactly the value of
-    ``mixed_mu_upper(M, blocks, method="dg", maxiter=0, target=inf)``: a sweep uses it to
-    order frequencies and to skip those already below a known lower bound.
+    A valid upper bound of mu(M) (each is a certificate), cheap, and the value of
+    ``mixed_mu_upper(M, blocks, method="dg", maxiter=0, target=inf)`` to rounding (that one
+    also re-checks its scalings outside the compiled kernel and returns the larger of the two
+    evaluations, which may differ in the last bits): a sweep uses it to order frequencies and
+    to skip those already below a known lower bound.
     """
     st = BlockStructure(blocks)
     Mp, sq = st.pad(st.check(M))
@@ -646,12 +653,12 @@ def mixed_mu_upper(
         # never warm-started: a chain of AB13MD warm starts (its x output fed back in) along a
         # frequency sweep was seen to degenerate and then hang inside the Fortran routine;
         # a cold call costs ~1 ms
-        res = _ab13md_upper(Mc, spec, None)
+        res = ab13md_upper_bound(Mc, spec, None)
         if res is not None:
             return res
     Mp, sq = st.pad(Mc)
     x0 = warm_start.params if warm_start is not None and warm_start.method == "dg" else None
-    return _dg_upper(Mp, sq, x0, target, rtol, maxiter)
+    return dg_upper_bound(Mp, sq, x0, target, rtol, maxiter)
 
 
 # ------------------------------------------------------------------------------------------

@@ -58,7 +58,7 @@ from vtolftc.synthesis.dg_scaling import (
     mixed_mu_upper,
     mixed_mu_upper_start,
 )
-from vtolftc.synthesis.mu import Block, MuSweep, _lower, _Structure, _verify
+from vtolftc.synthesis.mu import Block, BlockIndex, MuSweep, makes_singular, power_lower_bound
 
 __all__ = [
     "BlockStructure",
@@ -93,9 +93,9 @@ def mixed_mu_lower(
     if n_starts < 0:
         raise ValueError(f"n_starts must be >= 0, got {n_starts}")
     Mp, sq = st.pad(Mc)
-    s = _Structure(list(sq.blocks), Mp.shape[0])
+    s = BlockIndex(list(sq.blocks), Mp.shape[0])
     rng = np.random.default_rng(seed)
-    val, Delta, _ = _lower(Mp, s, n_starts, rng, [], iters)
+    val, Delta, _ = power_lower_bound(Mp, s, n_starts, rng, [], iters)
     if all(b.kind == "real" for b in sq.blocks):
         v2, D2 = _real_det_search(Mp, sq, val, rng)
         if v2 > val:
@@ -156,7 +156,7 @@ def _real_det_search(
         if t <= 0 or not np.isfinite(t) or 1.0 / t <= best[0]:
             continue
         Delta = delta(d)
-        if _verify(M, Delta):
+        if makes_singular(M, Delta):
             best = (1.0 / t, Delta)
     return best
 
@@ -250,14 +250,14 @@ def mixed_mu_sweep(
     up = np.zeros(w.size)
     prev: MixedMuUpper | None = None
     sq = st.padded()[0]
-    s = _Structure(list(sq.blocks), sq.m_shape[0])
+    s = BlockIndex(list(sq.blocks), sq.m_shape[0])
     rng = np.random.default_rng(seed)
     vec: list[tuple[NDArray[Any], NDArray[Any]]] = []
     for i in range(w.size):
         Mi = st.check(F[i])
         if lower:  # fast per-frequency lower bound: power iteration, warm-started
             Mp, _ = st.pad(Mi)
-            lo[i], _, v = _lower(Mp, s, n_starts, rng, vec, 30, real_search=False)
+            lo[i], _, v = power_lower_bound(Mp, s, n_starts, rng, vec, 30, real_search=False)
             vec = [] if v is None else [v]
         res = mixed_mu_upper(Mi, st, method=method, warm_start=prev, rtol=rtol, target=lo[i],
                              maxiter=60)

@@ -138,7 +138,7 @@ class MuSweep:
 # ------------------------------------------------------------------------------------------
 
 
-class _Structure:
+class BlockIndex:
     """Index maps of a block structure for a square matrix of size n."""
 
     def __init__(self, blocks: Sequence[Block], n: int):
@@ -288,7 +288,7 @@ def _check_matrix(M: Any) -> NDArray[np.complex128]:
 # ------------------------------------------------------------------------------------------
 
 
-def _osborne_init(M: NDArray[Any], st: _Structure, sweeps: int = 20) -> NDArray[np.float64]:
+def _osborne_init(M: NDArray[Any], st: BlockIndex, sweeps: int = 20) -> NDArray[np.float64]:
     """Osborne balancing of the block-norm matrix: minimise ||D B D^-1||_F (log params)."""
     K = st.K
     Bn = np.zeros((K, K))
@@ -323,7 +323,7 @@ def _osborne_init(M: NDArray[Any], st: _Structure, sweeps: int = 20) -> NDArray[
     return x
 
 
-def _eig_init(M: NDArray[Any], st: _Structure, x: NDArray[np.float64]) -> NDArray[np.float64]:
+def _eig_init(M: NDArray[Any], st: BlockIndex, x: NDArray[np.float64]) -> NDArray[np.float64]:
     """Replace the scalings of repeated blocks by R from QR(V^-1) of their diagonal block.
 
     For a single repeated complex block this gives sigma_max(R M R^-1) = rho(M) exactly
@@ -357,7 +357,7 @@ def _eig_init(M: NDArray[Any], st: _Structure, x: NDArray[np.float64]) -> NDArra
 class _UpperObjective:
     """Smoothed sigma_max(D_l M D_r^-1) and its gradient in the log-parametrisation."""
 
-    def __init__(self, M: NDArray[Any], st: _Structure):
+    def __init__(self, M: NDArray[Any], st: BlockIndex):
         self.M = M
         self.st = st
         self.smooth = 0.0
@@ -422,7 +422,7 @@ class _UpperObjective:
 
 def _upper(
     M: NDArray[Any],
-    st: _Structure,
+    st: BlockIndex,
     x0: NDArray[np.float64] | None,
     target: float,
     rtol: float,
@@ -466,7 +466,7 @@ def _upper(
 _MU_METHODS = ("auto", "ab13md", "dg", "dscale")
 
 
-def _ab13md_spec(st: _Structure) -> tuple[NDArray[Any], NDArray[Any]] | None:
+def _ab13md_spec(st: BlockIndex) -> tuple[NDArray[Any], NDArray[Any]] | None:
     nblock, itype = [], []
     for b in st.blocks:
         if b.kind == "full" and b.rows == b.cols:
@@ -482,7 +482,7 @@ def _ab13md_spec(st: _Structure) -> tuple[NDArray[Any], NDArray[Any]] | None:
 
 def _upper_any(
     M: NDArray[Any],
-    st: _Structure,
+    st: BlockIndex,
     warm: DScaling | None,
     target: float,
     rtol: float,
@@ -499,11 +499,11 @@ def _upper_any(
             "method='dg' (real blocks) or 'dscale' for this structure"
         )
     if method in ("auto", "ab13md") and spec is not None:
-        from vtolftc.synthesis.dg_scaling import _ab13md_upper
+        from vtolftc.synthesis.dg_scaling import ab13md_upper_bound
 
         # cold start only: chained AB13MD warm starts can hang (see mixed_mu); None when
         # AB13MD fails or its (D, G) do not prove its value: then the D-G optimiser below
-        res_ab = _ab13md_upper(M, spec, None)
+        res_ab = ab13md_upper_bound(M, spec, None)
         if res_ab is not None:
             d = np.sqrt(np.real(np.diag(res_ab.D)))
             Dl = np.diag(d).astype(complex)
@@ -511,11 +511,11 @@ def _upper_any(
             x = np.log(d[st.row_starts])
             return res_ab.value, DScaling(Dl, Dl.copy(), x, G, "ab13md", res_ab.params)
     if st.has_real and method in ("auto", "dg", "ab13md"):
-        from vtolftc.synthesis.dg_scaling import BlockStructure, _dg_upper
+        from vtolftc.synthesis.dg_scaling import BlockStructure, dg_upper_bound
 
         x0 = warm.warm if warm is not None and warm.method == "dg" else None
         # the budget of mixed_mu_upper (200 per stage), so that the two agree
-        res = _dg_upper(M, BlockStructure(st.blocks), x0, target, rtol, max(maxiter, 200))
+        res = dg_upper_bound(M, BlockStructure(st.blocks), x0, target, rtol, max(maxiter, 200))
         T = np.linalg.cholesky(res.D).conj().T  # D = T^H T
         return res.value, DScaling(T, T.copy(), np.zeros(st.n_params), res.G, "dg",
                                    res.params)
@@ -560,7 +560,7 @@ def mu_upper_bound(
         sigma_max(D.left @ M @ inv(D.right)); with real blocks (D-G bound) ``D.g`` holds G.
     """
     Mc = _check_matrix(M)
-    st = _Structure(blocks, Mc.shape[0])
+    st = BlockIndex(blocks, Mc.shape[0])
     if isinstance(warm_start, DScaling):
         warm = warm_start
     elif warm_start is not None:
@@ -583,7 +583,7 @@ def _blk_norms(v: NDArray[Any], idx_blk: NDArray[np.intp], K: int) -> NDArray[np
 class _Power:
     """Packard-Fan-Doyle power iteration for the complex (and signed real) mu lower bound."""
 
-    def __init__(self, M: NDArray[Any], st: _Structure):
+    def __init__(self, M: NDArray[Any], st: BlockIndex):
         self.M = M
         self.Mh = M.conj().T
         self.st = st
@@ -716,7 +716,7 @@ class _Power:
 
 
 def _delta_from_q(
-    M: NDArray[Any], Q: NDArray[Any], st: _Structure
+    M: NDArray[Any], Q: NDArray[Any], st: BlockIndex
 ) -> tuple[float, NDArray[np.complex128] | None]:
     """Valid bound |lambda| from Delta = Q / lambda, lambda an eigenvalue of M Q (||Q|| = 1).
 
@@ -735,12 +735,12 @@ def _delta_from_q(
         if abs(li.imag) > 1e-9 * abs(li):
             continue
         Delta = Q / li.real
-        if _verify(M, Delta):
+        if makes_singular(M, Delta):
             return float(abs(li.real)), Delta
     return 0.0, None
 
 
-def _verify(M: NDArray[Any], Delta: NDArray[Any]) -> bool:
+def makes_singular(M: NDArray[Any], Delta: NDArray[Any]) -> bool:
     """True if I - M Delta is singular to working accuracy."""
     n = M.shape[0]
     smin = float(np.linalg.svd(np.eye(n) - M @ Delta, compute_uv=False)[-1])
@@ -756,7 +756,7 @@ def _sign_vectors(kr: int, rng: np.random.Generator, cap: int = 16) -> list[NDAr
 
 def _lower_real(
     M: NDArray[Any],
-    st: _Structure,
+    st: BlockIndex,
     lb: float,
     rng: np.random.Generator,
     dirs_extra: Sequence[NDArray[Any]],
@@ -790,7 +790,7 @@ def _lower_real(
     cc = np.concatenate([st.col_idx[k] for k in cidx])
     Mrr, Mrc = M[np.ix_(rr, cr)], M[np.ix_(rr, cc)]
     Mcr, Mcc = M[np.ix_(rc, cr)], M[np.ix_(rc, cc)]
-    sub = _Structure([st.blocks[k] for k in cidx], rc.size)
+    sub = BlockIndex([st.blocks[k] for k in cidx], rc.size)
     single_full = sub.K == 1 and sub.blocks[0].kind == "full"
     sizes = np.array([st.blocks[k].rows for k in ridx])
     eye_r = np.eye(rr.size)
@@ -809,7 +809,7 @@ def _lower_real(
             Dc = np.outer(Vh[0].conj(), U[:, 0].conj()) / sv[0]
             mu_c = float(sv[0])
         else:
-            mu_c, Dc, _ = _lower(Mp, sub, 0, rng, [], 25)
+            mu_c, Dc, _ = power_lower_bound(Mp, sub, 0, rng, [], 25)
             if Dc is None:
                 return 0.0, None
         return min(1.0 / t, mu_c), Dc
@@ -838,15 +838,15 @@ def _lower_real(
         Delta = np.zeros((n, n), dtype=complex)
         Delta[cr, rr] = np.repeat(t_best * s, sizes)
         Delta[np.ix_(cc, rc)] = Dc
-        if _verify(M, Delta):
+        if makes_singular(M, Delta):
             dn = max(t_best, float(np.linalg.norm(Dc, 2)))
             best = (1.0 / dn, Delta)
     return best
 
 
-def _lower(
+def power_lower_bound(
     M: NDArray[Any],
-    st: _Structure,
+    st: BlockIndex,
     n_starts: int,
     rng: np.random.Generator,
     vec_starts: Sequence[tuple[NDArray[Any], NDArray[Any]]],
@@ -854,6 +854,12 @@ def _lower(
     include_eig: bool = True,
     real_search: bool = True,
 ) -> tuple[float, NDArray[np.complex128] | None, tuple[NDArray[Any], NDArray[Any]] | None]:
+    """Lower bound of mu by the power iteration (Packard-Fan-Doyle; signed for real blocks).
+
+    Returns the bound, the destabilising structured ``Delta`` of norm 1/bound that proves it
+    (checked with :func:`makes_singular`; None if none was found) and the converged vector pair
+    (a warm start for the next frequency).
+    """
     n = st.n
     if st.has_real:
         iters = min(iters, 25)  # the signed-real iteration rarely converges: keep it short
@@ -896,8 +902,9 @@ def _lower(
             cb = [k for k in range(st.K) if not st.is_real[k]]
             ri = np.concatenate([st.row_idx[k] for k in cb])
             ci = np.concatenate([st.col_idx[k] for k in cb])
-            sub = _Structure([st.blocks[k] for k in cb], ri.size)
-            val, Dsub, _ = _lower(M[np.ix_(ri, ci)], sub, max(1, n_starts // 2), rng, [], iters)
+            sub = BlockIndex([st.blocks[k] for k in cb], ri.size)
+            val, Dsub, _ = power_lower_bound(M[np.ix_(ri, ci)], sub, max(1, n_starts // 2),
+                                             rng, [], iters)
             if val > best[0] and Dsub is not None:
                 Delta = np.zeros((n, n), dtype=complex)
                 Delta[np.ix_(ci, ri)] = Dsub
@@ -931,11 +938,11 @@ def mu_lower_bound(
         destabilising perturbation was found.
     """
     Mc = _check_matrix(M)
-    st = _Structure(blocks, Mc.shape[0])
+    st = BlockIndex(blocks, Mc.shape[0])
     if n_starts < 0:
         raise ValueError(f"n_starts must be >= 0, got {n_starts}")
     starts = [] if scaling is None else [_svd_start(Mc, scaling)]
-    val, Delta, _ = _lower(Mc, st, n_starts, np.random.default_rng(seed), starts, iters)
+    val, Delta, _ = power_lower_bound(Mc, st, n_starts, np.random.default_rng(seed), starts, iters)
     return val, Delta
 
 
@@ -957,7 +964,7 @@ def _svd_start(M: NDArray[Any], D: DScaling) -> tuple[NDArray[Any], NDArray[Any]
 
 def _bounds(
     M: NDArray[Any],
-    st: _Structure,
+    st: BlockIndex,
     warm: DScaling | None,
     extra_starts: Sequence[tuple[NDArray[Any], NDArray[Any]]],
     n_starts: int,
@@ -968,11 +975,12 @@ def _bounds(
     method: str = "auto",
 ) -> tuple[MuBounds, tuple[NDArray[Any], NDArray[Any]] | None]:
     # quick lower bound first: it lets the upper-bound optimiser stop early when tight
-    lo0, Delta0, vec0 = _lower(M, st, 0, rng, list(extra_starts), iters, real_search=False)
+    lo0, Delta0, vec0 = power_lower_bound(M, st, 0, rng, list(extra_starts), iters,
+                                          real_search=False)
     up, D = _upper_any(M, st, warm, lo0, rtol, maxiter, method)
     lo, Delta, vec = lo0, Delta0, vec0
     if up > lo0 * (1.0 + rtol) or st.has_real:
-        lo1, Delta1, vec1 = _lower(
+        lo1, Delta1, vec1 = power_lower_bound(
             M, st, n_starts, rng, [_svd_start(M, D)], iters, include_eig=False
         )
         if lo1 > lo:
@@ -997,7 +1005,7 @@ def mu_bounds(
     ``method`` selects the upper-bound algorithm (see :func:`mu_upper_bound`).
     """
     Mc = _check_matrix(M)
-    st = _Structure(blocks, Mc.shape[0])
+    st = BlockIndex(blocks, Mc.shape[0])
     if n_starts < 0:
         raise ValueError(f"n_starts must be >= 0, got {n_starts}")
     res, _ = _bounds(Mc, st, warm_start, [], n_starts, np.random.default_rng(seed), rtol, 60,
@@ -1049,7 +1057,7 @@ def mu_sweep(
         raise ValueError("empty frequency grid")
     if not np.all(np.isfinite(F)):
         raise ValueError("freq_response contains NaN or inf entries")
-    st = _Structure(blocks, F.shape[1])
+    st = BlockIndex(blocks, F.shape[1])
     rng = np.random.default_rng(seed)
     lower = np.zeros(w.size)
     upper = np.zeros(w.size)

@@ -80,7 +80,7 @@ def power_iteration(M: NDArray[np.complex128], b: NDArray[np.complex128],
                     rep_blk: NDArray[np.intp], is_real: NDArray[np.bool_],
                     ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
     """The general iteration (any mix of full, repeated complex and repeated real blocks);
-    returns (a, w), a normalised. The index maps are those of ``mu._Structure``."""
+    returns (a, w), a normalised. The index maps are those of ``mu.BlockIndex``."""
     Mh = np.ascontiguousarray(np.conj(M).T)
     has_rep = rep_row.size > 0
     a = _matvec(M, b)

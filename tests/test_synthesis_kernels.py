@@ -10,7 +10,7 @@ import pytest
 import scipy.linalg
 
 from vtolftc.synthesis.freq_kernel import siso_sigma, siso_sigma_grad
-from vtolftc.synthesis.mu import Block, _Power, _Structure, mu_bounds
+from vtolftc.synthesis.mu import Block, BlockIndex, _Power, mu_bounds
 from vtolftc.synthesis.structured import (
     Parameter,
     TuningProblem,
@@ -134,7 +134,7 @@ def test_rightmost_eigenpair_is_scipys_bit_for_bit() -> None:
     [Block.real(1), Block.real(1), Block.full(2, 2)],
 ])
 def test_power_iteration_kernel_matches_the_numpy_reference(blocks: list[Block]) -> None:
-    st = _Structure(blocks, sum(b.cols for b in blocks))
+    st = BlockIndex(blocks, sum(b.cols for b in blocks))
     rng = np.random.default_rng(st.n)
     for _ in range(40):
         M = rng.standard_normal((st.n, st.n)) + 1j * rng.standard_normal((st.n, st.n))
