@@ -222,15 +222,8 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
             settings["method"] = "robust"
         res = SynthesisResult(af, tuple(points), gs, sh, lqr, settings=settings, method=method)
         if method == "robust":
-            from vtolftc.synthesis.robust import loop_margins
-
             t0 = time.perf_counter()
-            for ax in AXES:
-                res.margins_gs[ax] = [loop_margins(d.weights[0].plant(af), d.gains)
-                                      for d in gs[ax]]
-                if ax in sh:
-                    res.margins_shif[ax] = [loop_margins(w.plant(af), sh[ax].gains)
-                                            for w in sh[ax].weights]
+            _loop_margins(res)
             times["loop margins"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         res.files = write_gain_files(res, out)
@@ -252,34 +245,7 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
         if mu:
             # (with workers most of it already ran during the tuning's tail)
             t0 = time.perf_counter()
-            jobs_mu: list[tuple[Any, ...]] = []
-            for ax in AXES:
-                for i, p in enumerate(points):
-                    d = gs[ax][i]
-                    jobs_mu.append(("gs", ax, i, (af, ax, p, d.theta, d.weights[0], seed)))
-                    if ax in sh:
-                        jobs_mu.append(("shif", ax, i,
-                                        (af, ax, p, sh[ax].theta, sh[ax].weights[i], seed)))
-            runnable = [j for j in jobs_mu if _nominally_stable(res, j)]
-            results = {}
-            if executor is None:
-                pairs: Any = ((j, _mu_job(j[3])) for j in runnable)
-            else:
-                futs = {(pre_mu.pop(j[:3], None) or executor.submit(_mu_job, j[3])): j
-                        for j in runnable}
-                for f in pre_mu.values():  # none expected: every queued job is runnable
-                    f.cancel()
-                pairs = ((futs[f], f.result()) for f in as_completed(futs))
-            for j, r in pairs:
-                results[j[:3]] = r
-                tick(f"mu {j[0]} {j[1]} point {points[j[2]].number}")
-            if len(jobs_mu) > len(runnable):
-                tick("mu (skipped: nominally unstable)", len(jobs_mu) - len(runnable))
-            for kind, store in (("gs", res.mu_gs), ("shif", res.mu_shif)):
-                for ax in AXES:
-                    vals = [results.get((kind, ax, i)) for i in range(len(points))]
-                    if all(v is not None for v in vals):
-                        store[ax] = vals  # type: ignore[assignment]
+            _mu_stage(res, seed, executor, pre_mu, tick)
             times["mu analysis"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             res.files = write_gain_files(res, out)
@@ -313,6 +279,56 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
                 _stop_workers(executor)
             else:
                 executor.shutdown(wait=True, cancel_futures=True)
+
+
+def _loop_margins(res: SynthesisResult) -> None:
+    """The robust method's loop margins of every GS-SHIF and SHIF design (into ``res``)."""
+    from vtolftc.synthesis.robust import loop_margins
+
+    af, gs, sh = res.airframe, res.gs, res.shif
+    for ax in AXES:
+        res.margins_gs[ax] = [loop_margins(d.weights[0].plant(af), d.gains)
+                              for d in gs[ax]]
+        if ax in sh:
+            res.margins_shif[ax] = [loop_margins(w.plant(af), sh[ax].gains)
+                                    for w in sh[ax].weights]
+
+
+def _mu_stage(res: SynthesisResult, seed: int, executor: Executor | None,
+              pre_mu: dict[tuple[str, str, int], Future[AxisRobustness]],
+              tick: Callable[..., None]) -> None:
+    """The mu analysis of every nominally stable design (into ``res.mu_gs`` / ``res.mu_shif``):
+    in-process without ``executor``, else on the workers, reusing the jobs already queued
+    in ``pre_mu`` during the tuning."""
+    af, points, gs, sh = res.airframe, res.points, res.gs, res.shif
+    jobs_mu: list[tuple[Any, ...]] = []
+    for ax in AXES:
+        for i, p in enumerate(points):
+            d = gs[ax][i]
+            jobs_mu.append(("gs", ax, i, (af, ax, p, d.theta, d.weights[0], seed)))
+            if ax in sh:
+                jobs_mu.append(("shif", ax, i,
+                                (af, ax, p, sh[ax].theta, sh[ax].weights[i], seed)))
+    runnable = [j for j in jobs_mu if _nominally_stable(res, j)]
+    results = {}
+    if executor is None:
+        pairs: Any = ((j, _mu_job(j[3])) for j in runnable)
+    else:
+        futs = {(pre_mu.pop(j[:3], None) or executor.submit(_mu_job, j[3])): j
+                for j in runnable}
+        for f in pre_mu.values():  # none expected: every queued job is runnable
+            f.cancel()
+        pairs = ((futs[f], f.result()) for f in as_completed(futs))
+    for j, r in pairs:
+        results[j[:3]] = r
+        tick(f"mu {j[0]} {j[1]} point {points[j[2]].number}")
+    if len(jobs_mu) > len(runnable):
+        tick("mu (skipped: nominally unstable)", len(jobs_mu) - len(runnable))
+    for kind, store in (("gs", res.mu_gs), ("shif", res.mu_shif)):
+        for ax in AXES:
+            vals = [results.get((kind, ax, i)) for i in range(len(points))]
+            if all(v is not None for v in vals):
+                store[ax] = vals  # type: ignore[assignment]
 
 
 def _worker_init() -> None:

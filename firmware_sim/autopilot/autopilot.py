@@ -480,8 +480,14 @@ class Autopilot:
     # Control step
     # ------------------------------------------------------------------------------------
     def step(self, nav: NavState) -> NDArray[np.float64]:
-        """One control step on ``nav``; returns the 15 normalised actuator commands."""
-        pp = self._p
+        """One control step on ``nav``; returns the 15 normalised actuator commands.
+
+        The stages, in order: read the navigation data (hold the previous command when it is
+        unusable), the mode logic (:meth:`_update_mode`), the outer loops writing the force
+        commands (:meth:`_outer_mc` or :meth:`_outer_fw`), the attitude control
+        (:meth:`_attitude_control`) and the allocation to the actuators (:meth:`_allocate`).
+        """
+        # ---- read navigation ------------------------------------------------------------
         pos = nav.pos_ned_m.tolist()
         vel = nav.vel_ned_m_s.tolist()
         q = nav.q_wxyz
@@ -512,7 +518,55 @@ class Autopilot:
         if not math.isfinite(self._ground_alt):
             self._ground_alt = h
 
-        # landing detection (only meaningful in LAND)
+        mode = self._update_mode(nav, h, v_up, V, pitch, yaw)
+        if not m.armed or mode == _M_IDLE:
+            return self._idle_output()
+
+        # ---- outer loops: references and forces ----------------------------------------
+        ref = self._ref
+        ref[2] = self._yaw_hold
+        cos_tilt = max(0.5, math.cos(roll) * math.cos(pitch))
+        # _body_velocity_f(*ql, *vel)[0] and [2], inlined (same expressions, same bits)
+        vn_, ve_, vd_ = vel
+        ub = ((1 - 2 * (y_ * y_ + z_ * z_)) * vn_ + 2 * (x_ * y_ + w_ * z_) * ve_
+              + 2 * (x_ * z_ - w_ * y_) * vd_)
+        wb = (2 * (x_ * z_ + w_ * y_) * vn_ + 2 * (y_ * z_ - w_ * x_) * ve_
+              + (1 - 2 * (x_ * x_ + y_ * y_)) * vd_)
+        alpha = math.atan2(wb, ub) if ub > 1.0 else 0.0
+        lift, drag = self._aero_estimate(V, alpha)
+        fz_aero = -lift * math.cos(alpha) - drag * math.sin(alpha)  # body z, N
+
+        if mode is not _M_FIXED_WING:  # TAKEOFF, HOVER, LAND, FRONT/BACK_TRANSITION
+            reserve = False
+            rotor_hi = 1.0
+            pusher_hi = self._outer_mc(mode, nav, yaw, h, v_up, V, cos_tilt, fz_aero)
+            u_pref = self.u_pref_mc
+        else:  # FIXED_WING
+            t_fw = (self._time_usec - self._fw_entry_usec) * 1e-6
+            ramp = self._p["VT_TRANS_P2_DUR"].value
+            rotor_hi = max(0.0, 1.0 - t_fw / ramp) if ramp > 0 else 0.0
+            reserve = False
+            if rotor_hi <= 0.0:
+                rotor_hi = 1.0   # the reserve: weighted, not bounded (allocator_fw)
+                reserve = True
+            pusher_hi = 1.0
+            self._outer_fw(nav, roll, pitch, yaw, h, v_up, V, cos_tilt, alpha, lift, drag,
+                           fz_aero, reserve)
+            u_pref = self.u_pref_fw
+
+        tau = self._attitude_control(mode, h, V, att, rates)
+        return self._allocate(V, tau, reserve, rotor_hi, pusher_hi, u_pref)
+
+    def _update_mode(self, nav: NavState, h: float, v_up: float, V: float, pitch: float,
+                     yaw: float) -> FlightMode:
+        """The step's mode logic: landing detection (in LAND), the mode machine, mode entry,
+        the queued events, the navigator and the auto-disarm; returns the mode.
+
+        ``h`` altitude [m] (up), ``v_up`` climb rate [m/s], ``V`` airspeed [m/s], ``pitch``
+        and ``yaw`` [rad].
+        """
+        pp = self._p
+        m = self.modes
         landed = False
         if m.mode == _M_LAND:
             if h - self._ground_alt < 0.3 and abs(v_up) < 0.25:
@@ -533,127 +587,134 @@ class Autopilot:
         self.navigator.update(nav, yaw)
         if m.armed or self.arming.armed:
             self._auto_disarm()
+        return mode
 
+    def _idle_output(self) -> NDArray[np.float64]:
+        """Disarmed or IDLE: rotors off (idle throttle when armed), loops and allocator reset;
+        returns a copy of the commands."""
         u = self._u
-        if not m.armed or mode == _M_IDLE:
-            u[:] = 0.0
-            if m.armed:
-                u[: self.n_rotors] = ARMED_IDLE_THROTTLE
-            self._v[:] = 0.0
-            self._ref[:] = (0.0, 0.0, self._yaw_hold)
-            self._alloc_status = "idle"
-            self.allocator.reset(u)
-            self._fw_reserve = False
-            self._reset_loops()
-            return u.copy()
+        u[:] = 0.0
+        if self.modes.armed:
+            u[: self.n_rotors] = ARMED_IDLE_THROTTLE
+        self._v[:] = 0.0
+        self._ref[:] = (0.0, 0.0, self._yaw_hold)
+        self._alloc_status = "idle"
+        self.allocator.reset(u)
+        self._fw_reserve = False
+        self._reset_loops()
+        return u.copy()
 
-        # ---- outer loops: references and forces ----------------------------------------
+    def _outer_mc(self, mode: FlightMode, nav: NavState, yaw: float, h: float, v_up: float,
+                  V: float, cos_tilt: float, fz_aero: float) -> float:
+        """Outer loops in the multicopter modes (TAKEOFF, HOVER, LAND, transitions).
+
+        Writes the roll/pitch references into ``self._ref`` [rad] and the body z and x force
+        commands [N] into ``self._v[0]`` and ``self._v[1]``; returns the pushers' upper
+        bound (1 in the front transition, else 0).
+        """
+        pp = self._p
         ref = self._ref
-        ref[2] = self._yaw_hold
+        override = None
+        vmax_up = pp["MPC_Z_VEL_MAX_UP"].value
+        if mode == _M_TAKEOFF:
+            vmax_up = min(vmax_up, pp["MPC_TKO_SPEED"].value)
+        if mode == _M_LAND:
+            override = -pp["MPC_LAND_SPEED"].value
+            self._alt_ref = h
+        a_up = self.mc_alt.update(self._alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
+                                  kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
+                                  ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
+                                  v_max_up=vmax_up, v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value,
+                                  v_up_override=override)
+        self._v[0] = (-self.airframe.mass_kg * (self.airframe.gravity_m_s2 + a_up) / cos_tilt
+                      - fz_aero)
+        fx_cmd = 0.0
+        pusher_hi = 1.0
+        if mode == _M_FRONT_TRANSITION:
+            ref[0] = 0.0
+            ref[1] = 0.0
+            self._pusher_ramp = min(1.0, self._pusher_ramp
+                                    + pp["VT_PSHER_SLEW"].value * self.dt)
+            fx_cmd = pp["VT_F_TRANS_THR"].value * self._pusher_ramp * self._pusher_max_force(V)
+        elif mode == _M_BACK_TRANSITION:
+            ref[0] = 0.0
+            ref[1] = 0.0
+            pusher_hi = 0.0
+        else:
+            ref[0], ref[1] = self._position_hold(nav, yaw)
+            pusher_hi = 0.0
+        self._v[1] = fx_cmd
+        return pusher_hi
+
+    def _outer_fw(self, nav: NavState, roll: float, pitch: float, yaw: float, h: float,
+                  v_up: float, V: float, cos_tilt: float, alpha: float, lift: float,
+                  drag: float, fz_aero: float, reserve: bool) -> None:
+        """Outer loops in FIXED_WING: lateral guidance, altitude (TECS-like pitch) and
+        airspeed loops.
+
+        Writes the roll/pitch/yaw references into ``self._ref`` [rad] and the body z and x
+        force commands [N] into ``self._v[0]`` and ``self._v[1]`` (no z command in the
+        reserve, where the lift rotors are only weighted).
+        """
+        pp = self._p
+        ref = self._ref
         mass = self.airframe.mass_kg
         g = self.airframe.gravity_m_s2
-        fx_cmd = 0.0
-        use_fz = True
-        reserve = False
-        rotor_hi = 1.0
-        pusher_hi = 1.0
-        u_pref = self.u_pref_mc
-        cos_tilt = max(0.5, math.cos(roll) * math.cos(pitch))
-        # _body_velocity_f(*ql, *vel)[0] and [2], inlined (same expressions, same bits)
-        vn_, ve_, vd_ = vel
-        ub = ((1 - 2 * (y_ * y_ + z_ * z_)) * vn_ + 2 * (x_ * y_ + w_ * z_) * ve_
-              + 2 * (x_ * z_ - w_ * y_) * vd_)
-        wb = (2 * (x_ * z_ + w_ * y_) * vn_ + 2 * (y_ * z_ - w_ * x_) * ve_
-              + (1 - 2 * (x_ * x_ + y_ * y_)) * vd_)
-        alpha = math.atan2(wb, ub) if ub > 1.0 else 0.0
-        lift, drag = self._aero_estimate(V, alpha)
-        fz_aero = -lift * math.cos(alpha) - drag * math.sin(alpha)  # body z, N
-
-        if mode is not _M_FIXED_WING:  # TAKEOFF, HOVER, LAND, FRONT/BACK_TRANSITION
-            override = None
-            vmax_up = pp["MPC_Z_VEL_MAX_UP"].value
-            if mode == _M_TAKEOFF:
-                vmax_up = min(vmax_up, pp["MPC_TKO_SPEED"].value)
-            if mode == _M_LAND:
-                override = -pp["MPC_LAND_SPEED"].value
-                self._alt_ref = h
+        lim = math.radians
+        lateral = self.navigator.fw_lateral(nav, roll, yaw, V)
+        if lateral is None:
+            ref[0] = 0.0
+        else:
+            ref[0], ref[2] = lateral
+        ref[1] = self.fw_alt.update(self._alt_ref, h, v_up, kp_alt=pp["FW_ALT_P"].value,
+                                    kp_vz=pp["FW_VZ_P"].value, ki_vz=pp["FW_VZ_I"].value,
+                                    climb_max=pp["FW_CLMB_MAX"].value,
+                                    sink_max=pp["FW_SINK_MAX"].value,
+                                    pitch_min=lim(pp["FW_P_LIM_MIN"].value),
+                                    pitch_max=lim(pp["FW_P_LIM_MAX"].value))
+        fx_max = self._pusher_max_force(V)
+        e_v = self.navigator.airspeed_setpoint() - V
+        a_x = pp["FW_AIRSPD_P"].value * e_v + self._airspeed_int
+        fx_cmd = drag * math.cos(alpha) - lift * math.sin(alpha) + mass * (
+            a_x + g * math.sin(pitch))
+        if not ((fx_cmd >= fx_max and e_v > 0) or (fx_cmd <= 0.0 and e_v < 0)):
+            self._airspeed_int = min(max(self._airspeed_int
+                                         + pp["FW_AIRSPD_I"].value * e_v * self.dt, -3.0), 3.0)
+        self._v[1] = min(max(fx_cmd, 0.0), fx_max)
+        if not reserve:
             a_up = self.mc_alt.update(self._alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
                                       kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
                                       ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
-                                      v_max_up=vmax_up, v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value,
-                                      v_up_override=override)
-            fz_cmd = -mass * (g + a_up) / cos_tilt - fz_aero
-            if mode == _M_FRONT_TRANSITION:
-                ref[0] = 0.0
-                ref[1] = 0.0
-                self._pusher_ramp = min(1.0, self._pusher_ramp
-                                        + pp["VT_PSHER_SLEW"].value * self.dt)
-                fx_cmd = pp["VT_F_TRANS_THR"].value * self._pusher_ramp * self._pusher_max_force(V)
-            elif mode == _M_BACK_TRANSITION:
-                ref[0] = 0.0
-                ref[1] = 0.0
-                pusher_hi = 0.0
-            else:
-                ref[0], ref[1] = self._position_hold(nav, yaw)
-                pusher_hi = 0.0
-        else:  # FIXED_WING
-            t_fw = (self._time_usec - self._fw_entry_usec) * 1e-6
-            ramp = pp["VT_TRANS_P2_DUR"].value
-            rotor_hi = max(0.0, 1.0 - t_fw / ramp) if ramp > 0 else 0.0
-            if rotor_hi <= 0.0:
-                rotor_hi = 1.0   # the reserve: weighted, not bounded (allocator_fw)
-                reserve = True
-            u_pref = self.u_pref_fw
-            lim = math.radians
-            lateral = self.navigator.fw_lateral(nav, roll, yaw, V)
-            if lateral is None:
-                ref[0] = 0.0
-            else:
-                ref[0], ref[2] = lateral
-            ref[1] = self.fw_alt.update(self._alt_ref, h, v_up, kp_alt=pp["FW_ALT_P"].value,
-                                        kp_vz=pp["FW_VZ_P"].value, ki_vz=pp["FW_VZ_I"].value,
-                                        climb_max=pp["FW_CLMB_MAX"].value,
-                                        sink_max=pp["FW_SINK_MAX"].value,
-                                        pitch_min=lim(pp["FW_P_LIM_MIN"].value),
-                                        pitch_max=lim(pp["FW_P_LIM_MAX"].value))
-            fx_max = self._pusher_max_force(V)
-            e_v = self.navigator.airspeed_setpoint() - V
-            a_x = pp["FW_AIRSPD_P"].value * e_v + self._airspeed_int
-            fx_cmd = drag * math.cos(alpha) - lift * math.sin(alpha) + mass * (
-                a_x + g * math.sin(pitch))
-            if not ((fx_cmd >= fx_max and e_v > 0) or (fx_cmd <= 0.0 and e_v < 0)):
-                self._airspeed_int = min(max(self._airspeed_int
-                                             + pp["FW_AIRSPD_I"].value * e_v * self.dt, -3.0), 3.0)
-            fx_cmd = min(max(fx_cmd, 0.0), fx_max)
-            if not reserve:
-                a_up = self.mc_alt.update(self._alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
-                                          kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
-                                          ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
-                                          v_max_up=pp["MPC_Z_VEL_MAX_UP"].value,
-                                          v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value)
-                fz_cmd = -mass * (g + a_up) / cos_tilt - fz_aero
-            else:
-                use_fz = False
-                fz_cmd = 0.0
+                                      v_max_up=pp["MPC_Z_VEL_MAX_UP"].value,
+                                      v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value)
+            self._v[0] = -mass * (g + a_up) / cos_tilt - fz_aero
+        else:
+            self._v[0] = 0.0
 
-        # ---- attitude control --------------------------------------------------------------
-        on_ground = mode == _M_TAKEOFF and h - self._ground_alt < 0.5
-        if on_ground:
+    def _attitude_control(self, mode: FlightMode, h: float, V: float, att: NDArray[np.float64],
+                          rates: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Attitude control on the scheduling airspeed: the body torque commands [N m]
+        (FRD) for the references in ``self._ref`` (``att`` roll/pitch/yaw [rad], ``rates``
+        body rates [rad/s], ``V`` airspeed [m/s], ``h`` altitude [m])."""
+        if mode == _M_TAKEOFF and h - self._ground_alt < 0.5:  # still on the ground
             self.attitude.reset()
         # gains scheduled on a low-passed airspeed: the measurement's noise would otherwise
         # move the gains between neighbouring design points from step to step (in hover
         # between 0 and 1 m/s, whose pitch gains differ by 3x), a randomly time-varying
         # controller that the design never analysed
-        tc = pp["FTC_SCHED_TAU"].value
+        tc = self._p["FTC_SCHED_TAU"].value
         vs = self._v_sched
         if tc > 0.0 and math.isfinite(vs):
             vs += min(1.0, self.dt / tc) * (V - vs)
         else:
             vs = V
         self._v_sched = vs
-        tau = self.attitude.update(ref, att, rates, vs, self._sat_hi, self._sat_lo)
+        return self.attitude.update(self._ref, att, rates, vs, self._sat_hi, self._sat_lo)
 
-        # ---- allocation ---------------------------------------------------------------------
+    def _allocate(self, V: float, tau: NDArray[np.float64], reserve: bool, rotor_hi: float,
+                  pusher_hi: float, u_pref: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Allocate the virtual command (``self._v[0:2]`` forces [N], ``tau`` torques [N m])
+        to the actuators at airspeed ``V`` [m/s]; returns a copy of the commands."""
         # B(V) on a 0.1 m/s airspeed grid: the allocator rebuilds its Hessian only when B changes
         # (every ~12 steps in the transition instead of every step); the dynamic pressure
         # differs from the exact one by < 1 % above 10 m/s, far below the faults' 20-50 %.
@@ -662,15 +723,14 @@ class Autopilot:
             self._B_grid = self.effectiveness.matrix_on_grid(V, 0.1)
             self._B_grid_key = k_grid
         B = self._B_grid
-        if not use_fz:
+        if reserve:  # no z force command: the lift rotors' row is zeroed
             if B is not self._B_of:  # the grid's B is cached and read-only: copy on change
                 np.copyto(self._B, B)
                 self._B[0, :] = 0.0
                 self._B_of = B
             B = self._B
+        u = self._u
         v = self._v
-        v[0] = fz_cmd
-        v[1] = fx_cmd
         v[2:] = tau
         hi = self._hi
         if rotor_hi != self._hi_key[0] or pusher_hi != self._hi_key[1]:  # rarely changes

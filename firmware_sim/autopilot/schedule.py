@@ -172,119 +172,16 @@ class GainSchedule:
         """Validate a decoded schedule (see the module docstring for the schema)."""
         if not isinstance(d, Mapping):
             raise GainScheduleError(f"top level: expected a JSON object, got {type(d).__name__}")
-        fmt = d.get("format")
-        if fmt is None:
-            raise GainScheduleError(f"format: missing; expected {FORMAT!r}")
-        if fmt != FORMAT:
-            if isinstance(fmt, str) and fmt.startswith(_FORMAT_PREFIX):
-                raise GainScheduleError(
-                    f"format: unsupported version {fmt!r}; this reader knows {FORMAT!r}"
-                )
-            raise GainScheduleError(f"format: unknown format {_fmt(fmt)}; expected {FORMAT!r}")
-
+        _check_format(d.get("format"))
         controller = d.get("controller")
         if not isinstance(controller, str) or not controller.strip():
             raise GainScheduleError(
                 f"controller: expected a non-empty string, got {_fmt(controller)}"
             )
-
         af = d.get("airframe")
-        if not isinstance(af, Mapping):
-            raise GainScheduleError(
-                f"airframe: expected an object with 'name' and 'sha256', got {_fmt(af)}"
-            )
-        af_name = af.get("name")
-        if not isinstance(af_name, str) or not af_name.strip():
-            raise GainScheduleError(
-                f"airframe.name: expected a non-empty string, got {_fmt(af_name)}"
-            )
-        af_sha = af.get("sha256")
-        if not isinstance(af_sha, str) or not _SHA256.match(af_sha):
-            raise GainScheduleError(
-                f"airframe.sha256: expected 64 hexadecimal digits, got {_fmt(af_sha)}"
-            )
-
-        bp = d.get("airspeed_breakpoints_m_s")
-        if not isinstance(bp, list) or not bp:
-            raise GainScheduleError(
-                "airspeed_breakpoints_m_s: expected a non-empty list of airspeeds [m/s], "
-                f"got {_fmt(bp)}"
-            )
-        for i, b in enumerate(bp):
-            if not _is_number(b) or not math.isfinite(b):
-                raise GainScheduleError(
-                    f"airspeed_breakpoints_m_s[{i}]: expected a finite number [m/s], got {_fmt(b)}"
-                )
-        for i in range(1, len(bp)):
-            if not bp[i] > bp[i - 1]:
-                raise GainScheduleError(
-                    f"airspeed_breakpoints_m_s[{i}]: breakpoints must be strictly increasing, "
-                    f"got {bp[i]} after {bp[i - 1]}"
-                )
-        n = len(bp)
-
-        axes = d.get("axes")
-        if not isinstance(axes, Mapping):
-            raise GainScheduleError(
-                f"axes: expected an object with keys {list(AXES)}, got {_fmt(axes)}"
-            )
-        for ax in AXES:
-            if ax not in axes:
-                raise GainScheduleError(f"axes.{ax}: missing axis; expected all of {list(AXES)}")
-        extra_axes = sorted(set(axes) - set(AXES))
-        if extra_axes:
-            raise GainScheduleError(
-                f"axes: unknown axis {extra_axes[0]!r}; expected exactly {list(AXES)}"
-            )
-
-        table: dict[str, dict[str, tuple[float, ...]]] = {}
-        axes_meta: dict[str, Any] = {}
-        for ax in AXES:
-            a = axes[ax]
-            if not isinstance(a, Mapping):
-                raise GainScheduleError(
-                    f"axes.{ax}: expected an object with {list(GAIN_FIELDS)}, got {_fmt(a)}"
-                )
-            unknown = sorted(set(a) - set(GAIN_FIELDS) - {"metadata"})
-            if unknown:
-                raise GainScheduleError(
-                    f"axes.{ax}.{unknown[0]}: unknown field; expected {list(GAIN_FIELDS)} "
-                    "(and optionally 'metadata')"
-                )
-            if "metadata" in a:
-                axes_meta[ax] = a["metadata"]
-            table[ax] = {}
-            for f in GAIN_FIELDS:
-                where = f"axes.{ax}.{f}"
-                if f not in a:
-                    raise GainScheduleError(f"{where}: missing gain list")
-                vals = a[f]
-                if not isinstance(vals, list):
-                    raise GainScheduleError(
-                        f"{where}: expected a list of {n} numbers (one per breakpoint), "
-                        f"got {_fmt(vals)}"
-                    )
-                if len(vals) != n:
-                    raise GainScheduleError(
-                        f"{where}: length mismatch: {len(vals)} values for {n} airspeed breakpoints"
-                    )
-                for i, x in enumerate(vals):
-                    if not _is_number(x) or not math.isfinite(x):
-                        raise GainScheduleError(
-                            f"{where}[{i}]: expected a finite number, got {_fmt(x)}"
-                        )
-                    if x < 0:
-                        raise GainScheduleError(
-                            f"{where}[{i}]: negative gain {x}; gains must be >= 0"
-                        )
-                table[ax][f] = tuple(float(x) for x in vals)
-            for i in range(n):
-                if table[ax]["kd_rate"][i] > 0 and not table[ax]["tf_rate_s"][i] > 0:
-                    raise GainScheduleError(
-                        f"axes.{ax}.tf_rate_s[{i}]: expected > 0 where kd_rate > 0 "
-                        f"(kd_rate[{i}] = {table[ax]['kd_rate'][i]}), got "
-                        f"{table[ax]['tf_rate_s'][i]}"
-                    )
+        af_name, af_sha = _check_airframe(af)
+        bp = _check_breakpoints(d.get("airspeed_breakpoints_m_s"))
+        table, axes_meta = _check_axes(d.get("axes"), len(bp))
 
         known = {"format", "controller", "airframe", "airspeed_breakpoints_m_s", "axes"}
         metadata = {k: v for k, v in d.items() if k not in known}
@@ -367,3 +264,127 @@ class GainSchedule:
             f"GainSchedule(controller={self.controller!r}, airframe={self.airframe_name!r}, "
             f"breakpoints_m_s={list(self.breakpoints_m_s)})"
         )
+
+
+# ---------------------------------------------------------------------------------------------
+# Validation helpers of GainSchedule.from_dict (each raises GainScheduleError with the path)
+# ---------------------------------------------------------------------------------------------
+def _check_format(fmt: Any) -> None:
+    """Check the ``format`` field (must equal :data:`FORMAT`)."""
+    if fmt is None:
+        raise GainScheduleError(f"format: missing; expected {FORMAT!r}")
+    if fmt != FORMAT:
+        if isinstance(fmt, str) and fmt.startswith(_FORMAT_PREFIX):
+            raise GainScheduleError(
+                f"format: unsupported version {fmt!r}; this reader knows {FORMAT!r}"
+            )
+        raise GainScheduleError(f"format: unknown format {_fmt(fmt)}; expected {FORMAT!r}")
+
+
+def _check_airframe(af: Any) -> tuple[str, str]:
+    """Check the ``airframe`` object; returns its (name, sha256)."""
+    if not isinstance(af, Mapping):
+        raise GainScheduleError(
+            f"airframe: expected an object with 'name' and 'sha256', got {_fmt(af)}"
+        )
+    af_name = af.get("name")
+    if not isinstance(af_name, str) or not af_name.strip():
+        raise GainScheduleError(
+            f"airframe.name: expected a non-empty string, got {_fmt(af_name)}"
+        )
+    af_sha = af.get("sha256")
+    if not isinstance(af_sha, str) or not _SHA256.match(af_sha):
+        raise GainScheduleError(
+            f"airframe.sha256: expected 64 hexadecimal digits, got {_fmt(af_sha)}"
+        )
+    return af_name, af_sha
+
+
+def _check_breakpoints(bp: Any) -> list[Any]:
+    """Check ``airspeed_breakpoints_m_s`` (finite, strictly increasing, [m/s]); returns it."""
+    if not isinstance(bp, list) or not bp:
+        raise GainScheduleError(
+            "airspeed_breakpoints_m_s: expected a non-empty list of airspeeds [m/s], "
+            f"got {_fmt(bp)}"
+        )
+    for i, b in enumerate(bp):
+        if not _is_number(b) or not math.isfinite(b):
+            raise GainScheduleError(
+                f"airspeed_breakpoints_m_s[{i}]: expected a finite number [m/s], got {_fmt(b)}"
+            )
+    for i in range(1, len(bp)):
+        if not bp[i] > bp[i - 1]:
+            raise GainScheduleError(
+                f"airspeed_breakpoints_m_s[{i}]: breakpoints must be strictly increasing, "
+                f"got {bp[i]} after {bp[i - 1]}"
+            )
+    return bp
+
+
+def _check_axes(axes: Any, n: int) -> tuple[dict[str, dict[str, tuple[float, ...]]],
+                                            dict[str, Any]]:
+    """Check the ``axes`` object (exactly :data:`AXES`, each with ``n`` gains per field);
+    returns the gain table and the per-axis metadata."""
+    if not isinstance(axes, Mapping):
+        raise GainScheduleError(
+            f"axes: expected an object with keys {list(AXES)}, got {_fmt(axes)}"
+        )
+    for ax in AXES:
+        if ax not in axes:
+            raise GainScheduleError(f"axes.{ax}: missing axis; expected all of {list(AXES)}")
+    extra_axes = sorted(set(axes) - set(AXES))
+    if extra_axes:
+        raise GainScheduleError(
+            f"axes: unknown axis {extra_axes[0]!r}; expected exactly {list(AXES)}"
+        )
+    table: dict[str, dict[str, tuple[float, ...]]] = {}
+    axes_meta: dict[str, Any] = {}
+    for ax in AXES:
+        a = axes[ax]
+        if not isinstance(a, Mapping):
+            raise GainScheduleError(
+                f"axes.{ax}: expected an object with {list(GAIN_FIELDS)}, got {_fmt(a)}"
+            )
+        unknown = sorted(set(a) - set(GAIN_FIELDS) - {"metadata"})
+        if unknown:
+            raise GainScheduleError(
+                f"axes.{ax}.{unknown[0]}: unknown field; expected {list(GAIN_FIELDS)} "
+                "(and optionally 'metadata')"
+            )
+        if "metadata" in a:
+            axes_meta[ax] = a["metadata"]
+        table[ax] = {f: _check_gains(a, f"axes.{ax}.{f}", f, n) for f in GAIN_FIELDS}
+        for i in range(n):
+            if table[ax]["kd_rate"][i] > 0 and not table[ax]["tf_rate_s"][i] > 0:
+                raise GainScheduleError(
+                    f"axes.{ax}.tf_rate_s[{i}]: expected > 0 where kd_rate > 0 "
+                    f"(kd_rate[{i}] = {table[ax]['kd_rate'][i]}), got "
+                    f"{table[ax]['tf_rate_s'][i]}"
+                )
+    return table, axes_meta
+
+
+def _check_gains(a: Mapping[str, Any], where: str, f: str, n: int) -> tuple[float, ...]:
+    """Check one gain list ``a[f]`` (``n`` finite non-negative numbers); returns it."""
+    if f not in a:
+        raise GainScheduleError(f"{where}: missing gain list")
+    vals = a[f]
+    if not isinstance(vals, list):
+        raise GainScheduleError(
+            f"{where}: expected a list of {n} numbers (one per breakpoint), "
+            f"got {_fmt(vals)}"
+        )
+    if len(vals) != n:
+        raise GainScheduleError(
+            f"{where}: length mismatch: {len(vals)} values for {n} airspeed breakpoints"
+        )
+    for i, x in enumerate(vals):
+        if not _is_number(x) or not math.isfinite(x):
+            raise GainScheduleError(
+                f"{where}[{i}]: expected a finite number, got {_fmt(x)}"
+            )
+        if x < 0:
+            raise GainScheduleError(
+                f"{where}[{i}]: negative gain {x}; gains must be >= 0"
+            )
+    return tuple(float(x) for x in vals)

@@ -318,6 +318,55 @@ def parse_spec(text: str, *, source: str = "<spec>", base_dir: Path | None = Non
     if not isinstance(description, str):
         raise r.fail("campaign.description", description, "a string")
     duration = r.number(c, "duration_s", "campaign", 0.0, 3600.0, " (s)", open_lo=True)
+    controllers = _controllers(r, c)
+    airframe_path, gains_dir = _paths(r, c, base_dir if base_dir is not None else Path("."))
+    if actuator_names is None:
+        from vtolftc.airframe.loader import AirframeError, load_airframe
+
+        try:
+            actuator_names = load_airframe(airframe_path).actuator_names
+        except AirframeError as exc:
+            raise SpecError(f"{source}: campaign.airframe: {exc}") from None
+
+    phases = _phases(r, c, doc, duration)
+
+    families = [_family(r, f, i, actuator_names) for i, f in enumerate(r.tables(doc, "faults"))]
+    if not families:
+        raise SpecError(f"{source}: no [[faults]] table: expected at least one fault family")
+    names = [f.name for f in families]
+    if len(set(names)) != len(names):
+        raise r.fail("faults.family", names, "a distinct name for every family")
+
+    winds = [_wind(r, w, i) for i, w in enumerate(r.tables(doc, "wind"))] or [
+        WindSpec("calm")]
+    perts = [_pert(r, p, i) for i, p in enumerate(r.tables(doc, "perturbation"))] or [
+        PerturbationSpec("nominal")]
+    for what, items in (("wind", winds), ("perturbation", perts)):
+        nm = [x.name for x in items]
+        if len(set(nm)) != len(nm):
+            raise r.fail(f"{what}.name", nm, "a distinct name for every entry")
+
+    level, seeds = _noise(r, doc)
+
+    axis_values: dict[str, set[Any]] = {
+        "controller": set(controllers), "family": set(names),
+        "phase": {p for p, _ in phases}, "wind": {w.name for w in winds},
+        "perturbation": {p.name for p in perts}, "seed": set(seeds)}
+    excludes = _excludes(r, doc, axis_values)
+    gates = _gates(r, doc, names, controllers)
+
+    spec = Spec(
+        source=source, sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(), name=name,
+        description=description, duration_s=duration, controllers=tuple(controllers),
+        phases=tuple(phases), families=tuple(families), winds=tuple(winds),
+        perturbations=tuple(perts), noise_level=level, seeds=tuple(seeds),
+        excludes=tuple(excludes), gates=tuple(gates), airframe_path=airframe_path,
+        gains_dir=gains_dir, text=text)
+    return spec
+
+
+def _controllers(r: _R, c: Mapping[str, Any]) -> list[str]:
+    """``campaign.controllers``: known names, each once."""
     controllers = r.str_list(c, "controllers", "campaign", CONTROLLERS)
     for ctl in controllers:
         if ctl not in CONTROLLERS:
@@ -325,7 +374,12 @@ def parse_spec(text: str, *, source: str = "<spec>", base_dir: Path | None = Non
                          f"controller names among {', '.join(CONTROLLERS)} (not {ctl!r})")
     if len(set(controllers)) != len(controllers):
         raise r.fail("campaign.controllers", controllers, "each controller once")
-    base = base_dir if base_dir is not None else Path(".")
+    return controllers
+
+
+def _paths(r: _R, c: Mapping[str, Any], base: Path) -> tuple[str | None, str | None]:
+    """``campaign.airframe`` (a file) and ``campaign.gains`` (a directory), resolved against
+    ``base``; None where the spec names none."""
     airframe_path = gains_dir = None
     if "airframe" in c:
         airframe_path = str((base / r.string(c, "airframe", "campaign")).resolve())
@@ -336,14 +390,12 @@ def parse_spec(text: str, *, source: str = "<spec>", base_dir: Path | None = Non
         if not Path(gains_dir).is_dir():
             raise r.fail("campaign.gains", c["gains"],
                          "a directory holding gs-shif.json, shif.json and lqr.json")
-    if actuator_names is None:
-        from vtolftc.airframe.loader import AirframeError, load_airframe
+    return airframe_path, gains_dir
 
-        try:
-            actuator_names = load_airframe(airframe_path).actuator_names
-        except AirframeError as exc:
-            raise SpecError(f"{source}: campaign.airframe: {exc}") from None
 
+def _phases(r: _R, c: Mapping[str, Any], doc: Mapping[str, Any],
+            duration: float) -> list[tuple[str, float]]:
+    """``campaign.phases`` with the ``[timing]`` table: (phase name, injection time [s])."""
     t = r.keys(doc.get("timing", {}), _TIMING, "timing")
     hover_s = r.number(t, "hover_s", "timing", 0.0, TRANSITION_S, " (s, before the "
                        "transition at 20 s)", default=15.0)
@@ -379,23 +431,11 @@ def parse_spec(text: str, *, source: str = "<spec>", base_dir: Path | None = Non
         if any(n == ph for n, _ in phases):
             raise r.fail("campaign.phases", raw, "each phase once")
         phases.append((str(ph), at))
+    return phases
 
-    families = [_family(r, f, i, actuator_names) for i, f in enumerate(r.tables(doc, "faults"))]
-    if not families:
-        raise SpecError(f"{source}: no [[faults]] table: expected at least one fault family")
-    names = [f.name for f in families]
-    if len(set(names)) != len(names):
-        raise r.fail("faults.family", names, "a distinct name for every family")
 
-    winds = [_wind(r, w, i) for i, w in enumerate(r.tables(doc, "wind"))] or [
-        WindSpec("calm")]
-    perts = [_pert(r, p, i) for i, p in enumerate(r.tables(doc, "perturbation"))] or [
-        PerturbationSpec("nominal")]
-    for what, items in (("wind", winds), ("perturbation", perts)):
-        nm = [x.name for x in items]
-        if len(set(nm)) != len(nm):
-            raise r.fail(f"{what}.name", nm, "a distinct name for every entry")
-
+def _noise(r: _R, doc: Mapping[str, Any]) -> tuple[str, list[int]]:
+    """The ``[noise]`` table: (level, seeds)."""
     n = r.keys(doc.get("noise", {}), _NOISE, "noise")
     level = n.get("level", "none")
     if level not in ("none", "typical"):
@@ -409,11 +449,12 @@ def parse_spec(text: str, *, source: str = "<spec>", base_dir: Path | None = Non
     if level == "none" and len(seeds) > 1:
         raise r.fail("noise.seeds", seeds, "one seed when noise.level = 'none' (without "
                      "noise every seed flies the same scenario)")
+    return level, seeds
 
-    axis_values: dict[str, set[Any]] = {
-        "controller": set(controllers), "family": set(names),
-        "phase": {p for p, _ in phases}, "wind": {w.name for w in winds},
-        "perturbation": {p.name for p in perts}, "seed": set(seeds)}
+
+def _excludes(r: _R, doc: Mapping[str, Any],
+              axis_values: Mapping[str, set[Any]]) -> list[dict[str, tuple[Any, ...]]]:
+    """The ``[[exclude]]`` rules, each value among ``axis_values`` of its axis."""
     excludes = []
     for i, ex in enumerate(r.tables(doc, "exclude")):
         where = f"exclude[{i}]"
@@ -428,7 +469,12 @@ def parse_spec(text: str, *, source: str = "<spec>", base_dir: Path | None = Non
                     raise r.fail(f"{where}.{k}", x, f"one of {sorted(map(str, axis_values[k]))}")
             rule[k] = vals
         excludes.append(rule)
+    return excludes
 
+
+def _gates(r: _R, doc: Mapping[str, Any], names: Sequence[str],
+           controllers: Sequence[str]) -> list[Gate]:
+    """The ``[[gate]]`` tables (family among ``names``, controller among ``controllers``)."""
     gates = []
     for i, g in enumerate(r.tables(doc, "gate")):
         where = f"gate[{i}]"
@@ -442,15 +488,7 @@ def parse_spec(text: str, *, source: str = "<spec>", base_dir: Path | None = Non
             raise r.fail(f"{where}.controller", ctl,
                          f"one of the campaign's controllers {', '.join(controllers)}")
         gates.append(Gate(ms, fam, ctl))
-
-    spec = Spec(
-        source=source, sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(), name=name,
-        description=description, duration_s=duration, controllers=tuple(controllers),
-        phases=tuple(phases), families=tuple(families), winds=tuple(winds),
-        perturbations=tuple(perts), noise_level=level, seeds=tuple(seeds),
-        excludes=tuple(excludes), gates=tuple(gates), airframe_path=airframe_path,
-        gains_dir=gains_dir, text=text)
-    return spec
+    return gates
 
 
 def _family(r: _R, f: Any, i: int, actuator_names: Sequence[str]) -> FaultFamily:
@@ -467,30 +505,8 @@ def _family(r: _R, f: Any, i: int, actuator_names: Sequence[str]) -> FaultFamily
         if key not in allowed:
             raise SpecError(f"{r.source}: unknown key '{where}.{key}' for generate = "
                             f"{gen!r}: expected one of: {', '.join(sorted(allowed))}")
-    sets: list[FaultSet] = []
     if gen == "list":
-        raw_sets = f.get("sets")
-        if not isinstance(raw_sets, list) or not raw_sets:
-            raise r.fail(f"{where}.sets", raw_sets, "a non-empty list of fault sets, each a "
-                         "list of faults like \"rotor_2b:loss=0.5\"")
-        for j, s in enumerate(raw_sets):
-            at = f"{where}.sets[{j}]"
-            if isinstance(s, str):
-                s = [s]
-            if not isinstance(s, list) or not s or not all(isinstance(x, str) for x in s):
-                raise r.fail(at, s, "a non-empty list of faults like \"rotor_2b:loss=0.5\"")
-            triples: list[tuple[str, str, float]] = []
-            for txt in s:
-                if "@" in txt:
-                    raise r.fail(at, txt, "a fault without '@TIME' (the injection time is "
-                                 "the phase axis)")
-                try:
-                    flts = parse_fault_spec(txt, actuator_names)
-                except FaultError as exc:
-                    raise SpecError(f"{r.source}: field '{at}' = {txt!r}: {exc}") from None
-                triples += [(x.actuator, x.kind.value, float(x.loss)) for x in flts]
-            sets.append(FaultSet(fam, " ".join(s), tuple(triples)))
-        return FaultFamily(fam, tuple(sets))
+        return FaultFamily(fam, _listed_sets(r, f, where, fam, actuator_names))
 
     acts_raw = r.str_list(f, "actuators", where)
     try:
@@ -503,6 +519,59 @@ def _family(r: _R, f: Any, i: int, actuator_names: Sequence[str]) -> FaultFamily
     for k in kinds:
         if k not in {x.value for x in FaultKind}:
             raise r.fail(f"{where}.kinds", kinds, f"kinds among off, stuck, loss (not {k!r})")
+    mags = _magnitudes(r, f, where, kinds)
+    variants: list[tuple[str, float]] = []
+    for k in kinds:
+        if k == "loss":
+            variants += [("loss", m) for m in mags]
+        else:
+            variants.append((k, 1.0 if k == "off" else 0.0))
+    if gen == "subsets":
+        kk = f.get("k")
+        if (isinstance(kk, bool) or not isinstance(kk, int) or not 1 <= kk <= len(acts)):
+            raise r.fail(f"{where}.k", kk, f"an integer in [1, {len(acts)}] (subset size)")
+        groups = list(itertools.combinations(acts, kk))
+    else:
+        groups = [(a,) for a in acts]
+    sets: list[FaultSet] = []
+    for grp in groups:
+        for kind, loss in variants:
+            triples = [(a, kind, loss) for a in grp]
+            sets.append(FaultSet(fam, "+".join(_label(a, kind, loss) for a in grp),
+                                 tuple(triples)))
+    return FaultFamily(fam, tuple(sets))
+
+
+def _listed_sets(r: _R, f: Mapping[str, Any], where: str, fam: str,
+                 actuator_names: Sequence[str]) -> tuple[FaultSet, ...]:
+    """The fault sets of a ``generate = "list"`` family (``sets``)."""
+    sets: list[FaultSet] = []
+    raw_sets = f.get("sets")
+    if not isinstance(raw_sets, list) or not raw_sets:
+        raise r.fail(f"{where}.sets", raw_sets, "a non-empty list of fault sets, each a "
+                     "list of faults like \"rotor_2b:loss=0.5\"")
+    for j, s in enumerate(raw_sets):
+        at = f"{where}.sets[{j}]"
+        if isinstance(s, str):
+            s = [s]
+        if not isinstance(s, list) or not s or not all(isinstance(x, str) for x in s):
+            raise r.fail(at, s, "a non-empty list of faults like \"rotor_2b:loss=0.5\"")
+        triples: list[tuple[str, str, float]] = []
+        for txt in s:
+            if "@" in txt:
+                raise r.fail(at, txt, "a fault without '@TIME' (the injection time is "
+                             "the phase axis)")
+            try:
+                flts = parse_fault_spec(txt, actuator_names)
+            except FaultError as exc:
+                raise SpecError(f"{r.source}: field '{at}' = {txt!r}: {exc}") from None
+            triples += [(x.actuator, x.kind.value, float(x.loss)) for x in flts]
+        sets.append(FaultSet(fam, " ".join(s), tuple(triples)))
+    return tuple(sets)
+
+
+def _magnitudes(r: _R, f: Mapping[str, Any], where: str, kinds: Sequence[str]) -> list[float]:
+    """The ``magnitudes`` of a generated family (losses in (0, 1]; only with kind loss)."""
     mags: list[float] = []
     if "loss" in kinds:
         mraw = f.get("magnitudes")
@@ -518,25 +587,7 @@ def _family(r: _R, f: Any, i: int, actuator_names: Sequence[str]) -> FaultFamily
     elif "magnitudes" in f:
         raise r.fail(f"{where}.magnitudes", f["magnitudes"],
                      "no magnitudes unless kinds has loss")
-    variants: list[tuple[str, float]] = []
-    for k in kinds:
-        if k == "loss":
-            variants += [("loss", m) for m in mags]
-        else:
-            variants.append((k, 1.0 if k == "off" else 0.0))
-    if gen == "subsets":
-        kk = f.get("k")
-        if (isinstance(kk, bool) or not isinstance(kk, int) or not 1 <= kk <= len(acts)):
-            raise r.fail(f"{where}.k", kk, f"an integer in [1, {len(acts)}] (subset size)")
-        groups = list(itertools.combinations(acts, kk))
-    else:
-        groups = [(a,) for a in acts]
-    for grp in groups:
-        for kind, loss in variants:
-            triples = [(a, kind, loss) for a in grp]
-            sets.append(FaultSet(fam, "+".join(_label(a, kind, loss) for a in grp),
-                                 tuple(triples)))
-    return FaultFamily(fam, tuple(sets))
+    return mags
 
 
 def _label(actuator: str, kind: str, loss: float) -> str:

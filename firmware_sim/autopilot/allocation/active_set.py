@@ -66,8 +66,9 @@ __all__ = ["ActiveSetAllocator", "box_qp"]
 _perf_counter = time.perf_counter
 
 
+# one compiled loop the JIT optimises as a whole: splitting it would cost calls per iteration
 @numba.njit(cache=True)
-def box_qp_active_set(H, q, lo, hi, u0, max_iter, tol):
+def box_qp_active_set(H, q, lo, hi, u0, max_iter, tol):  # noqa: C901
     n = q.size
     u = np.empty(n)
     state = np.zeros(n, dtype=np.int8)  # 0 free, -1 at lo, +1 at hi, 2 fixed (lo == hi)
