@@ -36,13 +36,16 @@ one ``send_columns`` call per entity and chunk is what keeps the recorder cheap.
 Cost: the flight loop only copies a decimated sample (``rate_hz``, default 50 Hz) into
 pre-allocated numpy buffers; the buffers go to rerun in columns (``send_columns``) every
 ``file_flush_sim_s`` of simulated time (default 0.5 s; also when ``chunk_rows`` rows are
-buffered, and at least every ``live_flush_s`` of wall time when live). Rerun's file sink
-writes sent columns to the file at once (measured: a SIGKILL right after ``send_columns``
-keeps them); what is logged row by row (events, modes, faults, the path) leaves rerun's
-batcher within 8 ms of wall time (``ChunkBatcherConfig.LOW_LATENCY``), and a background
-thread asks rerun every 0.25 s of wall time to write what it holds. So a killed process
-(SIGKILL) loses about ``file_flush_sim_s`` of simulated time, however fast the simulation runs
-against the wall clock, and the file written so far stays readable. The flown path
+buffered, and at least every ``live_flush_s`` of wall time when live), followed by a blocking
+``flush``: rerun writes the file from its own threads on wall-clock time, and a simulation
+running at 50x real time outran them (a SIGKILL of ``vtolftc fly`` on an idle machine lost
+1.1-5.1 s of simulated time without the wait, 0.12 s with it; the wait costs about 3 ms per
+flush, 0.3 s on a 60 s case-1 flight of 3.2 s). What is logged row by row (events, modes,
+faults, the path) leaves rerun's batcher within 8 ms of wall time
+(``ChunkBatcherConfig.LOW_LATENCY``), and a background thread asks rerun every 0.25 s of wall
+time to write what it holds (events logged while the simulation stands still). So a killed
+process (SIGKILL) loses about ``file_flush_sim_s`` of simulated time, however fast the
+simulation runs against the wall clock, and the file written so far stays readable. The flown path
 (``world/path``, the whole path so far each time) is re-sent at most every ``path_period_s``
 of simulated time (default 1 s) and at the end.
 ``benchmarks/bench_dashboard.py`` measures the cost per sample.
@@ -188,6 +191,7 @@ class RerunRecorder:
         self._alloc(N_ACTUATORS)
         # rerun writes the file from its own threads; this one asks it to every 0.25 s, so a
         # killed process loses at most about file_flush_s + 0.25 s of the recording
+        self._flush_timeout = _flush_takes_timeout(self._rec)
         self._flusher_stop = threading.Event()
         self._flusher = threading.Thread(target=self._flush_loop, daemon=True,
                                          name="rerun-flush")
@@ -469,8 +473,8 @@ class RerunRecorder:
         return desc
 
     def _flush(self, final: bool = False) -> None:
-        """Send the buffered rows to rerun as columns (its file sink writes them at once)
-        and reset the buffers; the path too, every ``path_period_s`` and at the end."""
+        """Send the buffered rows to rerun as columns, wait until rerun has written them, and
+        reset the buffers; the path too, every ``path_period_s`` and at the end."""
         n = self._n
         self._last_flush_wall = time.monotonic()
         if n == 0:
@@ -523,6 +527,11 @@ class RerunRecorder:
                     pts = [*pts[::math.ceil(len(pts) / 4000)], pts[-1]]
                 rec.log("world/path", rr.LineStrips3D([pts], colors=(250, 200, 40),
                                                       radii=0.05))
+            if not final:
+                # rerun writes the file from its own threads, later by wall-clock time: wait
+                # for it here, on simulated time, so a SIGKILL loses about file_flush_sim_s
+                # however fast the simulation runs
+                rec.flush(timeout_sec=1.0) if self._flush_timeout else rec.flush()
         except Exception as exc:
             print(f"rerun recorder: flush: {exc}", file=sys.stderr)
         finally:
