@@ -14,24 +14,22 @@
   law: tau = k_int int(angle_ref - angle) dt + k_angle (angle_ref - angle) - k_rate rate,
   units k_int N m/(rad s), k_angle N m/rad, k_rate N m s/rad; one value per breakpoint.
 
-Every file is written atomically (temporary file in the same folder, then ``os.replace``), so
-an interrupted run never leaves a truncated file behind.
+Every file is written atomically (:func:`vtolftc.jsonio.atomic_write_text`), so an interrupted
+run never leaves a truncated file behind, in the project's one JSON convention
+(:func:`vtolftc.jsonio.json_safe`: a NaN or infinity is written as ``null``).
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from vtolftc.airframe.loader import Airframe
-from vtolftc.jsonio import atomic_write_text
+from vtolftc.jsonio import atomic_write_text, json_safe
 from vtolftc.synthesis.loops import PARAM_NAMES
 from vtolftc.synthesis.models import AXES
 
@@ -60,35 +58,14 @@ def tool_version() -> str:
         return "unknown"
 
 
-def jsonable(x: Any) -> Any:
-    """numpy scalars/arrays, complex numbers, dataclass-free containers -> JSON values.
-
-    Complex numbers become [re, im]; non-finite floats become strings ("inf", "nan") so the
-    file stays strict JSON.
-    """
-    if isinstance(x, Mapping):
-        return {str(k): jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return [jsonable(v) for v in x.tolist()]
-    if isinstance(x, complex | np.complexfloating):
-        return [jsonable(float(x.real)), jsonable(float(x.imag))]
-    if isinstance(x, bool | np.bool_):
-        return bool(x)
-    if isinstance(x, int | np.integer):
-        return int(x)
-    if isinstance(x, float | np.floating):
-        f = float(x)
-        return f if math.isfinite(f) else str(f)
-    return x
-
-
+#: the JSON conversion of the project (:func:`vtolftc.jsonio.json_safe`: NaN / inf -> null,
+#: complex -> [re, im]), under the name this package has always exported
+jsonable = json_safe
 
 
 def write_json(path: str | os.PathLike[str], doc: Mapping[str, Any]) -> Path:
     """Atomically write a JSON document (strict JSON, indented)."""
-    return atomic_write_text(path, json.dumps(jsonable(doc), indent=2, allow_nan=False) + "\n")
+    return atomic_write_text(path, json.dumps(json_safe(doc), indent=2, allow_nan=False) + "\n")
 
 
 def _common(af: Airframe) -> dict[str, Any]:

@@ -37,12 +37,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.airframe.loader import Airframe
-from vtolftc.firmware_sim.autopilot.allocation.interface import AXES_5
 
-__all__ = ["AXES", "EffectivenessModel"]
-
-#: Virtual axes, in the order of the rows of B.
-AXES: tuple[str, ...] = AXES_5
+__all__ = ["EffectivenessModel"]
 
 
 class EffectivenessModel:

@@ -38,12 +38,11 @@ from pathlib import Path
 from typing import Any
 
 from vtolftc.firmware_sim.autopilot.schedule import read_json_file
-from vtolftc.rotation import ATTITUDE_AXES
+from vtolftc.rotation import ATTITUDE_AXES as AXES
 
-__all__ = ["AXES", "FORMAT", "LQR_FIELDS", "LQRAxisGains", "LQRGains", "LQRGainsError"]
+__all__ = ["FORMAT", "LQR_FIELDS", "LQRAxisGains", "LQRGains", "LQRGainsError"]
 
 FORMAT = "vtolftc-lqr-gains/1"
-AXES: tuple[str, ...] = ATTITUDE_AXES
 LQR_FIELDS: tuple[str, ...] = ("k_int", "k_angle", "k_rate")
 _SHA256 = re.compile(r"^[0-9a-fA-F]{64}$")
 

@@ -66,10 +66,9 @@ from pathlib import Path
 from typing import Any
 
 from vtolftc.firmware_sim.autopilot.pid import PPIDGains
-from vtolftc.rotation import ATTITUDE_AXES
+from vtolftc.rotation import ATTITUDE_AXES as AXES
 
 __all__ = [
-    "AXES",
     "FORMAT",
     "GAIN_FIELDS",
     "GainSchedule",
@@ -77,7 +76,6 @@ __all__ = [
 ]
 
 FORMAT = "vtolftc-gain-schedule/1"
-AXES: tuple[str, ...] = ATTITUDE_AXES
 GAIN_FIELDS: tuple[str, ...] = ("kp_angle", "kp_rate", "ki_rate", "kd_rate", "tf_rate_s")
 _FORMAT_PREFIX = "vtolftc-gain-schedule/"
 _SHA256 = re.compile(r"^[0-9a-fA-F]{64}$")
