@@ -21,16 +21,16 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.firmware_sim.autopilot import control_kernels as ck
 from vtolftc.firmware_sim.autopilot.lqr import LQRAxisGains, LQRGains, LQRGainsError
-from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, gains_row
+from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, gains_row
 from vtolftc.firmware_sim.autopilot.schedule import GainSchedule, GainScheduleError
 from vtolftc.rotation import ATTITUDE_AXES
 
@@ -102,11 +102,54 @@ class AttitudeController(Protocol):
         """
 
 
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+def _lqr_row(g: LQRAxisGains) -> NDArray[np.float64]:
+    """One axis of LQR gains as the kernel's row: k_int, k_angle, k_rate."""
+    return np.array([float(g.k_int), float(g.k_angle), float(g.k_rate)])
 
 
-class ScheduledPPIDController:
+class _GainMemo:
+    """A gain table's gains at an airspeed (``table.gains_at``) and their (3, n) kernel array,
+    memoised: the measured airspeed comes in 0.01 m/s steps, so values repeat, and the gains
+    of a value never change. Starts afresh when the table object is replaced."""
+
+    def __init__(self, row: Callable[[Any], NDArray[np.float64]]) -> None:
+        self._row = row  # a module-level function, so a controller still pickles
+        self._table: object = None
+        self._by_speed: dict[float, dict[str, Any]] = {}
+        self._by_gains: dict[int, tuple[dict[str, Any], NDArray[np.float64]]] = {}
+
+    def at(self, table: GainSchedule | LQRGains, airspeed_m_s: float
+           ) -> tuple[dict[str, Any], NDArray[np.float64]]:
+        """``(gains by axis, kernel array)`` at ``airspeed_m_s`` [m/s]."""
+        if table is not self._table or len(self._by_speed) >= 20_000:
+            self._by_speed = {}
+            self._table = table
+        g = self._by_speed.get(airspeed_m_s)
+        if g is None:
+            g = table.gains_at(airspeed_m_s)
+            if airspeed_m_s == airspeed_m_s:  # never a NaN key
+                self._by_speed[airspeed_m_s] = g
+        ga = self._by_gains.get(id(g))
+        if ga is None or ga[0] is not g:  # keyed on the dict, kept alive by the entry
+            if len(self._by_gains) >= 20_000:
+                self._by_gains = {}
+            ga = (g, np.array([self._row(g[ax]) for ax in ATTITUDE_AXES]))
+            self._by_gains[id(g)] = ga
+        return ga
+
+
+class _GainFileController:
+    """What every controller records of its gain file: ``name``, ``gains_path`` and the
+    file's ``gains_sha256`` (empty for gains made in memory)."""
+
+    def __init__(self, name: str, gains_path: Path | None) -> None:
+        self.name = name
+        self.gains_path = gains_path if gains_path is not None else Path("<memory>")
+        self.gains_sha256 = (hashlib.sha256(gains_path.read_bytes()).hexdigest()
+                             if gains_path is not None else "")
+
+
+class ScheduledPPIDController(_GainFileController):
     """Cascaded P-PID per axis with gains from a :class:`GainSchedule` at the airspeed.
 
     Parameters
@@ -124,10 +167,8 @@ class ScheduledPPIDController:
     def __init__(self, schedule: GainSchedule, dt: float = 0.004, *,
                  rate_limits: tuple[float, float, float] = (2.0, 2.0, 1.0),
                  name: str = "gs-shif", gains_path: Path | None = None) -> None:
+        super().__init__(name, gains_path)
         self.schedule = schedule
-        self.name = name
-        self.gains_path = gains_path if gains_path is not None else Path("<memory>")
-        self.gains_sha256 = _sha256(gains_path) if gains_path is not None else ""
         g0 = schedule.gains_at(0.0)
         self._state = np.zeros((3, ck.N_STATE))
         self._const = np.zeros((3, ck.N_CONST))
@@ -137,9 +178,7 @@ class ScheduledPPIDController:
                          state=self._state, const=self._const, row=k)
             for k, (ax, rl) in enumerate(zip(ATTITUDE_AXES, rate_limits, strict=True)))
         self._out = np.zeros(3)
-        self._gains_cache: dict[float, dict[str, PPIDGains]] = {}
-        self._garr_cache: dict[int, tuple[dict[str, PPIDGains], NDArray[np.float64]]] = {}
-        self._cached_schedule: GainSchedule | None = schedule
+        self._memo = _GainMemo(gains_row)
 
     def reset(self) -> None:
         """Clear the integrators of the three axes' P-PID loops (``CascadedPPID.reset``)."""
@@ -150,67 +189,22 @@ class ScheduledPPIDController:
     def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
                rates: NDArray[np.float64], airspeed_m_s: float,
                sat_hi: Sequence[bool], sat_lo: Sequence[bool]) -> NDArray[np.float64]:
-        """Moment demand for one control step.
-
-        Parameters
-        ----------
-        ref, att : numpy.ndarray
-            attitude reference and measured attitude, (roll, pitch, yaw) ZYX Euler angles (rad).
-        rates : numpy.ndarray
-            body rates p, q, r, FRD (rad/s).
-        airspeed_m_s : float
-            airspeed (m/s), the scheduling variable.
-        sat_hi, sat_lo : sequence of bool
-            per axis, the allocator saturated the moment at its upper / lower limit last step
-            (anti-windup: the integrators do not move further that way).
-
-        Returns
-        -------
-        numpy.ndarray
-            moment demand (roll, pitch, yaw) about the body FRD axes (N m).
-        """
-        g = self._gains_cache.get(airspeed_m_s) if self._cached_schedule is self.schedule \
-            else None
-        if g is None:
-            g = self._gains_at(airspeed_m_s)
-        ga = self._garr_cache.get(id(g))
-        if ga is None or ga[0] is not g:
-            ga = self._gains_array(g)
+        """Moment demand for one control step [N m]; parameters and result as
+        :meth:`AttitudeController.update`."""
+        g, garr = self._memo.at(self.schedule, airspeed_m_s)
         own = self.pids
         own[0].gains = g[ATTITUDE_AXES[0]]
         own[1].gains = g[ATTITUDE_AXES[1]]
         own[2].gains = g[ATTITUDE_AXES[2]]
         out = self._out
         ck.ppid3_step(np.asarray(ref, dtype=np.float64), np.asarray(att, dtype=np.float64),
-                      np.asarray(rates, dtype=np.float64), ga[1], self._state, self._const,
+                      np.asarray(rates, dtype=np.float64), garr, self._state, self._const,
                       bool(sat_hi[0]), bool(sat_hi[1]), bool(sat_hi[2]),
                       bool(sat_lo[0]), bool(sat_lo[1]), bool(sat_lo[2]), out)
         return out.copy()
 
-    def _gains_array(self, g: dict[str, PPIDGains]
-                     ) -> tuple[dict[str, PPIDGains], NDArray[np.float64]]:
-        """The (3, 5) array of ``g`` for the compiled step (kp_angle, kp_rate, ki_rate,
-        kd_rate, tf_rate_s per axis), memoised on the dict (kept alive by the entry)."""
-        if len(self._garr_cache) >= 20_000:
-            self._garr_cache = {}
-        arr = np.array([gains_row(g[ax]) for ax in ATTITUDE_AXES])
-        ga = (g, arr)
-        self._garr_cache[id(g)] = ga
-        return ga
 
-    def _gains_at(self, airspeed_m_s: float) -> dict[str, PPIDGains]:
-        """``schedule.gains_at`` memoised on the exact airspeed (the measured airspeed comes
-        in 0.01 m/s steps, so values repeat; the gains of a value never change)."""
-        if self._cached_schedule is not self.schedule or len(self._gains_cache) >= 20_000:
-            self._gains_cache = {}
-            self._cached_schedule = self.schedule
-        g = self.schedule.gains_at(airspeed_m_s)
-        if airspeed_m_s == airspeed_m_s:  # never a NaN key
-            self._gains_cache[airspeed_m_s] = g
-        return g
-
-
-class LQRAttitudeController:
+class LQRAttitudeController(_GainFileController):
     """``tau = k_int * int(e) + k_angle * e - k_rate * rate`` per axis (see :mod:`.lqr`).
 
     Anti-windup: the integral term does not move in the direction of a saturated axis.
@@ -218,15 +212,11 @@ class LQRAttitudeController:
 
     def __init__(self, gains: LQRGains, dt: float = 0.004, *, name: str = "lqr",
                  gains_path: Path | None = None) -> None:
+        super().__init__(name, gains_path)
         self.gains = gains
         self.dt = float(dt)
-        self.name = name
-        self.gains_path = gains_path if gains_path is not None else Path("<memory>")
-        self.gains_sha256 = _sha256(gains_path) if gains_path is not None else ""
         self.integral_term = np.zeros(3)  # k_int * int(e) [N m], bumpless under scheduling
-        self._gains_cache: dict[float, dict[str, LQRAxisGains]] = {}
-        self._karr_cache: dict[int, tuple[dict[str, LQRAxisGains], NDArray[np.float64]]] = {}
-        self._cached_gains: LQRGains | None = gains
+        self._memo = _GainMemo(_lqr_row)
 
     def reset(self) -> None:
         """Clear the integral terms of the three axes."""
@@ -235,60 +225,15 @@ class LQRAttitudeController:
     def update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
                rates: NDArray[np.float64], airspeed_m_s: float,
                sat_hi: Sequence[bool], sat_lo: Sequence[bool]) -> NDArray[np.float64]:
-        """Moment demand for one control step.
-
-        Parameters
-        ----------
-        ref, att : numpy.ndarray
-            attitude reference and measured attitude, (roll, pitch, yaw) ZYX Euler angles (rad).
-        rates : numpy.ndarray
-            body rates p, q, r, FRD (rad/s).
-        airspeed_m_s : float
-            airspeed (m/s), the scheduling variable.
-        sat_hi, sat_lo : sequence of bool
-            per axis, the allocator saturated the moment at its upper / lower limit last step
-            (anti-windup: the integrators do not move further that way).
-
-        Returns
-        -------
-        numpy.ndarray
-            moment demand (roll, pitch, yaw) about the body FRD axes (N m).
-        """
-        g = self._gains_cache.get(airspeed_m_s) if self._cached_gains is self.gains else None
-        if g is None:
-            g = self._gains_at(airspeed_m_s)
-        ka = self._karr_cache.get(id(g))
-        if ka is None or ka[0] is not g:
-            ka = self._gains_array(g)
+        """Moment demand for one control step [N m]; parameters and result as
+        :meth:`AttitudeController.update`."""
+        karr = self._memo.at(self.gains, airspeed_m_s)[1]
         out = np.empty(3)
         ck.lqr3_step(np.asarray(ref, dtype=np.float64), np.asarray(att, dtype=np.float64),
-                     np.asarray(rates, dtype=np.float64), ka[1], self.dt, self.integral_term,
+                     np.asarray(rates, dtype=np.float64), karr, self.dt, self.integral_term,
                      bool(sat_hi[0]), bool(sat_hi[1]), bool(sat_hi[2]),
                      bool(sat_lo[0]), bool(sat_lo[1]), bool(sat_lo[2]), out)
         return out
-
-    def _gains_array(self, g: dict[str, LQRAxisGains]
-                     ) -> tuple[dict[str, LQRAxisGains], NDArray[np.float64]]:
-        """The (3, 3) array of ``g`` for the compiled step (k_int, k_angle, k_rate per axis),
-        memoised on the dict (kept alive by the entry)."""
-        if len(self._karr_cache) >= 20_000:
-            self._karr_cache = {}
-        arr = np.array([[float(g[ax].k_int), float(g[ax].k_angle), float(g[ax].k_rate)]
-                        for ax in ATTITUDE_AXES])
-        ka = (g, arr)
-        self._karr_cache[id(g)] = ka
-        return ka
-
-    def _gains_at(self, airspeed_m_s: float) -> dict[str, LQRAxisGains]:
-        """``gains.gains_at`` memoised on the exact airspeed (as the P-PID controller's: the
-        measured airspeed comes in 0.01 m/s steps; the gains of a value never change)."""
-        if self._cached_gains is not self.gains or len(self._gains_cache) >= 20_000:
-            self._gains_cache = {}
-            self._cached_gains = self.gains
-        g = self.gains.gains_at(airspeed_m_s)
-        if airspeed_m_s == airspeed_m_s:  # never a NaN key
-            self._gains_cache[airspeed_m_s] = g
-        return g
 
 
 def make_controller(name: str, gains_dir: str | Path | None = None, dt: float = 0.004, *,

@@ -63,6 +63,14 @@ def _min2(a: float, b: float) -> float:  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
+def _pick3(k: int, x0: bool, x1: bool, x2: bool) -> bool:  # pragma: no cover - compiled
+    """``(x0, x1, x2)[k]`` (per-axis flags come as scalars: no array per control step)."""
+    if k == 0:
+        return x0
+    return x1 if k == 1 else x2
+
+
+@numba.njit(cache=True)
 def wrap_angle(x: float) -> float:  # pragma: no cover - compiled
     """Wrap an angle [rad] to (-pi, pi]."""
     return -((-x + math.pi) % TWO_PI - math.pi)
@@ -160,12 +168,8 @@ def ppid3_step(ref, att, rates, G, S, C, sat_hi0, sat_hi1, sat_hi2, sat_lo0, sat
     ``S`` (3, 10) the state (read and written), ``C`` (3, 6) the constants; the saturation
     flags per axis; ``out`` (3,) receives the moments [N m]."""
     for k in range(3):
-        if k == 0:
-            sh, sl = sat_hi0, sat_lo0
-        elif k == 1:
-            sh, sl = sat_hi1, sat_lo1
-        else:
-            sh, sl = sat_hi2, sat_lo2
+        sh = _pick3(k, sat_hi0, sat_hi1, sat_hi2)
+        sl = _pick3(k, sat_lo0, sat_lo1, sat_lo2)
         out[k] = ppid_step(G[k], S, C, k, ref[k], att[k], rates[k], 0.0, sh, sl)
 
 
@@ -180,12 +184,8 @@ def lqr3_step(ref, att, rates, K, dt, it, sat_hi0, sat_hi1, sat_hi2, sat_lo0, sa
     written; kept in output units so that scheduled gains are bumpless), not moved in the
     direction of a saturated axis; ``out`` (3,) receives the moments [N m]."""
     for k in range(3):
-        if k == 0:
-            sh, sl = sat_hi0, sat_lo0
-        elif k == 1:
-            sh, sl = sat_hi1, sat_lo1
-        else:
-            sh, sl = sat_hi2, sat_lo2
+        sh = _pick3(k, sat_hi0, sat_hi1, sat_hi2)
+        sl = _pick3(k, sat_lo0, sat_lo1, sat_lo2)
         e = ref[k] - att[k]
         if k == 2:
             e = wrap_angle(e)

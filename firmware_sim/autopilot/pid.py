@@ -127,22 +127,13 @@ class ContinuousPPID:
     rate_den: np.ndarray
 
 
-def _const_property(col: int, doc: str) -> property:
+def _array_property(array: str, col: int, doc: str) -> property:
+    """A float attribute stored in column ``col`` of this axis' row of ``self.<array>``."""
     def get(self: CascadedPPID) -> float:
-        return float(self._const[self._row, col])
+        return float(getattr(self, array)[self._row, col])
 
     def put(self: CascadedPPID, value: float) -> None:
-        self._const[self._row, col] = float(value)
-
-    return property(get, put, doc=doc)
-
-
-def _state_property(col: int, doc: str) -> property:
-    def get(self: CascadedPPID) -> float:
-        return float(self._state[self._row, col])
-
-    def put(self: CascadedPPID, value: float) -> None:
-        self._state[self._row, col] = float(value)
+        getattr(self, array)[self._row, col] = float(value)
 
     return property(get, put, doc=doc)
 
@@ -242,16 +233,17 @@ class CascadedPPID:
             raise ValueError(f"method must be 'tustin' or 'backward_euler', got {value!r}")
         self._const[self._row, ck.C_TUSTIN] = 1.0 if value == "tustin" else 0.0
 
-    dt = _const_property(ck.C_DT, "sample time [s]")
-    u_min = _const_property(ck.C_U_MIN, "lower output limit [N m]")
-    u_max = _const_property(ck.C_U_MAX, "upper output limit [N m]")
+    dt = _array_property("_const", ck.C_DT, "sample time [s]")
+    u_min = _array_property("_const", ck.C_U_MIN, "lower output limit [N m]")
+    u_max = _array_property("_const", ck.C_U_MAX, "upper output limit [N m]")
 
     # the state ----------------------------------------------------------------------------
-    integral = _state_property(ck.S_INTEGRAL, "integral of ki e dt [N m]")
-    derivative = _state_property(ck.S_DERIVATIVE, "filtered kd de/dt [N m]")
-    rate_ref = _state_property(ck.S_RATE_REF, "last rate reference [rad/s]")
-    output = _state_property(ck.S_OUTPUT, "last output [N m]")
-    output_unsat = _state_property(ck.S_OUTPUT_UNSAT, "last output before the limits [N m]")
+    integral = _array_property("_state", ck.S_INTEGRAL, "integral of ki e dt [N m]")
+    derivative = _array_property("_state", ck.S_DERIVATIVE, "filtered kd de/dt [N m]")
+    rate_ref = _array_property("_state", ck.S_RATE_REF, "last rate reference [rad/s]")
+    output = _array_property("_state", ck.S_OUTPUT, "last output [N m]")
+    output_unsat = _array_property("_state", ck.S_OUTPUT_UNSAT,
+                                   "last output before the limits [N m]")
 
     @property
     def saturated(self) -> bool:
