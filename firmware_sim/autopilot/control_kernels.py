@@ -72,15 +72,41 @@ def _pick3(k: int, x0: bool, x1: bool, x2: bool) -> bool:  # pragma: no cover - 
 
 @numba.njit(cache=True)
 def wrap_angle(x: float) -> float:  # pragma: no cover - compiled
-    """Wrap an angle [rad] to (-pi, pi]."""
+    """Wrap an angle to (-pi, pi].
+
+    Parameters
+    ----------
+    x : float
+        Angle [rad].
+
+    Returns
+    -------
+    float
+        The same angle in (-pi, pi] [rad].
+    """
     return -((-x + math.pi) % TWO_PI - math.pi)
 
 
 @numba.njit(cache=True)
 def filter_coefficients(tf: float, dt: float, tustin: bool) -> tuple[float, float]:
-    """Pole ``a`` and gain ``b`` [1/s] of the discrete derivative filter
-    ``d_k = a d_{k-1} + b kd (e_k - e_{k-1})`` for time constant ``tf`` [s] and sample time
-    ``dt`` [s]: Tustin when ``tustin`` and ``tf >= dt/2``, else backward Euler."""
+    """Coefficients of the discrete derivative filter ``d_k = a d_{k-1} + b kd (e_k - e_{k-1})``.
+
+    Parameters
+    ----------
+    tf : float
+        Filter time constant [s].
+    dt : float
+        Sample time [s].
+    tustin : bool
+        Tustin (used when ``tf >= dt/2``; below that its pole would be negative) or
+        backward Euler.
+
+    Returns
+    -------
+    a, b : float
+        Pole (dimensionless, in [0, 1)) and gain [1/s]: Tustin ``(2tf - dt)/(2tf + dt)``,
+        ``2/(2tf + dt)``; backward Euler ``tf/(tf + dt)``, ``1/(tf + dt)``.
+    """
     if tustin and tf >= 0.5 * dt:
         return (2.0 * tf - dt) / (2.0 * tf + dt), 2.0 / (2.0 * tf + dt)
     return tf / (tf + dt), 1.0 / (tf + dt)
@@ -88,8 +114,26 @@ def filter_coefficients(tf: float, dt: float, tustin: bool) -> tuple[float, floa
 
 @numba.njit(cache=True)
 def ppid_rate_reference(g, C, k, angle_ref, angle, rate_ff):  # pragma: no cover - compiled
-    """Outer P loop of axis ``k``: ``kp_angle (angle_ref - angle) + rate_ff`` [rad/s], the
-    angle error wrapped if ``C[k, C_WRAP]``, limited to the rate limit. Reads no state."""
+    """Outer P loop of axis ``k``; reads no state.
+
+    Parameters
+    ----------
+    g : numpy.ndarray, shape (5,)
+        Gains of the axis (``G_*`` columns).
+    C : numpy.ndarray, shape (n, 6)
+        Constants (``C_*`` columns); row ``k`` is used.
+    k : int
+        Axis row.
+    angle_ref, angle : float
+        Reference and measured angle [rad] (error wrapped if ``C[k, C_WRAP]``).
+    rate_ff : float
+        Rate feed-forward [rad/s].
+
+    Returns
+    -------
+    float
+        ``kp_angle (angle_ref - angle) + rate_ff`` limited to the rate limit [rad/s].
+    """
     err = angle_ref - angle
     if C[k, C_WRAP] != 0.0:
         err = wrap_angle(err)
@@ -102,8 +146,26 @@ def ppid_rate_reference(g, C, k, angle_ref, angle, rate_ff):  # pragma: no cover
 
 @numba.njit(cache=True)
 def ppid_rate_step(g, S, C, k, rate_ref, rate):  # pragma: no cover - compiled
-    """Inner PID loop of axis ``k``, one step on ``e = rate_ref - rate`` [rad/s]: updates
-    row ``S[k]`` and returns the moment [N m] within the output limits."""
+    """Inner PID loop of axis ``k``: one step on ``e = rate_ref - rate``.
+
+    Parameters
+    ----------
+    g : numpy.ndarray, shape (5,)
+        Gains of the axis (``G_*`` columns).
+    S : numpy.ndarray, shape (n, 10)
+        State (``S_*`` columns); row ``k`` is read and written.
+    C : numpy.ndarray, shape (n, 6)
+        Constants (``C_*`` columns); row ``k`` is used.
+    k : int
+        Axis row.
+    rate_ref, rate : float
+        Rate reference and measured body rate of the axis [rad/s].
+
+    Returns
+    -------
+    float
+        Moment [N m] within the output limits.
+    """
     e = rate_ref - rate
     e_prev = S[k, S_E_PREV]
     de = e - e_prev
@@ -146,9 +208,28 @@ def ppid_rate_step(g, S, C, k, rate_ref, rate):  # pragma: no cover - compiled
 @numba.njit(cache=True)
 def ppid_step(g, S, C, k, angle_ref, angle, rate, rate_ff, sat_hi,
               sat_lo):  # pragma: no cover - compiled
-    """One cascaded P-PID step of axis ``k`` (outer P loop, inner PID loop), with the
-    allocation's anti-windup: if ``sat_hi`` (``sat_lo``) the integral does not grow (shrink)
-    this step, and its increment is taken back out of the returned moment [N m]."""
+    """One cascaded P-PID step of axis ``k`` (outer P loop, inner PID loop).
+
+    Parameters
+    ----------
+    g, S, C, k
+        Gains (5,), state (n, 10), constants (n, 6) and the axis row, as
+        :func:`ppid_rate_step`.
+    angle_ref, angle : float
+        Reference and measured angle [rad].
+    rate : float
+        Measured body rate of the axis [rad/s].
+    rate_ff : float
+        Rate feed-forward [rad/s].
+    sat_hi, sat_lo : bool
+        The allocation saturated this axis upwards / downwards last step: the integral does
+        not grow / shrink this step, and its increment is taken back out of the output.
+
+    Returns
+    -------
+    float
+        Moment [N m].
+    """
     before = S[k, S_INTEGRAL]
     r = ppid_rate_reference(g, C, k, angle_ref, angle, rate_ff)
     o = ppid_rate_step(g, S, C, k, r, rate)
@@ -164,9 +245,19 @@ def ppid3_step(ref, att, rates, G, S, C, sat_hi0, sat_hi1, sat_hi2, sat_lo0, sat
                sat_lo2, out):  # pragma: no cover - compiled
     """:func:`ppid_step` for the three axes (roll, pitch, yaw) in one call, no feed-forward.
 
-    ``ref``, ``att`` (3,) angles [rad], ``rates`` (3,) [rad/s]; ``G`` (3, 5) the gains,
-    ``S`` (3, 10) the state (read and written), ``C`` (3, 6) the constants; the saturation
-    flags per axis; ``out`` (3,) receives the moments [N m]."""
+    Parameters
+    ----------
+    ref, att : numpy.ndarray, shape (3,)
+        Reference and measured ZYX Euler angles [rad].
+    rates : numpy.ndarray, shape (3,)
+        Body rates p, q, r, FRD [rad/s].
+    G, S, C : numpy.ndarray
+        Gains (3, 5), state (3, 10; read and written), constants (3, 6).
+    sat_hi0, sat_hi1, sat_hi2, sat_lo0, sat_lo1, sat_lo2 : bool
+        The allocation's saturation flags per axis (see :func:`ppid_step`).
+    out : numpy.ndarray, shape (3,)
+        Receives the moments [N m], FRD body axes.
+    """
     for k in range(3):
         sh = _pick3(k, sat_hi0, sat_hi1, sat_hi2)
         sl = _pick3(k, sat_lo0, sat_lo1, sat_lo2)
@@ -179,10 +270,24 @@ def lqr3_step(ref, att, rates, K, dt, it, sat_hi0, sat_hi1, sat_hi2, sat_lo0, sa
     """LQR law with integral action for the three axes:
     ``tau = k_int int(e) + k_angle e - k_rate rate`` (yaw error wrapped).
 
-    ``K`` (3, 3): ``k_int`` [N m/(rad s)], ``k_angle`` [N m/rad], ``k_rate`` [N m s/rad] per
-    axis; ``dt`` [s]; ``it`` (3,) the integral terms ``k_int int(e)`` [N m] (read and
-    written; kept in output units so that scheduled gains are bumpless), not moved in the
-    direction of a saturated axis; ``out`` (3,) receives the moments [N m]."""
+    Parameters
+    ----------
+    ref, att : numpy.ndarray, shape (3,)
+        Reference and measured ZYX Euler angles [rad].
+    rates : numpy.ndarray, shape (3,)
+        Body rates p, q, r, FRD [rad/s].
+    K : numpy.ndarray, shape (3, 3)
+        Per axis ``k_int`` [N m/(rad s)], ``k_angle`` [N m/rad], ``k_rate`` [N m s/rad].
+    dt : float
+        Sample time [s].
+    it : numpy.ndarray, shape (3,)
+        The integral terms ``k_int int(e)`` [N m], read and written (kept in output units so
+        that scheduled gains are bumpless); not moved towards a saturated side.
+    sat_hi0, sat_hi1, sat_hi2, sat_lo0, sat_lo1, sat_lo2 : bool
+        The allocation's saturation flags per axis.
+    out : numpy.ndarray, shape (3,)
+        Receives the moments [N m], FRD body axes.
+    """
     for k in range(3):
         sh = _pick3(k, sat_hi0, sat_hi1, sat_hi2)
         sl = _pick3(k, sat_lo0, sat_lo1, sat_lo2)
