@@ -118,12 +118,8 @@ def ppid_rate_reference(g, C, k, angle_ref, angle, rate_ff):  # pragma: no cover
 
     Parameters
     ----------
-    g : numpy.ndarray, shape (5,)
-        Gains of the axis (``G_*`` columns).
-    C : numpy.ndarray, shape (n, 6)
-        Constants (``C_*`` columns); row ``k`` is used.
-    k : int
-        Axis row.
+    g, C, k
+        Gains (5,), constants (n, 6) and the axis row, as :func:`ppid_rate_step`.
     angle_ref, angle : float
         Reference and measured angle [rad] (error wrapped if ``C[k, C_WRAP]``).
     rate_ff : float
@@ -272,10 +268,8 @@ def lqr3_step(ref, att, rates, K, dt, it, sat_hi0, sat_hi1, sat_hi2, sat_lo0, sa
 
     Parameters
     ----------
-    ref, att : numpy.ndarray, shape (3,)
-        Reference and measured ZYX Euler angles [rad].
-    rates : numpy.ndarray, shape (3,)
-        Body rates p, q, r, FRD [rad/s].
+    ref, att, rates
+        Angles [rad] and body rates [rad/s], as :func:`ppid3_step`.
     K : numpy.ndarray, shape (3, 3)
         Per axis ``k_int`` [N m/(rad s)], ``k_angle`` [N m/rad], ``k_rate`` [N m s/rad].
     dt : float
@@ -283,10 +277,8 @@ def lqr3_step(ref, att, rates, K, dt, it, sat_hi0, sat_hi1, sat_hi2, sat_lo0, sa
     it : numpy.ndarray, shape (3,)
         The integral terms ``k_int int(e)`` [N m], read and written (kept in output units so
         that scheduled gains are bumpless); not moved towards a saturated side.
-    sat_hi0, sat_hi1, sat_hi2, sat_lo0, sat_lo1, sat_lo2 : bool
-        The allocation's saturation flags per axis.
-    out : numpy.ndarray, shape (3,)
-        Receives the moments [N m], FRD body axes.
+    sat_hi0, sat_hi1, sat_hi2, sat_lo0, sat_lo1, sat_lo2, out
+        Saturation flags per axis and the output (3,) [N m], as :func:`ppid3_step`.
     """
     for k in range(3):
         sh = _pick3(k, sat_hi0, sat_hi1, sat_hi2)
