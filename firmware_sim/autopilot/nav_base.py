@@ -213,10 +213,53 @@ class NavigatorBase:
             g.alt = item.altitude_amsl(self.home_alt) - self.home_alt
         return g
 
-    # ------------------------------------------------------------------ shared actions
+    # ------------------------------------------------------------------ the autopilot steered
+    # The one place the navigator reads and sets the autopilot's own state (its references,
+    # measurements and event queue): the modes use these.
+    @property
+    def last_nav(self) -> NavState | None:
+        """The autopilot's latest navigation solution (None before the first)."""
+        return self.ap._last_nav
+
+    @property
+    def altitude_m(self) -> float:
+        """The autopilot's measured height above home [m]."""
+        return self.ap._alt
+
+    @property
+    def airspeed_m_s(self) -> float:
+        """The autopilot's measured airspeed [m/s]."""
+        return self.ap._airspeed
+
+    @property
+    def yaw_hold(self) -> float:
+        """The autopilot's heading reference in multicopter and fixed-wing hold [rad]."""
+        return self.ap._yaw_hold
+
+    @yaw_hold.setter
+    def yaw_hold(self, yaw: float) -> None:
+        self.ap._yaw_hold = yaw
+
+    def set_alt_ref(self, alt: float) -> None:
+        """The autopilot's altitude reference [m above home]."""
+        self.ap._alt_ref = alt
+
+    def set_takeoff_alt(self, alt: float) -> None:
+        """The altitude [m above home] the mode machine's next takeoff climbs to (and the
+        altitude reference)."""
+        self.ap._takeoff_alt = alt
+        self.ap._alt_ref = alt
+
+    def drain_events(self) -> None:
+        """Let the autopilot log and act on the mode machine's events now (after a command
+        to it: takeoff, transition, land)."""
+        self.ap._drain_events()
+
     def say(self, text: str) -> None:
         """An event worth a STATUSTEXT (the autopilot's event log)."""
         self.ap._note(text)
+
+    # ------------------------------------------------------------------ shared actions
 
     def set_phase(self, phase: str) -> None:
         """Enter ``phase`` of the goal now (its clock restarts)."""
@@ -275,10 +318,12 @@ class NavigatorBase:
             ap._hold_ne[0], ap._hold_ne[1] = tgt
         ap._hold_locked = True
 
-    def hold_at(self, tgt: tuple[float, float]) -> None:
-        """Multicopter: hold position over ``tgt`` (north, east m) from now."""
+    def hold_at(self, tgt: tuple[float, float], lock: bool = True) -> None:
+        """Multicopter: hold position over ``tgt`` (north, east m) from now; ``lock`` False
+        leaves the autopilot free to re-centre the hold when it stops (AUTO.LOITER)."""
         self.ap._hold_ne[0], self.ap._hold_ne[1] = tgt
-        self.ap._hold_locked = True
+        if lock:
+            self.ap._hold_locked = True
 
 
 class NavigatorMode:

@@ -67,17 +67,17 @@ class Land(NavigatorMode):
         if math.isfinite(g.alt) and g.seq < 0:
             # RTL: the return altitude; a land item's altitude is the ground's: the
             # approach and back transition stay at the current altitude (PX4)
-            ap._alt_ref = g.alt
+            nv.set_alt_ref(g.alt)
         if mode == FlightMode.FIXED_WING:
             nv.fw_target = ("segment", nv.seg_a, tgt)
             if d <= self.brake_distance(tgt, nav):
                 m.transition(False)
-                ap._drain_events()
+                nv.drain_events()
                 nv.set_phase("back_transition")
             return False
         if mode == FlightMode.FRONT_TRANSITION:
             m.transition(False)
-            ap._drain_events()
+            nv.drain_events()
             nv.set_phase("back_transition")
             return False
         if mode == FlightMode.BACK_TRANSITION:
@@ -97,12 +97,12 @@ class Land(NavigatorMode):
         if m.mode != FlightMode.HOVER:
             return
         if math.isfinite(g.alt) and g.seq < 0:
-            ap._alt_ref = g.alt
+            nv.set_alt_ref(g.alt)
         nv.mc_goto(tgt, nav)
         v = math.hypot(float(nav.vel_ned_m_s[0]), float(nav.vel_ned_m_s[1]))
         if d < max(1.0, 0.5 * nv.param["NAV_ACC_RAD"].value) and v < 0.5:
             m.land()
-            ap._drain_events()
+            nv.drain_events()
             nv.set_phase("descend")
 
     def fly_back_transition_item(self) -> bool:
@@ -121,7 +121,7 @@ class Land(NavigatorMode):
             return True
         if mode in (FlightMode.FIXED_WING, FlightMode.FRONT_TRANSITION):
             m.transition(False)
-            ap._drain_events()
+            nv.drain_events()
         return False
 
     def brake_distance(self, tgt: tuple[float, float], nav: NavState) -> float:
@@ -141,7 +141,7 @@ class Land(NavigatorMode):
         a_mc = nv.ap.airframe.gravity_m_s2 * math.tan(math.radians(
             p["MPC_TILTMAX_AIR"].value))
         v_mc = nv.mc_speed if math.isfinite(nv.mc_speed) else p["MPC_XY_CRUISE"].value
-        return bt.distance(v_along, float(nv.ap._airspeed), a_mc, v_mc)
+        return bt.distance(v_along, float(nv.airspeed_m_s), a_mc, v_mc)
 
     def measure_back_transition(self, old: FlightMode, new: FlightMode,
                                 nav: NavState) -> None:

@@ -24,10 +24,10 @@ class Loiter(NavigatorMode):
         """AUTO.LOITER about the present position (``why``, if any, told to the ground)."""
         nv = self.navigator
         nv.leave_auto(NavMode.LOITER)
-        nav = nv.ap._last_nav
+        nav = nv.last_nav
         if nav is not None:
             nv.loiter_center = (float(nav.pos_ned_m[0]), float(nav.pos_ned_m[1]))
-            nv.ap._hold_ne[:] = nv.loiter_center
+            nv.hold_at(nv.loiter_center, lock=False)
         if why:
             nv.say(why)
 
@@ -39,7 +39,7 @@ class Loiter(NavigatorMode):
         m = ap.modes
         if not m.armed or m.mode in (FlightMode.IDLE, FlightMode.TAKEOFF, FlightMode.LAND):
             return CommandResult.DENIED
-        nav = ap._last_nav
+        nav = nv.last_nav
         if nav is None or nv.home is None:
             return CommandResult.TEMPORARILY_REJECTED
         n, e = float(nav.pos_ned_m[0]), float(nav.pos_ned_m[1])
@@ -49,10 +49,9 @@ class Loiter(NavigatorMode):
             n, e = nv.to_local(p[4], p[5])
         nv.leave_auto(NavMode.LOITER)
         nv.loiter_center = (n, e)
-        ap._hold_ne[:] = (n, e)
-        ap._hold_locked = True
+        nv.hold_at((n, e))
         if math.isfinite(p[6]):
-            ap._alt_ref = p[6] - nv.home_alt
+            nv.set_alt_ref(p[6] - nv.home_alt)
         if math.isfinite(p[0]) and p[0] > 0:
             nv.mc_speed = p[0]
         return CommandResult.ACCEPTED

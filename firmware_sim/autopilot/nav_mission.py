@@ -259,7 +259,7 @@ class Mission(NavigatorMode):
         if not g.has_position and nv.phase == "":
             g.north, g.east = pos
         if math.isfinite(g.alt):
-            ap._alt_ref = g.alt
+            nv.set_alt_ref(g.alt)
         d = math.hypot(tgt[0] - pos[0], tgt[1] - pos[1])
         loiter = g.command in (NAV_LOITER_TIME, NAV_LOITER_UNLIM)
         if nv.phase == "":

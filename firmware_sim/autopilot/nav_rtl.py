@@ -58,7 +58,7 @@ class Rtl(NavigatorMode):
         nv.nav_mode = NavMode.RTL
         n, e = self.destination()
         rtl_alt = nv.param["RTL_RETURN_ALT"].value
-        nv.goal = Goal(NAV_VTOL_LAND, -1, n, e, max(rtl_alt, nv.ap._alt))
+        nv.goal = Goal(NAV_VTOL_LAND, -1, n, e, max(rtl_alt, nv.altitude_m))
         nv.phase = ""
         nv.say(f"{why}: returning to ({n:.0f}, {e:.0f}) m at {nv.goal.alt:.0f} m")
         return CommandResult.ACCEPTED
@@ -66,7 +66,7 @@ class Rtl(NavigatorMode):
     def destination(self) -> tuple[float, float]:
         """The nearest of home and the rally points (local north, east m)."""
         nv = self.navigator
-        nav = nv.ap._last_nav
+        nav = nv.last_nav
         here = (0.0, 0.0) if nav is None else (float(nav.pos_ned_m[0]), float(nav.pos_ned_m[1]))
         best, dbest = (0.0, 0.0), math.hypot(*here)
         for it in nv.store.plans[RALLY]:

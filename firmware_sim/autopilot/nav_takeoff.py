@@ -29,11 +29,10 @@ class Takeoff(NavigatorMode):
 
     def start(self, alt: float) -> bool:
         """Arm-state takeoff of the mode machine to ``alt`` [m above home]; True if taken."""
-        ap = self.navigator.ap
-        ap._takeoff_alt = alt
-        ap._alt_ref = alt
-        res = ap.modes.takeoff()
-        ap._drain_events()
+        nv = self.navigator
+        nv.set_takeoff_alt(alt)
+        res = nv.ap.modes.takeoff()
+        nv.drain_events()
         return res == CommandResult.ACCEPTED
 
     def fly_item(self, g: Goal, nav: NavState, yaw: float, pos: tuple[float, float],
@@ -52,12 +51,12 @@ class Takeoff(NavigatorMode):
                 return False
             if mode == FlightMode.FIXED_WING:
                 return True
-            ap._alt_ref = alt
+            nv.set_alt_ref(alt)
             nv.set_phase("climb")
         if nv.phase == "climb":
             if mode == FlightMode.TAKEOFF:
                 return False
-            ap._alt_ref = alt
+            nv.set_alt_ref(alt)
             if abs(h - alt) > nv.param["NAV_MC_ALT_RAD"].value:
                 return False
             if g.command == NAV_TAKEOFF:
@@ -95,12 +94,12 @@ class Takeoff(NavigatorMode):
                 return False
             if target is not None:
                 want = math.atan2(target[1] - pos[1], target[0] - pos[0])
-                err = wrap_pi(want - ap._yaw_hold)
+                err = wrap_pi(want - nv.yaw_hold)
                 step = _YAW_SLEW * ap.dt
-                ap._yaw_hold = wrap_pi(ap._yaw_hold + min(max(err, -step), step))
+                nv.yaw_hold = wrap_pi(nv.yaw_hold + min(max(err, -step), step))
                 if abs(wrap_pi(want - yaw)) > math.radians(nv.param["MIS_YAW_ERR"].value):
                     return False
             nv.set_phase("transition")
             m.transition(True)
-            ap._drain_events()
+            nv.drain_events()
         return False

@@ -294,5 +294,5 @@ class Navigator(NavigatorBase):
         # steer): at most 15 deg ahead
         lim = math.radians(15.0)
         self._yaw_ref = wrap_pi(yaw + min(max(wrap_pi(self._yaw_ref - yaw), -lim), lim))
-        self.ap._yaw_hold = self._yaw_ref
+        self.yaw_hold = self._yaw_ref
         return roll_ref, self._yaw_ref
