@@ -321,7 +321,7 @@ class Autopilot:
         if action == "rtl" and self.navigator.start_rtl(text) == CommandResult.ACCEPTED:
             return
         if action in ("rtl", "land") and self.modes.mode != FlightMode.IDLE:
-            self.navigator._leave_auto((4, 6))
+            self.navigator.leave_auto((4, 6))
             self.modes.land()
             self._drain_events()
 

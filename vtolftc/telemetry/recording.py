@@ -75,7 +75,8 @@ import pyarrow as pa
 
 from vtolftc.protocols.hil import N_ACTUATORS
 from vtolftc.rotation import ATTITUDE_AXES
-from vtolftc.telemetry.samples import FlightMode, TelemetrySample
+from vtolftc.telemetry.autopilot_status import FlightMode
+from vtolftc.telemetry.samples import TelemetrySample
 
 __all__ = ["DEFAULT_ACTUATOR_NAMES", "RerunRecorder", "actuator_entity", "read_recording"]
 
