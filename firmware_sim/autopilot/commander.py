@@ -104,7 +104,7 @@ class Commander:
 
         COMPONENT_ARM_DISARM 400: param1 1 arm (on the ground, once navigation data came),
         0 disarm (on the ground; in the air only with param2 = 21196). NAV_TAKEOFF 22: param7
-        the takeoff altitude AMSL as in PX4 (needs the home position, :meth:`set_home`); NaN,
+        the takeoff altitude AMSL as in PX4 (needs the home position, ``Autopilot.set_home``); NaN,
         or less than :data:`TAKEOFF_MIN_HEIGHT_M` above home: ``MIS_TAKEOFF_ALT`` above home
         (STATUSTEXT "Using minimum takeoff altitude", as PX4); more than 500 m above home:
         DENIED; armed and on the ground only. On the ground the vehicle disarms by itself
