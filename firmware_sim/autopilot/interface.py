@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 # they are re-exported here so the autopilot's whole boundary reads from one place.
 from vtolftc.protocols.hil import (
     EARTH_RADIUS_M,
+    HIL_OUTPUTS,
     N_ACTUATORS,
     HilState,
     NavState,
@@ -48,6 +49,7 @@ from vtolftc.telemetry.samples import AutopilotStatus, FlightMode, LandedState, 
 
 __all__ = [
     "EARTH_RADIUS_M",
+    "HIL_OUTPUTS",
     "N_ACTUATORS",
     "AutopilotAPI",
     "AutopilotStatus",
