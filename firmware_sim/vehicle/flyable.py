@@ -54,7 +54,7 @@ def check_flyable(af: Airframe) -> None:
 
     def refuse(field: str, value: object, what: str, exc: Exception) -> AirframeError:
         return AirframeError(f"{af.source}: field '{field}' = {value!r}: expected an airframe "
-                             f"that can {what} ({exc})")
+                             f"that can {what} ({' '.join(str(exc).split())})")
 
     try:
         trim_hover(af)
