@@ -346,3 +346,17 @@ def test_quadplane_flies_sitl_over_udp(paper_gains, tmp_path):
     data = ULog(str(ulgs[0]), ["actuator_outputs"]).get_dataset("actuator_outputs").data
     assert set(data["noutputs"].tolist()) == {af.n_actuators}
     assert np.max(data["output[0]"]) > 0.3  # took off on the four lift rotors
+
+
+def test_gcs_fault_names_come_from_the_airframe(bad_files, capsys):
+    """``vtolftc gcs --airframe F inject``: the names are the file's (refused before any
+    link is opened, so no vehicle is needed)."""
+    argv = ["gcs", "--airframe", str(QP4), "--timeout", "0.1", "inject", "--actuator",
+            "rotor_2b", "--loss", "0.5"]
+    assert cli_run(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "unknown actuator 'rotor_2b'" in err and "rotor_4a" in err and "\n" not in err
+    path, reason = bad_files[0]["malformed"]
+    assert cli_run(["gcs", "--airframe", str(path), "status"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert reason in err and "\n" not in err
