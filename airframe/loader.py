@@ -131,7 +131,9 @@ class DerivativeTables:
 
 @dataclass(frozen=True)
 class Surfaces:
-    """Control surfaces: the five named in :data:`SURFACE_NAMES`, sharing their dynamics."""
+    """Control surfaces sharing their dynamics: one or two ailerons, the elevator, one or two
+    rudders (:data:`SURFACE_NAMES` when two of each; a single one is ``aileron`` /
+    ``rudder``, carrying the whole aircraft derivative)."""
 
     names: tuple[str, ...]
     max_deflection_rad: float
@@ -313,6 +315,8 @@ _SCHEMA: dict[str, dict[str, Any]] = {
     "lift_rotors": _ROTOR_GROUP,
     "pushers": _ROTOR_GROUP,
     "surfaces": {
+        "ailerons": _Num("", 1.0, 2.0),
+        "rudders": _Num("", 1.0, 2.0),
         "max_deflection_deg": _Num("deg", **_POS, hi=60.0),
         "time_constant_s": _Num("s", **_POS, hi=2.0),
         "rate_limit_deg_s": _Num("deg/s", **_POS, hi=5000.0),
@@ -335,6 +339,8 @@ _ROTOR_SCHEMA: dict[str, Any] = {
     "axis": "axis",
 }
 _ROTOR_OPTIONAL = frozenset({"axis"})
+_OPTIONAL: dict[str, frozenset[str]] = {"surfaces": frozenset({"ailerons", "rudders"})}
+"""Optional keys per section (``[surfaces] ailerons`` / ``rudders``: 1 or 2, default 2)."""
 
 HIL_OUTPUTS = 16
 """Outputs of HIL_ACTUATOR_CONTROLS: an airframe has at most this many actuators."""
@@ -392,10 +398,12 @@ class _Reader:
         if not isinstance(table, dict):
             raise self.fail(name, table, "a table ([section])")
         schema = _SCHEMA[name]
-        self.check_keys(table, schema, name)
+        self.check_keys(table, schema, name, _OPTIONAL.get(name, frozenset()))
         out: dict[str, Any] = {}
         for key, spec in schema.items():
             at = f"{name}.{key}"
+            if key not in table:
+                continue
             if isinstance(spec, _Num):
                 out[key] = self.number(table, key, spec, name)
             elif spec is str:
@@ -607,8 +615,17 @@ def airframe_from_dict(
     if len(pushers) > 2:
         raise rd.fail("pushers.rotor", [r.name for r in pushers], "one or two pushers")
     su = s["surfaces"]
+    counts = {}
+    for key in ("ailerons", "rudders"):
+        counts[key] = su.get(key, 2.0)
+        if counts[key] not in (1.0, 2.0):
+            raise rd.fail(f"surfaces.{key}", counts[key], "1 or 2")
+    surface_names = (
+        ("aileron_left", "aileron_right") if counts["ailerons"] == 2.0 else ("aileron",)
+    ) + ("elevator",) + (
+        ("rudder_left", "rudder_right") if counts["rudders"] == 2.0 else ("rudder",))
     surfaces = Surfaces(
-        names=SURFACE_NAMES, max_deflection_rad=math.radians(su["max_deflection_deg"]),
+        names=surface_names, max_deflection_rad=math.radians(su["max_deflection_deg"]),
         time_constant_s=su["time_constant_s"],
         rate_limit_rad_s=math.radians(su["rate_limit_deg_s"]),
     )
@@ -621,7 +638,7 @@ def airframe_from_dict(
     names = (
         tuple(f"rotor_{r.name}" for r in lift)
         + tuple(f"pusher_{r.name}" for r in pushers)
-        + SURFACE_NAMES
+        + surface_names
     )
     if len(set(names)) != len(names):
         raise AirframeError(f"{source}: actuator names are not unique: {names}")

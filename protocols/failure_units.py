@@ -83,6 +83,9 @@ class ActuatorTable:
     def groups(self) -> dict[str, tuple[str, ...]]:
         """Named actuator groups (``lift_rotors``, ``pushers``, surfaces ...) -> actuator names."""
         g = dict(GROUPS)
+        for group, prefix in (("ailerons", "aileron"), ("rudders", "rudder")):
+            g[group] = tuple(n for n in self.servos if n.startswith(prefix))
+        g["surfaces"] = self.servos
         g["lift_rotors"] = tuple(n for n in self.motors if n.startswith("rotor_"))
         g["pushers"] = tuple(n for n in self.motors if n.startswith("pusher_"))
         g["motors"] = self.motors

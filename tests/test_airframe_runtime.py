@@ -360,3 +360,45 @@ def test_gcs_fault_names_come_from_the_airframe(bad_files, capsys):
     assert cli_run(["gcs", "--airframe", str(path), "status"]) == 2
     err = capsys.readouterr().err.strip()
     assert reason in err and "\n" not in err
+
+
+def test_one_aileron_and_one_rudder_act_as_the_pairs_deflected_together():
+    """``[surfaces] ailerons = 1, rudders = 1``: one surface carries the whole aircraft
+    derivative, in the vehicle model and in the autopilot's effectiveness alike."""
+    from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
+    from vtolftc.firmware_sim.vehicle import dynamics as dyn
+    from vtolftc.firmware_sim.vehicle.model import Vehicle
+    from vtolftc.firmware_sim.vehicle.trim import _base_state
+
+    doc = _ds1_doc()
+    doc["surfaces"]["ailerons"] = 1
+    doc["surfaces"]["rudders"] = 1
+    one = airframe_from_dict(doc)
+    two = load_airframe()
+    assert one.actuator_names[-3:] == ("aileron", "elevator", "rudder")
+    assert one.n_actuators == 13
+    for bad in (0, 3, 1.5):
+        doc["surfaces"]["ailerons"] = bad
+        with pytest.raises(AirframeError, match=r"field 'surfaces.ailerons'"):
+            airframe_from_dict(doc)
+    B1 = EffectivenessModel(one).matrix(18.0)
+    B2 = EffectivenessModel(two).matrix(18.0)
+    i2 = two.actuator_index
+    np.testing.assert_allclose(B1[:, one.actuator_index("aileron")],
+                               B2[:, i2("aileron_left")] - B2[:, i2("aileron_right")])
+    np.testing.assert_allclose(B1[:, one.actuator_index("rudder")],
+                               B2[:, i2("rudder_left")] + B2[:, i2("rudder_right")])
+    assert np.any(B1[:, one.actuator_index("aileron")] != 0.0)
+
+    def accel(af, cmd: dict[str, float]) -> np.ndarray:
+        x = _base_state(af, 30.0, 18.0, 0.0)
+        for name, c in cmd.items():
+            x[dyn.N_RIGID + af.actuator_index(name)] = c
+        dx, _ = Vehicle(af).derivatives(x, x[dyn.N_RIGID:])
+        return dx[10:13]
+
+    np.testing.assert_allclose(
+        accel(one, {"aileron": 0.3, "rudder": -0.2, "elevator": 0.1}),
+        accel(two, {"aileron_left": 0.3, "aileron_right": -0.3, "rudder_left": -0.2,
+                    "rudder_right": -0.2, "elevator": 0.1}), rtol=1e-12, atol=1e-12)
+    assert not np.allclose(accel(one, {"aileron": 0.3}), accel(one, {}))
