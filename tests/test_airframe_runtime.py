@@ -292,18 +292,30 @@ def _vtolftc(*argv: str, timeout: float = 900) -> subprocess.CompletedProcess:
                           text=True, timeout=timeout, cwd=ROOT)
 
 
+class _PaperGains:
+    """``vtolftc synth --method paper --airframe F`` (one classical start, no mu, no report:
+    the gains only), run once per airframe on first use."""
+
+    def __init__(self, factory: pytest.TempPathFactory) -> None:
+        self._factory = factory
+        self._dirs: dict[str, Path] = {}
+
+    def __getitem__(self, stem: str) -> Path:
+        if stem not in self._dirs:
+            d = self._factory.mktemp(stem)
+            path = ROOT / "airframe" / f"{stem}.toml"
+            p = _vtolftc("synth", "--method", "paper", "--airframe", str(path), "--out",
+                         str(d), "--starts", "0", "--no-mu", "--no-report", "--quiet",
+                         "--jobs", "1")
+            assert p.returncode == 0, p.stderr[-2000:]
+            self._dirs[stem] = d
+        return self._dirs[stem]
+
+
 @pytest.fixture(scope="module")
 def paper_gains(tmp_path_factory):
-    """``vtolftc synth --method paper --airframe F`` for QP-4 and HX-6 (one classical start,
-    no mu, no report: the gains only)."""
-    out = {}
-    for path in (QP4, HX6):
-        d = tmp_path_factory.mktemp(path.stem)
-        p = _vtolftc("synth", "--method", "paper", "--airframe", str(path), "--out", str(d),
-                     "--starts", "0", "--no-mu", "--no-report", "--quiet", "--jobs", "1")
-        assert p.returncode == 0, p.stderr[-2000:]
-        out[path.stem] = d
-    return out
+    """Gain directories by airframe stem (``qp4``, ``hx6``), synthesised on first use."""
+    return _PaperGains(tmp_path_factory)
 
 
 @pytest.mark.slow
