@@ -50,10 +50,10 @@ def _check(args: argparse.Namespace) -> None:
 
 def cmd_synth(args: argparse.Namespace) -> int:
     """Structured H-infinity GS-SHIF and SHIF designs, LQR baseline, mu analysis, report."""
-    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.firmware_sim.vehicle.flyable import load_flyable_airframe
 
     _check(args)
-    af = load_airframe(args.airframe)
+    af = load_flyable_airframe(args.airframe)
     from tqdm import tqdm
 
     from vtolftc.synthesis.pipeline import run_synthesis, work_units

@@ -73,7 +73,7 @@ from vtolftc.firmware_sim.autopilot.delegation import Delegated
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
 from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
 from vtolftc.firmware_sim.autopilot.interface import (
-    N_ACTUATORS,
+    HIL_OUTPUTS,
     AutopilotStatus,
     CommandResult,
     FlightMode,
@@ -164,9 +164,9 @@ class Autopilot:
                  gains_dir: str | Path | None = None, dt_s: float = 0.004) -> None:
         self.airframe = airframe if airframe is not None else load_airframe()
         af = self.airframe
-        if af.n_actuators != N_ACTUATORS:
-            raise ValueError(f"airframe {af.name}: {af.n_actuators} actuators, the autopilot "
-                             f"expects {N_ACTUATORS}")
+        if af.n_actuators > HIL_OUTPUTS:
+            raise ValueError(f"airframe {af.name}: {af.n_actuators} actuators, HIL carries "
+                             f"at most {HIL_OUTPUTS}")
         self.dt = float(dt_s)
         self.controller_name = controller
         controller_obj = make_controller(

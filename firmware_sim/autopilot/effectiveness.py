@@ -75,17 +75,20 @@ class EffectivenessModel:
         def col(name: str) -> int:
             return names.index(name)
 
-        for side, sgn in (("aileron_left", 0.5), ("aileron_right", -0.5)):
+        ail = [(n, s) for n, s in (("aileron_left", 0.5), ("aileron_right", -0.5)) if n in names]
+        for side, sgn in ail or [("aileron", 1.0)]:
             j = col(side)
             self._B_q[2, j] = S * b * w.Cl_da * sgn * d
             self._B_q[4, j] = S * b * w.Cn_da * sgn * d
         j = col("elevator")
         self._B_q[0, j] = -S * w.CL_de * d
         self._B_q[3, j] = S * c * w.Cm_de * d
-        for side in ("rudder_left", "rudder_right"):
+        rud = [n for n in ("rudder_left", "rudder_right") if n in names]
+        share = 0.5 if rud else 1.0
+        for side in rud or ["rudder"]:
             j = col(side)
-            self._B_q[2, j] = S * b * w.Cl_dr * 0.5 * d
-            self._B_q[4, j] = S * b * w.Cn_dr * 0.5 * d
+            self._B_q[2, j] = S * b * w.Cl_dr * share * d
+            self._B_q[4, j] = S * b * w.Cn_dr * share * d
         self._rho = airframe.air_density_kg_m3
         self._faded = [j for j in range(n_u) if self._fade_slope[j] != 0.0]
         self._cache: dict[int, NDArray[np.float64]] = {}

@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 # an AutopilotStatus; the metrics and the recorder read FlightMode; nothing in protocols does).
 from vtolftc.protocols.hil import (
     EARTH_RADIUS_M,
+    HIL_OUTPUTS,
     N_ACTUATORS,
     HilState,
     NavState,
@@ -51,6 +52,7 @@ from vtolftc.telemetry.autopilot_status import AutopilotStatus, FlightMode, Land
 
 __all__ = [
     "EARTH_RADIUS_M",
+    "HIL_OUTPUTS",
     "N_ACTUATORS",
     "AutopilotAPI",
     "AutopilotStatus",
