@@ -108,25 +108,36 @@ class TunableBlock:
 
 @dataclass
 class StaticGain(TunableBlock):
-    """A tunable n_out x n_in static gain u = K y.
+    """A tunable n_out x n_in static gain u = K y (units: the plant's controls per measurement).
 
     Parameters
     ----------
-    name:
+    name : str
         Block name (parameter names are ``name.K[i,j]``).
-    n_out, n_in:
+    n_out, n_in : int
         Shape of K.
-    initial:
-        Start value (default zeros).
-    plant:
+    initial : array_like, optional
+        Start value, shape (n_out, n_in) (default zeros).
+    plant : GeneralizedPlant, optional
         If given (and ``scale`` is None), entry scales from :meth:`GeneralizedPlant.gain_scale`
         for the random starts and the bounds (the optimiser's step unit stays 1); the block
         must then map all the plant's measurements to all its controls.
-    scale:
+    scale : float or array_like, optional
         Typical magnitude per entry (scalar or n_out x n_in); default 1 or the plant's.
-    bound:
+    bound : float or array_like, optional
         |K_ij| <= bound (scalar or array); default ``DEFAULT_BOUND_FACTOR * scale``; ``inf``
         for unbounded.
+
+    Raises
+    ------
+    ValueError
+        For shapes that do not fit, or a plant whose sizes differ from the block's.
+
+    Examples
+    --------
+    >>> K = StaticGain("K", 1, 2)
+    >>> [p.name for p in K.parameters()]
+    ['K.K[0,0]', 'K.K[0,1]']
     """
 
     name: str
@@ -173,10 +184,24 @@ class StaticGain(TunableBlock):
 class StateSpaceBlock(TunableBlock):
     """A tunable fixed-order state space (Ak, Bk, Ck, Dk), every entry free.
 
-    ``order`` states. Initial realisation: Ak = -rate I (rate: the plant's ||A|| if
-    ``plant`` is given, else 1 [1/s]), Bk = I-like, Ck = 0, Dk = 0 (or ``initial`` =
-    (Ak, Bk, Ck, Dk)). Scales: Ak ~ rate, Bk ~ 1, Ck and Dk ~ the plant gain scale.
-    ``bound_factor`` x scale bounds every entry.
+    Initial realisation: Ak = -rate I (rate: the plant's ||A|| if ``plant`` is given, else
+    1 [1/s]), Bk = I-like, Ck = 0, Dk = 0 (or ``initial``). Scales: Ak ~ rate, Bk ~ 1, Ck and
+    Dk ~ the plant gain scale.
+
+    Parameters
+    ----------
+    name : str
+        Block name (parameter prefix).
+    order : int
+        Number of states.
+    n_out, n_in : int
+        Outputs (controls) and inputs (measurements).
+    initial : tuple of array_like, optional
+        (Ak, Bk, Ck, Dk) to start from.
+    plant : GeneralizedPlant, optional
+        Plant whose scales set the start and the parameter scales.
+    bound_factor : float
+        Every entry is bounded by ``bound_factor`` x its scale.
     """
 
     name: str
@@ -241,8 +266,16 @@ class StateSpaceBlock(TunableBlock):
 class PIDBlock(TunableBlock):
     """SISO PID kp + ki/s + kd s/(tf s + 1) (:func:`vtolftc.synthesis.structured.pid`).
 
-    Parameters ``name.kp``, ``name.ki``, ``name.kd``, ``name.tf`` with the given initial
-    values and bounds (ki > 0 and tf > 0 are required by the realisation).
+    Parameters
+    ----------
+    name : str
+        Block name; parameters ``name.kp``, ``name.ki``, ``name.kd``, ``name.tf``.
+    kp, ki, kd : float
+        Initial gains (ki > 0 is required by the realisation).
+    tf : float
+        Initial derivative filter time constant (s), > 0.
+    bounds : dict of str to (float, float)
+        Optional (lower, upper) per gain name.
     """
 
     name: str
@@ -276,9 +309,17 @@ class PIDBlock(TunableBlock):
 class PPIDBlock(TunableBlock):
     """The paper's P-PID cascade as one 1 x 2 block: u = K_rate(s) (kp_angle e - rate).
 
-    Inputs [e = angle_ref - angle (rad); body rate (rad/s)], output moment (N m). The five
-    parameters are named ``name.<g>`` for g in :data:`vtolftc.synthesis.loops.PARAM_NAMES`;
-    ``gains`` gives initial values, ``bounds`` optional (lower, upper) per gain.
+    Inputs [e = angle_ref - angle (rad); body rate (rad/s)], output moment (N m).
+
+    Parameters
+    ----------
+    name : str
+        Block name; the five parameters are named ``name.<g>`` for g in
+        :data:`vtolftc.synthesis.loops.PARAM_NAMES`.
+    gains : dict of str to float
+        Initial values per gain name.
+    bounds : dict of str to (float, float)
+        Optional (lower, upper) per gain.
     """
 
     name: str
@@ -326,6 +367,16 @@ class ControllerStructure:
     K's inputs are the blocks' inputs concatenated in order (they must add up to the plant's
     measurements), its outputs the blocks' outputs (the plant's controls). ``parameters``
     concatenates the blocks' parameters; :meth:`split` and :meth:`realize` map theta back.
+
+    Parameters
+    ----------
+    blocks : sequence of TunableBlock or TunableBlock
+        The blocks, in order.
+
+    Raises
+    ------
+    ValueError
+        Without blocks, or with duplicate block names.
     """
 
     def __init__(self, blocks: Sequence[TunableBlock] | TunableBlock):
@@ -379,7 +430,20 @@ class ControllerStructure:
 
 
 class LFTChannel:
-    """Picklable tuning channel theta -> F_l(P, K(theta)) (A, B, C, D)."""
+    """Picklable tuning channel theta -> F_l(P, K(theta)) (A, B, C, D).
+
+    Parameters
+    ----------
+    plant : GeneralizedPlant
+        The plant.
+    structure : ControllerStructure
+        The controller structure closing it.
+
+    Raises
+    ------
+    ValueError
+        If the structure's inputs/outputs do not match the plant's measurements/controls.
+    """
 
     def __init__(self, plant: GeneralizedPlant, structure: ControllerStructure):
         d = plant.dims
@@ -404,9 +468,42 @@ def lft_problem(
 ) -> TuningProblem:
     """The structured H-infinity problem min_theta max_i ||F_l(P_i, K(theta))||_inf.
 
-    One channel per plant (several models = a multi-model design). Returns a
-    :class:`~vtolftc.synthesis.structured.TuningProblem` for
-    :func:`~vtolftc.synthesis.structured.tune`.
+    One channel per plant (several models = a multi-model design).
+
+    Parameters
+    ----------
+    plants : GeneralizedPlant or sequence of GeneralizedPlant
+        The plant(s).
+    structure : ControllerStructure, TunableBlock or sequence of TunableBlock
+        The controller structure.
+    names : sequence of str, optional
+        Channel names (default one per plant).
+    stability_margin : float
+        Required closed-loop decay rate (1/s).
+
+    Returns
+    -------
+    TuningProblem
+        For :func:`~vtolftc.synthesis.structured.tune`.
+
+    Raises
+    ------
+    ValueError
+        If a plant does not fit the structure.
+
+    Examples
+    --------
+    Static output feedback u = k y of x' = x + w1 + u (unstable), y = x + w2, z = [x; u];
+    the optimum is k = -(1 + sqrt(3)) with norm 1 + sqrt(3):
+
+    >>> from vtolftc.synthesis.lft import GeneralizedPlant
+    >>> from vtolftc.synthesis.structured import tune
+    >>> P = GeneralizedPlant.from_matrices(A=[[1.0]], B1=[[1.0, 0.0]], B2=[[1.0]],
+    ...                                    C1=[[1.0], [0.0]], C2=[[1.0]],
+    ...                                    D12=[[0.0], [1.0]], D21=[[0.0, 1.0]])
+    >>> res = tune(lft_problem(P, StaticGain("K", 1, 1, initial=[[-3.0]])))
+    >>> res.stable, round(res.value, 6), round(float(res.theta[0]), 4)
+    (True, 2.732051, -2.7321)
     """
     if isinstance(plants, GeneralizedPlant):
         plants = [plants]

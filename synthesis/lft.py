@@ -53,6 +53,26 @@ class GeneralizedPlant:
     Build with :meth:`from_matrices` (COMPleib order A, B1, B2, C1, C2, D11, D12, D21, D22;
     missing D blocks are zero) or :meth:`from_ss` (a state space with the last ``ny`` outputs
     measured and the last ``nu`` inputs controlled, MATLAB ``hinfstruct`` convention).
+    Signals are in the plant's own units; x has n states, w nw exogenous inputs, u nu
+    controls, z nz performance outputs, y ny measurements.
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+        State matrix.
+    B1, B2 : ndarray, shapes (n, nw), (n, nu)
+        Input matrices of w and u.
+    C1, C2 : ndarray, shapes (nz, n), (ny, n)
+        Output matrices of z and y.
+    D11, D12, D21, D22 : ndarray, shapes (nz, nw), (nz, nu), (ny, nw), (ny, nu)
+        Feedthrough matrices.
+
+    Examples
+    --------
+    >>> P = GeneralizedPlant.from_matrices(A=[[-1.0]], B1=[[1.0]], B2=[[1.0]], C1=[[1.0]],
+    ...                                    C2=[[1.0]])
+    >>> P.D22.shape
+    (1, 1)
     """
 
     A: NDArray[np.float64]
@@ -148,24 +168,34 @@ def lft(P: GeneralizedPlant, K: Any, *, wellposed_tol: float = 1e-10) -> StateSp
 
     Parameters
     ----------
-    P:
-        The :class:`GeneralizedPlant`.
-    K:
+    P : GeneralizedPlant
+        The plant.
+    K : array_like, tuple or control.StateSpace/TransferFunction
         A static gain (nu x ny array), a state space (Ak, Bk, Ck, Dk) tuple or a
         python-control StateSpace/TransferFunction.
-    wellposed_tol:
+    wellposed_tol : float
         The loop is rejected as ill-posed if sigma_min(I - Dk D22) <= wellposed_tol
         (1 + ||Dk|| ||D22||).
 
     Returns
     -------
-    (Acl, Bcl, Ccl, Dcl)
-        State [x; xk].
+    Acl, Bcl, Ccl, Dcl : ndarray
+        The closed loop, state [x; xk].
 
     Raises
     ------
     ValueError
         Wrong controller shape or an ill-posed loop (I - Dk D22 singular).
+
+    Examples
+    --------
+    x' = -x + w + u, z = x, y = x closed by u = -2 y: x' = -3 x + w.
+
+    >>> P = GeneralizedPlant.from_matrices(A=[[-1.0]], B1=[[1.0]], B2=[[1.0]], C1=[[1.0]],
+    ...                                    C2=[[1.0]])
+    >>> Acl, Bcl, Ccl, Dcl = lft(P, [[-2.0]])
+    >>> Acl.tolist(), Dcl.tolist()
+    ([[-3.0]], [[0.0]])
     """
     d = P.dims
     nu, ny = d["nu"], d["ny"]
