@@ -202,6 +202,11 @@ class StateSpaceBlock(TunableBlock):
         Plant whose scales set the start and the parameter scales.
     bound_factor : float
         Every entry is bounded by ``bound_factor`` x its scale.
+
+    Raises
+    ------
+    ValueError
+        For order < 1 or an ``initial`` realisation of the wrong shapes.
     """
 
     name: str
@@ -320,6 +325,11 @@ class PPIDBlock(TunableBlock):
         Initial values per gain name.
     bounds : dict of str to (float, float)
         Optional (lower, upper) per gain.
+
+    Raises
+    ------
+    ValueError
+        If ``gains`` lacks one of the five initial gains.
     """
 
     name: str

@@ -119,7 +119,7 @@ def write_gain_files(res: SynthesisResult, out_dir: Path) -> dict[str, Path]:
     Returns
     -------
     dict of str to pathlib.Path
-        The files written, keyed by controller.
+        The files written, keyed by controller (``"gs-shif"``, ``"shif"``, ``"lqr"``).
     """
     af = res.airframe
     common = {
@@ -201,7 +201,7 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
     Raises
     ------
     ValueError
-        For an unknown method or invalid counts.
+        For an unknown method.
     """
     if method not in METHODS:
         raise ValueError(f"method {method!r}: expected one of {', '.join(METHODS)}")

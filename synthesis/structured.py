@@ -1104,8 +1104,8 @@ def tune(
     Raises
     ------
     ValueError
-        For invalid arguments (negative counts or tolerances, an initial point of the wrong
-        size).
+        For n_starts < 0, max_iter < 1, time_limit <= 0 or a negative or non-finite
+        regularization.
 
     Examples
     --------
@@ -1504,8 +1504,9 @@ def mixed_sensitivity(G: Any, K: Any, Ws: Any = None, Wt: Any = None, Wr: Any = 
     Raises
     ------
     ValueError
-        For an improper Wt or Wr (e.g. Wt(s) = s/wt + ...: add high-frequency poles) or a Ws
-        with a pole at s = 0 (A = 0 in eq. 5: use a small A > 0).
+        For an improper Wt or Wr (e.g. Wt(s) = s/wt + ...: add high-frequency poles), a Ws
+        with a pole at s = 0 (A = 0 in eq. 5: use a small A > 0), no weight at all, or an
+        ill-posed loop (I + G(inf) K(inf) singular).
     """
     import control
 
