@@ -454,7 +454,7 @@ def _upper_any(
 
 def mu_upper_bound(
     M: NDArray[Any],
-    blocks: Sequence[Block],
+    blocks: Sequence[Block] | BlockStructure,
     *,
     warm_start: DScaling | NDArray[np.float64] | None = None,
     rtol: float = 1e-6,
@@ -467,7 +467,7 @@ def mu_upper_bound(
     ----------
     M : array_like, shape (n, n)
         Square complex matrix.
-    blocks : sequence of Block
+    blocks : sequence of Block or BlockStructure
         Block structure; sizes must sum to n.
     warm_start : DScaling or ndarray, optional
         A previous :class:`DScaling` (or its ``params``) for the same structure, e.g. from a
@@ -900,7 +900,7 @@ def power_lower_bound(
 
 def mu_lower_bound(
     M: NDArray[Any],
-    blocks: Sequence[Block],
+    blocks: Sequence[Block] | BlockStructure,
     *,
     n_starts: int = 4,
     seed: int = 0,
@@ -917,7 +917,7 @@ def mu_lower_bound(
     ----------
     M : array_like, shape (n, n)
         Square complex matrix.
-    blocks : sequence of Block
+    blocks : sequence of Block or BlockStructure
         Block structure; sizes must sum to n.
     n_starts : int
         Seeded random starts.
@@ -995,7 +995,7 @@ def _bounds(
 
 def mu_bounds(
     M: NDArray[Any],
-    blocks: Sequence[Block],
+    blocks: Sequence[Block] | BlockStructure,
     *,
     n_starts: int = 4,
     seed: int = 0,
@@ -1009,7 +1009,7 @@ def mu_bounds(
     ----------
     M : array_like, shape (n, n)
         Square complex matrix.
-    blocks : sequence of Block
+    blocks : sequence of Block or BlockStructure
         Block structure; sizes must sum to n.
     n_starts : int
         Random power-iteration starts added to the deterministic ones (eigen- and
@@ -1052,7 +1052,7 @@ def mu_bounds(
 
 def mu_sweep(
     freq_response: NDArray[Any],
-    blocks: Sequence[Block],
+    blocks: Sequence[Block] | BlockStructure,
     omegas: NDArray[np.float64],
     *,
     n_starts: int = 1,
@@ -1069,7 +1069,7 @@ def mu_sweep(
     ----------
     freq_response : ndarray of complex, shape (nw, n, n)
         M(j w) (e.g. from :func:`vtolftc.synthesis.hinfnorm.frequency_response`).
-    blocks : sequence of Block
+    blocks : sequence of Block or BlockStructure
         Block structure.
     omegas : ndarray of float, shape (nw,)
         The frequencies in rad/s (used for reporting the peak frequencies).
