@@ -75,7 +75,13 @@ class LqrAxis:
     B: NDArray[np.float64]
 
     def gains(self) -> dict[str, float]:
-        """``k_int``, ``k_angle``, ``k_rate`` of this axis as a dict."""
+        """``k_int``, ``k_angle``, ``k_rate`` of this axis as a dict.
+
+        Returns
+        -------
+        dict of str to float
+            N m / (rad s), N m / rad, N m s / rad.
+        """
         return {"k_int": self.k_int, "k_angle": self.k_angle, "k_rate": self.k_rate}
 
 

@@ -77,11 +77,28 @@ class TunableBlock:
     n_states: int
 
     def parameters(self) -> list[Parameter]:
-        """The block's parameters (names prefixed with the block name)."""
+        """The block's parameters (names prefixed with the block name).
+
+        Returns
+        -------
+        list of Parameter
+            In the order of the block's slice of theta.
+        """
         raise NotImplementedError
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """(Ak, Bk, Ck, Dk) for this block's slice of theta."""
+        """(Ak, Bk, Ck, Dk) for this block's slice of theta.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_params,)
+            The block's parameter values.
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            Shapes (n_states, n_states), (n_states, n_in), (n_out, n_states), (n_out, n_in).
+        """
         raise NotImplementedError
 
     @property
@@ -167,7 +184,13 @@ class StaticGain(TunableBlock):
         self._initial = _grid(self.initial, shape, "initial", 0.0)
 
     def parameters(self) -> list[Parameter]:
-        """The gain matrix entries ``K[i,j]``, row-major, as parameters."""
+        """The gain matrix entries ``K[i,j]``, row-major, as parameters.
+
+        Returns
+        -------
+        list of Parameter
+            n_out * n_in parameters.
+        """
         # a plant-derived scale sets the random starts and the bounds, not the optimiser's
         # step unit: on COMPleib HE3 (||A|| = 9.8 from a gravity coupling, eigenvalues below
         # 1.01 rad/s) plant-scaled steps stall at 0.94 where unit steps reach 0.82 (issue 23)
@@ -175,7 +198,18 @@ class StaticGain(TunableBlock):
         return self._matrix_params("K", self._initial, self._scale, self._bound, unit)
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """Static gain: no states, ``D = theta`` reshaped to (n_out, n_in)."""
+        """Static gain: no states, ``D = theta`` reshaped to (n_out, n_in).
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_out * n_in,)
+            The entries, row-major.
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            Empty state matrices and D of shape (n_out, n_in).
+        """
         K = np.asarray(theta, float).reshape(self.n_out, self.n_in)
         return np.zeros((0, 0)), np.zeros((0, self.n_in)), np.zeros((self.n_out, 0)), K
 
@@ -249,14 +283,31 @@ class StateSpaceBlock(TunableBlock):
                         gscale)
 
     def parameters(self) -> list[Parameter]:
-        """All entries of A, B, C and D (in that order, row-major) as parameters."""
+        """All entries of A, B, C and D (in that order, row-major) as parameters.
+
+        Returns
+        -------
+        list of Parameter
+            order^2 + order (n_in + n_out) + n_out n_in parameters.
+        """
         out: list[Parameter] = []
         for label, x0, s in zip("ABCD", self._init, self._scales, strict=True):
             out += self._matrix_params(label, x0, s, self.bound_factor * s)
         return out
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """``(A, B, C, D)`` cut from ``theta`` in the order of :meth:`parameters`."""
+        """``(A, B, C, D)`` cut from ``theta`` in the order of :meth:`parameters`.
+
+        Parameters
+        ----------
+        theta : ndarray of float
+            The block's parameter values.
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            Shapes (order, order), (order, n_in), (n_out, order), (n_out, n_in).
+        """
         k, p, m = self.order, self.n_out, self.n_in
         th = np.asarray(theta, float)
         i = 0
@@ -295,7 +346,13 @@ class PIDBlock(TunableBlock):
         self.n_states = 2
 
     def parameters(self) -> list[Parameter]:
-        """``kp``, ``ki``, ``kd`` and the derivative filter time constant ``tf`` (s)."""
+        """``kp``, ``ki``, ``kd`` and the derivative filter time constant ``tf`` (s).
+
+        Returns
+        -------
+        list of Parameter
+            Four parameters.
+        """
         dflt = {"kp": (-1e6, 1e6), "ki": (1e-9, 1e6), "kd": (-1e6, 1e6), "tf": (1e-4, 1e3)}
         out = []
         for k in ("kp", "ki", "kd", "tf"):
@@ -306,7 +363,18 @@ class PIDBlock(TunableBlock):
         return out
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """State-space PID with filtered derivative for ``theta = (kp, ki, kd, tf)``."""
+        """State-space PID with filtered derivative for ``theta = (kp, ki, kd, tf)``.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (4,)
+            kp, ki, kd, tf (s).
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            As :func:`vtolftc.synthesis.structured.pid`.
+        """
         return pid(*(float(v) for v in theta))
 
 
@@ -345,7 +413,13 @@ class PPIDBlock(TunableBlock):
         self.n_in, self.n_out, self.n_states = 2, 1, 2
 
     def parameters(self) -> list[Parameter]:
-        """The five cascaded P-PID gains (angle P, rate P, I, D, derivative filter s)."""
+        """The five cascaded P-PID gains (angle P, rate P, I, D, derivative filter s).
+
+        Returns
+        -------
+        list of Parameter
+            In :data:`vtolftc.synthesis.loops.PARAM_NAMES` order.
+        """
         from vtolftc.synthesis.loops import PARAM_NAMES
 
         dflt = {"kp_angle": (1e-6, 1e3), "kp_rate": (1e-9, 1e6), "ki_rate": (1e-9, 1e6),
@@ -362,6 +436,16 @@ class PPIDBlock(TunableBlock):
         """Cascaded P-PID for ``theta``: inputs (angle error (rad), rate (rad/s)), output moment.
 
         The rate loop sees ``kp_angle * e - rate``.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (5,)
+            The gains in :data:`vtolftc.synthesis.loops.PARAM_NAMES` order.
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            Shapes (2, 2), (2, 2), (1, 2), (1, 2); output in N m.
         """
         from vtolftc.synthesis.loops import rate_controller
 
@@ -409,16 +493,44 @@ class ControllerStructure:
         self.n_out = sum(b.n_out for b in self.blocks)
 
     def parameters(self) -> list[Parameter]:
-        """Parameters of all blocks, concatenated in block order."""
+        """Parameters of all blocks, concatenated in block order.
+
+        Returns
+        -------
+        list of Parameter
+            The structure's theta layout.
+        """
         return [p for ps in self._params for p in ps]
 
     def split(self, theta: NDArray[np.float64]) -> dict[str, NDArray[np.float64]]:
-        """theta -> {block name: its parameter slice}."""
+        """theta -> {block name: its parameter slice}.
+
+        Parameters
+        ----------
+        theta : array_like, shape (n_params,)
+            All parameters.
+
+        Returns
+        -------
+        dict of str to ndarray
+            Each block's slice.
+        """
         th = np.asarray(theta, float)
         return {b.name: th[s] for b, s in zip(self.blocks, self._slices, strict=True)}
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """(Ak, Bk, Ck, Dk) of the block-diagonal controller at theta."""
+        """(Ak, Bk, Ck, Dk) of the block-diagonal controller at theta.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_params,)
+            All parameters.
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            The block-diagonal realisation (inputs and outputs concatenated in block order).
+        """
         th = np.asarray(theta, float)
         parts = [b.realize(th[s]) for b, s in zip(self.blocks, self._slices, strict=True)]
         from scipy.linalg import block_diag

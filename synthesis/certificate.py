@@ -221,8 +221,20 @@ class ParametricFamily:
         return ([Block.real(self.n_v)] if self.n_v > 0 else []) + [Block.real(1)]
 
     def coefficients(self, dV: Any, dg: Any) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
-        """(damping, stiffness, 1 - gamma) at normalised parameters (arrays broadcast); the
-        polynomials continued beyond [-1, 1]."""
+        """(damping, stiffness, 1 - gamma) at normalised parameters.
+
+        The polynomials are continued beyond [-1, 1].
+
+        Parameters
+        ----------
+        dV, dg : float or array_like
+            Normalised airspeed and effectiveness-loss parameters (arrays broadcast).
+
+        Returns
+        -------
+        damping, stiffness, effectiveness : ndarray
+            N m s / rad, N m / rad and 1 - gamma.
+        """
         dV = np.asarray(dV, float)
         dg = np.asarray(dg, float)
         return (npoly.polyval(dV, self.damping) + 0 * dg,
@@ -230,8 +242,21 @@ class ParametricFamily:
                 self.b0 - self.rg * dg + 0 * dV)
 
     def scaled(self, factor: float) -> ParametricFamily:
-        """The same family with its box scaled by ``factor`` about the centre (dV, dg
-        renormalised: the polynomial coefficients of dV^i times factor^i)."""
+        """The same family with its box scaled by ``factor`` about the centre.
+
+        dV and dg are renormalised: the polynomial coefficients of dV^i are multiplied by
+        factor^i.
+
+        Parameters
+        ----------
+        factor : float
+            Box scaling (1: unchanged).
+
+        Returns
+        -------
+        ParametricFamily
+            The scaled family.
+        """
         f = float(factor)
         pw = f ** np.arange(max(self.damping.size, self.stiffness.size))
         return ParametricFamily(self.axis, self.inertia, self.damping * pw[: self.damping.size],
@@ -239,11 +264,33 @@ class ParametricFamily:
                                 self.v_half * f, self.g_centre, self.rg * f, self.tau_s)
 
     def airspeed(self, dV: Any) -> Any:
-        """V [m/s] at normalised dV."""
+        """V [m/s] at normalised dV.
+
+        Parameters
+        ----------
+        dV : float or array_like
+            Normalised airspeed parameter.
+
+        Returns
+        -------
+        float or ndarray
+            Airspeed (m/s).
+        """
         return self.v_centre + self.v_half * np.asarray(dV, float)
 
     def gamma(self, dg: Any) -> Any:
-        """gamma at normalised dg."""
+        """gamma at normalised dg.
+
+        Parameters
+        ----------
+        dg : float or array_like
+            Normalised effectiveness-loss parameter.
+
+        Returns
+        -------
+        float or ndarray
+            The loss of effectiveness gamma.
+        """
         return self.g_centre + self.rg * np.asarray(dg, float)
 
 
@@ -989,7 +1036,13 @@ class PieceResult:
             math.inf if self.grid_k_hi == 0 else 1.0 / self.grid_k_hi)
 
     def to_dict(self) -> dict[str, Any]:
-        """All fields (and ``grid_mu``) as a JSON-ready dict (inf as None)."""
+        """All fields (and ``grid_mu``) as a JSON-ready dict (inf as None).
+
+        Returns
+        -------
+        dict
+            The fields.
+        """
         d = {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
              for k, v in self.__dict__.items()}
         g = self.grid_mu
@@ -1052,7 +1105,13 @@ class PointCertificate:
         return "not certified: bound >= 1"
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary with the pieces."""
+        """JSON-ready summary with the pieces.
+
+        Returns
+        -------
+        dict
+            The summary.
+        """
         g = self.grid
         return {"axis": self.axis, "point": self.point, "v_min_m_s": self.v_min_m_s,
                 "v_max_m_s": self.v_max_m_s, "plant": self.plant,

@@ -93,23 +93,52 @@ class SensitivityWeight:
                                  "number > 0 (A = 0 gives an infinite weighted norm)")
 
     def tf(self) -> ct.TransferFunction:
-        """Ws(s) as a python-control transfer function."""
+        """Ws(s) as a python-control transfer function.
+
+        Returns
+        -------
+        control.TransferFunction
+            Ws(s).
+        """
         return ct.tf([1.0 / self.M, self.omega_b_rad_s], [1.0, self.A * self.omega_b_rad_s])
 
     def ss(self) -> StateSpaceData:
-        """First-order state-space realisation ``(A, B, C, D)`` of Ws(s)."""
+        """First-order state-space realisation ``(A, B, C, D)`` of Ws(s).
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            Each of shape (1, 1).
+        """
         a = -self.A * self.omega_b_rad_s
         # (s/M + wb)/(s - a) = 1/M + (wb + a/M)/(s - a)
         return (np.array([[a]]), np.array([[1.0]]),
                 np.array([[self.omega_b_rad_s + a / self.M]]), np.array([[1.0 / self.M]]))
 
     def response(self, omegas: NDArray[np.float64]) -> NDArray[np.complex128]:
-        """Ws(j omega) at the frequencies ``omegas`` (rad/s)."""
+        """Ws(j omega) at the frequencies ``omegas`` (rad/s).
+
+        Parameters
+        ----------
+        omegas : array_like, shape (nw,)
+            Frequencies (rad/s).
+
+        Returns
+        -------
+        ndarray of complex, shape (nw,)
+            Ws(j omega).
+        """
         s = 1j * np.asarray(omegas, float)
         return (s / self.M + self.omega_b_rad_s) / (s + self.A * self.omega_b_rad_s)
 
     def to_dict(self) -> dict[str, float]:
-        """The parameters ``M``, ``omega_b_rad_s``, ``A`` as a JSON-ready dict."""
+        """The parameters ``M``, ``omega_b_rad_s``, ``A`` as a JSON-ready dict.
+
+        Returns
+        -------
+        dict of str to float
+            The parameters.
+        """
         return {"M": self.M, "omega_b_rad_s": self.omega_b_rad_s, "A": self.A}
 
 
@@ -151,23 +180,52 @@ class ControlWeight:
         return self.r_max_rad / self.u_max_N_m
 
     def tf(self) -> ct.TransferFunction:
-        """Wr(s) = (h s + 1e-3 omega_a) / (s + omega_a) as a python-control transfer function."""
+        """Wr(s) = (h s + 1e-3 omega_a) / (s + omega_a) as a python-control transfer function.
+
+        Returns
+        -------
+        control.TransferFunction
+            Wr(s), h = r_max / u_max (rad / (N m)).
+        """
         return ct.tf([self.high_gain, self.omega_a_rad_s * 1e-3], [1.0, self.omega_a_rad_s])
 
     def ss(self) -> StateSpaceData:
-        """First-order state-space realisation ``(A, B, C, D)`` of Wr(s)."""
+        """First-order state-space realisation ``(A, B, C, D)`` of Wr(s).
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            Each of shape (1, 1).
+        """
         wa, h = self.omega_a_rad_s, self.high_gain
         # (h s + wa 1e-3)/(s + wa) = h + (wa 1e-3 - h wa)/(s + wa)
         return (np.array([[-wa]]), np.array([[1.0]]), np.array([[wa * 1e-3 - h * wa]]),
                 np.array([[h]]))
 
     def response(self, omegas: NDArray[np.float64]) -> NDArray[np.complex128]:
-        """Wr(j omega) at the frequencies ``omegas`` (rad/s)."""
+        """Wr(j omega) at the frequencies ``omegas`` (rad/s).
+
+        Parameters
+        ----------
+        omegas : array_like, shape (nw,)
+            Frequencies (rad/s).
+
+        Returns
+        -------
+        ndarray of complex, shape (nw,)
+            Wr(j omega).
+        """
         s = 1j * np.asarray(omegas, float)
         return (self.high_gain * s + self.omega_a_rad_s * 1e-3) / (s + self.omega_a_rad_s)
 
     def to_dict(self) -> dict[str, float]:
-        """The parameters ``r_max_rad``, ``u_max_N_m``, ``omega_a_rad_s`` as a JSON-ready dict."""
+        """The parameters ``r_max_rad``, ``u_max_N_m``, ``omega_a_rad_s`` as a JSON-ready dict.
+
+        Returns
+        -------
+        dict of str to float
+            The parameters.
+        """
         return {"r_max_rad": self.r_max_rad, "u_max_N_m": self.u_max_N_m,
                 "omega_a_rad_s": self.omega_a_rad_s}
 
@@ -258,19 +316,43 @@ class ClosedLoop:
                 sign * self.D[[out]][:, [inp]])
 
     def S(self) -> StateSpaceData:
-        """e/r."""
+        """Sensitivity e/r.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            SISO state space (rad/rad).
+        """
         return self._siso(0, 0)
 
     def R(self) -> StateSpaceData:
-        """u/r."""
+        """Control sensitivity u/r.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            SISO state space (N m / rad).
+        """
         return self._siso(1, 0)
 
     def T_u(self) -> StateSpaceData:
-        """-u/d: complementary sensitivity at the plant input."""
+        """-u/d: complementary sensitivity at the plant input.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            SISO state space (dimensionless).
+        """
         return self._siso(1, 1, -1.0)
 
     def S_ud(self) -> StateSpaceData:
-        """e/d (= -G_angle S_u)."""
+        """e/d (= -G_angle S_u), the angle error per input moment.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            SISO state space (rad / (N m)).
+        """
         return self._siso(0, 1)
 
     @property
@@ -279,11 +361,28 @@ class ClosedLoop:
         return np.linalg.eigvals(self.A)
 
     def stable(self, margin: float = 0.0) -> bool:
-        """True when every closed-loop pole has real part < ``-margin`` (rad/s)."""
+        """True when every closed-loop pole has real part < ``-margin`` (rad/s).
+
+        Parameters
+        ----------
+        margin : float
+            Required decay rate (1/s).
+
+        Returns
+        -------
+        bool
+            The verdict.
+        """
         return bool(np.max(self.poles.real) < -margin)
 
     def lti(self) -> ct.StateSpace:
-        """The closed loop as a python-control state-space system."""
+        """The closed loop as a python-control state-space system.
+
+        Returns
+        -------
+        control.StateSpace
+            Inputs [r, d], outputs [e, u, rate, angle].
+        """
         return ct.ss(self.A, self.B, self.C, self.D)
 
 
@@ -581,9 +680,21 @@ class CascadeChannel:
         return A, B, C, D
 
     def realize_batch(self, thetas: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-        """The channel at every row of ``thetas`` (nb, 5): (A, B, C, D) stacked (nb, ., .),
-        each slice equal to ``self(thetas[i])`` bit for bit (same element operations; used
-        for the tuner's finite-difference realisations, all at once)."""
+        """The channel at every row of ``thetas``, all at once.
+
+        Each slice equals ``self(thetas[i])`` bit for bit (same element operations; used for the
+        tuner's finite-difference realisations).
+
+        Parameters
+        ----------
+        thetas : ndarray of float, shape (nb, 5)
+            P-PID gains, one set per row.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            Stacked realisations, each of shape (nb, ., .).
+        """
         if not hasattr(self, "_A0"):
             self._template()
             self._plan()
@@ -640,12 +751,34 @@ class CascadeChannel:
                                   Bw[:, 0].copy(), Dw[0, 0], self._rows["Wd*Sd"], 0, 1))
 
     def rows(self, theta: NDArray[np.float64]) -> dict[str, StateSpaceData]:
-        """Each weighted function on its own (name -> (A, B, C, D))."""
+        """Each weighted function on its own.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (5,)
+            P-PID gains.
+
+        Returns
+        -------
+        dict of str to tuple of ndarray
+            Row name -> (A, B, C, D).
+        """
         A, B, C, D = self(theta)
         return {n: (A, B, C[[i]], D[[i]]) for i, n in enumerate(self.outputs)}
 
     def reference(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """The same channel assembled the slow, obvious way (series + stack; for tests)."""
+        """The same channel assembled the slow, obvious way (series + stack; for tests).
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (5,)
+            P-PID gains.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            The channel.
+        """
         cl = _closed(self._G, np.asarray(theta, float))
         Ws, Wt, Wr = self._W
         parts = []

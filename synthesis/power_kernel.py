@@ -90,7 +90,7 @@ def power_iteration(M: NDArray[np.complex128], b: NDArray[np.complex128],
     iters : int
         Maximum iterations.
     tol : float
-        Convergence tolerance on the vectors.
+        Relative tolerance on the change of the iteration's growth estimate beta.
     K : int
         Number of blocks.
     blk_of_row, blk_of_col, full_row, full_col, rep_row, rep_col, rep_blk, is_real : ndarray
@@ -162,7 +162,7 @@ def power_iteration_scalar(M: NDArray[np.complex128], b: NDArray[np.complex128],
     iters : int
         Maximum iterations.
     tol : float
-        Convergence tolerance on the vectors.
+        Relative tolerance on the change of the iteration's growth estimate beta.
 
     Returns
     -------

@@ -63,5 +63,11 @@ class SynthesisResult:
     margins_shif: dict[Axis, list[Any]] = field(default_factory=dict)
 
     def nominal_stable(self) -> dict[Axis, list[bool]]:
-        """Per axis, whether each scheduled design point's nominal closed loop is stable."""
+        """Per axis, whether each scheduled design point's nominal closed loop is stable.
+
+        Returns
+        -------
+        dict of str to list of bool
+            One verdict per design point.
+        """
         return {ax: [d.stable for d in self.gs[ax]] for ax in AXES}

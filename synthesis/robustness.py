@@ -165,7 +165,13 @@ class AxisRobustness:
         return float(np.max(self.rp.gap))
 
     def summary(self) -> dict[str, float]:
-        """Peaks, lower bounds, peak frequencies (rad/s), gaps, the closed-form check, as a dict."""
+        """Peaks, lower bounds, peak frequencies (rad/s), gaps and the closed-form check.
+
+        Returns
+        -------
+        dict of str to float
+            The numbers, by name.
+        """
         return {
             "mu_rs": self.mu_rs, "mu_rs_lower": self.rs.peak_lower,
             "mu_rs_peak_frequency_rad_s": self.rs.peak_upper_frequency_rad_s,

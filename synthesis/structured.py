@@ -220,12 +220,34 @@ class TuningProblem:
         return np.array([p.typical for p in self.parameters], dtype=float)
 
     def realize(self, theta: NDArray[np.float64]) -> list[StateSpaceData]:
-        """State-space data (A, B, C, D) of every channel at theta."""
+        """State-space data (A, B, C, D) of every channel at theta.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_params,)
+            The parameter values.
+
+        Returns
+        -------
+        list of tuple of ndarray
+            One (A, B, C, D) per channel.
+        """
         theta = self._check_theta(theta)
         return [as_state_space(c(theta)) for c in self.channels]
 
     def channel_norms(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        """||channel_i(theta)||_inf for every channel (inf if unstable / margin violated)."""
+        """||channel_i(theta)||_inf for every channel.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_params,)
+            The parameter values.
+
+        Returns
+        -------
+        ndarray of float, shape (n_channels,)
+            The norms (inf if unstable or the stability margin is violated).
+        """
         out = []
         for A, B, C, D in self.realize(theta):
             if self.stability_margin > 0 and A.size and (
@@ -237,7 +259,18 @@ class TuningProblem:
         return np.array(out)
 
     def objective(self, theta: NDArray[np.float64]) -> float:
-        """max_i ||channel_i(theta)||_inf (the gamma of eq. 8)."""
+        """max_i ||channel_i(theta)||_inf (the gamma of eq. 8).
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_params,)
+            The parameter values.
+
+        Returns
+        -------
+        float
+            The objective.
+        """
         return float(np.max(self.channel_norms(theta)))
 
     def _check_theta(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:

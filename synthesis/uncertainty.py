@@ -194,14 +194,31 @@ class UncertaintyWeight:
         return len(self.poles_rad_s)
 
     def tf(self) -> ct.TransferFunction:
-        """W_t(s) as a python-control transfer function."""
+        """W_t(s) as a python-control transfer function.
+
+        Returns
+        -------
+        control.TransferFunction
+            W_t(s).
+        """
         W = ct.tf([self.gain], [1.0])
         for z, p in zip(self.zeros_rad_s, self.poles_rad_s, strict=True):
             W = W * ct.tf([1.0 / z, 1.0], [1.0 / p, 1.0])
         return W
 
     def magnitude(self, omegas: np.ndarray) -> np.ndarray:
-        """|W_t(j omega)| at the frequencies ``omegas`` (rad/s)."""
+        """|W_t(j omega)| at the frequencies ``omegas`` (rad/s).
+
+        Parameters
+        ----------
+        omegas : array_like, shape (nw,)
+            Frequencies (rad/s).
+
+        Returns
+        -------
+        ndarray of float, shape (nw,)
+            The magnitudes.
+        """
         s = 1j * np.asarray(omegas, dtype=float)
         m = np.full(s.shape, self.gain, dtype=complex)
         for z, p in zip(self.zeros_rad_s, self.poles_rad_s, strict=True):
@@ -209,7 +226,13 @@ class UncertaintyWeight:
         return np.abs(m)
 
     def to_dict(self) -> dict[str, object]:
-        """Gain, zeros and poles (rad/s) as a JSON-ready dict."""
+        """Gain, zeros and poles (rad/s) as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            Keys ``gain``, ``zeros_rad_s``, ``poles_rad_s``.
+        """
         return {"gain": self.gain, "zeros_rad_s": list(self.zeros_rad_s),
                 "poles_rad_s": list(self.poles_rad_s)}
 

@@ -2,9 +2,10 @@
 form, and the examples in those docstrings run.
 
 Every public module-level function and class of ``synthesis/`` (except ``design.py`` and
-``robust.py``, the paper's design, documented on their own) has a ``Parameters`` section that
-names each of its parameters (a class: those of its constructor, i.e. its ``__init__`` or its
-dataclass fields) and, for a function that returns something, a ``Returns`` section. The
+``robust.py``, the paper's design, documented on their own), and every public method of those
+classes, has a ``Parameters`` section that names each of its parameters (a class: those of its
+constructor, i.e. its ``__init__`` or its dataclass fields) and, for a function that returns
+something, a ``Returns`` section (a property: a docstring). The
 main entry points carry an ``Examples`` section, and every example in the toolbox's
 docstrings is run as a doctest.
 """
@@ -12,6 +13,7 @@ docstrings is run as a doctest.
 from __future__ import annotations
 
 import ast
+import copy
 import doctest
 import importlib
 import re
@@ -95,18 +97,31 @@ def _returns_value(fn: ast.FunctionDef) -> bool:
 
 
 def _public_definitions() -> list[tuple[str, ast.FunctionDef | ast.ClassDef]]:
+    """(module, node) of every public function and class; methods named ``Class.method``."""
     out = []
     for path in MODULES:
         for node in ast.parse(path.read_text()).body:
             if isinstance(node, ast.FunctionDef | ast.ClassDef) and not node.name.startswith("_"):
                 out.append((path.stem, node))
+            if isinstance(node, ast.ClassDef) and not node.name.startswith("_"):
+                for sub in node.body:
+                    if isinstance(sub, ast.FunctionDef) and not sub.name.startswith("_"):
+                        method = copy.copy(sub)
+                        method.name = f"{node.name}.{sub.name}"
+                        out.append((path.stem, method))
     return out
+
+
+def _is_property(node: ast.FunctionDef) -> bool:
+    return any("property" in ast.unparse(d) for d in node.decorator_list)
 
 
 def _doc_problems(node: ast.FunctionDef | ast.ClassDef) -> list[str]:
     doc = ast.get_docstring(node) or ""
     if not doc:
         return ["no docstring"]
+    if isinstance(node, ast.FunctionDef) and _is_property(node):
+        return []
     params = _constructor_params(node) if isinstance(node, ast.ClassDef) else _arg_names(node)
     problems = []
     if params:
