@@ -76,13 +76,13 @@ from numpy.typing import NDArray
 from scipy.optimize import brentq
 
 from vtolftc.airframe.loader import Airframe
-from vtolftc.synthesis.dg_scaling import BlockStructure
 from vtolftc.synthesis.hinfnorm import StateSpaceData, frequency_response
 from vtolftc.synthesis.lft import GeneralizedPlant, lft
 from vtolftc.synthesis.loops import PARAM_NAMES, rate_controller
 from vtolftc.synthesis.mixed_mu import mixed_mu_lower, mixed_mu_upper, mixed_mu_upper_start
 from vtolftc.synthesis.models import Axis, axis_coefficients
 from vtolftc.synthesis.mu import Block, MuSweep
+from vtolftc.synthesis.mu_blocks import BlockStructure
 from vtolftc.synthesis.robust import LoopDelays, actuator_time_constant
 from vtolftc.synthesis.uncertainty import GAMMA_RANGE, DesignPoint
 

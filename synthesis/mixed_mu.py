@@ -53,12 +53,12 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from vtolftc.synthesis.dg_scaling import (
-    BlockStructure,
     MixedMuUpper,
     mixed_mu_upper,
     mixed_mu_upper_start,
 )
 from vtolftc.synthesis.mu import Block, MuSweep, makes_singular, power_lower_bound
+from vtolftc.synthesis.mu_blocks import BlockStructure
 
 __all__ = [
     "BlockStructure",
