@@ -119,6 +119,16 @@ class Block:
         return Block("real", int(n), int(n))
 
 
+_MAP_NAMES = frozenset((
+    "n", "K", "row_idx", "col_idx", "blk_of_row", "blk_of_col", "is_full", "is_real",
+    "all_square", "scalar", "rep_blocks", "rep_row", "rep_col", "rep_blk",
+    "full_row", "full_col", "row_starts", "col_starts", "diag_param_l", "diag_param_r",
+    "block_param_slices", "n_params", "off_il", "off_jl", "off_ir", "off_jr", "off_pre",
+    "off_pim", "has_off",
+))
+"""Attributes that :meth:`BlockStructure._index` sets."""
+
+
 def _cat(parts: list[NDArray[np.intp]]) -> NDArray[np.intp]:
     return np.concatenate(parts) if parts else np.zeros(0, np.intp)
 
@@ -129,7 +139,9 @@ class BlockStructure:
     Validated once at construction (building a ``BlockStructure`` from a ``BlockStructure``
     reuses it). Besides the shapes it holds the index maps that the mu bounds use: where each
     block sits in M's rows and columns and how the D-scaling parameter vector of
-    :func:`vtolftc.synthesis.mu.mu_upper_bound` fills D_l and D_r.
+    :func:`vtolftc.synthesis.mu.mu_upper_bound` fills D_l and D_r (computed together on the
+    first access of any of them, so that the D-G analyses, which need only the shapes, do not
+    pay for them).
 
     Parameters
     ----------
@@ -189,7 +201,13 @@ class BlockStructure:
                     "Block.repeated_complex(n) or Block.real(n)"
                 )
         self.__dict__["blocks"] = blocks
-        self._index(blocks)
+
+    def __getattr__(self, name: str) -> Any:
+        # only called for attributes not yet set: the index maps, built on first use
+        if name in _MAP_NAMES and "blocks" in self.__dict__:
+            self._index(self.__dict__["blocks"])
+            return self.__dict__[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def __setattr__(self, name: str, value: Any) -> None:
         raise AttributeError(f"BlockStructure is immutable (cannot set {name!r})")
@@ -225,7 +243,6 @@ class BlockStructure:
         a["blk_of_col"] = np.concatenate([np.full(b.rows, k) for k, b in enumerate(blocks)])
         a["is_full"] = np.array([b.kind == "full" for b in blocks])
         a["is_real"] = np.array([b.kind == "real" for b in blocks])
-        a["has_real"] = bool(a["is_real"].any())
         a["all_square"] = all(b.rows == b.cols for b in blocks)
         a["scalar"] = all(b.rows == b.cols == 1 for b in blocks)
         # element maps for repeated blocks (row position -> column position)
@@ -284,7 +301,6 @@ class BlockStructure:
     blk_of_col: NDArray[np.intp]
     is_full: NDArray[np.bool_]
     is_real: NDArray[np.bool_]
-    has_real: bool
     all_square: bool
     scalar: bool
     rep_blocks: list[int]
@@ -316,6 +332,11 @@ class BlockStructure:
     def delta_shape(self) -> tuple[int, int]:
         """Shape (rows, cols) of the block-diagonal perturbation Delta."""
         return sum(b.rows for b in self.blocks), sum(b.cols for b in self.blocks)
+
+    @property
+    def has_real(self) -> bool:
+        """True when a block is a real (parametric) scalar block."""
+        return any(b.kind == "real" for b in self.blocks)
 
     @property
     def square(self) -> bool:

@@ -20,6 +20,8 @@ def test_every_analysis_uses_the_one_type() -> None:
 
 def test_built_from_a_structure_it_reuses_the_validated_maps() -> None:
     st = BlockStructure([Block.full(1, 3), Block.real(2)])
+    assert "row_idx" not in vars(st)  # the index maps are built on first use ...
+    assert st.row_idx[0].tolist() == [0, 1, 2] and "diag_param_l" in vars(st)  # ... all at once
     again = BlockStructure(st)
     assert again == st and hash(again) == hash(st)
     assert again.row_idx is st.row_idx and again.diag_param_l is st.diag_param_l
