@@ -318,7 +318,7 @@ def mixed_mu_sweep(
     >>> w = np.array([0.5, 1.0, 2.0])
     >>> F = np.array([[[1 / (1j * wi + 1)]] for wi in w])
     >>> sw = mixed_mu_sweep(F, [Block.real(1)], w)
-    >>> sw.peak_upper < 1e-6                 # a real scalar never destabilises 1/(jw + 1)
+    >>> sw.peak_upper < 1e-6     # at w > 0 no real delta makes 1 - delta / (jw + 1) vanish
     True
     """
     st = BlockStructure(blocks)
