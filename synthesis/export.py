@@ -49,7 +49,13 @@ LQR_FORMAT = "vtolftc-lqr-gains/1"
 
 
 def tool_version() -> str:
-    """Version string of the installed vtol-ftc distribution (``unknown`` if not installed)."""
+    """Version string of the installed vtol-ftc distribution.
+
+    Returns
+    -------
+    str
+        The version, or ``unknown`` if the distribution is not installed.
+    """
     try:
         from importlib.metadata import version
 
@@ -64,7 +70,20 @@ jsonable = json_safe
 
 
 def write_json(path: str | os.PathLike[str], doc: Mapping[str, Any]) -> Path:
-    """Atomically write a JSON document (strict JSON, indented)."""
+    """Atomically write a JSON document (strict JSON, indented).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination file.
+    doc : mapping
+        The document (passed through :func:`jsonable`: NaN / inf become null).
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+    """
     return atomic_write_text(path, json.dumps(json_safe(doc), indent=2, allow_nan=False) + "\n")
 
 
@@ -82,9 +101,34 @@ def schedule_document(af: Airframe, controller: str, breakpoints_m_s: Sequence[f
                       metadata: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """A ``vtolftc-gain-schedule/1`` document.
 
-    ``gains[axis][i]`` is the gain dict (keys :data:`vtolftc.synthesis.loops.PARAM_NAMES`) at
-    breakpoint i. Values are rounded to 6 significant digits (well below the design's
-    sensitivity) so the files stay readable.
+    Values are rounded to 6 significant digits (well below the design's sensitivity) so the
+    files stay readable.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe (its file's sha256 is recorded).
+    controller : str
+        Controller name, e.g. ``"gs-shif"``.
+    breakpoints_m_s : sequence of float
+        Airspeed breakpoints (m/s).
+    gains : mapping of str to sequence of mapping
+        ``gains[axis][i]`` is the gain dict (keys :data:`vtolftc.synthesis.loops.PARAM_NAMES`)
+        at breakpoint i.
+    axes_metadata : mapping, optional
+        Extra per-axis entries.
+    metadata : mapping, optional
+        Extra top-level metadata.
+
+    Returns
+    -------
+    dict
+        The document, ready for :func:`write_json`.
+
+    Raises
+    ------
+    ValueError
+        If an axis has not one gain set per breakpoint.
     """
     axes: dict[str, Any] = {}
     for ax in AXES:
@@ -110,7 +154,19 @@ def lqr_document(af: Airframe, gains: Mapping[str, Mapping[str, float]],
                  metadata: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """A ``vtolftc-lqr-gains/1`` document with one breakpoint (0 m/s): constant gains.
 
-    ``gains[axis]`` has keys k_int, k_angle, k_rate (units in the module docstring).
+    Parameters
+    ----------
+    af : Airframe
+        The airframe (its file's sha256 is recorded).
+    gains : mapping of str to mapping
+        ``gains[axis]`` with keys k_int, k_angle, k_rate (units in the module docstring).
+    metadata : mapping, optional
+        Extra top-level metadata.
+
+    Returns
+    -------
+    dict
+        The document, ready for :func:`write_json`.
     """
     common = _common(af)
     doc: dict[str, Any] = {

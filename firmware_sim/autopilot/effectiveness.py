@@ -114,7 +114,7 @@ class EffectivenessModel:
     def matrix_on_grid(self, airspeed_m_s: float, step_m_s: float = 0.1) -> NDArray[np.float64]:
         """``B`` at the airspeed rounded to a multiple of ``step_m_s`` (cached, read-only).
 
-        The autopilot uses it so that ``B`` (hence OSQP's KKT matrix) changes only when the
+        The autopilot uses it so that ``B`` (hence the allocator's Hessian) changes only when the
         airspeed crosses a grid point; with 0.1 m/s the dynamic pressure differs from the
         exact one by less than 1 % above 10 m/s.
         """
