@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -104,6 +105,11 @@ def authority_bandwidth(u_max_N_m: float, inertia_kg_m2: float, r_max_rad: float
     return math.sqrt(u_max_N_m / (inertia_kg_m2 * r_max_rad))
 
 
+def _who(af: Airframe) -> str:
+    """``file.toml (name)``: how an error names the airframe."""
+    return f"{Path(af.source).name} ({af.name})"
+
+
 def require_authority(af: Airframe, axis: Axis, airspeed_m_s: float, u_max_N_m: float,
                       ) -> None:
     """Raise :class:`~vtolftc.airframe.loader.AirframeError` (one line, exit status 2 from
@@ -111,7 +117,7 @@ def require_authority(af: Airframe, axis: Axis, airspeed_m_s: float, u_max_N_m: 
     loop can then be designed there."""
     if not (math.isfinite(u_max_N_m) and u_max_N_m > 0.0):
         raise AirframeError(
-            f"{af.name}: no {axis} moment authority at {airspeed_m_s:g} m/s (lift rotors and "
+            f"{_who(af)}: no {axis} moment authority at {airspeed_m_s:g} m/s (lift rotors and "
             f"surfaces give {u_max_N_m:g} N m): no {axis} attitude loop can be designed")
 
 
@@ -149,10 +155,10 @@ def transition_speeds(af: Airframe, transition_end_m_s: float | None = None,
     vc = (max(_round_up(CRUISE_OVER_STALL * vs), vt + SPEED_GRID_M_S) if cruise_m_s is None
           else float(cruise_m_s))
     if not vt > 0.0 or vt < vs - 1e-6:
-        raise AirframeError(f"{af.name}: transition end {vt:g} m/s: expected at least the "
+        raise AirframeError(f"{_who(af)}: transition end {vt:g} m/s: expected at least the "
                             f"stall speed {vs:.2f} m/s")
     if not vc > vt:
-        raise AirframeError(f"{af.name}: cruise {vc:g} m/s: expected above the transition "
+        raise AirframeError(f"{_who(af)}: cruise {vc:g} m/s: expected above the transition "
                             f"end {vt:g} m/s")
     return TransitionSpeeds(vs, vt, vc)
 
@@ -168,12 +174,16 @@ def scaled_design_points(af: Airframe, *, cruise: bool,
     For DS-1 (k = 1, V_c = 18): table 1's points and 18 m/s over 13-20 m/s.
     """
     sp = transition_speeds(af) if speeds is None else speeds
-    k = sp.transition_end_m_s / PAPER_TRANSITION_END_M_S
-    pts = tuple(DesignPoint(p.number, p.airspeed_m_s * k, p.v_min_m_s * k, p.v_max_m_s * k)
+    vt = sp.transition_end_m_s
+
+    def k(v: float) -> float:  # v V_t / 13 m/s (the last point ends at V_t exactly)
+        return v * vt / PAPER_TRANSITION_END_M_S
+
+    pts = tuple(DesignPoint(p.number, k(p.airspeed_m_s), k(p.v_min_m_s), k(p.v_max_m_s))
                 for p in PAPER_DESIGN_POINTS)
     if not cruise:
         return pts
-    vt, vc = sp.transition_end_m_s, sp.cruise_m_s
+    vc = sp.cruise_m_s
     return (*pts, DesignPoint(len(pts) + 1, vc, vt, vc + CRUISE_OVERSPEED_FRACTION * (vc - vt)))
 
 
@@ -189,6 +199,6 @@ def require_bounds(af: Airframe, axis: Axis, bounds: dict[str, tuple[float, floa
     for name, (lo, hi) in bounds.items():
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise AirframeError(
-                f"{af.name}: the {axis} loop's {name} has no admissible value (bounds "
+                f"{_who(af)}: the {axis} loop's {name} has no admissible value (bounds "
                 f"[{lo:g}, {hi:g}] from its authority, inertia and actuator bandwidth): no "
                 f"{axis} attitude loop can be designed")
