@@ -1,4 +1,5 @@
-"""The robust attitude design of DS-1 (``vtolftc synth --method robust``, the default).
+"""The robust attitude design (``vtolftc synth --method robust``, the default), for DS-1
+and any airframe of its class (every scale from the airframe file: :mod:`.scaling`).
 
 The method stays the paper's: structured H-infinity mixed sensitivity of the fixed P-PID
 cascade (fig. 5) at airspeed design points, faults as multiplicative input uncertainty, mu
@@ -32,14 +33,21 @@ d. **Ws by rule** (:func:`sensitivity_rule`): omega_b = min(omega_act / 8, omega
    sqrt((u_max - d_max) / (J r_max)) the bandwidth at which a reference step r_max takes the
    authority left after the worst rotor-out; M = the sensitivity peak of the second-order loop
    whose step overshoot is :data:`OVERSHOOT` (20 %). Table 2's values are printed beside.
-f. **Cruise point** 18 m/s (range 13-20 m/s), so the schedule covers the envelope flown;
-   in fixed-wing the allocator keeps the lift rotors as a reserve (autopilot).
+e. **Design points from the transition range** (:func:`robust_points`): the paper's six
+   scaled to the airframe's transition end V_t (table 1's airspeeds times V_t / 13 m/s) and
+f. **a cruise point** V_c over [V_t, V_c + 0.4 (V_c - V_t)] (DS-1: 18 m/s over 13-20 m/s;
+   V_t and V_c from the wing or declared, :func:`~vtolftc.synthesis.scaling.
+   transition_speeds`), so the schedule covers the envelope flown; in fixed-wing the
+   allocator keeps the lift rotors as a reserve (autopilot).
 g. **Gain bounds from physics** (:func:`robust_parameters`): outer loop <= omega_act / 2;
    rate-loop crossover kp_rate / J <= omega_act; the controller's high-frequency gain
    kp_rate + kd_rate / tf_rate_s bounded by gyro noise (3 sigma of
    :data:`GYRO_NOISE_RAD_S` must not cost more than 5 % of u_max, nor slew the moment faster
    than the actuators' rate limit allows in one control period); each of kp_rate and
-   kd_rate / tf_min is held below that bound. Every active bound is reported.
+   kd_rate / tf_min is held below that bound; the other bounds and the start are multiples
+   of omega_act, omega_act^2, tau_act or the control period (formulas in
+   :func:`robust_parameters`; DS-1's former numbers exactly). Every active bound is
+   reported. An axis without authority is refused (``AirframeError``, one line).
 
 Channels (all minimised together, minimax, :func:`vtolftc.synthesis.structured.tune`): eq. 8
 ``[Ws S; Wt T_u; Wr R]`` normalised by its own floor ``max(1, |Wt(0)|)`` (with integral action

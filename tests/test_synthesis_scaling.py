@@ -310,19 +310,20 @@ def test_the_design_loop_is_the_same_with_and_without_workers(ds1):
 @pytest.mark.parametrize("path", [SCALED_UP, QUADPLANE], ids=["scaled-up", "quadplane-4"])
 def test_synthesis_finishes_for_other_airframes(path, method, tmp_path):
     """`vtolftc synth`'s pipeline on DS-1 scaled up (16 kg, 3.2 m span, 42 N rotors,
-    inertia x1.3) and on a 4-lift-rotor quadplane variant, at three of their design points
-    (hover, mid-transition, the last), no random start, no mu: gain files written, every
-    closed loop stable."""
+    inertia x1.3) and on a 4-lift-rotor quadplane variant, at two of their design points
+    (hover and the last: transition end for paper, cruise for robust; SHIF over both), no
+    random start, no mu: gain files written, every closed loop stable (40-115 s each with
+    three points on a loaded 2-core machine, hence two)."""
     from vtolftc.synthesis.pipeline import run_synthesis
 
     af = load_airframe(path)
     pts = robust_points(af) if method == "robust" else paper_points(af)
-    sel = (pts[0], pts[3], pts[-1])
+    sel = (pts[0], pts[-1])
     res = run_synthesis(af, tmp_path, n_starts=0, jobs=2, mu=False, report=False,
                         method=method, points=sel)
     doc = json.loads((tmp_path / "gs-shif.json").read_text())
     assert doc["airframe"]["sha256"] == af.sha256
     assert (tmp_path / "shif.json").is_file() and (tmp_path / "lqr.json").is_file()
     for ax in AXES:
-        assert [d.stable for d in res.gs[ax]] == [True] * 3, ax
+        assert [d.stable for d in res.gs[ax]] == [True] * 2, ax
         assert res.shif[ax].stable, ax
