@@ -27,6 +27,8 @@ from vtolftc.synthesis.design import (
     OMEGA_A_RAD_S,
     R_MAX_RAD,
     TABLE2,
+    control_weight_bandwidth,
+    paper_points,
     run_designs,
 )
 from vtolftc.synthesis.export import lqr_document, schedule_document, write_json
@@ -64,10 +66,13 @@ def _weights_meta(res: SynthesisResult) -> dict[str, Any]:
                          for ax in AXES},
         }
     return {
-        "Ws_form": "(s/M + omega_b) / (s + A omega_b)  (paper eq. 5, table 2)",
+        "Ws_form": "(s/M + omega_b) / (s + A omega_b)  (paper eq. 5, table 2 for DS-1; "
+                   "another aircraft: M kept, omega_b times its authority bandwidth over "
+                   "DS-1's, synthesis/design.py table2_scaled)",
         "Wr_form": "((r_max/u_max) s + omega_a 1e-3) / (s + omega_a)  (paper eq. 6)",
         "Wt_form": "gain * prod (s/z_i + 1)/(s/p_i + 1)  (fitted cover, paper fig. 3)",
-        "A": A_SENSITIVITY, "omega_a_rad_s": OMEGA_A_RAD_S, "r_max_rad": R_MAX_RAD,
+        "A": A_SENSITIVITY, "omega_a_rad_s": control_weight_bandwidth(res.airframe),
+        "r_max_rad": R_MAX_RAD,
         "gamma_range": list(GAMMA_RANGE),
         "per_axis": {ax: [w.to_dict() for d in res.gs[ax] for w in d.weights] for ax in AXES},
     }
@@ -207,11 +212,11 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
         raise ValueError(f"method {method!r}: expected one of {', '.join(METHODS)}")
     if points is None:
         if method == "robust":
-            from vtolftc.synthesis.robust import ROBUST_DESIGN_POINTS
+            from vtolftc.synthesis.robust import robust_points
 
-            points = ROBUST_DESIGN_POINTS
+            points = robust_points(af)
         else:
-            points = PAPER_DESIGN_POINTS
+            points = paper_points(af)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     times: dict[str, float] = {}

@@ -322,10 +322,15 @@ def write_report(res: SynthesisResult, out_dir: str | Path,
                       for p in res.points]))
 
     md += ["", "## Table 2: weights", "",
-           "Ws = (s/M + omega_b)/(s + A omega_b) with the paper's table 2 values and A = "
+           "Ws = (s/M + omega_b)/(s + A omega_b) with the paper's table 2 values (for DS-1; "
+           "for another aircraft M is kept and omega_b scaled by the ratio of its authority "
+           "bandwidth sqrt(u_max / (J r_max)) to DS-1's at the same point, "
+           "`vtolftc.synthesis.design.table2_scaled`) and A = "
            f"{res.gs['roll'][0].weights[0].Ws.A:g}; Wr = ((r_max/u_max) s + omega_a 1e-3)/"
            f"(s + omega_a), r_max = {math.degrees(res.gs['roll'][0].weights[0].Wr.r_max_rad):g}"
-           " deg, omega_a = 5 rad/s, u_max = moment authority of the airframe about the axis "
+           f" deg, omega_a = {res.gs['roll'][0].weights[0].Wr.omega_a_rad_s:g} rad/s (the "
+           "paper's 5 rad/s times the actuator bandwidth over DS-1's), u_max = moment "
+           "authority of the airframe about the axis "
            "at the nominal airspeed (lift rotors around their hover share + surfaces at full "
            "deflection; `vtolftc.synthesis.design.moment_authority`). W_t = gain prod (s/z + 1)/"
            "(s/p + 1), fitted over the relative errors (fig. 3 plots).", ""]
