@@ -81,7 +81,8 @@ Threads (the control step never waits for a ground station):
 Modules, along PX4's seams: this one holds the threads, the control-thread hand-over and the
 status the worker observes; link handling (receive queues, rate limits, partners, sending) is
 :mod:`.gcs_link`, the streams :mod:`.gcs_streams`, the parameter protocol :mod:`.gcs_params`,
-commands :mod:`.gcs_commands`, missions, TIMESYNC, PING and the geofence :mod:`.gcs_services`
+commands :mod:`.gcs_commands`, the simulation hold :mod:`.gcs_hold`, missions, TIMESYNC, PING
+and the geofence :mod:`.gcs_services`
 (on :mod:`.mission`), the further telemetry :mod:`.gcs_telemetry`.
 """
 
@@ -98,6 +99,7 @@ from typing import Any
 import numpy as np
 
 from vtolftc.firmware_sim.autopilot.gcs_commands import CommandService
+from vtolftc.firmware_sim.autopilot.gcs_hold import SimulationHold
 from vtolftc.firmware_sim.autopilot.gcs_link import GcsLinks, Handler
 from vtolftc.firmware_sim.autopilot.gcs_params import ParameterService
 from vtolftc.firmware_sim.autopilot.gcs_services import Px4Services
@@ -109,7 +111,6 @@ from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotStatus,
     FlightMode,
     NavState,
-    ParamType,
 )
 from vtolftc.firmware_sim.autopilot.modes import px4_custom_mode
 from vtolftc.protocols.failure_units import ActuatorTable
@@ -132,7 +133,6 @@ RADIO_STATUS (109, as ArduPilot), PARAM_REQUEST_READ (20) and PARAM_REQUEST_LIST
 (read-only). Everything else, every command, PARAM_SET and mission message included, needs
 the key."""
 
-SIM_HOLD_PARAM = "SIM_HOLD_MS"
 
 
 def px4_mode_of(mode: FlightMode) -> tuple[int, int]:
@@ -195,12 +195,8 @@ class GcsEndpoint:
         self.lockstep = lockstep
         self.on_event = on_event or (lambda kind, text: None)
         self.version = version
-        params = autopilot.params
-        if SIM_HOLD_PARAM not in params:
-            params.register(SIM_HOLD_PARAM, -1, ParamType.INT32, -1, 2**31 - 1,
-                            "lockstep only: hold the simulation before the control step at "
-                            "this simulated time in ms (-1 = off)")
-        params.set(SIM_HOLD_PARAM, int(hold_ms))
+        self.hold = SimulationHold(autopilot.params, lockstep=lockstep, hold_ms=hold_ms)
+        """``SIM_HOLD_MS`` and its announcement (:mod:`.gcs_hold`)."""
         # control thread <-> worker
         self._control_q: collections.deque[tuple[int, Any, Callable[[], None]]] = \
             collections.deque()
@@ -220,9 +216,6 @@ class GcsEndpoint:
         self._last_message = ""
         self._wall_next = 0.0
         self._last_step_wall = -math.inf
-        self._hold_notice_ms: int | None = None
-        self._hold_sent_ms: int | None = None
-        self._hold_announce_wall = 0.0
         self.ready = ready
         """True once the autopilot is warm (HEARTBEAT says STANDBY/ACTIVE, not BOOT)."""
         self.mav_state: int | None = None
@@ -391,7 +384,7 @@ class GcsEndpoint:
             self._snap = (nav, status)
             self._snap_seq += 1
         self.services.on_step(nav)
-        self._hold_notice_ms = None
+        self.hold.notice_ms = None
         self._wake.set()
 
     def publish_status(self, status: AutopilotStatus) -> None:
@@ -403,17 +396,12 @@ class GcsEndpoint:
 
     def hold_usec(self) -> int | None:
         """Simulated time at which to hold, None if no hold (or not lockstep)."""
-        if not self.lockstep:
-            return None
-        v = int(self.ap.params.get(SIM_HOLD_PARAM))
-        return None if v < 0 else v * 1000
+        return self.hold.hold_usec()
 
     def announce_hold(self, time_usec: int) -> None:
         """Control thread: the simulation is held at ``time_usec`` (the worker tells the
         ground stations, repeated at 1 Hz)."""
-        ms = time_usec // 1000
-        if self._hold_notice_ms != ms:
-            self._hold_notice_ms = ms
+        if self.hold.announce(time_usec):
             self._wake.set()
 
     def tick(self) -> None:
@@ -468,7 +456,7 @@ class GcsEndpoint:
             self.nav = nav
             self.sim_usec = int(nav.time_usec)
             self._last_step_wall = time.monotonic()
-            self._hold_sent_ms = None
+            self.hold.stepped()
         if st is not None:
             self.commands = np.asarray(st.actuator_commands, dtype=float)
             self._observe(st)
@@ -496,9 +484,6 @@ class GcsEndpoint:
             self._wall_next = now + 1.0
             for name in ("HEARTBEAT", "SYS_STATUS", "EXTENDED_SYS_STATE"):
                 self.streams.send(MSG[name])
-        ms = self._hold_notice_ms
-        if ms is not None and (self._hold_sent_ms != ms or now >= self._hold_announce_wall):
-            self._hold_sent_ms = ms
-            self._hold_announce_wall = now + 1.0
-            if self.links:
-                self.send_all(self.links[0].codec.named_value_int_encode(ms, b"SIM_HOLD", ms))
+        ms = self.hold.due(now)
+        if ms is not None and self.links:
+            self.send_all(self.links[0].codec.named_value_int_encode(ms, b"SIM_HOLD", ms))
