@@ -26,6 +26,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from vtolftc.firmware_sim.autopilot.gcs_link import Handler
 from vtolftc.firmware_sim.autopilot.gcs_services import command_int_params
 from vtolftc.firmware_sim.autopilot.gcs_streams import MSG
 from vtolftc.firmware_sim.autopilot.gcs_telemetry import TELEMETRY_MSG
@@ -80,7 +81,7 @@ class CommandService:
         self.answered = 0
         """COMMAND_ACKs sent."""
 
-    def handlers(self) -> dict[str, Any]:
+    def handlers(self) -> dict[str, Handler]:
         """Handler of each message type of :attr:`HANDLES` (``f(link_index, link, msg)``)."""
         return {"COMMAND_LONG": self.on_command_long, "COMMAND_INT": self.on_command_int}
 

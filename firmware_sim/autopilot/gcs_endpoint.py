@@ -66,7 +66,7 @@ Threads (the control step never waits for a ground station):
   opens the links with a datagram rate limit, so a flood is dropped before it is parsed) into a
   bounded per-link queue; when it is full the oldest message is dropped (counted in
   :meth:`GcsEndpoint.link_stats` as ``queue_dropped``);
-- one worker thread handles the queues: at most :attr:`GcsEndpoint.budget_per_cycle` messages
+- one worker thread handles the queues: at most ``budget_per_cycle`` messages
   per cycle (round robin over the links), a token bucket per client (link, system, component;
   ``rate_limit_hz`` sustained, ``rate_burst`` burst; excess dropped, counted as
   ``rate_limited``), one handler per message type (:attr:`GcsEndpoint.handlers`). Everything

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from vtolftc.firmware_sim.autopilot.gcs_link import Handler
 from vtolftc.firmware_sim.autopilot.interface import ParamError, ParamType
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.link import Link
@@ -61,7 +62,7 @@ class ParameterService:
     def __init__(self, endpoint: Any) -> None:
         self.ep = endpoint
 
-    def handlers(self) -> dict[str, Any]:
+    def handlers(self) -> dict[str, Handler]:
         """Handler of each message type of :attr:`HANDLES` (``f(link_index, link, msg)``)."""
         return {"PARAM_REQUEST_LIST": self.on_request_list,
                 "PARAM_REQUEST_READ": self.on_request_read, "PARAM_SET": self.on_set}
