@@ -142,6 +142,28 @@ def moment_authority(af: Airframe, axis: Axis, airspeed_m_s: float) -> float:
     active up to 13 m/s; while the wing unloads them the headroom only changes sides).
     Surfaces at full deflection delta_max: roll qbar S b Cl_da, pitch qbar S c |Cm_de|,
     yaw qbar S b |Cn_dr|. Pushers are not counted (they only push forward).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    airspeed_m_s : float
+        Airspeed [m/s] (the surfaces' dynamic pressure qbar = rho V^2 / 2).
+
+    Returns
+    -------
+    float
+        u_max [N m], >= 0.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> ds1 = load_airframe()
+    >>> hover, cruise = (moment_authority(ds1, "roll", v) for v in (0.0, 18.0))
+    >>> hover > 0, cruise > hover          # the surfaces add authority with airspeed
+    (True, True)
     """
     w = af.wing
     n = len(af.lift_rotors)
@@ -164,7 +186,21 @@ def moment_authority(af: Airframe, axis: Axis, airspeed_m_s: float) -> float:
 
 @dataclass(frozen=True)
 class AxisWeights:
-    """Weights of one axis at one design point."""
+    """Weights of one axis at one design point (paper section 3.1.3).
+
+    Parameters
+    ----------
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    point : DesignPoint
+        The design point (airspeeds in m/s).
+    Ws : SensitivityWeight
+        Performance weight on the sensitivity S (eq. 5).
+    Wt : UncertaintyWeight
+        Multiplicative input-uncertainty weight on T_u (fitted cover).
+    Wr : ControlWeight
+        Control-effort weight on R (eq. 6).
+    """
 
     axis: Axis
     point: DesignPoint
@@ -173,7 +209,14 @@ class AxisWeights:
     Wr: ControlWeight
 
     def to_dict(self) -> dict[str, Any]:
-        """Ws, Wt and Wr parameters as a JSON-ready dict."""
+        """Ws, Wt and Wr parameters as a JSON-ready dict.
+
+        Returns
+        -------
+        dict of str to dict
+            ``{"Ws": ..., "Wt": ..., "Wr": ...}``, each the weight's own ``to_dict()``
+            (frequencies in rad/s, moments in N m, angles in rad).
+        """
         return {"Ws": self.Ws.to_dict(), "Wt": self.Wt.to_dict(), "Wr": self.Wr.to_dict()}
 
 
@@ -183,6 +226,23 @@ def weights_for(af: Airframe, axis: Axis, point: DesignPoint,
     """Ws (table 2 scaled to ``af``, :func:`table2_scaled`; or ``table2`` as given), Wt
     (``cover``) and Wr (eq. 6, omega_a of :func:`control_weight_bandwidth`) of ``axis`` at
     ``point``.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    point : DesignPoint
+        The design point (airspeeds in m/s).
+    table2 : dict of str to sequence of (float, float), optional
+        Axis -> (M, omega_b [rad/s]) per point number 1.. used as given instead of
+        :func:`table2_scaled`.
+
+    Returns
+    -------
+    AxisWeights
+        Ws, Wt and Wr of ``axis`` at ``point``.
 
     Raises
     ------
@@ -212,6 +272,34 @@ def table2_scaled(af: Airframe, axis: Axis, point: DesignPoint) -> tuple[float, 
     authority_bandwidth`, u_max = :func:`moment_authority`, J the axis inertia) at the
     point's airspeed V (the table 1 airspeed of the same point number for DS-1): an aircraft
     with twice the inertia for the same authority tracks sqrt(2) times slower.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    point : DesignPoint
+        The design point; its ``number`` (1-6) selects the row of :data:`TABLE2`.
+
+    Returns
+    -------
+    M : float
+        Peak of 1 / |Ws| (dimensionless).
+    omega_b : float
+        Bandwidth of Ws [rad/s].
+
+    Raises
+    ------
+    AirframeError
+        ``af`` has no moment about ``axis`` at the point's airspeed.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> ds1 = load_airframe()
+    >>> table2_scaled(ds1, "roll", paper_points(ds1)[0]) == TABLE2["roll"][0]   # DS-1: table 2
+    True
     """
     M, wb = TABLE2[axis][point.number - 1]
     ref = reference_airframe()
@@ -227,14 +315,37 @@ def table2_scaled(af: Airframe, axis: Axis, point: DesignPoint) -> tuple[float, 
 def control_weight_bandwidth(af: Airframe) -> float:
     """omega_a [rad/s] of Wr (eq. 6): the paper's 5 rad/s for DS-1, scaled with the actuator
     bandwidth, omega_a = 5 omega_act(af) / omega_act(DS-1)
-    (:func:`~vtolftc.synthesis.scaling.actuator_bandwidth`)."""
+    (:func:`~vtolftc.synthesis.scaling.actuator_bandwidth`).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+
+    Returns
+    -------
+    float
+        omega_a [rad/s].
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> control_weight_bandwidth(load_airframe())
+    5.0
+    """
     return OMEGA_A_RAD_S * (actuator_bandwidth(af) / actuator_bandwidth(reference_airframe()))
 
 
 @functools.lru_cache(maxsize=1)
 def reference_airframe() -> Airframe:
     """DS-1 (``airframe/ds1.toml``), the stand-in for the paper's aircraft that table 2's
-    weights were designed for (loaded once)."""
+    weights were designed for (loaded once).
+
+    Returns
+    -------
+    Airframe
+        DS-1, the same object on every call.
+    """
     return load_airframe(None)
 
 
@@ -253,6 +364,36 @@ def parameters(af: Airframe, axis: Axis, u_max: float) -> list[Parameter]:
       omega_r / 5, lower bound), kd_rate = 0.05 J, tf = 5 T, kp_angle = omega_r / 4.
 
     For DS-1 (omega_act = 20 rad/s, T = 4 ms) these are the bounds of the module docstring.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    u_max : float
+        Moment authority about ``axis`` [N m] (the smallest over the tune's points).
+
+    Returns
+    -------
+    list of Parameter
+        kp_angle [1/s], kp_rate [N m s/rad], ki_rate [N m/rad], kd_rate [N m s^2/rad],
+        tf_rate_s [s], in :data:`~vtolftc.synthesis.loops.PARAM_NAMES` order.
+
+    Raises
+    ------
+    AirframeError
+        A gain with no admissible value (:func:`~vtolftc.synthesis.scaling.require_bounds`).
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> ds1 = load_airframe()
+    >>> p = parameters(ds1, "roll", moment_authority(ds1, "roll", 0.0))
+    >>> [x.name for x in p]
+    ['kp_angle', 'kp_rate', 'ki_rate', 'kd_rate', 'tf_rate_s']
+    >>> p[0].lower, p[0].upper, p[-1].lower, p[-1].upper    # 1/s, 1/s, s, s
+    (0.3, 8.0, 0.01, 1.0)
     """
     J = axis_inertia(af, axis)
     w_act = actuator_bandwidth(af)
@@ -294,20 +435,72 @@ def _problem(af: Airframe, axis: Axis, weights: list[AxisWeights],
 @dataclass(frozen=True)
 class PaperMethod:
     """The paper's design as a :class:`~vtolftc.synthesis.design_loop.DesignMethod`: weights
-    of :func:`weights_for`, eq. 8 on the eq. 1-3 model, tie-break of :func:`pick_start`."""
+    of :func:`weights_for`, eq. 8 on the eq. 1-3 model, tie-break of :func:`pick_start`.
+    It has no parameters."""
 
     def weights(self, af: Airframe, axis: Axis, point: DesignPoint) -> AxisWeights:
-        """:func:`weights_for` ``(af, axis, point)``."""
+        """:func:`weights_for` ``(af, axis, point)``.
+
+        Parameters
+        ----------
+        af : Airframe
+            The airframe.
+        axis : {"roll", "pitch", "yaw"}
+            The attitude axis.
+        point : DesignPoint
+            The design point.
+
+        Returns
+        -------
+        AxisWeights
+            The weights.
+        """
         return weights_for(af, axis, point)
 
     def setup(self, af: Airframe, axis: Axis, weights: list[AxisWeights]) -> TuningSetup:
-        """The eq. 7-8 problem over the points of ``weights``."""
+        """The eq. 7-8 problem over the points of ``weights``.
+
+        Parameters
+        ----------
+        af : Airframe
+            The airframe.
+        axis : {"roll", "pitch", "yaw"}
+            The attitude axis.
+        weights : list of AxisWeights
+            One per model (point).
+
+        Returns
+        -------
+        TuningSetup
+            The problem, the eq. 1-3 plants and the channels, one per point.
+        """
         pb, plants, chans = _problem(af, axis, weights)
         return TuningSetup(pb, plants, chans)
 
     def design(self, axis: Axis, weights: list[AxisWeights], label: str, n_starts: int,
                setup: TuningSetup, res: TuneResult) -> AxisDesign:
-        """The design of a finished tune: tie-break, norms per point, poles."""
+        """The design of a finished tune: tie-break, norms per point, poles.
+
+        Parameters
+        ----------
+        axis : {"roll", "pitch", "yaw"}
+            The attitude axis.
+        weights : list of AxisWeights
+            The weights the problem was built from.
+        label : str
+            ``"point N"`` or ``"all points"``.
+        n_starts : int
+            Number of random starts (the classical start comes on top).
+        setup : TuningSetup
+            The setup of :meth:`setup`.
+        res : TuneResult
+            The finished tune.
+
+        Returns
+        -------
+        AxisDesign
+            Gains, the worst norms over the points, per-point norms and poles.
+        """
         theta = pick_start(res, setup.chans)
         per = [achieved_norms(c, theta) for c in setup.chans]
         norms = {k: max(p[k] for p in per) for k in per[0]}
@@ -321,13 +514,62 @@ class PaperMethod:
 
 def paper_points(af: Airframe) -> tuple[DesignPoint, ...]:
     """The paper method's six design points for ``af``: table 1 scaled to its transition
-    range (:func:`~vtolftc.synthesis.scaling.scaled_design_points`; table 1 for DS-1)."""
+    range (:func:`~vtolftc.synthesis.scaling.scaled_design_points`; table 1 for DS-1).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+
+    Returns
+    -------
+    tuple of DesignPoint
+        Points 1-6, airspeeds in m/s.
+
+    Raises
+    ------
+    AirframeError
+        The airframe's transition range is inconsistent
+        (:func:`~vtolftc.synthesis.scaling.transition_speeds`).
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> paper_points(load_airframe()) == PAPER_DESIGN_POINTS     # DS-1: table 1
+    True
+    """
     return scaled_design_points(af, cruise=False)
 
 
 def design_point(af: Airframe, axis: Axis, point: DesignPoint, *, n_starts: int = 6,
                  seed: int = 0, max_iter: int = 40) -> AxisDesign:
-    """Tune one axis at one design point (eq. 7-8 for the nominal model of the point)."""
+    """Tune one axis at one design point (eq. 7-8 for the nominal model of the point).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    point : DesignPoint
+        The design point.
+    n_starts : int, optional
+        Number of seeded random starts besides the classical start.
+    seed : int, optional
+        The design's seed (:func:`~vtolftc.synthesis.design_loop.point_seed`).
+    max_iter : int, optional
+        Iteration limit of each start's local optimisation.
+
+    Returns
+    -------
+    AxisDesign
+        The GS-SHIF design of the point, labelled ``"point N"``.
+
+    Raises
+    ------
+    AirframeError
+        ``af`` has no moment about ``axis`` at the point's airspeed.
+    """
     return tune_axis(PaperMethod(), af, axis, [weights_for(af, axis, point)],
                      f"point {point.number}", n_starts, point_seed(seed, axis, point.number),
                      max_iter)
@@ -337,7 +579,33 @@ def design_shif(af: Airframe, axis: Axis, points: Sequence[DesignPoint] | None =
                 *, n_starts: int = 6, seed: int = 0, max_iter: int = 40) -> AxisDesign:
     """One constant P-PID for ``axis`` minimising the max over all points (default
     :func:`paper_points`) of the stacked norm (multi-model minimax, the same weights per
-    point as GS-SHIF)."""
+    point as GS-SHIF).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    points : sequence of DesignPoint, optional
+        The models' design points; default :func:`paper_points` ``(af)``.
+    n_starts : int, optional
+        Number of seeded random starts besides the classical start.
+    seed : int, optional
+        The design's seed (:func:`~vtolftc.synthesis.design_loop.point_seed`).
+    max_iter : int, optional
+        Iteration limit of each start's local optimisation.
+
+    Returns
+    -------
+    AxisDesign
+        The SHIF design, labelled ``"all points"``.
+
+    Raises
+    ------
+    AirframeError
+        ``af`` has no moment about ``axis`` at one of the points.
+    """
     pts = paper_points(af) if points is None else points
     ws = [weights_for(af, axis, p) for p in pts]
     return tune_axis(PaperMethod(), af, axis, ws, "all points", n_starts,
@@ -355,6 +623,39 @@ def run_designs(af: Airframe, *, n_starts: int = 6, seed: int = 0,
     default): :func:`vtolftc.synthesis.design_loop.run_design_loop` with
     :class:`PaperMethod` (deterministic, the same bit for bit with or without
     ``executor``; ``progress`` and ``on_design`` as there).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    n_starts : int, optional
+        Number of seeded random starts besides the classical start.
+    seed : int, optional
+        The design's seed (:func:`~vtolftc.synthesis.design_loop.point_seed`).
+    max_iter : int, optional
+        Iteration limit of each start's local optimisation.
+    points : sequence of DesignPoint, optional
+        The GS-SHIF design points; default :func:`paper_points` ``(af)``.
+    executor : concurrent.futures.Executor, optional
+        Runs the jobs; default: this process.
+    shif : bool, optional
+        Also tune the SHIF design of each axis.
+    progress : callable, optional
+        ``progress(label)`` after each finished tune.
+    on_design : callable, optional
+        ``on_design(key, design)`` with each finished design.
+
+    Returns
+    -------
+    gs : dict
+        Axis -> the GS-SHIF designs in ``points`` order.
+    shif : dict
+        Axis -> the SHIF design (empty without ``shif``).
+
+    Raises
+    ------
+    AirframeError
+        An axis with no moment authority at a point, or no admissible gain.
     """
     pts = paper_points(af) if points is None else tuple(points)
     return run_design_loop(PaperMethod(), af, pts, shif_points=paper_points(af),
@@ -363,5 +664,18 @@ def run_designs(af: Airframe, *, n_starts: int = 6, seed: int = 0,
 
 
 def design_gs_shif(af: Airframe, **kw: Any) -> dict[Axis, list[AxisDesign]]:
-    """GS-SHIF only (see :func:`run_designs`)."""
+    """GS-SHIF only (see :func:`run_designs`).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    **kw
+        Keyword arguments of :func:`run_designs` but ``shif``.
+
+    Returns
+    -------
+    dict
+        Axis -> the GS-SHIF designs in point order.
+    """
     return run_designs(af, shif=False, **kw)[0]

@@ -53,9 +53,33 @@ SHIF_TAG = 100
 class AxisDesign:
     """Result of one tune: gains, per-requirement norms, closed-loop poles, weights used.
 
-    ``norms`` keys: ``gamma`` (the stacked norm of eq. 8, max over models for SHIF),
-    ``Ws*S``, ``Wt*T``, ``Wr*R`` (each requirement alone; for SHIF the max over models).
-    ``bounds``: where each gain bound comes from (robust method), or None.
+    Parameters
+    ----------
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    label : str
+        ``"point N"`` (a GS-SHIF tune at design point N) or ``"all points"`` (SHIF).
+    gains : dict of str to float
+        The P-PID gains by :data:`~vtolftc.synthesis.loops.PARAM_NAMES`: kp_angle [1/s],
+        kp_rate [N m s/rad], ki_rate [N m/rad], kd_rate [N m s^2/rad], tf_rate_s [s].
+    norms : dict of str to float
+        H-infinity norms (dimensionless): ``gamma`` (the stacked norm of eq. 8, max over
+        models for SHIF), ``Ws*S``, ``Wt*T``, ``Wr*R`` (each requirement alone; for SHIF the
+        max over models); the robust method adds its channels' norms.
+    stable : bool
+        Every model's closed loop is stable at ``gains``.
+    poles : list of list of complex
+        Closed-loop poles [rad/s] per model (one list per design point of the tune).
+    weights : list
+        The weights of each point (``AxisWeights`` or ``RobustWeights``), in model order.
+    starts : int
+        Number of starts tuned (random starts + the classical one).
+    message : str, optional
+        The optimiser's closing message.
+    per_model_norms : list of dict of str to float, optional
+        ``norms`` of each model alone, in model order.
+    bounds : dict of str to dict, optional
+        Where each gain bound comes from (robust method), or None.
     """
 
     axis: Axis
@@ -78,7 +102,21 @@ class AxisDesign:
 
 def achieved_norms(ch: CascadeChannel, theta: NDArray[np.float64]) -> dict[str, float]:
     """The exact H-infinity norm of the channel (``"gamma"``) and of each of its weighted rows
-    (e.g. ``"Ws*S"``) at the gains ``theta``, by name."""
+    (e.g. ``"Ws*S"``) at the gains ``theta``, by name.
+
+    Parameters
+    ----------
+    ch : CascadeChannel
+        The weighted closed-loop channel of one model.
+    theta : ndarray, shape (5,)
+        P-PID gains in :data:`~vtolftc.synthesis.loops.PARAM_NAMES` order (units there).
+
+    Returns
+    -------
+    dict of str to float
+        ``"gamma"`` and each row name of ``ch`` -> its H-infinity norm (dimensionless; inf if
+        the closed loop is unstable).
+    """
     out = {"gamma": hinf_norm(ch(theta)).value}
     for name, sys in ch.rows(theta).items():
         out[name] = hinf_norm(sys).value
@@ -95,7 +133,23 @@ def _secondary(ch: CascadeChannel, theta: NDArray[np.float64]) -> float:
 def pick_start(res: TuneResult, channels: Sequence[CascadeChannel]) -> NDArray[np.float64]:
     """Tie-break among near-optimal starts: among the starts whose objective is within 0.1 %
     of the best, the one with the smallest ||Ws S||_inf over ``channels`` (the reasons are in
-    :mod:`vtolftc.synthesis.design`'s docstring)."""
+    :mod:`vtolftc.synthesis.design`'s docstring).
+
+    Parameters
+    ----------
+    res : TuneResult
+        A finished tune with its start records.
+    channels : sequence of CascadeChannel
+        The channels whose worst ||Ws S||_inf breaks the tie (those without a ``Ws*S`` row
+        count as 0).
+
+    Returns
+    -------
+    ndarray, shape (5,)
+        The chosen gains in :data:`~vtolftc.synthesis.loops.PARAM_NAMES` order;
+        ``res.theta`` unchanged if the tune found no stabilising gains. Ties in ||Ws S||
+        go to the lowest start index.
+    """
     if not res.stable:
         return res.theta
     best = res.value
@@ -106,14 +160,47 @@ def pick_start(res: TuneResult, channels: Sequence[CascadeChannel]) -> NDArray[n
 
 
 def point_seed(seed: int, axis: Axis, tag: int) -> int:
-    """The random-start seed of one tune: independent streams per (seed, axis, point tag)."""
+    """The random-start seed of one tune: independent streams per (seed, axis, point tag).
+
+    Parameters
+    ----------
+    seed : int
+        The design's seed (``vtolftc synth --seed``), >= 0.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    tag : int
+        The design point number (GS-SHIF) or :data:`SHIF_TAG`.
+
+    Returns
+    -------
+    int
+        A 32-bit seed from ``numpy.random.SeedSequence([seed, axis index, tag])``.
+
+    Examples
+    --------
+    >>> point_seed(0, "roll", 3) == point_seed(0, "roll", 3)     # deterministic
+    True
+    >>> len({point_seed(0, ax, t) for ax in ("roll", "pitch", "yaw") for t in (1, 2, SHIF_TAG)})
+    9
+    """
     return int(np.random.SeedSequence([seed, AXES.index(axis), tag]).generate_state(1)[0])
 
 
 @dataclass
 class TuningSetup:
-    """A tuning problem and what its method needs to make a design of the result: the
-    plants and channels per model, and method-specific ``extra`` data."""
+    """A tuning problem and what its method needs to make a design of the result.
+
+    Parameters
+    ----------
+    problem : TuningProblem
+        The (multi-model) structured H-infinity problem to tune.
+    plants : list
+        The design plant (moment [N m] -> [rate rad/s; angle rad]) of each model.
+    chans : list of CascadeChannel
+        The channels of ``problem``, in its order.
+    extra : object, optional
+        Method-specific data (the robust method: channel names and gain-bound reasons).
+    """
 
     problem: TuningProblem
     plants: list[Any]
@@ -125,22 +212,98 @@ class DesignMethod(Protocol):
     """What a synthesis method gives the loop (must pickle, for worker processes)."""
 
     def weights(self, af: Airframe, axis: Axis, point: DesignPoint) -> Any:
-        """The weights of ``axis`` at ``point``."""
+        """The weights of ``axis`` at ``point``.
+
+        Parameters
+        ----------
+        af : Airframe
+            The airframe.
+        axis : {"roll", "pitch", "yaw"}
+            The attitude axis.
+        point : DesignPoint
+            The design point (airspeeds in m/s).
+
+        Returns
+        -------
+        object
+            The method's weights of that (axis, point) (picklable).
+        """
         ...
 
     def setup(self, af: Airframe, axis: Axis, weights: list[Any]) -> TuningSetup:
-        """The (multi-model) tuning problem of ``axis`` over the points of ``weights``."""
+        """The (multi-model) tuning problem of ``axis`` over the points of ``weights``.
+
+        Parameters
+        ----------
+        af : Airframe
+            The airframe.
+        axis : {"roll", "pitch", "yaw"}
+            The attitude axis.
+        weights : list
+            Weights from :meth:`weights`, one per model (one point: GS-SHIF; all: SHIF).
+
+        Returns
+        -------
+        TuningSetup
+            The problem with its plants and channels.
+        """
         ...
 
     def design(self, axis: Axis, weights: list[Any], label: str, n_starts: int,
                setup: TuningSetup, res: TuneResult) -> AxisDesign:
-        """The design of a finished tune (tie-break, norms, poles)."""
+        """The design of a finished tune (tie-break, norms, poles).
+
+        Parameters
+        ----------
+        axis : {"roll", "pitch", "yaw"}
+            The attitude axis.
+        weights : list
+            The weights the problem was built from.
+        label : str
+            ``"point N"`` or ``"all points"``.
+        n_starts : int
+            Number of random starts (the classical start comes on top).
+        setup : TuningSetup
+            The setup of :meth:`setup`.
+        res : TuneResult
+            The finished tune.
+
+        Returns
+        -------
+        AxisDesign
+            The design.
+        """
         ...
 
 
 def tune_axis(method: DesignMethod, af: Airframe, axis: Axis, weights: list[Any], label: str,
               n_starts: int, seed: int, max_iter: int) -> AxisDesign:
-    """One tune of ``axis`` over the points of ``weights`` (one point: GS-SHIF; all: SHIF)."""
+    """One tune of ``axis`` over the points of ``weights`` (one point: GS-SHIF; all: SHIF).
+
+    Parameters
+    ----------
+    method : DesignMethod
+        The synthesis method (setup and design of the tune).
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    weights : list
+        The method's weights, one per model.
+    label : str
+        The design's label, ``"point N"`` or ``"all points"``.
+    n_starts : int
+        Number of seeded random starts besides the classical start, >= 0.
+    seed : int
+        Seed of the random starts (:func:`point_seed`).
+    max_iter : int
+        Iteration limit of each start's local optimisation.
+
+    Returns
+    -------
+    AxisDesign
+        The design of the finished tune.
+    """
     st = method.setup(af, axis, weights)
     res = tune(st.problem, n_starts=n_starts, seed=seed, max_iter=max_iter)
     return method.design(axis, weights, label, n_starts, st, res)
@@ -186,6 +349,31 @@ def run_design_loop(method: DesignMethod, af: Airframe, points: Sequence[DesignP
     bit, as the sequential run. ``progress(label)`` is called after each finished tune,
     ``on_design(key, design)`` with each finished design (key ``(axis, point number)``,
     ``(axis, 0)`` for SHIF), e.g. to queue its analysis behind the tunes still running.
+
+    Parameters
+    ----------
+    method : DesignMethod
+        The synthesis method (picklable when ``executor`` runs other processes).
+    af : Airframe
+        The airframe.
+    points : sequence of DesignPoint
+        The GS-SHIF design points (airspeeds in m/s), one tune per axis and point.
+    shif_points : sequence of DesignPoint, optional
+        The points of the SHIF tunes; default ``points``.
+    n_starts : int, optional
+        Number of seeded random starts of each tune besides the classical start.
+    seed : int, optional
+        The design's seed (:func:`point_seed`).
+    executor : concurrent.futures.Executor, optional
+        Runs the jobs; default: this process, sequentially.
+    shif : bool, optional
+        Also tune the SHIF (constant, multi-model) design of each axis.
+    progress : callable, optional
+        ``progress(label)`` after each finished tune (e.g. ``"roll point 3"``).
+    max_iter : int, optional
+        Iteration limit of each start's local optimisation.
+    on_design : callable, optional
+        ``on_design(key, design)`` with each finished design.
 
     Returns
     -------

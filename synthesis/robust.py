@@ -140,7 +140,30 @@ __all__ = [
 def robust_points(af: Airframe) -> tuple[DesignPoint, ...]:
     """The robust method's design points for ``af``: the paper's six scaled to its
     transition range plus the wing-borne cruise point V_c over [V_t, V_c + 0.4 (V_c - V_t)]
-    (:func:`~vtolftc.synthesis.scaling.scaled_design_points`)."""
+    (:func:`~vtolftc.synthesis.scaling.scaled_design_points`).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+
+    Returns
+    -------
+    tuple of DesignPoint
+        Points 1-7 (airspeeds in m/s), the cruise point last.
+
+    Raises
+    ------
+    AirframeError
+        The airframe's transition range is inconsistent
+        (:func:`~vtolftc.synthesis.scaling.transition_speeds`).
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> [(p.airspeed_m_s, p.v_min_m_s, p.v_max_m_s) for p in robust_points(load_airframe())][-2:]
+    [(13.0, 11.5, 13.0), (18.0, 13.0, 20.0)]
+    """
     return scaled_design_points(af, cruise=True)
 
 
@@ -160,9 +183,23 @@ GYRO_NOISE_RAD_S = 0.004
 
 @dataclass(frozen=True)
 class LoopDelays:
-    """Delays of the real loop [s]: control period (sample-hold + one period of computation
-    and output: 1.5 periods of delay), declared HIL transport (one-way state + command, as
-    the design assumes it), and the extra loop delay the design must tolerate."""
+    """Delays of the real loop [s].
+
+    Parameters
+    ----------
+    control_period_s : float, optional
+        The autopilot's control period T [s] (sample-hold + one period of computation and
+        output: 1.5 T of delay).
+    hil_transport_s : float, optional
+        Declared HIL transport delay [s] (one-way state + command, as the design assumes it).
+    extra_margin_s : float, optional
+        The extra loop delay the design must tolerate [s].
+
+    Examples
+    --------
+    >>> LoopDelays().transport_s         # 1.5 * 4 ms + 2 ms
+    0.008
+    """
 
     control_period_s: float = AUTOPILOT_PERIOD_S
     hil_transport_s: float = 0.002
@@ -176,7 +213,19 @@ class LoopDelays:
 
 @dataclass(frozen=True)
 class RobustSpec:
-    """Settings of the robust design (defaults: DS-1's declared requirements)."""
+    """Settings of the robust design (defaults: DS-1's declared requirements).
+
+    Parameters
+    ----------
+    delays : LoopDelays, optional
+        The loop's delays and the delay margin to design for.
+    excursion_rad : float, optional
+        Declared worst single rotor-out angle excursion e_max [rad].
+    overshoot : float, optional
+        Step overshoot bound of the tracking loop (fraction, e.g. 0.2).
+    gyro_noise_rad_s : float, optional
+        Gyro noise, one sigma [rad/s].
+    """
 
     delays: LoopDelays = LoopDelays()
     excursion_rad: float = EXCURSION_RAD
@@ -184,7 +233,13 @@ class RobustSpec:
     gyro_noise_rad_s: float = GYRO_NOISE_RAD_S
 
     def to_dict(self) -> dict[str, float]:
-        """Delays (s), excursion (rad), overshoot and gyro noise (rad/s) as a JSON-ready dict."""
+        """Delays (s), excursion (rad), overshoot and gyro noise (rad/s) as a JSON-ready dict.
+
+        Returns
+        -------
+        dict of str to float
+            The settings and the derived modelled transport delay, by name with units.
+        """
         return {"control_period_s": self.delays.control_period_s,
                 "hil_transport_s": self.delays.hil_transport_s,
                 "modelled_transport_delay_s": self.delays.transport_s,
@@ -202,7 +257,28 @@ class RobustSpec:
 def trim_rotor_thrusts(af: Airframe, airspeed_m_s: float) -> NDArray[np.float64]:
     """Lift-rotor trim thrusts [N] at ``airspeed_m_s`` in level flight at zero pitch (the
     transition attitude): total = weight - wing lift (qbar S CL0, >= 0), no roll or pitch
-    moment, min-norm share (the allocator's preference for equal thrusts)."""
+    moment, min-norm share (the allocator's preference for equal thrusts).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    airspeed_m_s : float
+        Airspeed [m/s].
+
+    Returns
+    -------
+    ndarray, shape (n_lift_rotors,)
+        Trim thrust of each lift rotor [N], in the airframe file's order.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> ds1 = load_airframe()
+    >>> T = trim_rotor_thrusts(ds1, 0.0)
+    >>> T.shape == (len(ds1.lift_rotors),), bool(abs(T.sum() - ds1.weight_N) < 1e-9)
+    (True, True)
+    """
     w = af.wing
     qbar = 0.5 * af.air_density_kg_m3 * airspeed_m_s**2
     total = max(0.0, af.weight_N - qbar * w.area_m2 * w.CL0)
@@ -215,7 +291,29 @@ def trim_rotor_thrusts(af: Airframe, airspeed_m_s: float) -> NDArray[np.float64]
 
 def rotor_out_moment(af: Airframe, axis: Axis, airspeed_m_s: float) -> float:
     """Largest trim moment [N m] about ``axis`` that switching one lift rotor off leaves
-    (its trim thrust times its arm; yaw: its reaction torque)."""
+    (its trim thrust times its arm; yaw: its reaction torque).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    airspeed_m_s : float
+        Airspeed [m/s].
+
+    Returns
+    -------
+    float
+        d_max [N m], >= 0 (0 once the wing carries the weight).
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> ds1 = load_airframe()
+    >>> [round(rotor_out_moment(ds1, "pitch", v), 2) for v in (0.0, 13.0, 25.0)]   # N m
+    [9.56, 5.04, 0.0]
+    """
     T = trim_rotor_thrusts(af, airspeed_m_s)
     out = 0.0
     for r, t in zip(af.lift_rotors, T, strict=True):
@@ -228,7 +326,22 @@ def rotor_out_moment(af: Airframe, axis: Axis, airspeed_m_s: float) -> float:
 def moment_authority_robust(af: Airframe, axis: Axis, airspeed_m_s: float) -> float:
     """u_max [N m] for the robust design: the lift rotors around their trim thrust at this
     airspeed (:func:`trim_rotor_thrusts`; none once the wing carries the weight, since in
-    fixed-wing they are a reserve), plus the surfaces at full deflection."""
+    fixed-wing they are a reserve), plus the surfaces at full deflection.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    airspeed_m_s : float
+        Airspeed [m/s].
+
+    Returns
+    -------
+    float
+        u_max [N m], >= 0.
+    """
     T = trim_rotor_thrusts(af, airspeed_m_s)
     w = af.wing
     rotors = 0.0
@@ -248,7 +361,26 @@ def design_plant(af: Airframe, axis: Axis, airspeed_m_s: float, gamma: float = 0
     delay folded in: 1/((tau_act + T) s + 1), T = ``delays.transport_s`` (exp(-sT) ~
     1/(1 + sT) for w T << 1: T = 8 ms, crossovers below 20 rad/s; one state instead of a lag
     and a Pade pair, which keeps the tuning fast). The margins are checked against the exact
-    delay (:func:`loop_margins`, :func:`stable_with_delay`)."""
+    delay (:func:`loop_margins`, :func:`stable_with_delay`).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    airspeed_m_s : float
+        Airspeed [m/s].
+    gamma : float, optional
+        Loss of control effectiveness of the axis' moment, in [0, 1] (0: nominal).
+    delays : LoopDelays, optional
+        The loop's delays (only ``transport_s`` enters the plant).
+
+    Returns
+    -------
+    control.StateSpace
+        One input (moment [N m]), two outputs (rate [rad/s], angle [rad]).
+    """
     G = attitude_model(af, axis, airspeed_m_s, gamma)
     tau = actuator_time_constant(af) + max(0.0, delays.transport_s)
     return ct.series(ct.ss(ct.tf([1.0], [tau, 1.0])), G)
@@ -257,7 +389,29 @@ def design_plant(af: Airframe, axis: Axis, airspeed_m_s: float, gamma: float = 0
 def delay_weight(tau_s: float) -> StateSpaceData:
     """W_delta(s) = k tau s / (tau s / 2 + 1) with the smallest k such that
     |W_delta(j w)| >= |exp(-j w t) - 1| for every t in [0, tau_s] and every w (the bound is
-    2 |sin(w tau / 2)| for w tau <= pi and 2 beyond; k is found on a dense grid, 1 % added)."""
+    2 |sin(w tau / 2)| for w tau <= pi and 2 beyond; k is found on a dense grid, 1 % added).
+
+    Parameters
+    ----------
+    tau_s : float
+        The largest extra delay to cover [s], > 0.
+
+    Returns
+    -------
+    tuple of ndarray
+        (A, B, C, D) of W_delta, one state, one input, one output (A, B, C, D of shapes
+        (1, 1)).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from vtolftc.synthesis.hinfnorm import frequency_response
+    >>> W = delay_weight(0.05)
+    >>> w = np.logspace(-1, 3, 400)
+    >>> bound = np.abs(np.exp(-1j * w * 0.05) - 1)
+    >>> bool(np.all(np.abs(frequency_response(W, w)[:, 0, 0]) >= bound))
+    True
+    """
     x = np.logspace(-3, 3, 4000)
     bound = np.where(x < math.pi, 2.0 * np.abs(np.sin(x / 2.0)), 2.0)
     k = 1.01 * float(np.max(bound * np.sqrt(1.0 + (x / 2.0) ** 2) / x))
@@ -281,7 +435,31 @@ def _overshoot_sensitivity_peak(overshoot: float) -> float:
 def sensitivity_rule(af: Airframe, axis: Axis, point: DesignPoint, u_max: float,
                      d_max: float, spec: RobustSpec = RobustSpec(),
                      ) -> tuple[SensitivityWeight, dict[str, float]]:
-    """Ws of the documented rule (module docstring, d) and the numbers behind it."""
+    """Ws of the documented rule (module docstring, d) and the numbers behind it.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    point : DesignPoint
+        The design point (airspeeds in m/s).
+    u_max : float
+        Moment authority about ``axis`` at the point [N m].
+    d_max : float
+        Worst rotor-out moment there [N m] (:func:`rotor_out_moment`).
+    spec : RobustSpec, optional
+        The design's settings (default DS-1's declared requirements).
+
+    Returns
+    -------
+    Ws : SensitivityWeight
+        M (dimensionless), omega_b [rad/s] and A = 1e-3.
+    rule : dict
+        ``omega_act_rad_s``, ``omega_u_rad_s``, ``omega_b_rad_s``, ``M`` and
+        ``limited_by`` (``"actuator bandwidth"`` or ``"authority"``).
+    """
     J = axis_inertia(af, axis)
     w_act = actuator_bandwidth(af)
     w_u = authority_bandwidth(max(u_max - d_max, 1e-3 * u_max), J, R_MAX_RAD)
@@ -293,7 +471,24 @@ def sensitivity_rule(af: Airframe, axis: Axis, point: DesignPoint, u_max: float,
 
 
 def high_frequency_gain_bound(af: Airframe, u_max: float, spec: RobustSpec) -> dict[str, float]:
-    """Bounds [N m s/rad] on kp_rate + kd_rate/tf from gyro noise (module docstring, g)."""
+    """Bounds [N m s/rad] on kp_rate + kd_rate/tf from gyro noise (module docstring, g).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    u_max : float
+        Moment authority about the axis [N m].
+    spec : RobustSpec
+        Gyro noise and control period.
+
+    Returns
+    -------
+    dict of str to float
+        ``noise`` (3 sigma of noise costs 5 % of u_max), ``slew`` (3 sigma of noise slews
+        the moment at the actuators' rate limit over one control period) and ``k_hf_max``
+        (the smaller), all in N m s/rad.
+    """
     s3 = 3.0 * spec.gyro_noise_rad_s
     noise = 0.05 * u_max / s3
     r_lim = min([r.rate_limit_per_s for r in af.lift_rotors]
@@ -328,6 +523,26 @@ def robust_parameters(af: Airframe, axis: Axis, u_max: float, spec: RobustSpec =
 
     For DS-1 (omega_act = 20 rad/s, T = 4 ms): kp_angle >= 0.3, kp_rate >= 0.2 J, ki_rate
     >= 0.1 J, tf in [0.01, 1] s, the start's crossover capped at 6 rad/s.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    u_max : float
+        Moment authority about ``axis`` [N m] (the smallest over the tune's points).
+    spec : RobustSpec, optional
+        The design's settings (default DS-1's declared requirements).
+
+    Returns
+    -------
+    params : list of Parameter
+        kp_angle [1/s], kp_rate [N m s/rad], ki_rate [N m/rad], kd_rate [N m s^2/rad],
+        tf_rate_s [s], in :data:`~vtolftc.synthesis.loops.PARAM_NAMES` order.
+    why : dict of str to dict
+        Per gain its bounds and where they come from; ``k_hf`` the
+        :func:`high_frequency_gain_bound`.
 
     Raises
     ------
@@ -383,7 +598,24 @@ def robust_parameters(af: Airframe, axis: Axis, u_max: float, spec: RobustSpec =
 class RobustWeights(AxisWeights):
     """Weights of one axis at one point for the robust design: eq. 8's (about the centred
     nominal), the disturbance weight ``Wd`` (d_max / e_max, 0 if no rotor-out moment), the
-    design plant's nominal (airspeed, gamma) and the numbers behind the rules."""
+    design plant's nominal (airspeed, gamma) and the numbers behind the rules.
+
+    Parameters
+    ----------
+    axis, point, Ws, Wt, Wr
+        As in :class:`~vtolftc.synthesis.design.AxisWeights` (Wt fitted about ``nominal``).
+    nominal : (float, float), optional
+        The design plant's (airspeed [m/s], gamma) (:func:`~vtolftc.synthesis.uncertainty.
+        centred_nominal`).
+    d_max_N_m : float, optional
+        Worst rotor-out moment at the point [N m].
+    Wd : float, optional
+        High-frequency gain of the disturbance weight, d_max * factor / e_max [N m/rad].
+    rule : dict, optional
+        The numbers behind Ws (:func:`sensitivity_rule`) with table 2's beside.
+    delays : LoopDelays, optional
+        The loop's delays (in the design plant).
+    """
 
     nominal: tuple[float, float] = (0.0, 0.0)
     d_max_N_m: float = 0.0
@@ -392,19 +624,58 @@ class RobustWeights(AxisWeights):
     delays: LoopDelays = LoopDelays()
 
     def to_dict(self) -> dict[str, Any]:
-        """The weights, nominal point, rotor-out moment (N m), Wd and the Ws rule, as a dict."""
+        """The weights, nominal point, rotor-out moment (N m), Wd and the Ws rule, as a dict.
+
+        Returns
+        -------
+        dict of str to object
+            :meth:`AxisWeights.to_dict` with the robust fields added.
+        """
         return {**super().to_dict(), "nominal_airspeed_m_s": self.nominal[0],
                 "nominal_gamma": self.nominal[1], "rotor_out_moment_N_m": self.d_max_N_m,
                 "Wd": self.Wd, "Ws_rule": self.rule}
 
     def plant(self, af: Airframe) -> ct.StateSpace:
-        """Design plant of this axis at the nominal (airspeed, gamma), loop delays included."""
+        """Design plant of this axis at the nominal (airspeed, gamma), loop delays included.
+
+        Parameters
+        ----------
+        af : Airframe
+            The airframe.
+
+        Returns
+        -------
+        control.StateSpace
+            :func:`design_plant` at ``nominal``: moment [N m] -> [rate rad/s; angle rad].
+        """
         return design_plant(af, self.axis, self.nominal[0], self.nominal[1], self.delays)
 
 
 def robust_weights(af: Airframe, axis: Axis, point: DesignPoint,
                    spec: RobustSpec = RobustSpec()) -> RobustWeights:
-    """All weights of ``axis`` at ``point`` (module docstring a-d)."""
+    """All weights of ``axis`` at ``point`` (module docstring a-d).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    point : DesignPoint
+        The design point (airspeeds in m/s).
+    spec : RobustSpec, optional
+        The design's settings (default DS-1's declared requirements).
+
+    Returns
+    -------
+    RobustWeights
+        The weights with the nominal, rotor-out moment and rule.
+
+    Raises
+    ------
+    AirframeError
+        ``af`` has no moment about ``axis`` at the point's airspeed.
+    """
     nom = centred_nominal(af, axis, point)
     Wt, _ = cover(af, axis, point, nominal=nom)
     u_max = moment_authority_robust(af, axis, point.airspeed_m_s)
@@ -438,7 +709,18 @@ def disturbance_weight(w: RobustWeights) -> StateSpaceData:
     (the design before) the hover pitch error of the worst rotor-out took 1.8 s to halve,
     and in a 4 m/s crosswind with a gust the vehicle drifted backwards into reversed flow
     and crashed (rotors 1b, 3b off in hover); with w_i = omega_b it halves in 0.8 s and
-    both fly (``docs/ds1-claims/README.md``)."""
+    both fly (``docs/ds1-claims/README.md``).
+
+    Parameters
+    ----------
+    w : RobustWeights
+        Weights of the point (``Wd`` [N m/rad] and Ws's omega_b [rad/s]).
+
+    Returns
+    -------
+    tuple of ndarray
+        (A, B, C, D) of Wd(s), one state, each of shape (1, 1).
+    """
     wi = w.Ws.omega_b_rad_s
     # Wd (s + wi)/(s + e wi) = Wd + Wd wi (1 - e)/(s + e wi)
     e = 0.01
@@ -476,22 +758,81 @@ def _robust_problem(af: Airframe, axis: Axis, weights: list[RobustWeights], spec
 class RobustMethod:
     """The robust design as a :class:`~vtolftc.synthesis.design_loop.DesignMethod`: weights
     of :func:`robust_weights`, the channels of the module docstring on the design plant,
-    the tie-break on the eq. 8 channels, unnormalised norms reported."""
+    the tie-break on the eq. 8 channels, unnormalised norms reported.
+
+    Parameters
+    ----------
+    spec : RobustSpec, optional
+        The design's settings (default DS-1's declared requirements).
+    """
 
     spec: RobustSpec = RobustSpec()
 
     def weights(self, af: Airframe, axis: Axis, point: DesignPoint) -> RobustWeights:
-        """:func:`robust_weights` ``(af, axis, point, spec)``."""
+        """:func:`robust_weights` ``(af, axis, point, spec)``.
+
+        Parameters
+        ----------
+        af : Airframe
+            The airframe.
+        axis : {"roll", "pitch", "yaw"}
+            The attitude axis.
+        point : DesignPoint
+            The design point (airspeeds in m/s).
+
+        Returns
+        -------
+        RobustWeights
+            The weights.
+        """
         return robust_weights(af, axis, point, self.spec)
 
     def setup(self, af: Airframe, axis: Axis, weights: list[RobustWeights]) -> TuningSetup:
-        """The problem of every channel of every point of ``weights``."""
+        """The problem of every channel of every point of ``weights``.
+
+        Parameters
+        ----------
+        af : Airframe
+            The airframe.
+        axis : {"roll", "pitch", "yaw"}
+            The attitude axis.
+        weights : list of RobustWeights
+            One per model (point).
+
+        Returns
+        -------
+        TuningSetup
+            The problem, design plants, channels and ``extra`` = (channel names, gain-bound
+            reasons).
+        """
         pb, plants, chans, names, why = _robust_problem(af, axis, weights, self.spec)
         return TuningSetup(pb, plants, chans, (names, why))
 
     def design(self, axis: Axis, weights: list[RobustWeights], label: str, n_starts: int,
                setup: TuningSetup, res: TuneResult) -> AxisDesign:
-        """The design of a finished tune: tie-break, unnormalised norms per point, poles."""
+        """The design of a finished tune: tie-break, unnormalised norms per point, poles.
+
+        Parameters
+        ----------
+        axis : {"roll", "pitch", "yaw"}
+            The attitude axis.
+        weights : list of RobustWeights
+            The weights the problem was built from.
+        label : str
+            ``"point N"`` or ``"all points"``.
+        n_starts : int
+            Number of random starts (the classical start comes on top).
+        setup : TuningSetup
+            The setup of :meth:`setup`.
+        res : TuneResult
+            The finished tune.
+
+        Returns
+        -------
+        AxisDesign
+            Gains, worst unnormalised norms (``Wd*Sd``, ``Wdelay*T`` and the tuned objective
+            beside eq. 8's), per-point norms, poles and the gain-bound reasons.
+        """
         spec = self.spec
         names, why = setup.extra
         eq8 = [c for c, n in zip(setup.chans, names, strict=True) if n.endswith("eq8")]
@@ -518,7 +859,35 @@ class RobustMethod:
 def robust_design_point(af: Airframe, axis: Axis, point: DesignPoint, *, n_starts: int = 4,
                         seed: int = 0, max_iter: int = 40,
                         spec: RobustSpec = RobustSpec()) -> AxisDesign:
-    """Tune one axis at one point with the robust channels."""
+    """Tune one axis at one point with the robust channels.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    point : DesignPoint
+        The design point (airspeeds in m/s).
+    n_starts : int, optional
+        Number of seeded random starts besides the classical start.
+    seed : int, optional
+        The design's seed (:func:`~vtolftc.synthesis.design_loop.point_seed`).
+    max_iter : int, optional
+        Iteration limit of each start's local optimisation.
+    spec : RobustSpec, optional
+        The design's settings (default DS-1's declared requirements).
+
+    Returns
+    -------
+    AxisDesign
+        The design, labelled ``"point N"``.
+
+    Raises
+    ------
+    AirframeError
+        No moment authority or no admissible gain for ``axis``.
+    """
     return tune_axis(RobustMethod(spec), af, axis, [robust_weights(af, axis, point, spec)],
                      f"point {point.number}", n_starts, point_seed(seed, axis, point.number),
                      max_iter)
@@ -529,7 +898,35 @@ def robust_design_shif(af: Airframe, axis: Axis,
                        n_starts: int = 4, seed: int = 0, max_iter: int = 40,
                        spec: RobustSpec = RobustSpec()) -> AxisDesign:
     """One constant P-PID over all points (default :func:`robust_points`) with the robust
-    channels of every point."""
+    channels of every point.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    points : sequence of DesignPoint, optional
+        The models' design points; default :func:`robust_points` ``(af)``.
+    n_starts : int, optional
+        Number of seeded random starts besides the classical start.
+    seed : int, optional
+        The design's seed (:func:`~vtolftc.synthesis.design_loop.point_seed`).
+    max_iter : int, optional
+        Iteration limit of each start's local optimisation.
+    spec : RobustSpec, optional
+        The design's settings (default DS-1's declared requirements).
+
+    Returns
+    -------
+    AxisDesign
+        The SHIF design, labelled ``"all points"``.
+
+    Raises
+    ------
+    AirframeError
+        No moment authority or no admissible gain for ``axis``.
+    """
     pts = robust_points(af) if points is None else points
     ws = [robust_weights(af, axis, p, spec) for p in pts]
     return tune_axis(RobustMethod(spec), af, axis, ws, "all points", n_starts,
@@ -548,6 +945,41 @@ def run_robust_designs(af: Airframe, *, n_starts: int = 4, seed: int = 0,
     with :class:`RobustMethod` (deterministic, the same bit for bit with or without
     ``executor``, as one :func:`robust_design_shif` / :func:`robust_design_point` call per
     tune; ``progress`` and ``on_design`` as there).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    n_starts : int, optional
+        Number of seeded random starts besides the classical start.
+    seed : int, optional
+        The design's seed (:func:`~vtolftc.synthesis.design_loop.point_seed`).
+    max_iter : int, optional
+        Iteration limit of each start's local optimisation.
+    points : sequence of DesignPoint, optional
+        The design points of GS-SHIF and SHIF; default :func:`robust_points` ``(af)``.
+    executor : concurrent.futures.Executor, optional
+        Runs the jobs; default: this process.
+    shif : bool, optional
+        Also tune the SHIF design of each axis.
+    progress : callable, optional
+        ``progress(label)`` after each finished tune.
+    spec : RobustSpec, optional
+        The design's settings (default DS-1's declared requirements).
+    on_design : callable, optional
+        ``on_design(key, design)`` with each finished design.
+
+    Returns
+    -------
+    gs : dict
+        Axis -> the GS-SHIF designs in ``points`` order.
+    shif : dict
+        Axis -> the SHIF design (empty without ``shif``).
+
+    Raises
+    ------
+    AirframeError
+        An axis with no moment authority at a point, or no admissible gain.
     """
     pts = robust_points(af) if points is None else tuple(points)
     return run_design_loop(RobustMethod(spec), af, pts, n_starts=n_starts, seed=seed,
@@ -573,6 +1005,21 @@ class LoopMargins:
     2 atan(alpha/2): the gain and phase variations it guarantees simultaneously;
     ``phase_margin_deg`` (smallest over the crossovers), ``crossover_rad_s`` (the crossover
     that sets the delay margin).
+
+    Parameters
+    ----------
+    delay_margin_s : float
+        Smallest destabilising extra loop delay [s] (inf if no crossover).
+    crossover_rad_s : float
+        Gain crossover that sets the delay margin [rad/s] (nan if none).
+    phase_margin_deg : float
+        Smallest phase margin over the crossovers [deg] (inf if none).
+    disk_alpha : float
+        Balanced disk margin alpha (dimensionless).
+    disk_gain_margin : float
+        Gain margin the disk guarantees (factor, dimensionless).
+    disk_phase_margin_deg : float
+        Phase margin the disk guarantees [deg].
     """
 
     delay_margin_s: float
@@ -583,13 +1030,37 @@ class LoopMargins:
     disk_phase_margin_deg: float
 
     def to_dict(self) -> dict[str, float]:
-        """All margins as a dict of floats."""
+        """All margins as a dict of floats.
+
+        Returns
+        -------
+        dict of str to float
+            Field name -> value (units as in the field names).
+        """
         return dict(self.__dict__)
 
 
 def loop_frequency_response(G: Any, theta: Any, omegas: NDArray[np.float64],
                             ) -> NDArray[np.complex128]:
-    """L_u(j w) of plant ``G`` (moment -> [rate; angle]) and gains ``theta``."""
+    """L_u(j w) of plant ``G`` (moment -> [rate; angle]) and gains ``theta``.
+
+    Parameters
+    ----------
+    G : state-space system
+        The plant, moment [N m] -> [rate rad/s; angle rad] (e.g. :func:`design_plant`).
+    theta : dict or sequence of float
+        P-PID gains, by name or in :data:`~vtolftc.synthesis.loops.PARAM_NAMES` order
+        (kp_angle [1/s], kp_rate [N m s/rad], ki_rate [N m/rad], kd_rate [N m s^2/rad],
+        tf_rate_s [s]).
+    omegas : ndarray, shape (n,)
+        Frequencies [rad/s].
+
+    Returns
+    -------
+    ndarray of complex, shape (n,)
+        The loop broken at the plant input, K_rate (kp_angle G_angle + G_rate), at each
+        frequency (dimensionless).
+    """
     th = [theta[k] for k in PARAM_NAMES] if isinstance(theta, dict) else list(theta)
     F = frequency_response(G, omegas)
     K = frequency_response(rate_controller(th[1], th[2], th[3], th[4]), omegas)[:, 0, 0]
@@ -598,7 +1069,25 @@ def loop_frequency_response(G: Any, theta: Any, omegas: NDArray[np.float64],
 
 def loop_margins(G: Any, theta: Any, omegas: NDArray[np.float64] | None = None,
                  ) -> LoopMargins:
-    """Delay and disk margins of the loop (see :class:`LoopMargins`)."""
+    """Delay and disk margins of the loop (see :class:`LoopMargins`).
+
+    Parameters
+    ----------
+    G : state-space system
+        The plant, moment [N m] -> [rate rad/s; angle rad] (e.g. :func:`design_plant`).
+    theta : dict or sequence of float
+        P-PID gains, by name or in :data:`~vtolftc.synthesis.loops.PARAM_NAMES` order
+        (kp_angle [1/s], kp_rate [N m s/rad], ki_rate [N m/rad], kd_rate [N m s^2/rad],
+        tf_rate_s [s]).
+    omegas : ndarray, shape (n,), optional
+        Frequency grid [rad/s] for the crossovers and the disk margin; default 6000
+        points log-spaced over [1e-3, 1e4].
+
+    Returns
+    -------
+    LoopMargins
+        The margins.
+    """
     w = np.logspace(-3, 4, 6000) if omegas is None else np.asarray(omegas, float)
     L = loop_frequency_response(G, theta, w)
     m = np.abs(L)
@@ -628,14 +1117,52 @@ def loop_margins(G: Any, theta: Any, omegas: NDArray[np.float64] | None = None,
 
 def stable_with_delay(G: Any, theta: Any, delay_s: float, order: int = 8) -> bool:
     """Closed-loop stability with ``delay_s`` more delay at the plant input (Pade of order
-    ``order``), an independent check of the delay margin."""
+    ``order``), an independent check of the delay margin.
+
+    Parameters
+    ----------
+    G : state-space system
+        The plant, moment [N m] -> [rate rad/s; angle rad] (e.g. :func:`design_plant`).
+    theta : dict or sequence of float
+        P-PID gains, by name or in :data:`~vtolftc.synthesis.loops.PARAM_NAMES` order
+        (kp_angle [1/s], kp_rate [N m s/rad], ki_rate [N m/rad], kd_rate [N m s^2/rad],
+        tf_rate_s [s]).
+    delay_s : float
+        Extra delay at the plant input [s] (0: none).
+    order : int, optional
+        Order of the Pade approximation of the delay.
+
+    Returns
+    -------
+    bool
+        The closed loop with the delay is stable.
+    """
     P = ct.series(ct.ss(ct.tf(*ct.pade(delay_s, order))), ct.ss(G)) if delay_s > 0 else G
     return closed_loop(ct.ss(P), theta).stable()
 
 
 def disturbance_peak(G: Any, theta: Any, d_N_m: float, t_end_s: float = 10.0) -> float:
     """Peak |angle| [rad] of the linear closed loop after a moment step ``d_N_m`` at the
-    plant input (what one rotor-out does to the nominal loop)."""
+    plant input (what one rotor-out does to the nominal loop).
+
+    Parameters
+    ----------
+    G : state-space system
+        The plant, moment [N m] -> [rate rad/s; angle rad] (e.g. :func:`design_plant`).
+    theta : dict or sequence of float
+        P-PID gains, by name or in :data:`~vtolftc.synthesis.loops.PARAM_NAMES` order
+        (kp_angle [1/s], kp_rate [N m s/rad], ki_rate [N m/rad], kd_rate [N m s^2/rad],
+        tf_rate_s [s]).
+    d_N_m : float
+        Moment step at the plant input [N m].
+    t_end_s : float, optional
+        Simulated time [s] (4001 samples).
+
+    Returns
+    -------
+    float
+        Peak |angle| [rad] (0 for ``d_N_m`` = 0).
+    """
     if d_N_m == 0:
         return 0.0
     cl = closed_loop(G, theta)

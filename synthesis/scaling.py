@@ -84,7 +84,24 @@ def axis_inertia(af: Airframe, axis: Axis) -> float:
 
 def actuator_time_constant(af: Airframe) -> float:
     """tau_act [s]: the slowest moment actuator's first-order time constant (lift rotors,
-    surfaces; the pushers make no attitude moment)."""
+    surfaces; the pushers make no attitude moment).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe (its lift rotors' and surfaces' time constants).
+
+    Returns
+    -------
+    float
+        tau_act [s], the largest of those time constants.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> actuator_time_constant(load_airframe())     # DS-1: 50 ms actuators
+    0.05
+    """
     return float(max([r.time_constant_s for r in af.lift_rotors]
                      + [af.surfaces.time_constant_s]))
 
@@ -92,7 +109,24 @@ def actuator_time_constant(af: Airframe) -> float:
 def actuator_bandwidth(af: Airframe) -> float:
     """omega_act = 1 / tau_act [rad/s] (:func:`actuator_time_constant`): the frequency scale
     of the gain bounds. A loop crossing over at omega_c loses atan(omega_c / omega_act) of
-    phase to the actuator lag."""
+    phase to the actuator lag.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+
+    Returns
+    -------
+    float
+        omega_act [rad/s].
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> actuator_bandwidth(load_airframe())         # DS-1: 1 / 50 ms
+    20.0
+    """
     return 1.0 / actuator_time_constant(af)
 
 
@@ -101,7 +135,29 @@ def authority_bandwidth(u_max_N_m: float, inertia_kg_m2: float, r_max_rad: float
     ``r_max_rad`` [rad] takes the moment ``u_max_N_m`` [N m] about an axis of inertia
     ``inertia_kg_m2`` [kg m^2] (accelerating at u_max / J over half the step and braking over
     the other half takes 2 sqrt(r_max J / u_max) = 2 / omega_u). Doubling J or halving u_max
-    divides it by sqrt(2)."""
+    divides it by sqrt(2).
+
+    Parameters
+    ----------
+    u_max_N_m : float
+        Moment authority u_max about the axis [N m], > 0.
+    inertia_kg_m2 : float
+        Moment of inertia J about the axis [kg m^2], > 0.
+    r_max_rad : float
+        Reference step r_max [rad], > 0.
+
+    Returns
+    -------
+    float
+        omega_u [rad/s].
+
+    Examples
+    --------
+    >>> authority_bandwidth(8.0, 1.0, 2.0)          # sqrt(8 / (1 * 2))
+    2.0
+    >>> round(authority_bandwidth(8.0, 2.0, 2.0) * 2 ** 0.5, 12)   # twice J: / sqrt(2)
+    2.0
+    """
     return math.sqrt(u_max_N_m / (inertia_kg_m2 * r_max_rad))
 
 
@@ -114,7 +170,24 @@ def require_authority(af: Airframe, axis: Axis, airspeed_m_s: float, u_max_N_m: 
                       ) -> None:
     """Raise :class:`~vtolftc.airframe.loader.AirframeError` (one line, exit status 2 from
     the CLI) when the airframe has no moment about ``axis`` at ``airspeed_m_s``: no attitude
-    loop can then be designed there."""
+    loop can then be designed there.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe (named in the error).
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis.
+    airspeed_m_s : float
+        The design point's airspeed [m/s] (named in the error).
+    u_max_N_m : float
+        The moment authority about ``axis`` there [N m].
+
+    Raises
+    ------
+    AirframeError
+        ``u_max_N_m`` is not finite and positive.
+    """
     if not (math.isfinite(u_max_N_m) and u_max_N_m > 0.0):
         raise AirframeError(
             f"{_who(af)}: no {axis} moment authority at {airspeed_m_s:g} m/s (lift rotors and "
@@ -123,9 +196,17 @@ def require_authority(af: Airframe, axis: Axis, airspeed_m_s: float, u_max_N_m: 
 
 @dataclass(frozen=True)
 class TransitionSpeeds:
-    """The airspeeds that bound the design [m/s]: clean-wing ``stall``, ``transition_end``
-    (the front transition completes; the last rotor-assisted design point) and ``cruise``
-    (wing-borne design point)."""
+    """The airspeeds that bound the design [m/s].
+
+    Parameters
+    ----------
+    stall_m_s : float
+        Clean-wing stall speed [m/s].
+    transition_end_m_s : float
+        Where the front transition completes: the last rotor-assisted design point [m/s].
+    cruise_m_s : float
+        The wing-borne design point [m/s].
+    """
 
     stall_m_s: float
     transition_end_m_s: float
@@ -145,10 +226,31 @@ def transition_speeds(af: Airframe, transition_end_m_s: float | None = None,
     V_c = ``cruise_m_s`` or :data:`CRUISE_OVER_STALL` V_stall rounded up to the grid (and
     above V_t). DS-1: V_stall 12.73, V_t 13, V_c 18 m/s (its design card's numbers).
 
+    Parameters
+    ----------
+    af : Airframe
+        The airframe (mass, wing area, CL_max, air density).
+    transition_end_m_s : float, optional
+        Declared transition end V_t [m/s]; default derived from the stall speed.
+    cruise_m_s : float, optional
+        Declared cruise speed V_c [m/s]; default derived from the stall speed.
+
+    Returns
+    -------
+    TransitionSpeeds
+        V_stall, V_t and V_c [m/s].
+
     Raises
     ------
     AirframeError
         A declared transition end below the stall or a cruise speed not above it.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> sp = transition_speeds(load_airframe())
+    >>> round(sp.stall_m_s, 2), sp.transition_end_m_s, sp.cruise_m_s
+    (12.73, 13.0, 18.0)
     """
     vs = af.stall_speed_m_s()
     vt = _round_up(vs) if transition_end_m_s is None else float(transition_end_m_s)
@@ -172,6 +274,34 @@ def scaled_design_points(af: Airframe, *, cruise: bool,
     1/13, 4/13 ... of V_t). With ``cruise``, point 7 at V_c with the range [V_t, V_c +
     :data:`CRUISE_OVERSPEED_FRACTION` (V_c - V_t)] (the robust method's wing-borne point).
     For DS-1 (k = 1, V_c = 18): table 1's points and 18 m/s over 13-20 m/s.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    cruise : bool
+        Append the wing-borne cruise point (the robust method's point 7).
+    speeds : TransitionSpeeds, optional
+        The transition range; default :func:`transition_speeds` ``(af)``.
+
+    Returns
+    -------
+    tuple of DesignPoint
+        Six points (seven with ``cruise``), numbered from 1; airspeeds in m/s.
+
+    Raises
+    ------
+    AirframeError
+        Through :func:`transition_speeds` when ``speeds`` is not given.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> pts = scaled_design_points(load_airframe(), cruise=True)
+    >>> [p.airspeed_m_s for p in pts]
+    [0.0, 1.0, 4.0, 7.0, 10.0, 13.0, 18.0]
+    >>> pts[-1].v_min_m_s, pts[-1].v_max_m_s
+    (13.0, 20.0)
     """
     sp = transition_speeds(af) if speeds is None else speeds
     vt = sp.transition_end_m_s
@@ -195,7 +325,22 @@ AUTOPILOT_PERIOD_S = 0.004
 def require_bounds(af: Airframe, axis: Axis, bounds: dict[str, tuple[float, float]]) -> None:
     """Raise :class:`~vtolftc.airframe.loader.AirframeError` (one line) if a gain's lower
     bound ``bounds[name][0]`` is not below its upper bound: the airframe's physics leave no
-    room for that gain of the ``axis`` loop."""
+    room for that gain of the ``axis`` loop.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe (named in the error).
+    axis : {"roll", "pitch", "yaw"}
+        The attitude axis whose loop the gains belong to.
+    bounds : dict of str to (float, float)
+        Gain name -> (lower, upper) bound, in the gain's own units.
+
+    Raises
+    ------
+    AirframeError
+        A bound is not finite, or a lower bound is not below its upper bound.
+    """
     for name, (lo, hi) in bounds.items():
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise AirframeError(
