@@ -224,3 +224,33 @@ def test_certify_ds1_quick(tmp_path):
         assert name in html
     assert run(["certify", str(DS1), "--out", str(out), "--profile", "quick",
                 "--resume"]) == rc
+
+
+LIBRARY = ("quadplane-4p1.toml", "hexa-ds6.toml", "heavy-25.toml", "small-3.toml")
+
+
+@pytest.mark.parametrize("name", LIBRARY)
+def test_library_airframe_loads_and_trims(name):
+    """The library's airframes (issue 22 item 5) load, are physically plausible and trim in
+    hover, mid-transition and wing-borne at 1.4 x the stall speed (they fly once the runtime
+    takes any actuator count; certifying them is not asserted here)."""
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.firmware_sim.vehicle.trim import trim_table
+
+    af = load_airframe(ROOT / "airframe" / name)
+    tw = sum(r.max_thrust_N for r in af.lift_rotors) / af.weight_N
+    assert 1.6 <= tw <= 2.0, tw
+    assert 8.0 <= af.mass_kg / af.wing.area_m2 <= 20.0           # wing loading, kg/m^2
+    vs = af.stall_speed_m_s()
+    assert 9.0 <= vs <= 15.0, vs
+    spins = [r.name for r in af.lift_rotors]
+    assert len(spins) in (4, 6, 8)
+    rows = trim_table(af, [0.0, 0.5 * vs, 1.4 * vs])
+    ok = {(round(V, 3), mode) for V, mode, tp, _ in rows if tp is not None}
+    assert (0.0, "hover") in ok
+    assert (round(0.5 * vs, 3), "rotor-assisted") in ok
+    assert (round(1.4 * vs, 3), "wing") in ok
+    # the inertia is that of the mass spread over the span: Jx of a uniform wing-span rod
+    # of the whole mass would be m b^2 / 12; a real airframe sits well inside (0.05, 1) of it
+    ratio = af.inertia_kg_m2[0][0] / (af.mass_kg * af.wing.span_m ** 2 / 12)
+    assert 0.05 < ratio < 1.0, ratio
