@@ -128,6 +128,26 @@ def test_interrupt_keeps_finished_stages(tmp_path):
     assert c.n == {"a": 1, "b": 1, "c": 2}
 
 
+def test_sigterm_keeps_finished_stages(tmp_path):
+    """SIGTERM during a stage stops the run as Ctrl-C does; the finished stages stay cached."""
+    import os
+    import signal
+
+    c = Calls()
+    stages = c.stages()
+
+    def term(ctx):
+        os.kill(os.getpid(), signal.SIGTERM)
+        return {"verdict": "pass"}
+
+    stages[2] = Stage("c", "stub c", term, needs=("b",))
+    old = signal.getsignal(signal.SIGTERM)
+    with pytest.raises(KeyboardInterrupt):
+        run_certify(DS1, tmp_path / "t", stages=stages, code="v")
+    assert signal.getsignal(signal.SIGTERM) == old          # the handler is restored
+    assert {p.name for p in (tmp_path / "t" / "stages").iterdir()} == {"a.json", "b.json"}
+
+
 def _row(family, phase, survived, recoverable=True):
     return {"family": family, "phase": phase, "survived": survived, "recoverable": recoverable,
             "faults": "rotor_1a:off", "wind": "calm", "outcome": "ok" if survived else "crash",
