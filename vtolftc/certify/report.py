@@ -152,7 +152,9 @@ def _stage_section(name: str, rec: Mapping[str, Any]) -> str:
                      "scenarios.</p>")
         parts.append(_table(("gate", "survived / recoverable", "minimum", "verdict"),
                             [(g["name"], f"{g['survived']}/{g['recoverable']}",
-                              f"{g['min']:.0%}", "pass" if g["pass"] else "FAIL")
+                              f"{g['min']:.0%}",
+                              "n/a (none in this profile)" if not g["recoverable"]
+                              else "pass" if g["pass"] else "FAIL")
                              for g in rec.get("gates", [])]))
         parts.append(_table(("family", "phase", "scenarios", "recoverable", "survived",
                              "survived of recoverable"),
