@@ -276,3 +276,33 @@ def test_library_airframe_loads_and_trims(name):
     # of the whole mass would be m b^2 / 12; a real airframe sits well inside (0.05, 1) of it
     ratio = af.inertia_kg_m2[0][0] / (af.mass_kg * af.wing.span_m ** 2 / 12)
     assert 0.05 < ratio < 1.0, ratio
+
+
+def test_sitl_stage_flies_the_file_and_the_synthesised_gains(tmp_path, monkeypatch):
+    """The SITL stage starts the processes with the certified airframe file and the gain files
+    of the synthesis stage, over UDP; a SITL that cannot start fails the stage (not a crash)."""
+    from vtolftc import mission_sitl
+    from vtolftc.certify.pipeline import StageContext
+    from vtolftc.certify.stages import stage_sitl
+    from vtolftc.sitl import SitlError
+
+    seen = {}
+
+    class FakeRun:
+        def __init__(self, cfg):
+            seen["cfg"] = cfg
+
+        def start(self):
+            raise SitlError("no vehicle (stub)")
+
+        def close(self):
+            seen["closed"] = True
+
+    monkeypatch.setattr(mission_sitl, "SitlRun", FakeRun)
+    ctx = StageContext(DS1, "x" * 64, tmp_path, PROFILES["quick"])
+    ctx.records["synth"] = {"gains_dir": str(tmp_path / "synth")}
+    with pytest.raises(StageError, match="no vehicle"):
+        stage_sitl(ctx)
+    cfg = seen["cfg"]
+    assert cfg.airframe == DS1 and cfg.gains_dir == tmp_path / "synth"
+    assert cfg.transport == "udp" and seen["closed"]
