@@ -43,6 +43,8 @@ class Calls:
                 raise KeyboardInterrupt
             if name == self.fail:
                 raise StageError("the stub cannot")
+            if name == self.fail.removeprefix("runtime:"):
+                raise RuntimeError("solver diverged")
             upstream = {k: ctx.records[k]["value"] for k in needs}
             rec = {"verdict": "pass", "value": f"{name}<{upstream}>",
                    "gate_failures": [f"{name}: below the line"] if name == self.gate else []}
@@ -116,6 +118,14 @@ def test_failed_stage_skips_what_needs_it(tmp_path):
     c.fail = ""
     assert run_certify(DS1, tmp_path / "f", stages=c.stages(), code="v", resume=True) == 0
     assert c.n == {"a": 1, "b": 2, "c": 1}
+
+
+def test_runtime_error_fails_the_stage_not_the_command(tmp_path):
+    c = Calls(fail="runtime:a")
+    assert run_certify(DS1, tmp_path / "r", stages=c.stages(), code="v") == 1
+    assert c.n == {"a": 1}
+    html = (tmp_path / "r" / "report.html").read_text()
+    assert "RuntimeError: solver diverged" in html
 
 
 def test_interrupt_keeps_finished_stages(tmp_path):

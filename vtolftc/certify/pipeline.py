@@ -8,7 +8,8 @@ written atomically to ``OUT/stages/NAME.json`` (``{"key": ..., "record": ...}``)
 ends, so Ctrl-C or SIGTERM keep every finished stage; ``resume=True`` reuses a stage whose
 file holds the same key. A record may carry ``"gate_failures"`` (a list of one-line
 messages): the pipeline goes on (the report shows every stage) and the command exits 1.
-A stage that raises :class:`StageError` fails its gate and stops the stages that need it.
+A stage that raises :class:`StageError` (or another RuntimeError: a solver or SITL failure)
+fails its gate and stops the stages that need it; it is not cached.
 """
 
 from __future__ import annotations
@@ -128,7 +129,7 @@ def run_pipeline(stages: Sequence[Stage], ctx: StageContext, *, code: str | None
                  ) -> PipelineResult:
     """Run ``stages`` in order with the cache (see the module docstring).
 
-    Returns every record; a stage that raised :class:`StageError` gets the record
+    Returns every record; a stage that raised a RuntimeError gets the record
     ``{"verdict": "fail", "error": ..., "gate_failures": [...]}`` (not cached) and the stages
     that need it ``{"verdict": "skipped", ...}``. KeyboardInterrupt propagates after the
     finished stages are on disk.
@@ -160,9 +161,10 @@ def run_pipeline(stages: Sequence[Stage], ctx: StageContext, *, code: str | None
             t0 = time.perf_counter()
             try:
                 rec = dict(st.run(ctx))
-            except StageError as exc:
-                rec = {"verdict": "fail", "error": str(exc),
-                       "gate_failures": [f"{st.name}: {exc}"]}
+            except RuntimeError as exc:  # StageError, or a domain failure (solver, SITL)
+                msg = str(exc) if isinstance(exc, StageError) else (
+                    f"{type(exc).__name__}: {exc}")
+                rec = {"verdict": "fail", "error": msg, "gate_failures": [f"{st.name}: {msg}"]}
                 bad.add(st.name)
             times[st.name] = time.perf_counter() - t0
             rec.setdefault("wall_s", times[st.name])
