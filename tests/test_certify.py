@@ -252,8 +252,12 @@ def test_certify_ds1_quick(tmp_path):
         {1, n_points // 2 + 1, n_points})
     html = (out / "report.html").read_text()
     assert html.count("data:image/png;base64,") == 3
-    for name in ("trim", "synth", "certificate", "campaign", "sitl"):
-        assert name in html
+    from vtolftc.certify.stages import default_stages
+
+    for st in default_stages():                      # a verdict row per stage
+        verdict = recs[st.name]["verdict"]
+        assert f"<tr><td>{st.title}</td><td style='color:" in html
+        assert f"font-weight:bold'>{verdict}</td>" in html
     assert run(["certify", str(DS1), "--out", str(out), "--profile", "quick",
                 "--resume"]) == rc
 
