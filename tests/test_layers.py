@@ -35,7 +35,7 @@ LAYERS: list[tuple[int, str, tuple[str, ...]]] = [
     (3, "synthesis", ("vtolftc.synthesis",)),
     (3, "gcs", ("vtolftc.gcs",)),
     (4, "runners", ("vtolftc.scenario", "vtolftc.sitl", "vtolftc.campaign", "vtolftc.mission_run",
-                    "vtolftc.mission_sitl",
+                    "vtolftc.mission_sitl", "vtolftc.certify",
                     "vtolftc.processes")),
     (5, "top", ("vtolftc.cli", "vtolftc.cmd_*", "vtolftc.dashboard", "vtolftc.__main__")),
 ]

@@ -23,6 +23,7 @@ from vtolftc.firmware_sim.vehicle.faults import FaultError
 # Modules are imported when the parser is built, so keep their top-level imports light.
 _COMMAND_MODULES: tuple[str, ...] = (
     "vtolftc.cmd_campaign",
+    "vtolftc.cmd_certify",
     "vtolftc.cmd_dashboard",
     "vtolftc.cmd_fly",
     "vtolftc.cmd_gcs",

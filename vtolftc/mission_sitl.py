@@ -79,13 +79,16 @@ def pymavlink_download(conn: Any) -> list[MissionItem]:
 
 def fly_sitl_mission(out_dir: Path, inject_case: int | None = None, transport: str = "udp",
                      items: list[MissionItem] | None = None, fault_item: int = 2,
-                     fault_delay_s: float = 5.0, wall_timeout_s: float = 900.0
+                     fault_delay_s: float = 5.0, wall_timeout_s: float = 900.0,
+                     airframe: Path | None = None, gains_dir: Path | None = None,
                      ) -> dict[str, Any]:
     """Fly ``items`` (default :func:`rectangle_mission`) as the module docstring says;
-    returns the record (lists of reached items, samples, modes, battery readings, checks)."""
+    returns the record (lists of reached items, samples, modes, battery readings, checks).
+    ``airframe`` / ``gains_dir``: another airframe file and its gain files (default DS-1 and
+    the shipped gains)."""
     port = free_udp_port()
     cfg = SitlConfig(out_dir=out_dir, transport=transport, hold_at_start=False,
-                     failure_injection=True,
+                     failure_injection=True, airframe=airframe, gains_dir=gains_dir,
                      plots=False, extra_autopilot_args=[
                          "--gcs-link", f"udp-client://127.0.0.1:{port}"])
     run = SitlRun(cfg)
