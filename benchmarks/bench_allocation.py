@@ -166,7 +166,7 @@ class _Recorder:
 
 def record_case(case: str, controller: str = "gs-shif") -> tuple[WLSAllocator, list]:
     """Fly ``case`` in-process and return (the autopilot's allocator, its QP log)."""
-    from vtolftc.scenario import paper_scenario, run_scenario
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
 
     box: dict[str, _Recorder] = {}
 

@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
-from vtolftc.scenario import paper_scenario, run_scenario
+from vtolftc.runners.scenario import paper_scenario, run_scenario
 from vtolftc.telemetry.runfolder import RunFolderWriter
 
 

@@ -60,10 +60,10 @@ def main() -> None:
     ap.add_argument("--no-dask", action="store_true")
     args = ap.parse_args()
 
-    from vtolftc.campaign.execute import fly_scenario, run_dask, run_local
-    from vtolftc.campaign.results import PartWriter
-    from vtolftc.campaign.scenarios import expand
-    from vtolftc.campaign.spec import parse_spec
+    from vtolftc.runners.campaign.execute import fly_scenario, run_dask, run_local
+    from vtolftc.runners.campaign.results import PartWriter
+    from vtolftc.runners.campaign.scenarios import expand
+    from vtolftc.runners.campaign.spec import parse_spec
 
     scen = expand(parse_spec(SPEC))[: args.scenarios]
     n = len(scen)
@@ -72,7 +72,7 @@ def main() -> None:
 
     # fixed costs
     t = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import vtolftc.cli; vtolftc.cli.build_parser()"],
+    subprocess.run([sys.executable, "-c", "import vtolftc.cli.main; vtolftc.cli.build_parser()"],
                    check=True)
     t_start = time.perf_counter() - t
     from vtolftc.airframe.loader import load_airframe

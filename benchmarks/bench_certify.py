@@ -39,7 +39,7 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=None, help="campaign processes (default: cores)")
     ap.add_argument("--airframe", type=Path, default=ROOT / "airframe" / "ds1.toml")
     args = ap.parse_args()
-    from vtolftc.cmd_certify import run_certify
+    from vtolftc.cli.cmd_certify import run_certify
 
     tmp = None
     out = args.out

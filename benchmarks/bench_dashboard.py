@@ -60,7 +60,7 @@ def bench_recorder(tmp: Path, repeats: int = 3) -> dict[str, Any]:
 
 def bench_case_run(tmp: Path) -> dict[str, Any]:
     from vtolftc.airframe.loader import load_airframe
-    from vtolftc.scenario import paper_scenario, run_scenario
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
     from vtolftc.telemetry.recording import RerunRecorder
 
     af = load_airframe()
@@ -89,8 +89,8 @@ class _Null:
 
 def _sitl_once(tmp: Path, name: str, dashboard: bool, browser: bool) -> dict[str, Any]:
     from vtolftc.airframe.loader import load_airframe
-    from vtolftc.scenario import paper_scenario
-    from vtolftc.sitl import SitlConfig, SitlRun
+    from vtolftc.runners.scenario import paper_scenario
+    from vtolftc.runners.sitl import SitlConfig, SitlRun
 
     af = load_airframe()
     extra: list[str] = []

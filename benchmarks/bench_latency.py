@@ -4,7 +4,7 @@
 
 For each delay, the processes run in lockstep (so the figures do not depend on the machine's
 load: the delay is one of simulated time, applied by the vehicle, see
-``vtolftc.sitl.SitlConfig.hil_delay_ms``); the aircraft takes off to 10 m, hovers
+``vtolftc.runners.sitl.SitlConfig.hil_delay_ms``); the aircraft takes off to 10 m, hovers
 2 s, then rotor_1a loses 30 % of its thrust (a step disturbance: without one a perfect hover
 is an equilibrium that no delay disturbs) and the largest |roll|, |pitch| and altitude error
 of the next ``--hover-s`` seconds (from the autopilot's telemetry) are printed; "reached hover" no
@@ -20,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from vtolftc.sitl import SitlConfig, SitlRun
+from vtolftc.runners.sitl import SitlConfig, SitlRun
 
 
 def hover(delay_ms: float, hover_s: float) -> dict[str, float]:

@@ -2,13 +2,15 @@
 
     python benchmarks/bench_mission.py [--transport udp|zenoh|none] [--faults]
 
-1. The reference mission (:func:`vtolftc.mission_run.rectangle_mission`: NAV_TAKEOFF 30 m,
+1. The reference mission (:func:`vtolftc.runners.mission_run.rectangle_mission`: NAV_TAKEOFF 30 m,
    transition, four waypoints on a 300 m x 600 m rectangle, back transition, land at home)
    flown in-process: per fixed-wing leg the RMS and maximum distance to the planned polyline
-   (:func:`vtolftc.mission_run.path_errors`, the corner cut of the turns included), the landing
+   (:func:`vtolftc.runners.mission_run.path_errors`, the corner cut of the turns included), the
+   landing
    error, simulated and wall time.
 2. The same mission flown by the SITL processes in lockstep (free-running, uploaded by a
-   pymavlink client, :func:`vtolftc.mission_sitl.fly_sitl_mission`): the same per-leg figures
+   pymavlink client, :func:`vtolftc.runners.mission_sitl.fly_sitl_mission`): the same per-leg
+   figures
    from the telemetry (LOCAL_POSITION_NED at 10 Hz) and the wall time of the flight (arming to
    disarm after landing, process start-up excluded).
 
@@ -26,7 +28,7 @@ import numpy as np
 
 from vtolftc.airframe.loader import load_airframe
 from vtolftc.firmware_sim.vehicle.faults import case_faults
-from vtolftc.mission_run import path_errors, rectangle_mission, run_mission
+from vtolftc.runners.mission_run import path_errors, rectangle_mission, run_mission
 
 
 def _table(title: str, errs: dict[int, dict[str, float]]) -> None:
@@ -53,7 +55,7 @@ def main() -> None:
           f"({r.sim_time_s / r.wall_time_s:.1f}x real time)")
     if args.transport == "none":
         return
-    from vtolftc.mission_sitl import fly_sitl_mission
+    from vtolftc.runners.mission_sitl import fly_sitl_mission
 
     with tempfile.TemporaryDirectory() as tmp:
         rec = fly_sitl_mission(Path(tmp), inject_case=1 if faults else None,

@@ -30,7 +30,7 @@ import numpy as np
 
 from vtolftc.protocols import make_codec
 from vtolftc.protocols.netutil import free_udp_port
-from vtolftc.sitl import SitlConfig, SitlRun, run_sitl
+from vtolftc.runners.sitl import SitlConfig, SitlRun, run_sitl
 
 
 def _frames(n: int) -> list[bytes]:

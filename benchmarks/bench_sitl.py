@@ -2,7 +2,8 @@
 
     python benchmarks/bench_sitl.py [--transport udp|zenoh|both] [--duration 40] [--case 1]
 
-For each transport it flies the case with ``vtolftc.sitl.run_sitl`` (vehicle and autopilot as
+For each transport it flies the case with ``vtolftc.runners.sitl.run_sitl`` (vehicle and autopilot
+as
 separate processes, ground-station commands, no plots) and reports:
 
 - the real-time factor: simulated seconds / wall seconds from the start hold to the end hold
@@ -27,8 +28,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from vtolftc.scenario import paper_scenario, run_scenario
-from vtolftc.sitl import SitlConfig, run_sitl
+from vtolftc.runners.scenario import paper_scenario, run_scenario
+from vtolftc.runners.sitl import SitlConfig, run_sitl
 
 
 def main() -> None:

@@ -14,7 +14,7 @@ import hashlib
 from typing import Any
 
 from vtolftc.protocols.hil import wire_commands
-from vtolftc.scenario import paper_scenario, run_scenario
+from vtolftc.runners.scenario import paper_scenario, run_scenario
 
 RUNS = (("1", "gs-shif"), ("2", "shif"), ("0", "lqr"))
 

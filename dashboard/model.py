@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from vtolftc.geodesy import FlatEarth
+from vtolftc.base.geodesy import FlatEarth
+from vtolftc.base.rotation import euler_to_quat, quat_mul
 from vtolftc.protocols.generated import constants as mav
-from vtolftc.rotation import euler_to_quat, quat_mul
 
 __all__ = [
     "CommandFeedback",

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from vtolftc.geodesy import EARTH_RADIUS_M, FlatEarth
+from vtolftc.base.geodesy import EARTH_RADIUS_M, FlatEarth
 
 __all__ = [
     "EARTH_RADIUS_M",

@@ -53,7 +53,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from vtolftc.jsonio import atomic_write, atomic_write_text
+from vtolftc.base.jsonio import atomic_write, atomic_write_text
 
 __all__ = [
     "DIALECT_NAME",
@@ -147,7 +147,7 @@ def generate_dialect(target: Path, xml: Path = DIALECT_XML) -> Path:
     """Run mavgen (MAVLink 2.0, Python 3) on ``xml`` and write the module to ``target``.
 
     mavgen writes into a temporary directory beside ``target``; the module is published with
-    :func:`vtolftc.jsonio.atomic_write`: a reader never sees half a module.
+    :func:`vtolftc.base.jsonio.atomic_write`: a reader never sees half a module.
 
     Parameters
     ----------

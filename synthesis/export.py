@@ -14,9 +14,9 @@
   law: tau = k_int int(angle_ref - angle) dt + k_angle (angle_ref - angle) - k_rate rate,
   units k_int N m/(rad s), k_angle N m/rad, k_rate N m s/rad; one value per breakpoint.
 
-Every file is written atomically (:func:`vtolftc.jsonio.atomic_write_text`), so an interrupted
+Every file is written atomically (:func:`vtolftc.base.jsonio.atomic_write_text`), so an interrupted
 run never leaves a truncated file behind, in the project's one JSON convention
-(:func:`vtolftc.jsonio.json_safe`: a NaN or infinity is written as ``null``).
+(:func:`vtolftc.base.jsonio.json_safe`: a NaN or infinity is written as ``null``).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from vtolftc.airframe.loader import Airframe
-from vtolftc.jsonio import atomic_write_text, json_safe
+from vtolftc.base.jsonio import atomic_write_text, json_safe
 from vtolftc.synthesis.loops import PARAM_NAMES
 from vtolftc.synthesis.models import AXES
 
@@ -64,7 +64,7 @@ def tool_version() -> str:
         return "unknown"
 
 
-#: the JSON conversion of the project (:func:`vtolftc.jsonio.json_safe`: NaN / inf -> null,
+#: the JSON conversion of the project (:func:`vtolftc.base.jsonio.json_safe`: NaN / inf -> null,
 #: complex -> [re, im]), under the name this package has always exported
 jsonable = json_safe
 

@@ -24,7 +24,7 @@ import control as ct
 import numpy as np
 
 from vtolftc.airframe.loader import Airframe
-from vtolftc.rotation import ATTITUDE_AXES
+from vtolftc.base.rotation import ATTITUDE_AXES
 
 Axis = Literal["roll", "pitch", "yaw"]
 AXES: tuple[Axis, ...] = ATTITUDE_AXES  # type: ignore[assignment]

@@ -24,7 +24,7 @@ from vtolftc.airframe.loader import (
     hover_effectiveness,
     load_airframe,
 )
-from vtolftc.cli import run as cli_run
+from vtolftc.cli.main import run as cli_run
 from vtolftc.firmware_sim.vehicle.flyable import check_flyable
 from vtolftc.protocols.hil import HIL_OUTPUTS, wire_commands
 
@@ -263,7 +263,7 @@ def test_failure_units_and_fault_names_come_from_the_airframe():
 
 
 def test_campaign_families_cover_every_actuator_of_the_file(tmp_path):
-    from vtolftc.campaign.spec import load_spec
+    from vtolftc.runners.campaign.spec import load_spec
 
     spec = tmp_path / "qp4.toml"
     spec.write_text(f'[campaign]\nname = "qp4"\nduration_s = 30.0\ncontrollers = ["gs-shif"]\n'

@@ -28,7 +28,12 @@ from vtolftc.firmware_sim.autopilot.interface import (
     wire_commands,
 )
 from vtolftc.firmware_sim.vehicle.model import Vehicle
-from vtolftc.mission_run import BT_LAST_WP_NE, BT_STOP_NE, back_transition_mission, run_mission
+from vtolftc.runners.mission_run import (
+    BT_LAST_WP_NE,
+    BT_STOP_NE,
+    back_transition_mission,
+    run_mission,
+)
 
 BT = int(FlightMode.BACK_TRANSITION)
 FW = int(FlightMode.FIXED_WING)

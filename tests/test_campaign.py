@@ -14,11 +14,11 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from vtolftc.campaign.outcome import outcome
-from vtolftc.campaign.results import SCHEMA, TIMING_COLUMNS, PartWriter, read_results
-from vtolftc.campaign.scenarios import expand
-from vtolftc.campaign.spec import SpecError, load_spec, parse_spec
-from vtolftc.cli import run
+from vtolftc.cli.main import run
+from vtolftc.runners.campaign.outcome import outcome
+from vtolftc.runners.campaign.results import SCHEMA, TIMING_COLUMNS, PartWriter, read_results
+from vtolftc.runners.campaign.scenarios import expand
+from vtolftc.runners.campaign.spec import SpecError, load_spec, parse_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 CAMPAIGNS = ROOT / "campaigns"
@@ -357,8 +357,8 @@ def test_compare_and_gates(small_reference, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "outcome changed in 1 scenarios" in out
     assert rows[0]["scenario_id"] in out
-    from vtolftc.campaign.report import check_gates
-    from vtolftc.campaign.spec import Gate
+    from vtolftc.runners.campaign.report import check_gates
+    from vtolftc.runners.campaign.spec import Gate
 
     surv = sum(ref.column("survived").to_pylist()) / ref.num_rows
     assert check_gates([Gate(0.0)], ref) == []
@@ -441,8 +441,8 @@ def _trim_conditions() -> dict:
     """Phase conditions from the nominal trims (no reference flight): hover at 15 s,
     wing-borne 18 m/s at 40 s; the transition (23 s) left out (the flight did not get there)."""
     from vtolftc.airframe.loader import load_airframe
-    from vtolftc.campaign.oracle import PhaseCondition
     from vtolftc.firmware_sim.vehicle.recoverability import trim_condition
+    from vtolftc.runners.campaign.oracle import PhaseCondition
 
     af = load_airframe()
     out = {}
@@ -454,13 +454,13 @@ def _trim_conditions() -> dict:
 
 def test_oracle_columns_per_flight_condition():
     from vtolftc.airframe.loader import load_airframe
-    from vtolftc.campaign.oracle import oracle_columns
-    from vtolftc.campaign.report import recoverable_lines
     from vtolftc.firmware_sim.vehicle.recoverability import (
         RECOVERABLE_MIN_MARGIN,
         FlightCondition,
         assess,
     )
+    from vtolftc.runners.campaign.oracle import oracle_columns
+    from vtolftc.runners.campaign.report import recoverable_lines
 
     scenarios = expand(parse_spec(ORACLE))
     cols = oracle_columns(scenarios, _trim_conditions())
@@ -507,7 +507,7 @@ def test_oracle_columns_per_flight_condition():
                      "controller": s.controller, "family": s.family, "phase": s.phase,
                      "faults": s.faults_label, "wind": s.wind.name, "perturbation": "nominal",
                      "seed": 0, **cols[s.scenario_id]})
-    from vtolftc.campaign.results import _table
+    from vtolftc.runners.campaign.results import _table
 
     lines = recoverable_lines(_table(rows))
     assert lines[0] == "| family | phase | recoverable | gs-shif | lqr |"
@@ -536,8 +536,8 @@ def test_campaign_results_carry_the_oracle(small_reference):
 
 
 def test_a_failing_oracle_leaves_the_rows_not_judged(monkeypatch, capsys):
-    import vtolftc.campaign.oracle as oracle
-    from vtolftc.cmd_campaign import _oracle
+    import vtolftc.runners.campaign.oracle as oracle
+    from vtolftc.cli.cmd_campaign import _oracle
 
     def broken(todo):
         raise RuntimeError("reference flight crashed")
@@ -552,12 +552,12 @@ def test_oracle_rules_per_mode():
     """In a transition the forward force is free (the transition accelerates); in hover the
     pushers are held where the reference flight had them."""
     from vtolftc.airframe.loader import load_airframe
-    from vtolftc.campaign.oracle import PhaseCondition, judge
     from vtolftc.firmware_sim.vehicle.recoverability import (
         FlightCondition,
         assess,
         trim_condition,
     )
+    from vtolftc.runners.campaign.oracle import PhaseCondition, judge
 
     af = load_airframe()
     pos = list(trim_condition(af, "rotor-assisted", 4.0).actuator_positions)

@@ -11,16 +11,16 @@ from pathlib import Path
 
 import pytest
 
-from vtolftc.certify.pipeline import Stage, StageError
-from vtolftc.certify.stages import (
+from vtolftc.base.errors import UsageError
+from vtolftc.cli.cmd_certify import run_certify
+from vtolftc.cli.main import run
+from vtolftc.runners.certify.pipeline import Stage, StageError
+from vtolftc.runners.certify.stages import (
     PROFILES,
     campaign_spec_text,
     judge_campaign,
     judge_mission,
 )
-from vtolftc.cli import run
-from vtolftc.cmd_certify import run_certify
-from vtolftc.errors import UsageError
 
 ROOT = Path(__file__).resolve().parents[1]
 DS1 = ROOT / "airframe" / "ds1.toml"
@@ -200,9 +200,9 @@ def test_mission_gate():
 def test_campaign_spec_of_the_full_profile(tmp_path):
     """Every single and double lift rotor off, surfaces and pushers off/stuck, three phases,
     calm and crosswind + gust, GS-SHIF only, with the file's airframe and the stage's gains."""
-    from vtolftc.campaign.scenarios import expand
-    from vtolftc.campaign.spec import parse_spec
-    from vtolftc.certify.pipeline import StageContext
+    from vtolftc.runners.campaign.scenarios import expand
+    from vtolftc.runners.campaign.spec import parse_spec
+    from vtolftc.runners.certify.pipeline import StageContext
 
     ctx = StageContext(DS1, "x" * 64, tmp_path, PROFILES["full"])
     ctx.records["synth"] = {"gains_dir": str(GAINS), "gains_sha256": {"gs-shif": "0"}}
@@ -252,7 +252,7 @@ def test_certify_ds1_quick(tmp_path):
         {1, n_points // 2 + 1, n_points})
     html = (out / "report.html").read_text()
     assert html.count("data:image/png;base64,") == 3
-    from vtolftc.certify.stages import default_stages
+    from vtolftc.runners.certify.stages import default_stages
 
     for st in default_stages():                      # a verdict row per stage
         verdict = recs[st.name]["verdict"]
@@ -295,10 +295,10 @@ def test_library_airframe_loads_and_trims(name):
 def test_sitl_stage_flies_the_file_and_the_synthesised_gains(tmp_path, monkeypatch):
     """The SITL stage starts the processes with the certified airframe file and the gain files
     of the synthesis stage, over UDP; a SITL that cannot start fails the stage (not a crash)."""
-    from vtolftc import mission_sitl
-    from vtolftc.certify.pipeline import StageContext
-    from vtolftc.certify.stages import stage_sitl
-    from vtolftc.sitl import SitlError
+    from vtolftc.runners import mission_sitl
+    from vtolftc.runners.certify.pipeline import StageContext
+    from vtolftc.runners.certify.stages import stage_sitl
+    from vtolftc.runners.sitl import SitlError
 
     seen = {}
 

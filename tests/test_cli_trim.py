@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from vtolftc.cli import main
+from vtolftc.cli.main import main
 
 
 def test_trim_table_markdown(capsys):

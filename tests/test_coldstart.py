@@ -200,8 +200,8 @@ def test_fresh_cache_sitl_flight_through_every_mode_never_stalls(tmp_path, monke
     numba specialisation compiled after STANDBY."""
     from pymavlink import mavutil
 
-    from vtolftc.mission_sitl import pymavlink_upload
-    from vtolftc.sitl import SitlConfig, SitlRun
+    from vtolftc.runners.mission_sitl import pymavlink_upload
+    from vtolftc.runners.sitl import SitlConfig, SitlRun
 
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "empty_numba_cache"))
     port = free_udp_port()

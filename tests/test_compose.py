@@ -13,10 +13,10 @@ import pytest
 
 yaml = pytest.importorskip("yaml", reason="pyyaml is in the [test] extra")
 
-from vtolftc.cli import build_parser  # noqa: E402
-from vtolftc.processes import autopilot as ap_process  # noqa: E402
-from vtolftc.processes import vehicle as veh_process  # noqa: E402
+from vtolftc.cli.main import build_parser  # noqa: E402
 from vtolftc.protocols import parse_link_url  # noqa: E402
+from vtolftc.runners.processes import autopilot as ap_process  # noqa: E402
+from vtolftc.runners.processes import vehicle as veh_process  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 COMPOSE = ROOT / "docker" / "compose.yaml"
@@ -71,7 +71,7 @@ def test_router_version_matches_the_python_binding(compose):
 
 def test_vehicle_command_parses(compose):
     cmd = compose["services"]["vehicle"]["command"]
-    assert cmd[:3] == ["python", "-m", "vtolftc.processes.vehicle"]
+    assert cmd[:3] == ["python", "-m", "vtolftc.runners.processes.vehicle"]
     args = veh_process._parse_args(cmd[3:])
     assert args.lockstep is False and args.allow_remote
     _check_zenoh_url(args.link, compose, "up", "hil")
@@ -79,7 +79,7 @@ def test_vehicle_command_parses(compose):
 
 def test_autopilot_command_parses(compose):
     cmd = compose["services"]["autopilot"]["command"]
-    assert cmd[:3] == ["python", "-m", "vtolftc.processes.autopilot"]
+    assert cmd[:3] == ["python", "-m", "vtolftc.runners.processes.autopilot"]
     args = ap_process._parse_args(cmd[3:])
     assert args.lockstep is False and args.allow_remote and args.no_default_gcs
     _check_zenoh_url(args.hil_link, compose, "down", "hil")
@@ -116,4 +116,4 @@ def test_dockerfile_copies_every_package():
         assert re.search(rf"^COPY {pkg} {pkg}$", text, re.M), f"{pkg} not copied"
         assert (ROOT / pkg).is_dir()
     assert "pip install ." in text
-    assert "vtolftc.processes.autopilot --help" in text
+    assert "vtolftc.runners.processes.autopilot --help" in text

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from vtolftc.sitl import SitlConfig, SitlRun
+from vtolftc.runners.sitl import SitlConfig, SitlRun
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -172,7 +172,7 @@ def test_fly_sigkill_loses_at_most_1_5_s_in_every_file(tmp_path, t_kill):
 
 
 def test_fly_out_refused_unless_overwrite_and_never_mixed(tmp_path, hand_gains, capsys):
-    from vtolftc.cli import run
+    from vtolftc.cli.main import run
 
     out = tmp_path / "run"
     base = ["fly", "--case", "0", "--controller", "lqr", "--duration", "0.5", "--gains",
@@ -199,7 +199,7 @@ def test_fly_out_refused_unless_overwrite_and_never_mixed(tmp_path, hand_gains, 
 
 @pytest.mark.parametrize("bad", ["/proc/nope/run", "FILE"])
 def test_fly_bad_out_is_one_line_exit_2(tmp_path, hand_gains, capsys, bad):
-    from vtolftc.cli import run
+    from vtolftc.cli.main import run
 
     if bad == "FILE":
         bad = str(tmp_path / "a_file")

@@ -12,9 +12,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from vtolftc.base.rotation import euler_to_quat as euler_to_quaternion
 from vtolftc.dashboard.model import DashboardModel, ned_to_display
 from vtolftc.gcs.client import CommandOutcome, VehicleSnapshot
-from vtolftc.rotation import euler_to_quat as euler_to_quaternion
 from vtolftc.telemetry.geometry import aircraft_geometry, rotor_grid
 
 
@@ -295,7 +295,7 @@ def test_dashboard_without_autopilot_says_so(ds1):
 
 
 def test_cli_dashboard_arguments(capsys):
-    from vtolftc.cli import run
+    from vtolftc.cli.main import run
 
     assert run(["dashboard", "--host", "10.1.2.3"]) == 2
     assert "needs --allow-remote" in capsys.readouterr().err
@@ -321,7 +321,7 @@ def test_mission_points_and_status_lines():
 
     from vtolftc.dashboard.model import _extras, mission_points_display
     from vtolftc.firmware_sim.vehicle.sensors import Home
-    from vtolftc.mission_run import rectangle_mission
+    from vtolftc.runners.mission_run import rectangle_mission
 
     h = Home()
     pts, seqs = mission_points_display(rectangle_mission(), h.lat_deg, h.lon_deg, h.alt_m)

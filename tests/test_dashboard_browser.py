@@ -44,7 +44,7 @@ def chromium():
 def sitl(tmp_path, ds1):
     """Vehicle + autopilot processes in real time, a ground station, and the dashboard."""
     from vtolftc.dashboard.web import Dashboard
-    from vtolftc.sitl import SitlConfig, SitlRun
+    from vtolftc.runners.sitl import SitlConfig, SitlRun
 
     # duration: far beyond what the test needs (it closes the run); under load every wait
     # below may take its full time and the SITL must not end first

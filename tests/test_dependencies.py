@@ -128,7 +128,7 @@ def test_scanner_optional_imports_need_an_extra(tmp_path):
 
 def test_scanner_leaves_out_stdlib_first_party_and_neighbours(tmp_path):
     (tmp_path / "helper_mod.py").write_text("")
-    f = _module(tmp_path, "import json\nimport vtolftc.rotation\nimport helper_mod\n"
+    f = _module(tmp_path, "import json\nimport vtolftc.base.rotation\nimport helper_mod\n"
                           "from . import x\n")
     assert imports_of(f) == []
 

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from vtolftc.cli import run as cli_run
+from vtolftc.cli.main import run as cli_run
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
@@ -299,7 +299,7 @@ def test_mission_download_ping_timesync_and_command_int(endpoint_and_gs):
     """The endpoint's PX4 services without a vehicle: a mission stored in the navigator comes
     back through the ground station; PING, TIMESYNC and COMMAND_INT are answered."""
     from vtolftc.firmware_sim.vehicle.sensors import Home
-    from vtolftc.mission_run import rectangle_mission
+    from vtolftc.runners.mission_run import rectangle_mission
 
     ep, gs = endpoint_and_gs
     items = rectangle_mission()

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from vtolftc.geodesy import EARTH_RADIUS_M, FlatEarth
+from vtolftc.base.geodesy import EARTH_RADIUS_M, FlatEarth
 from vtolftc.protocols.hil import HilRoundTrip, NavState, decode_hil_state, encode_hil_state
 
 

@@ -53,10 +53,10 @@ def test_bad_hil_key_is_one_line_and_exit_2(program, monkeypatch, capsys):
     monkeypatch.setenv(HIL_KEY_ENV, "not-a-key")
     port = free_udp_port()
     if program == "vehicle":
-        from vtolftc.processes.vehicle import main
+        from vtolftc.runners.processes.vehicle import main
         rc = main(["--link", f"udp-server://127.0.0.1:{port}"])
     else:
-        from vtolftc.processes.autopilot import main
+        from vtolftc.runners.processes.autopilot import main
         rc = main(["--hil-link", f"udp-client://127.0.0.1:{port}", "--no-default-gcs",
                    "--no-warmup"])
     err = capsys.readouterr().err
@@ -189,7 +189,7 @@ class _Stranger(threading.Thread):
 def test_forged_heartbeat_first_race_refused_real_autopilot_arms_and_flies(tmp_path):
     """Real processes over UDP (``vtolftc sitl``'s runner, its per-run HIL key): the
     stranger forges from before the autopilot is started until the end of the flight."""
-    from vtolftc.sitl import SitlConfig, SitlRun
+    from vtolftc.runners.sitl import SitlConfig, SitlRun
 
     strangers: list[_Stranger] = []
 

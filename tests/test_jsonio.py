@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from vtolftc.jsonio import dumps, json_safe
+from vtolftc.base.jsonio import dumps, json_safe
 
 
 def test_json_safe_converts_numpy_and_non_finite_values():
@@ -86,7 +86,7 @@ def test_atomic_write_replaces_whole_or_not_at_all(tmp_path):
     fails leaves the old file and no temporary file."""
     import os
 
-    from vtolftc.jsonio import atomic_write, atomic_write_text
+    from vtolftc.base.jsonio import atomic_write, atomic_write_text
 
     p = atomic_write_text(tmp_path / "sub" / "a.json", "{}\n")
     assert p.read_text() == "{}\n"

@@ -6,8 +6,8 @@ lower layer. Groups of one layer are siblings that never import each other (the 
 imports the vehicle nor the synthesis: passive FTC, and the gains reach it as files). Every
 import counts, also those inside functions and under ``TYPE_CHECKING``, and so does a module
 loaded by name: a string that is exactly the name of one of the namespace's modules
-(``importlib.import_module("vtolftc.cmd_fly")``, a table of command modules, ``python -m
-vtolftc.processes.vehicle``).
+(``importlib.import_module("vtolftc.cli.cmd_fly")``, a table of command modules, ``python -m
+vtolftc.runners.processes.vehicle``).
 
 No module takes a private name (``_x``) from another module: what another module needs is
 public, or it is not needed.
@@ -26,18 +26,15 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: Bottom up: (layer, group, module patterns). Patterns match a module and its sub-modules.
 LAYERS: list[tuple[int, str, tuple[str, ...]]] = [
-    (0, "base", ("vtolftc", "vtolftc.rotation", "vtolftc.geodesy", "vtolftc.jsonio",
-                "vtolftc.errors", "vtolftc.airframe")),
+    (0, "base", ("vtolftc", "vtolftc.base", "vtolftc.airframe")),
     (1, "protocols", ("vtolftc.protocols",)),
     (2, "telemetry", ("vtolftc.telemetry",)),
     (3, "autopilot", ("vtolftc.firmware_sim", "vtolftc.firmware_sim.autopilot")),
     (3, "vehicle", ("vtolftc.firmware_sim.vehicle",)),
     (3, "synthesis", ("vtolftc.synthesis",)),
     (3, "gcs", ("vtolftc.gcs",)),
-    (4, "runners", ("vtolftc.scenario", "vtolftc.sitl", "vtolftc.campaign", "vtolftc.mission_run",
-                    "vtolftc.mission_sitl", "vtolftc.certify",
-                    "vtolftc.processes")),
-    (5, "top", ("vtolftc.cli", "vtolftc.cmd_*", "vtolftc.dashboard", "vtolftc.__main__")),
+    (4, "runners", ("vtolftc.runners",)),
+    (5, "top", ("vtolftc.cli", "vtolftc.dashboard", "vtolftc.__main__")),
 ]
 
 

@@ -18,8 +18,8 @@ from vtolftc.firmware_sim.autopilot.mission import (
     MissionStore,
     Result,
 )
-from vtolftc.mission_run import rectangle_mission
 from vtolftc.protocols.mavlink import make_codec
+from vtolftc.runners.mission_run import rectangle_mission
 
 GCS = (255, 190)
 

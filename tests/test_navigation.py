@@ -27,7 +27,7 @@ from vtolftc.firmware_sim.vehicle.battery import BatteryModel, propeller_power_w
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import Home
 from vtolftc.protocols.px4 import mode_name
-from vtolftc.scenario import Action, Scenario, run_scenario
+from vtolftc.runners.scenario import Action, Scenario, run_scenario
 
 G = 9.80665
 
@@ -206,7 +206,7 @@ def test_vtol_takeoff_loiter_speed_change_and_vtol_land_in_process():
     """NAV_VTOL_TAKEOFF (climb, align, transition), DO_CHANGE_SPEED, NAV_LOITER_TIME in
     fixed-wing, NAV_VTOL_LAND (back transition at the braking distance, land at the point)."""
     from vtolftc.firmware_sim.autopilot.mission import MissionItem
-    from vtolftc.mission_run import _latlon, run_mission
+    from vtolftc.runners.mission_run import _latlon, run_mission
 
     h = Home()
     rel = 6

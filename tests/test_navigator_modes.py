@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from vtolftc.base.geodesy import FlatEarth
 from vtolftc.firmware_sim.autopilot import interface
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 from vtolftc.firmware_sim.autopilot.mission import (
@@ -39,7 +40,6 @@ from vtolftc.firmware_sim.autopilot.nav_mission import Mission
 from vtolftc.firmware_sim.autopilot.nav_rtl import Rtl
 from vtolftc.firmware_sim.autopilot.nav_takeoff import Takeoff
 from vtolftc.firmware_sim.vehicle.sensors import Home
-from vtolftc.geodesy import FlatEarth
 from vtolftc.protocols import hil
 from vtolftc.telemetry import autopilot_status
 

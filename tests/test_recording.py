@@ -201,7 +201,7 @@ def test_live_web_viewer_on_loopback(tmp_path, monkeypatch):
 def test_case_run_recording(tmp_path, ds1):
     """A short real in-process run (takeoff, a rotor fault at 2 s, a refused transition)."""
     from vtolftc.firmware_sim.vehicle.faults import parse_fault_spec
-    from vtolftc.scenario import paper_scenario, run_scenario
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
 
     scen = paper_scenario(0, 4.0, airframe=ds1, arm_s=0.2, transition_s=3.0,
                           extra_faults=parse_fault_spec("rotor_2b:loss=0.5@2",

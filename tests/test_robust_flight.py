@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
-from vtolftc.scenario import paper_scenario, run_scenario
+from vtolftc.runners.scenario import paper_scenario, run_scenario
 
 
 def test_hil_delay_line_feeds_the_autopilot_older_states(ds1):
@@ -44,7 +44,7 @@ def test_attitude_gains_are_scheduled_on_the_low_passed_airspeed(ds1, tau):
     """The attitude controller gets the airspeed through the FTC_SCHED_TAU first-order
     low-pass (0: unfiltered), so the noise of the measurement does not move the gains
     between design points from step to step; the mode logic still sees the raw value."""
-    from vtolftc.campaign.execute import vehicle_options
+    from vtolftc.runners.campaign.execute import vehicle_options
 
     measured: list[float] = []
     scheduled: list[float] = []
@@ -117,7 +117,7 @@ class _PeakPitch:
 
     def on_sample(self, sample):
         if sample.time_usec > 3_000_000:
-            from vtolftc.rotation import quat_to_euler
+            from vtolftc.base.rotation import quat_to_euler
 
             self.peak = max(self.peak, abs(math.degrees(quat_to_euler(sample.nav.q_wxyz)[1])))
 
@@ -131,8 +131,8 @@ class _PeakPitch:
 def _fly(job):
     case, specs, duration, delay, *wind = job
     from vtolftc.airframe.loader import load_airframe
-    from vtolftc.campaign.execute import vehicle_options
     from vtolftc.firmware_sim.vehicle.faults import parse_fault_spec
+    from vtolftc.runners.campaign.execute import vehicle_options
 
     af = load_airframe()
     faults = [f for s in specs for f in parse_fault_spec(s, af.actuator_names)]

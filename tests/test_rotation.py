@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from vtolftc.base.rotation import dcm, euler_to_quat, quat_mul, quat_to_euler
 from vtolftc.firmware_sim.vehicle.dynamics import quat_to_dcm
-from vtolftc.rotation import dcm, euler_to_quat, quat_mul, quat_to_euler
 
 rng = np.random.default_rng(7)
 EULERS = [(float(r), float(p), float(y)) for r, p, y in zip(

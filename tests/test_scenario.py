@@ -14,7 +14,7 @@ from vtolftc.firmware_sim.autopilot.attitude import default_gains_dir
 from vtolftc.firmware_sim.autopilot.interface import FlightMode
 from vtolftc.firmware_sim.vehicle.faults import Fault
 from vtolftc.firmware_sim.vehicle.sensors import Home
-from vtolftc.scenario import paper_scenario, run_scenario
+from vtolftc.runners.scenario import paper_scenario, run_scenario
 from vtolftc.telemetry.runfolder import RunFolderWriter
 
 CONTROLLERS = ("gs-shif", "shif", "lqr")
@@ -199,7 +199,7 @@ def test_fault_cases_complete(controller, case):
 
 
 def test_cli_fly_and_compare(tmp_path, hand_gains, capsys):
-    from vtolftc.cli import run
+    from vtolftc.cli.main import run
 
     out = tmp_path / "fly"
     assert run(["fly", "--case", "1", "--controller", "lqr", "--duration", "2",
@@ -230,7 +230,7 @@ def test_cli_fly_and_compare(tmp_path, hand_gains, capsys):
     (["fly", "--progress", "nan"], "--progress"),
 ])
 def test_cli_bad_input_is_one_line_exit_2(argv, match, capsys):
-    from vtolftc.cli import run
+    from vtolftc.cli.main import run
 
     assert run(argv) == 2
     err = capsys.readouterr().err
@@ -238,7 +238,7 @@ def test_cli_bad_input_is_one_line_exit_2(argv, match, capsys):
 
 
 def test_cli_missing_gain_file_is_reported_before_flying(tmp_path, capsys):
-    from vtolftc.cli import run
+    from vtolftc.cli.main import run
 
     out = tmp_path / "never"
     assert run(["fly", "--gains", str(tmp_path), "--out", str(out)]) == 2
@@ -253,7 +253,7 @@ def test_full_flight_back_transition_and_landing(hand_gains):
     the vehicle ends on the ground, disarmed, without a crash."""
     from dataclasses import replace
 
-    from vtolftc.scenario import Action
+    from vtolftc.runners.scenario import Action
 
     nan = float("nan")
     sc = paper_scenario(0, 66.0)

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from vtolftc.base.rotation import ATTITUDE_AXES
 from vtolftc.firmware_sim.autopilot.pid import PPIDGains
 from vtolftc.firmware_sim.autopilot.schedule import (
     FORMAT,
@@ -16,7 +17,6 @@ from vtolftc.firmware_sim.autopilot.schedule import (
     GainSchedule,
     GainScheduleError,
 )
-from vtolftc.rotation import ATTITUDE_AXES
 
 BP = [0.0, 1.0, 4.0, 7.0, 10.0, 13.0]
 SHA = "ab" * 32

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from vtolftc.base.rotation import euler_to_quat
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import (
     Home,
@@ -12,7 +13,6 @@ from vtolftc.firmware_sim.vehicle.sensors import (
     altitude_from_pressure_m,
     pressure_at_altitude_hpa,
 )
-from vtolftc.rotation import euler_to_quat
 
 
 def test_isa_pressure_known_values():

@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 
 from vtolftc.protocols import open_link, parse_link_url
-from vtolftc.scenario import paper_scenario, run_scenario
-from vtolftc.sitl import SitlConfig, SitlRun, run_sitl
+from vtolftc.runners.scenario import paper_scenario, run_scenario
+from vtolftc.runners.sitl import SitlConfig, SitlRun, run_sitl
 from vtolftc.telemetry.recording import read_recording
 
 pytestmark = pytest.mark.slow
@@ -72,7 +72,7 @@ def _spray_garbage(run: SitlRun) -> None:
 
 
 def _refuse_constant(name: str) -> None:
-    raise AssertionError(f"non-standard JSON constant {name} (write through vtolftc.jsonio)")
+    raise AssertionError(f"non-standard JSON constant {name} (write through vtolftc.base.jsonio)")
 
 
 @pytest.mark.parametrize("transport", ["udp", "zenoh"])
@@ -170,7 +170,7 @@ def test_realtime_mode_flies_at_wall_clock_pace(tmp_path):
 def test_children_stop_when_the_runner_is_killed(tmp_path):
     """SIGKILL leaves no chance to clean up: the processes watch their parent instead."""
     out = tmp_path / "run"
-    code = ("import time, pathlib; from vtolftc.sitl import SitlConfig, SitlRun; "
+    code = ("import time, pathlib; from vtolftc.runners.sitl import SitlConfig, SitlRun; "
             f"r = SitlRun(SitlConfig(out_dir=pathlib.Path({str(out)!r}), plots=False)); "
             "r.start(); print('up', flush=True); time.sleep(120)")
     p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE)

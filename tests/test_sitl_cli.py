@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from vtolftc.cli import run as cli_run
+from vtolftc.cli.main import run as cli_run
 from vtolftc.protocols import parse_link_url
-from vtolftc.sitl import SitlConfig, SitlRun
+from vtolftc.runners.sitl import SitlConfig, SitlRun
 
 
 @pytest.mark.parametrize("argv, fragment", [

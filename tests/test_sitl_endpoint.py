@@ -19,7 +19,7 @@ from pymavlink import mavutil
 from vtolftc.gcs.client import GroundStation
 from vtolftc.protocols import open_link
 from vtolftc.protocols.netutil import free_tcp_port, free_udp_port
-from vtolftc.sitl import SitlConfig, SitlRun
+from vtolftc.runners.sitl import SitlConfig, SitlRun
 
 pytestmark = pytest.mark.slow
 

@@ -21,8 +21,8 @@ from pyulog import ULog
 
 from vtolftc.firmware_sim.autopilot.ulog import TOPICS
 from vtolftc.firmware_sim.vehicle.sensors import Home
-from vtolftc.mission_run import path_errors
-from vtolftc.mission_sitl import fly_sitl_mission
+from vtolftc.runners.mission_run import path_errors
+from vtolftc.runners.mission_sitl import fly_sitl_mission
 
 pytestmark = pytest.mark.slow
 
@@ -137,7 +137,7 @@ def test_two_back_transitions_stop_over_their_points_over_udp(tmp_path):
     """The mission with two back transitions (:func:`back_transition_mission`) uploaded and
     flown over UDP: the first stops over its waypoint, the second lands within 10 m of home,
     neither flies past its point and back (planned from the deceleration achieved)."""
-    from vtolftc.mission_run import BT_LAST_WP_NE, BT_STOP_NE, back_transition_mission
+    from vtolftc.runners.mission_run import BT_LAST_WP_NE, BT_STOP_NE, back_transition_mission
 
     items = back_transition_mission()
     rec = fly_sitl_mission(tmp_path, items=items)

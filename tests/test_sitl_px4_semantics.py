@@ -30,7 +30,7 @@ import pytest
 from pymavlink import mavutil
 
 from vtolftc.protocols.netutil import free_udp_port
-from vtolftc.sitl import SitlConfig, SitlRun
+from vtolftc.runners.sitl import SitlConfig, SitlRun
 
 pytestmark = pytest.mark.slow
 

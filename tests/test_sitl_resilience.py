@@ -24,7 +24,7 @@ import pytest
 from vtolftc.gcs.client import GroundStation
 from vtolftc.protocols import make_codec, open_link
 from vtolftc.protocols.netutil import free_udp_port
-from vtolftc.sitl import SitlConfig, SitlRun
+from vtolftc.runners.sitl import SitlConfig, SitlRun
 
 pytestmark = pytest.mark.slow
 

@@ -13,7 +13,7 @@ import pytest
 from vtolftc.protocols import SigningConfig, open_link
 from vtolftc.protocols.mavlink import signing_timestamp_now
 from vtolftc.protocols.netutil import free_udp_port
-from vtolftc.sitl import SitlConfig, SitlRun
+from vtolftc.runners.sitl import SitlConfig, SitlRun
 
 pytestmark = pytest.mark.slow
 PASS = "sitl signing test"

@@ -283,7 +283,7 @@ def test_export_documents_load_with_the_autopilot_reader(ds1, tmp_path):
     s = GainSchedule.load(p)
     s.verify_airframe(ds1.name, ds1.sha256)
     assert s.gains_at(2.0)["pitch"].kp_rate == pytest.approx(3.0)
-    # the project's one JSON convention (vtolftc.jsonio): a non-finite number is null
+    # the project's one JSON convention (vtolftc.base.jsonio): a non-finite number is null
     assert json.loads(p.read_text())["axes"]["roll"]["metadata"]["norm"] is None
     assert not list(tmp_path.glob(".*.tmp"))  # atomic write left no temp file
     lq = lqr_document(ds1, {ax: {"k_int": 1, "k_angle": 2, "k_rate": 3} for ax in AXES})
@@ -343,7 +343,7 @@ def test_shipped_gains_are_physically_sensible(ds1):
 
 
 def test_cli_rejects_bad_input(tmp_path, capsys):
-    from vtolftc.cli import run
+    from vtolftc.cli.main import run
 
     assert run(["synth", "--starts", "-1", "--out", str(tmp_path)]) == 2
     assert "--starts" in capsys.readouterr().err

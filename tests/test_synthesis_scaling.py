@@ -265,7 +265,7 @@ def test_no_authority_on_an_axis_is_an_airframe_error(ds1):
 
 
 def test_cli_synth_refuses_no_authority_in_one_line(tmp_path, capsys):
-    from vtolftc.cli import run
+    from vtolftc.cli.main import run
 
     text = Path(load_airframe().source).read_text()
     text = text.replace("torque_to_thrust_m = 0.016", "torque_to_thrust_m = 0.0")

@@ -31,7 +31,7 @@ DURATION_S = 32.0      # takeoff, hover, front transition (complete near 27.8 s)
 @pytest.fixture(scope="module")
 def flight_ulg(tmp_path_factory):
     """``vtolftc fly --case 1`` in-process: its ``flight.ulg``."""
-    from vtolftc.cli import run
+    from vtolftc.cli.main import run
 
     out = tmp_path_factory.mktemp("fly") / "run"
     assert run(["fly", "--case", "1", "--duration", str(DURATION_S), "--out", str(out),

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from vtolftc.airframe.loader import load_airframe
+from vtolftc.base.rotation import euler_to_quat
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.model import Perturbation, Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import StateEstimateNoise, StateNoise
 from vtolftc.firmware_sim.vehicle.wind import Gust, WindField
-from vtolftc.rotation import euler_to_quat
 
 
 @pytest.fixture(scope="module")

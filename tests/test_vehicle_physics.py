@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from vtolftc.base.rotation import dcm, euler_to_quat
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.model import Vehicle
-from vtolftc.rotation import dcm, euler_to_quat
 
 
 def _state(ds1, pos=(0, 0, -100), vel=(0, 0, 0), euler=(0, 0, 0), omega=(0, 0, 0)):

@@ -271,7 +271,7 @@ def test_output_watchdog_safe_output_in_real_time(tmp_path):
 
 def test_process_exits_when_the_autopilot_vanishes():
     port = free_udp_port()
-    p = subprocess.Popen([sys.executable, "-m", "vtolftc.processes.vehicle", "--link",
+    p = subprocess.Popen([sys.executable, "-m", "vtolftc.runners.processes.vehicle", "--link",
                           f"udp-server://127.0.0.1:{port}", "--peer-timeout", "1",
                           "--connect-timeout", "20"], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE)
@@ -294,7 +294,7 @@ def test_process_exits_when_the_autopilot_vanishes():
 
 
 def test_bad_arguments_exit_2():
-    r = subprocess.run([sys.executable, "-m", "vtolftc.processes.vehicle", "--link",
+    r = subprocess.run([sys.executable, "-m", "vtolftc.runners.processes.vehicle", "--link",
                         "udp-server://8.8.8.8:4560"], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 2 and "loopback" in r.stderr and "Traceback" not in r.stderr

@@ -5,7 +5,7 @@
 The physical recoverability oracle (``vtolftc.firmware_sim.vehicle.recoverability``) for
 every k-subset of the lift rotors switched off, at the campaign's hover (15 s) and
 mid-transition (23 s) conditions, read from the same reference flight as ``vtolftc
-campaign`` (``vtolftc.campaign.oracle``, its rules), calm unless ``--wind`` (a gust's peak,
+campaign`` (``vtolftc.runners.campaign.oracle``, its rules), calm unless ``--wind`` (a gust's peak,
 NED m/s, felt in every phase).
 Prints, per phase and k, how many subsets are recoverable (margin >= 0.001 rad/s^2) and the
 lowest margins.
@@ -18,7 +18,7 @@ import itertools
 import sys
 
 from vtolftc.airframe.loader import AirframeError, load_airframe
-from vtolftc.campaign.oracle import judge, reference_conditions
+from vtolftc.runners.campaign.oracle import judge, reference_conditions
 
 PHASES = (("hover", 15.0), ("mid-transition", 23.0))
 

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from vtolftc.airframe.loader import load_airframe
-from vtolftc.jsonio import atomic_write_text
+from vtolftc.base.jsonio import atomic_write_text
 from vtolftc.synthesis.certificate import certify_schedule
 
 HERE = Path(__file__).resolve().parent

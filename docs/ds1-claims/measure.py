@@ -73,7 +73,7 @@ def fly(job: tuple[str, str, list[str], str, str | None, float, float]) -> dict[
     label, case, specs, ctrl, gains, duration, delay = job
     from vtolftc.airframe.loader import load_airframe
     from vtolftc.firmware_sim.vehicle.faults import parse_fault_spec
-    from vtolftc.scenario import paper_scenario, run_scenario
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
 
     af = load_airframe()
     faults = [f for s in specs for f in parse_fault_spec(s, af.actuator_names)]

@@ -28,11 +28,11 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from vtolftc.base.rotation import ATTITUDE_AXES
 from vtolftc.firmware_sim.autopilot import control_kernels as ck
 from vtolftc.firmware_sim.autopilot.lqr import LQRAxisGains, LQRGains, LQRGainsError
 from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, gains_row
 from vtolftc.firmware_sim.autopilot.schedule import GainSchedule, GainScheduleError
-from vtolftc.rotation import ATTITUDE_AXES
 
 __all__ = [
     "CONTROLLERS",

@@ -53,6 +53,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.base.rotation import quat_to_euler
 from vtolftc.firmware_sim.autopilot.arming import ArmingMonitor
 from vtolftc.firmware_sim.autopilot.attitude import make_controller
 from vtolftc.firmware_sim.autopilot.attitude_stage import AttitudeStage
@@ -90,7 +91,6 @@ from vtolftc.firmware_sim.autopilot.output import (
 )
 from vtolftc.firmware_sim.autopilot.parameters import default_parameters
 from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
-from vtolftc.rotation import quat_to_euler
 
 __all__ = [
     "ALLOCATION_WEIGHTS",

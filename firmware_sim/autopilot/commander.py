@@ -13,6 +13,7 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from vtolftc.base.rotation import quat_to_euler
 from vtolftc.firmware_sim.autopilot.arming import ArmingMonitor
 from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
 from vtolftc.firmware_sim.autopilot.interface import (
@@ -26,7 +27,6 @@ from vtolftc.firmware_sim.autopilot.navigator import MS_COMPLETE, NavMode
 from vtolftc.firmware_sim.autopilot.outer_loops import OuterLoops
 from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
 from vtolftc.protocols.generated import constants as mav
-from vtolftc.rotation import quat_to_euler
 
 __all__ = [
     "CMD_COMPONENT_ARM_DISARM",

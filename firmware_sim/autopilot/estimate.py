@@ -13,8 +13,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from vtolftc.base.rotation import quat_to_euler
 from vtolftc.firmware_sim.autopilot.interface import NavState
-from vtolftc.rotation import quat_to_euler
 
 __all__ = ["StateEstimate", "body_velocity", "body_velocity_f"]
 

@@ -44,6 +44,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from vtolftc.base.rotation import quat_to_euler
 from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotStatus,
     FlightMode,
@@ -52,7 +53,6 @@ from vtolftc.firmware_sim.autopilot.interface import (
     ParamType,
 )
 from vtolftc.protocols.generated import constants as mav
-from vtolftc.rotation import quat_to_euler
 
 __all__ = ["FAILSAFE_PARAMS", "FailsafeEvent", "FailsafeMonitor", "register_failsafe_params"]
 

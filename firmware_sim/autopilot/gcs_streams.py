@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from vtolftc.base.rotation import quat_to_euler
 from vtolftc.firmware_sim.autopilot.gcs_services import STREAM_RATES_HZ
 from vtolftc.firmware_sim.autopilot.gcs_telemetry import TELEMETRY_MSG, TELEMETRY_RATES_HZ
 from vtolftc.firmware_sim.autopilot.interface import (
@@ -39,7 +40,6 @@ from vtolftc.firmware_sim.autopilot.modes import px4_custom_mode
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.link import Link
 from vtolftc.protocols.px4 import MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MAV_MODE_FLAG_SAFETY_ARMED
-from vtolftc.rotation import quat_to_euler
 
 __all__ = ["DEFAULT_RATES_HZ", "MSG", "StreamService"]
 

@@ -36,8 +36,8 @@ from dataclasses import dataclass
 from os import PathLike
 from typing import Any
 
+from vtolftc.base.rotation import ATTITUDE_AXES as AXES
 from vtolftc.firmware_sim.autopilot.schedule import load_document
-from vtolftc.rotation import ATTITUDE_AXES as AXES
 
 __all__ = ["FORMAT", "LQR_FIELDS", "LQRAxisGains", "LQRGains", "LQRGainsError"]
 

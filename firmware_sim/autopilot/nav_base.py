@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from vtolftc.base.geodesy import FlatEarth
 from vtolftc.firmware_sim.autopilot.backtrans import BackTransitionPlanner
 from vtolftc.firmware_sim.autopilot.guidance import L1Guidance
 from vtolftc.firmware_sim.autopilot.interface import (
@@ -38,7 +39,6 @@ from vtolftc.firmware_sim.autopilot.mission import (
     MissionItem,
     MissionStore,
 )
-from vtolftc.geodesy import FlatEarth
 from vtolftc.protocols.generated import constants as mav
 
 __all__ = ["MS_ACTIVE", "MS_COMPLETE", "MS_NOT_STARTED", "MS_PAUSED", "NAV_PARAMS", "Goal",

@@ -1,8 +1,8 @@
 """The autopilot as a process: HIL link to the vehicle, MAVLink links to ground stations.
 
 :class:`AutopilotProcess` is the flight software's main loop; the program around it (argument
-parsing, links, run folder, recorder, metrics) is :mod:`vtolftc.processes.autopilot`
-(``python -m vtolftc.processes.autopilot``), which passes its observers in: this module
+parsing, links, run folder, recorder, metrics) is :mod:`vtolftc.runners.processes.autopilot`
+(``python -m vtolftc.runners.processes.autopilot``), which passes its observers in: this module
 imports no runner, no run-folder writer and no viewer.
 
 Threads. The control thread (the caller of :meth:`AutopilotProcess.run`) owns the autopilot and
@@ -11,7 +11,7 @@ applies at most a few queued ground-station requests per cycle, steps the autopi
 HIL_SENSOR / HIL_STATE_QUATERNION pair and answers HIL_ACTUATOR_CONTROLS with
 ``wire_commands`` of its output, unless the simulation is held (``SIM_HOLD_MS``, lockstep
 only). Commands therefore act at the next control step, exactly as in the in-process runner
-(:mod:`vtolftc.scenario`). The ground-station links are received, parsed, rate-limited and
+(:mod:`vtolftc.runners.scenario`). The ground-station links are received, parsed, rate-limited and
 answered by the threads of :class:`~vtolftc.firmware_sim.autopilot.gcs_endpoint.GcsEndpoint`:
 the control step never waits for a ground station.
 

@@ -65,8 +65,8 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, TypeVar
 
+from vtolftc.base.rotation import ATTITUDE_AXES as AXES
 from vtolftc.firmware_sim.autopilot.pid import PPIDGains
-from vtolftc.rotation import ATTITUDE_AXES as AXES
 
 __all__ = [
     "FORMAT",

@@ -71,8 +71,8 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from vtolftc.geodesy import FlatEarth
-from vtolftc.rotation import dcm, euler_to_quat
+from vtolftc.base.geodesy import FlatEarth
+from vtolftc.base.rotation import dcm, euler_to_quat
 
 __all__ = ["NESTED", "TOPICS", "ULogWriter"]
 

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vtolftc.base.rotation import quat_mul
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.model import Vehicle
-from vtolftc.rotation import quat_mul
 
 STATE_NAMES = ("pn", "pe", "pd", "vn", "ve", "vd", "dphi", "dtheta", "dpsi", "p", "q", "r")
 

@@ -21,6 +21,7 @@ import numba
 import numpy as np
 
 from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.base.rotation import dcm, quat_to_euler
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.faults import Fault, FaultError, FaultKind
 from vtolftc.firmware_sim.vehicle.sensors import (
@@ -32,7 +33,6 @@ from vtolftc.firmware_sim.vehicle.sensors import (
     StateNoise,
 )
 from vtolftc.firmware_sim.vehicle.wind import WindField
-from vtolftc.rotation import dcm, quat_to_euler
 
 _F64 = np.dtype(np.float64)
 

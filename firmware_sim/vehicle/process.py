@@ -1,7 +1,7 @@
 """The simulated vehicle as a process: a :class:`Vehicle` behind a MAVLink HIL link.
 
 :class:`VehicleProcess` is the simulator's loop; the program around it is
-:mod:`vtolftc.processes.vehicle` (``python -m vtolftc.processes.vehicle``).
+:mod:`vtolftc.runners.processes.vehicle` (``python -m vtolftc.runners.processes.vehicle``).
 
 Physics runs at 1 kHz (the vehicle's RK4 step); every 4 ms of simulated time (one control
 period) the process sends, in one datagram, PX4-SITL style:
@@ -85,17 +85,17 @@ from typing import Any, TextIO
 import numpy as np
 
 from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.base.jsonio import atomic_write_text, dumps
+from vtolftc.base.rotation import quat_to_euler as dyn_quat_to_euler
 from vtolftc.firmware_sim.vehicle.battery import BatteryModel, vehicle_power_w
 from vtolftc.firmware_sim.vehicle.dynamics import N_RIGID
 from vtolftc.firmware_sim.vehicle.faults import Fault, FaultKind
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import SensorNoise
-from vtolftc.jsonio import atomic_write_text, dumps
 from vtolftc.protocols import SigningConfig, open_link
 from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.hil import NavState, encode_hil_state
-from vtolftc.rotation import quat_to_euler as dyn_quat_to_euler
 
 __all__ = ["AUTOPILOT_COMPONENT_ID", "AUTOPILOT_SYSTEM_ID", "EXIT_PEER_LOST", "SAFE_OUTPUT",
            "VehicleProcess"]

@@ -87,10 +87,10 @@ import numpy as np
 from scipy.optimize import linprog
 
 from vtolftc.airframe.loader import Airframe
+from vtolftc.base.rotation import euler_to_quat
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.faults import Fault, FaultError, FaultKind
 from vtolftc.firmware_sim.vehicle.model import Perturbation, Vehicle
-from vtolftc.rotation import euler_to_quat
 
 __all__ = [
     "AXES",

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vtolftc.geodesy import FlatEarth
+from vtolftc.base.geodesy import FlatEarth
 
 SEA_LEVEL_PRESSURE_HPA = 1013.25
 SEA_LEVEL_TEMPERATURE_C = 15.0

@@ -20,9 +20,9 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.base.rotation import euler_to_quat
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.model import Vehicle
-from vtolftc.rotation import euler_to_quat
 
 
 class TrimError(RuntimeError):

@@ -108,7 +108,7 @@ def main() -> None:
 
 
 def _nav_of(veh: Vehicle, now: int):
-    from vtolftc.mission_run import _nav_of as nav_of
+    from vtolftc.runners.mission_run import _nav_of as nav_of
 
     return nav_of(veh, now)
 

@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from vtolftc.base.rotation import quat_to_euler
 from vtolftc.protocols.hil import NavState
-from vtolftc.rotation import quat_to_euler
 from vtolftc.telemetry.autopilot_status import FlightMode
 from vtolftc.telemetry.samples import TelemetrySample
 

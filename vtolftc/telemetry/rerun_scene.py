@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from vtolftc.rotation import ATTITUDE_AXES
+from vtolftc.base.rotation import ATTITUDE_AXES
 
 __all__ = ["TIMELINE", "VIRTUAL_AXES", "actuator_entity", "blueprint", "log_static_scene"]
 

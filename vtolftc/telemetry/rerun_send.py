@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from vtolftc.rotation import ATTITUDE_AXES
+from vtolftc.base.rotation import ATTITUDE_AXES
 from vtolftc.telemetry.rerun_rows import RowBuffer
 from vtolftc.telemetry.rerun_scene import TIMELINE, actuator_entity
 

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from vtolftc.jsonio import json_safe
+from vtolftc.base.jsonio import json_safe
 from vtolftc.protocols.hil import N_ACTUATORS
 from vtolftc.telemetry.samples import TelemetrySample
 

@@ -1,5 +1,5 @@
-"""The process programs of SITL: ``python -m vtolftc.processes.autopilot`` and
-``python -m vtolftc.processes.vehicle``.
+"""The process programs of SITL: ``python -m vtolftc.runners.processes.autopilot`` and
+``python -m vtolftc.runners.processes.vehicle``.
 
 They parse the arguments, open the links and wire the run folder, the rerun recorder and the
 metrics into the flight software (:mod:`vtolftc.firmware_sim.autopilot.process`,

@@ -1,10 +1,10 @@
 """SITL runner: the vehicle and the autopilot as separate processes, flown by a ground station.
 
-:class:`SitlRun` starts ``python -m vtolftc.processes.vehicle`` and ``python -m
-vtolftc.processes.autopilot`` (each in its own process group, output in log files of the
+:class:`SitlRun` starts ``python -m vtolftc.runners.processes.vehicle`` and ``python -m
+vtolftc.runners.processes.autopilot`` (each in its own process group, output in log files of the
 run folder) on free loopback ports, over UDP or zenoh (embedded peers, explicit
 ``tcp/127.0.0.1`` endpoints, no scouting), connects a :class:`vtolftc.gcs.client.GroundStation` and
-flies a :class:`vtolftc.scenario.Scenario` by sending the real MAVLink commands: arming,
+flies a :class:`vtolftc.runners.scenario.Scenario` by sending the real MAVLink commands: arming,
 NAV_TAKEOFF, DO_VTOL_TRANSITION, and the faults as MAV_CMD_INJECT_PARTIAL_LOSS /
 INJECT_FAILURE after setting SYS_FAILURE_EN = 1. The autopilot forwards the faults to the
 vehicle process; the controller never sees them.
@@ -63,8 +63,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from vtolftc.base.jsonio import atomic_write_text, json_safe
 from vtolftc.gcs.client import CommandOutcome, GcsError, GroundStation
-from vtolftc.jsonio import atomic_write_text, json_safe
 from vtolftc.protocols.hil_signing import HIL_KEY_ENV, new_hil_key
 from vtolftc.protocols.netutil import free_tcp_port, free_udp_port
 
@@ -216,12 +216,12 @@ class SitlRun:
         if cfg.hil_loss > 0:
             latency += ["--hil-loss", f"{cfg.hil_loss:g}"]
         timeout = f"{cfg.vehicle_timeout_s:g}"
-        self._spawn("vehicle", ["-m", "vtolftc.processes.vehicle", "--link", v_url,
+        self._spawn("vehicle", ["-m", "vtolftc.runners.processes.vehicle", "--link", v_url,
                                 *mode, *common, "--out", str(self.out / "vehicle"),
                                 "--peer-timeout", timeout, "--connect-timeout",
                                 str(cfg.startup_timeout_s), *latency,
                                 *cfg.extra_vehicle_args])
-        ap_args = ["-m", "vtolftc.processes.autopilot", "--hil-link", a_hil,
+        ap_args = ["-m", "vtolftc.runners.processes.autopilot", "--hil-link", a_hil,
                    "--gcs-link", a_gcs, "--no-default-gcs", *mode, *common,
                    "--controller", cfg.controller,
                    "--out", str(self.out / "autopilot"), "--case", str(cfg.case),
@@ -281,7 +281,8 @@ class SitlRun:
 
     # ------------------------------------------------------------------ flight
     def fly(self, scenario: Any) -> SitlResult:
-        """Fly ``scenario`` (a :class:`vtolftc.scenario.Scenario`) and return the metrics."""
+        """Fly ``scenario`` (a :class:`vtolftc.runners.scenario.Scenario`) and return the
+        metrics."""
         from vtolftc.airframe.loader import load_airframe
 
         assert self.gs is not None
@@ -405,7 +406,7 @@ def _read_json(path: Path) -> dict[str, Any]:
 def run_sitl(config: SitlConfig, scenario: Any = None) -> SitlResult:
     """Start, fly (default: ``paper_scenario(case, duration)``) and stop; always cleans up."""
     if scenario is None:
-        from vtolftc.scenario import paper_scenario
+        from vtolftc.runners.scenario import paper_scenario
 
         scenario = paper_scenario(config.case, config.duration_s)
     with SitlRun(config) as run:

@@ -7,7 +7,7 @@ to the scenario's fault set and condition, never to a controller: the controller
 condition share it, and survival is reported against it (survived / recoverable).
 
 The flight condition of a phase (its injection time) is read from one **reference flight**:
-the campaign's timeline (:func:`vtolftc.scenario.paper_scenario`, no fault, calm air, the
+the campaign's timeline (:func:`vtolftc.runners.scenario.paper_scenario`, no fault, calm air, the
 airframe file as it is) flown once with GS-SHIF, up to the last injection time. At each
 injection time it gives the speed over the ground along the heading, the pitch and the
 actuator positions (where a stuck actuator stays), and the autopilot's mode: in the
@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from vtolftc.campaign.scenarios import CampaignScenario
+from vtolftc.runners.campaign.scenarios import CampaignScenario
 
 __all__ = ["PhaseCondition", "judge", "oracle_columns", "reference_conditions"]
 
@@ -99,7 +99,7 @@ def reference_conditions(times_s: Sequence[float], airframe_path: str | None = N
     """The reference flight's condition at each of ``times_s`` (s, simulated); a time the
     flight did not reach (it crashed) is missing from the answer."""
     from vtolftc.airframe.loader import load_airframe
-    from vtolftc.scenario import paper_scenario, run_scenario
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
 
     af = load_airframe(airframe_path)
     rec = _Recorder(times_s)

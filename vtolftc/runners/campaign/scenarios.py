@@ -1,4 +1,4 @@
-"""Expansion of a :class:`~vtolftc.campaign.spec.Spec` into its scenarios.
+"""Expansion of a :class:`~vtolftc.runners.campaign.spec.Spec` into its scenarios.
 
 The order is fixed by the spec (fault families and their sets in file order, then phases,
 winds, perturbations, seeds and controllers, the innermost last: the controllers of one flight
@@ -17,7 +17,7 @@ import shlex
 from dataclasses import dataclass
 from typing import Any
 
-from vtolftc.campaign.spec import FaultSet, PerturbationSpec, Spec, SpecError, WindSpec
+from vtolftc.runners.campaign.spec import FaultSet, PerturbationSpec, Spec, SpecError, WindSpec
 
 __all__ = ["CampaignScenario", "expand", "flight_order"]
 

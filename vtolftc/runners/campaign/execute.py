@@ -1,9 +1,10 @@
 """Flying campaign scenarios: one scenario in-process, many on a local pool or a Dask cluster.
 
 :func:`fly_scenario` is the unit of work: it flies one
-:class:`~vtolftc.campaign.scenarios.CampaignScenario` with the in-process runner
-(:func:`vtolftc.scenario.run_scenario`, deterministic) and returns its result row (see
-:mod:`vtolftc.campaign.results`). Everything in the row except the wall times depends only on
+:class:`~vtolftc.runners.campaign.scenarios.CampaignScenario` with the in-process runner
+(:func:`vtolftc.runners.scenario.run_scenario`, deterministic) and returns its result row (see
+:mod:`vtolftc.runners.campaign.results`). Everything in the row except the wall times depends only
+on
 the scenario, so the same spec gives the same rows on one core, on a process pool or on any
 Dask worker with the same package installed.
 
@@ -24,8 +25,8 @@ import traceback
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-from vtolftc.campaign.outcome import outcome
-from vtolftc.campaign.scenarios import CampaignScenario
+from vtolftc.runners.campaign.outcome import outcome
+from vtolftc.runners.campaign.scenarios import CampaignScenario
 
 __all__ = ["fly_scenario", "run_dask", "run_local", "vehicle_options"]
 
@@ -48,7 +49,8 @@ def vehicle_options(steady_ned_m_s: Sequence[float] = (0.0, 0.0, 0.0),
                     inertia_scale: Sequence[float] = (1.0, 1.0, 1.0),
                     cg_offset_m: Sequence[float] = (0.0, 0.0, 0.0),
                     noise_level: str = "none", seed: int = 0) -> dict[str, Any]:
-    """The ``vehicle_options`` of :func:`vtolftc.scenario.run_scenario` for a wind (steady NED
+    """The ``vehicle_options`` of :func:`vtolftc.runners.scenario.run_scenario` for a wind (steady
+    NED
     m/s, gusts as (start s, duration s, amplitude NED m/s)), an airframe perturbation and a
     state-noise level (``none`` | ``typical``) with its seed. Shared by the campaign and
     ``vtolftc fly``, so both fly the very same vehicle."""
@@ -81,7 +83,7 @@ def fly_scenario(sc: CampaignScenario) -> dict[str, Any]:
     """Fly one scenario and return its result row (never raises on a failing flight: an
     exception inside the simulation is the outcome ``error`` with its message)."""
     from vtolftc.firmware_sim.vehicle.faults import Fault
-    from vtolftc.scenario import paper_scenario, run_scenario
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
 
     t0 = time.perf_counter()
     row: dict[str, Any] = {

@@ -20,7 +20,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from vtolftc.errors import UsageError
+from vtolftc.base.errors import UsageError
 
 
 def _on_sigterm(signum: int, frame: FrameType | None) -> None:
@@ -30,7 +30,7 @@ def _on_sigterm(signum: int, frame: FrameType | None) -> None:
 def run_certify(airframe: Path, out: Path, *, profile: str = "full", jobs: int | None = None,
                 scheduler: str | None = None, resume: bool = False,
                 stages: Sequence[Any] | None = None, code: str | None = None) -> int:
-    """Run the pipeline (``stages`` default :func:`vtolftc.certify.stages.default_stages`),
+    """Run the pipeline (``stages`` default :func:`vtolftc.runners.certify.stages.default_stages`),
     write the report, print the gates; return 0 (every gate holds) or 1.
 
     Raises
@@ -41,9 +41,9 @@ def run_certify(airframe: Path, out: Path, *, profile: str = "full", jobs: int |
         the airframe file is malformed or cannot fly.
     """
     from vtolftc.airframe.loader import load_airframe
-    from vtolftc.certify.pipeline import StageContext, run_pipeline
-    from vtolftc.certify.report import write_report
-    from vtolftc.certify.stages import PROFILES, default_stages, sitl_command
+    from vtolftc.runners.certify.pipeline import StageContext, run_pipeline
+    from vtolftc.runners.certify.report import write_report
+    from vtolftc.runners.certify.stages import PROFILES, default_stages, sitl_command
 
     af = load_airframe(airframe)
     meta_path = out / "certify.json"

@@ -6,7 +6,7 @@ NAV_WAYPOINTs on the corners of a ``length`` x ``width`` rectangle (north, then 
 back; the fourth corner is home), DO_VTOL_TRANSITION back to multicopter and NAV_LAND at home.
 
 :func:`run_mission` flies a mission in-process (vehicle at 1 kHz, autopilot at 250 Hz, the
-same HIL encoding as :mod:`vtolftc.scenario`): arm, AUTO.MISSION, until the autopilot has
+same HIL encoding as :mod:`vtolftc.runners.scenario`): arm, AUTO.MISSION, until the autopilot has
 landed and disarmed or ``timeout_s``. Faults may be injected when a given mission item becomes
 current (plus a delay), e.g. case 1's during the first fixed-wing leg.
 
@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.base.geodesy import FlatEarth
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 from vtolftc.firmware_sim.autopilot.interface import (
     FlightMode,
@@ -47,7 +48,6 @@ from vtolftc.firmware_sim.vehicle.battery import BatteryModel, vehicle_power_w
 from vtolftc.firmware_sim.vehicle.faults import Fault
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import Home
-from vtolftc.geodesy import FlatEarth
 
 __all__ = ["MissionRun", "back_transition_mission", "path_errors", "rectangle_mission",
            "run_mission"]

@@ -11,7 +11,7 @@ Figures (in the output folder):
 - ``attitude_excursion.png``: distributions of the largest roll/pitch excursion per
   controller (a crash is at or beyond 60 deg).
 
-Survival everywhere is :mod:`vtolftc.campaign.outcome`.
+Survival everywhere is :mod:`vtolftc.runners.campaign.outcome`.
 """
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from vtolftc.campaign.outcome import ALTITUDE_TOLERANCE_M, ATTITUDE_TOLERANCE_DEG
-from vtolftc.campaign.results import TIMING_COLUMNS
-from vtolftc.campaign.spec import Gate
-from vtolftc.jsonio import atomic_write_text
+from vtolftc.base.jsonio import atomic_write_text
+from vtolftc.runners.campaign.outcome import ALTITUDE_TOLERANCE_M, ATTITUDE_TOLERANCE_DEG
+from vtolftc.runners.campaign.results import TIMING_COLUMNS
+from vtolftc.runners.campaign.spec import Gate
 
 __all__ = ["check_gates", "compare", "recoverable_lines", "summary_lines", "worst",
            "write_report"]

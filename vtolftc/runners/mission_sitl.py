@@ -21,11 +21,11 @@ from pymavlink import mavutil
 
 from vtolftc.firmware_sim.autopilot.mission import MissionItem
 from vtolftc.firmware_sim.vehicle.faults import case_faults
-from vtolftc.mission_run import rectangle_mission
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.netutil import free_udp_port
 from vtolftc.protocols.px4 import mode_name
-from vtolftc.sitl import SitlConfig, SitlError, SitlRun
+from vtolftc.runners.mission_run import rectangle_mission
+from vtolftc.runners.sitl import SitlConfig, SitlError, SitlRun
 
 __all__ = ["fly_sitl_mission", "pymavlink_download", "pymavlink_upload"]
 

@@ -21,8 +21,8 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from vtolftc.errors import UsageError
-from vtolftc.jsonio import atomic_write_text, dumps
+from vtolftc.base.errors import UsageError
+from vtolftc.base.jsonio import atomic_write_text, dumps
 
 
 def _usage(msg: str) -> Exception:
@@ -46,9 +46,9 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         raise _usage(f"--jobs {args.jobs}: expected a number of processes >= 1")
     if args.scheduler is not None and args.jobs is not None:
         raise _usage("--jobs and --scheduler: give one (the cluster sets its own workers)")
-    from vtolftc.campaign.results import PartWriter, read_results, write_final
-    from vtolftc.campaign.scenarios import expand, flight_order
-    from vtolftc.campaign.spec import SpecError, load_spec
+    from vtolftc.runners.campaign.results import PartWriter, read_results, write_final
+    from vtolftc.runners.campaign.scenarios import expand, flight_order
+    from vtolftc.runners.campaign.spec import SpecError, load_spec
 
     try:
         spec = load_spec(args.spec)
@@ -119,7 +119,7 @@ def _cpus() -> int:
 
 def _oracle(todo: list[Any]) -> dict[str, dict[str, Any]]:
     """The physical oracle's columns of the scenarios to fly (one reference flight + LPs)."""
-    from vtolftc.campaign.oracle import oracle_columns
+    from vtolftc.runners.campaign.oracle import oracle_columns
 
     t0 = time.perf_counter()
     try:
@@ -137,7 +137,7 @@ def _fly(args: argparse.Namespace, spec: Any, todo: list[Any], writer: Any, tota
          n_done: int, n_surv: int, oracle: dict[str, dict[str, Any]] | None = None) -> None:
     from tqdm import tqdm
 
-    from vtolftc.campaign.execute import run_dask, run_local
+    from vtolftc.runners.campaign.execute import run_dask, run_local
 
     if args.scheduler:
         try:
@@ -173,8 +173,8 @@ def _chain(first: list[Any], rest: Any) -> Any:
 
 
 def _finish(spec: Any, table: Any, out: Path, wall: float, n_flown: int, total: int) -> int:
-    from vtolftc.campaign.execute import cached_airframe
-    from vtolftc.campaign.report import (
+    from vtolftc.runners.campaign.execute import cached_airframe
+    from vtolftc.runners.campaign.report import (
         check_gates,
         recoverable_lines,
         summary_lines,
@@ -217,8 +217,8 @@ def _finish(spec: Any, table: Any, out: Path, wall: float, n_flown: int, total: 
 
 
 def _compare(paths: list[str]) -> int:
-    from vtolftc.campaign.report import compare
-    from vtolftc.campaign.results import read_results
+    from vtolftc.runners.campaign.report import compare
+    from vtolftc.runners.campaign.results import read_results
 
     tables = []
     for p in paths:

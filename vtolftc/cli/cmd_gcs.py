@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from vtolftc.errors import UsageError
+from vtolftc.base.errors import UsageError
 
 __all__ = ["register"]
 

@@ -30,8 +30,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from vtolftc.certify.pipeline import Stage, StageContext, StageError, code_digest
-from vtolftc.errors import UsageError
+from vtolftc.base.errors import UsageError
+from vtolftc.runners.certify.pipeline import Stage, StageContext, StageError, code_digest
 
 __all__ = ["PROFILES", "SINGLE_PHASES", "default_stages"]
 
@@ -237,7 +237,7 @@ def stage_campaign(ctx: StageContext) -> dict[str, Any]:
     """The envelope campaign of the synthesised GS-SHIF (``vtolftc campaign``'s engine)."""
     import shutil
 
-    from vtolftc.campaign.results import read_results
+    from vtolftc.runners.campaign.results import read_results
 
     out = ctx.out_dir / "campaign"
     text = campaign_spec_text(ctx)
@@ -259,12 +259,12 @@ def fly_campaign(spec_path: Path, out: Path, *, jobs: int | None, scheduler: str
     """Fly the scenarios of ``spec_path`` not yet in ``out`` (``vtolftc campaign --resume``'s
     engine: oracle columns, local pool or Dask, Parquet parts), then write the campaign's own
     ``results.parquet`` and ``report.html``."""
-    from vtolftc.campaign.execute import cached_airframe, run_dask, run_local
-    from vtolftc.campaign.oracle import oracle_columns
-    from vtolftc.campaign.report import write_report
-    from vtolftc.campaign.results import PartWriter, read_results, write_final
-    from vtolftc.campaign.scenarios import expand, flight_order
-    from vtolftc.campaign.spec import SpecError, load_spec
+    from vtolftc.runners.campaign.execute import cached_airframe, run_dask, run_local
+    from vtolftc.runners.campaign.oracle import oracle_columns
+    from vtolftc.runners.campaign.report import write_report
+    from vtolftc.runners.campaign.results import PartWriter, read_results, write_final
+    from vtolftc.runners.campaign.scenarios import expand, flight_order
+    from vtolftc.runners.campaign.spec import SpecError, load_spec
 
     try:
         spec = load_spec(spec_path)
@@ -347,8 +347,8 @@ def judge_campaign(rows: list[Mapping[str, Any]]) -> dict[str, Any]:
 def stage_sitl(ctx: StageContext) -> dict[str, Any]:
     """The reference VTOL mission (takeoff, transition, four waypoints, back transition, land)
     flown by the SITL processes over UDP with the synthesised gains."""
-    from vtolftc.mission_sitl import fly_sitl_mission
-    from vtolftc.sitl import SitlError
+    from vtolftc.runners.mission_sitl import fly_sitl_mission
+    from vtolftc.runners.sitl import SitlError
 
     out = ctx.stage_dir("sitl")
     gains = Path(ctx.records["synth"]["gains_dir"])
@@ -361,7 +361,7 @@ def stage_sitl(ctx: StageContext) -> dict[str, Any]:
 
 
 def judge_mission(rec: Mapping[str, Any], n_items: int) -> dict[str, Any]:
-    """The SITL record and its gate from :func:`vtolftc.mission_sitl.fly_sitl_mission`'s
+    """The SITL record and its gate from :func:`vtolftc.runners.mission_sitl.fly_sitl_mission`'s
     record (``pos`` NED samples, ``reached`` item numbers)."""
     pos = list(rec.get("pos", []))
     fails = []
@@ -389,7 +389,7 @@ def judge_mission(rec: Mapping[str, Any], n_items: int) -> dict[str, Any]:
 
 def sitl_command(airframe: Path, gains_dir: str, out: Path) -> str:
     """A command that re-flies the SITL mission of a certify run."""
-    code = ("from pathlib import Path; from vtolftc.mission_sitl import fly_sitl_mission; "
+    code = ("from pathlib import Path; from vtolftc.runners.mission_sitl import fly_sitl_mission; "
             f"r = fly_sitl_mission(Path({str(out)!r}), airframe=Path({str(airframe)!r}), "
             f"gains_dir=Path({gains_dir!r})); print(r['reached'], r['pos'][-1])")
     return shlex.join(["python", "-c", code])

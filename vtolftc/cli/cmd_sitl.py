@@ -3,7 +3,7 @@
     vtolftc sitl --case 1 --controller gs-shif [--transport udp|zenoh] [--realtime]
                  [--duration 40] [--out DIR] [--compare]
 
-Starts ``vtolftc.processes.vehicle`` and ``vtolftc.processes.autopilot`` on
+Starts ``vtolftc.runners.processes.vehicle`` and ``vtolftc.runners.processes.autopilot`` on
 free
 loopback ports (UDP, or embedded zenoh peers on tcp/127.0.0.1), flies the case through a
 ground station with the real MAVLink commands (arm, takeoff, transition, fault injection with
@@ -19,7 +19,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from vtolftc.errors import UsageError
+from vtolftc.base.errors import UsageError
 
 __all__ = ["METRIC_ROWS", "register"]
 
@@ -102,8 +102,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     if f"case{case}" not in load_cases():
         raise UsageError(f"--case {args.case!r}: expected one of "
                          f"{', '.join(k.removeprefix('case') for k in load_cases())}")
-    from vtolftc.scenario import paper_scenario
-    from vtolftc.sitl import SitlConfig, SitlError, run_sitl
+    from vtolftc.runners.scenario import paper_scenario
+    from vtolftc.runners.sitl import SitlConfig, SitlError, run_sitl
     from vtolftc.telemetry.runfolder import default_run_dir
 
     af = None
@@ -138,7 +138,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
         print(line + (f" ({o['detail']})" if o["result"] != "ACCEPTED" and o["detail"] else ""))
     ref = None
     if args.compare:
-        from vtolftc.scenario import run_scenario
+        from vtolftc.runners.scenario import run_scenario
 
         ref = run_scenario(scenario, args.controller, airframe=af, gains_dir=args.gains_dir
                            ).metrics

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from vtolftc.errors import UsageError
+from vtolftc.base.errors import UsageError
 
 __all__ = ["cmd_dashboard", "register"]
 

@@ -2,5 +2,5 @@
 
 ``spec`` (TOML spec files), ``scenarios`` (expansion), ``execute`` (one scenario; local pool
 and Dask), ``results`` (Parquet parts), ``outcome`` (the survival definition), ``report``
-(summary, gates, HTML and PNGs, comparisons); the command line is ``vtolftc.cmd_campaign``.
+(summary, gates, HTML and PNGs, comparisons); the command line is ``vtolftc.cli.cmd_campaign``.
 """

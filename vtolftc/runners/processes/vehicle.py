@@ -1,6 +1,6 @@
 """The vehicle process program.
 
-    python -m vtolftc.processes.vehicle --link udp-server://127.0.0.1:4560 [--lockstep]
+    python -m vtolftc.runners.processes.vehicle --link udp-server://127.0.0.1:4560 [--lockstep]
         [--realtime] [--airframe FILE] [--seed N] [--noise] [--duration S] [--out DIR]
         [--output-timeout S] [--hil-delay-ms MS] [--hil-loss P]
 
@@ -29,7 +29,7 @@ __all__ = ["main"]
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(
-        prog="python -m vtolftc.processes.vehicle",
+        prog="python -m vtolftc.runners.processes.vehicle",
         description="Simulated vehicle behind a MAVLink HIL link (PX4 SITL style).")
     ap.add_argument("--link", required=True,
                     help="HIL link URL, e.g. udp-server://127.0.0.1:4560 or "

@@ -1,6 +1,6 @@
 """The autopilot process program.
 
-    python -m vtolftc.processes.autopilot --hil-link udp-client://127.0.0.1:4560
+    python -m vtolftc.runners.processes.autopilot --hil-link udp-client://127.0.0.1:4560
         [--gcs-link URL ...] [--no-default-gcs] [--lockstep|--realtime]
         [--controller gs-shif|shif|lqr] [--airframe FILE] [--gains-dir DIR]
         [--hold-ms MS] [--param NAME=VALUE ...] [--signing-passphrase TEXT]
@@ -46,11 +46,11 @@ import sys
 from pathlib import Path
 from typing import Any, TextIO
 
+from vtolftc.base.jsonio import atomic_write_text, json_safe
 from vtolftc.firmware_sim.autopilot.failsafe import register_failsafe_params
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import UNSIGNED_ALLOWED
 from vtolftc.firmware_sim.autopilot.interface import AutopilotAPI, ParamError
 from vtolftc.firmware_sim.autopilot.process import AutopilotProcess
-from vtolftc.jsonio import atomic_write_text, json_safe
 from vtolftc.protocols import SigningConfig, StreamTimestamps, open_link
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.hil_signing import hil_signing_from_env
@@ -66,7 +66,7 @@ dropped unparsed. A ground station sends a few tens per second."""
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(
-        prog="python -m vtolftc.processes.autopilot",
+        prog="python -m vtolftc.runners.processes.autopilot",
         description="vtol-ftc autopilot: HIL link to the simulated vehicle, MAVLink to ground "
                     "stations (PX4 conventions).")
     ap.add_argument("--hil-link", required=True,

@@ -14,8 +14,8 @@ is never lost, and at most the rows of the unwritten batch are flown again by ``
 and sorts by index; :func:`write_final` writes ``results.parquet`` the same way (atomically).
 
 Columns (one row per scenario) are :data:`SCHEMA`: the scenario's axes, ``outcome`` /
-``survived`` (:mod:`vtolftc.campaign.outcome`), ``recoverable`` / ``recovery_margin`` (the
-physical oracle, :mod:`vtolftc.campaign.oracle`; a NaN margin: not judged), crash time,
+``survived`` (:mod:`vtolftc.runners.campaign.outcome`), ``recoverable`` / ``recovery_margin`` (the
+physical oracle, :mod:`vtolftc.runners.campaign.oracle`; a NaN margin: not judged), crash time,
 final errors, RMSEs over the window from the injection, largest attitude excursion and
 altitude loss, transition time, share of control steps whose allocation fell short of the
 commanded moments, and wall times.
@@ -32,7 +32,7 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from vtolftc.jsonio import atomic_write
+from vtolftc.base.jsonio import atomic_write
 
 __all__ = ["SCHEMA", "TIMING_COLUMNS", "PartWriter", "read_results", "write_final"]
 

@@ -27,7 +27,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from vtolftc.errors import UsageError
+from vtolftc.base.errors import UsageError
 
 CONTROLLER_NAMES = ("gs-shif", "shif", "lqr")
 _PAPER_TABLE4 = {
@@ -131,7 +131,7 @@ def default_observers(run_dir: Path, args: argparse.Namespace) -> list[Any]:
 
 
 def _bind_autopilot(observers: list[Any]) -> Any:
-    """``autopilot_setup`` for :func:`~vtolftc.scenario.run_scenario` that hands the run's
+    """``autopilot_setup`` for :func:`~vtolftc.runners.scenario.run_scenario` that hands the run's
     autopilot to the observers that read it (the ULog writer: parameters, mission, rates)."""
     def setup(ap: Any) -> None:
         for obs in observers:
@@ -198,7 +198,7 @@ def _check_common(args: argparse.Namespace) -> None:
 def _fly_one(case: str, controller: str, args: argparse.Namespace, run_dir: Path,
              extra_faults: list[Any]) -> Any:
     from vtolftc.firmware_sim.vehicle.flyable import load_flyable_airframe
-    from vtolftc.scenario import paper_scenario, run_scenario
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
 
     af = load_flyable_airframe(getattr(args, "airframe", None))
     scen = paper_scenario(case, args.duration, airframe=af, extra_faults=extra_faults,
@@ -236,8 +236,8 @@ def _floats(text: str, n: int, what: str, unit: str) -> tuple[float, ...]:
 def _vehicle_options(args: argparse.Namespace) -> dict[str, Any]:
     """The physical vehicle and its environment from ``--wind``, ``--gust``, ``--mass-scale``,
     ``--inertia-scale``, ``--cg-offset``, ``--noise`` and ``--noise-seed`` (as a campaign
-    scenario flies them, see :func:`vtolftc.campaign.execute.vehicle_options`)."""
-    from vtolftc.campaign.execute import vehicle_options
+    scenario flies them, see :func:`vtolftc.runners.campaign.execute.vehicle_options`)."""
+    from vtolftc.runners.campaign.execute import vehicle_options
 
     wind = (_floats(args.wind, 3, "--wind", "N,E,D (m/s)")
             if getattr(args, "wind", None) else (0.0, 0.0, 0.0))
@@ -332,7 +332,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
 
 def cmd_compare(args: argparse.Namespace) -> int:
     """Fly a case with the three controllers and print a table like the paper's table 4."""
-    from vtolftc.jsonio import json_safe
+    from vtolftc.base.jsonio import json_safe
     from vtolftc.telemetry.runfolder import default_run_dir
 
     _check_common(args)

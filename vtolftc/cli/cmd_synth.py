@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from vtolftc.errors import UsageError
+from vtolftc.base.errors import UsageError
 
 
 def _check(args: argparse.Namespace) -> None:

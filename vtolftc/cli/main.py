@@ -15,20 +15,20 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from vtolftc.airframe.loader import AirframeError, load_airframe
-from vtolftc.errors import UsageError
+from vtolftc.base.errors import UsageError
 from vtolftc.firmware_sim.vehicle.faults import FaultError
 
 # Each of these modules defines ``register(subparsers)``, adding its sub-command(s) with
 # ``set_defaults(func=...)``; the functions raise UsageError / RuntimeError as described above.
 # Modules are imported when the parser is built, so keep their top-level imports light.
 _COMMAND_MODULES: tuple[str, ...] = (
-    "vtolftc.cmd_campaign",
-    "vtolftc.cmd_certify",
-    "vtolftc.cmd_dashboard",
-    "vtolftc.cmd_fly",
-    "vtolftc.cmd_gcs",
-    "vtolftc.cmd_sitl",
-    "vtolftc.cmd_synth",
+    "vtolftc.cli.cmd_campaign",
+    "vtolftc.cli.cmd_certify",
+    "vtolftc.cli.cmd_dashboard",
+    "vtolftc.cli.cmd_fly",
+    "vtolftc.cli.cmd_gcs",
+    "vtolftc.cli.cmd_sitl",
+    "vtolftc.cli.cmd_synth",
 )
 
 
