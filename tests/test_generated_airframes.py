@@ -27,12 +27,13 @@ import hashlib
 import json
 import math
 import tempfile
+import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, assume, given, note, settings
+from hypothesis import HealthCheck, Phase, assume, example, given, note, settings
 from support.airframes import (
     MASS_RANGE_KG,
     N_LIFT_ROTORS,
@@ -43,6 +44,7 @@ from support.airframes import (
 )
 
 from vtolftc.airframe.loader import (
+    DS1_PATH,
     Airframe,
     AirframeError,
     airframe_from_dict,
@@ -63,6 +65,15 @@ _FLOWN: set[str] = set()
 """Names (layout, mass to 0.1 kg, span to 0.01 m) already flown in this session: Hypothesis
 mutates earlier examples, and a near-copy of an airframe would spend the CI budget on the same
 aircraft, so the slow test rejects it (rejected draws do not count towards max_examples)."""
+
+
+def _weak_pusher_ds1() -> dict[str, Any]:
+    """DS-1 with 2 N pushers: cannot reach its wing-borne trim (an explicit example that the
+    flyability check refuses, so the one-line refusal branch runs every time)."""
+    doc = tomllib.loads(DS1_PATH.read_text())
+    doc["airframe"]["name"] = "DS-1 with 2 N pushers"
+    doc["pushers"]["max_thrust_N"] = 2.0
+    return doc
 
 
 def _load(doc: dict[str, Any]) -> Airframe:
@@ -149,6 +160,7 @@ def _fly(af: Airframe, gains_dir: Path) -> dict[str, Any]:
           phases=(Phase.explicit, Phase.generate),
           suppress_health_check=(HealthCheck.too_slow, HealthCheck.filter_too_much))
 @given(doc=airframe_documents())
+@example(doc=_weak_pusher_ds1())
 def test_generated_airframes_synthesise_and_fly_the_nominal_transition(doc):
     """Each generated airframe is refused in one line or synthesised and flown (case 0)."""
     from vtolftc.firmware_sim.vehicle.flyable import check_flyable
