@@ -139,7 +139,7 @@ def _cheap_gains(af: Airframe, out: Path) -> None:
 
 
 def _fly(af: Airframe, gains_dir: Path) -> dict[str, Any]:
-    from vtolftc.scenario import paper_scenario, run_scenario
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
 
     speeds = af.airspeeds
     assert speeds is not None
