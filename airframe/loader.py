@@ -153,11 +153,19 @@ class LandingGear:
     friction_coefficient: float
 
 
-TRANSITION_END_OVER_STALL = 1.05
-"""Transition-end airspeed over the stall speed when the file declares none [-]."""
-
 CRUISE_OVER_STALL = 1.4
-"""Cruise airspeed over the stall speed when the file declares none [-]."""
+"""Cruise airspeed over the stall speed when the file declares none [-] (the usual 1.3-1.5
+band of small fixed-wing aircraft: below the wing's best-range speed, well clear of the stall
+in gusts)."""
+
+SPEED_GRID_M_S = 0.5
+"""Derived airspeeds are rounded up to this grid [m/s] (rounding up keeps the transition end
+at or above the stall speed)."""
+
+
+def round_up_speed(v_m_s: float) -> float:
+    """``v_m_s`` rounded up to :data:`SPEED_GRID_M_S` [m/s] (exact multiples stay)."""
+    return math.ceil(v_m_s / SPEED_GRID_M_S - 1e-9) * SPEED_GRID_M_S
 
 
 @dataclass(frozen=True)
@@ -165,9 +173,11 @@ class Airspeeds:
     """The airspeeds that matter [m/s]: stall, end of the transition, cruise.
 
     Declared in the optional ``[airspeeds]`` section or derived from the wing: stall = the
-    wing alone at CL_max carrying the weight, transition end =
-    :data:`TRANSITION_END_OVER_STALL` x stall, cruise = :data:`CRUISE_OVER_STALL` x stall.
-    ``declared`` names the ones the file gave.
+    wing alone at CL_max carrying the weight, transition end = stall rounded up to
+    :data:`SPEED_GRID_M_S`, cruise = :data:`CRUISE_OVER_STALL` x stall rounded up (and at least
+    one grid step above the transition end). DS-1: 12.73, 13.0, 18.0 m/s. The one rule of the
+    project: the synthesis' design points and the autopilot's ``VT_ARSP_TRANS`` /
+    ``FW_AIRSPD_TRIM`` come from here. ``declared`` names the ones the file gave.
     """
 
     stall_m_s: float
@@ -705,8 +715,9 @@ def hover_authority_problem(af: Airframe) -> str:
 def _with_airspeeds(af: Airframe, declared: Mapping[str, float], rd: _Reader) -> Airframe:
     """The airframe with its stall / transition-end / cruise airspeeds, declared or derived."""
     stall = declared.get("stall_m_s", af.stall_speed_m_s())
-    end = declared.get("transition_end_m_s", TRANSITION_END_OVER_STALL * stall)
-    cruise = declared.get("cruise_m_s", CRUISE_OVER_STALL * stall)
+    end = declared.get("transition_end_m_s", round_up_speed(stall))
+    cruise = declared.get("cruise_m_s", max(round_up_speed(CRUISE_OVER_STALL * stall),
+                                            end + SPEED_GRID_M_S))
     if not stall <= end <= cruise:
         bad = "transition_end_m_s" if end < stall else "cruise_m_s"
         raise rd.fail(f"airspeeds.{bad}", declared.get(bad, end if end < stall else cruise),

@@ -28,7 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from vtolftc.airframe.loader import Airframe, AirframeError
+from vtolftc.airframe.loader import (
+    CRUISE_OVER_STALL,
+    SPEED_GRID_M_S,
+    Airframe,
+    AirframeError,
+    round_up_speed,
+)
 from vtolftc.synthesis.models import AXES, Axis
 from vtolftc.synthesis.uncertainty import PAPER_DESIGN_POINTS, DesignPoint
 
@@ -52,13 +58,6 @@ __all__ = [
 #: The paper's transition end (its stall speed, table 1's last point) [m/s]: table 1's
 #: airspeeds are used as fractions of it.
 PAPER_TRANSITION_END_M_S = 13.0
-#: Cruise speed over the clean stall speed when the airframe declares none (cruise at 1.4
-#: V_stall: the usual 1.3-1.5 band of small fixed-wing aircraft, below the wing's best
-#: range speed and well clear of the stall in gusts).
-CRUISE_OVER_STALL = 1.4
-#: The derived speeds are rounded up to this grid [m/s] (rounding up keeps the transition
-#: end at or above the stall speed).
-SPEED_GRID_M_S = 0.5
 #: The cruise point's perturbed range reaches above cruise by this fraction of the band
 #: between transition end and cruise (speed-hold errors and gusts).
 CRUISE_OVERSPEED_FRACTION = 0.4
@@ -213,18 +212,15 @@ class TransitionSpeeds:
     cruise_m_s: float
 
 
-def _round_up(v: float) -> float:
-    return math.ceil(v / SPEED_GRID_M_S - 1e-9) * SPEED_GRID_M_S
-
 
 def transition_speeds(af: Airframe, transition_end_m_s: float | None = None,
                       cruise_m_s: float | None = None) -> TransitionSpeeds:
     """The transition range of ``af``, declared or derived from the wing.
 
-    V_stall = sqrt(m g / (rho/2 S CL_max)) (:meth:`Airframe.stall_speed_m_s`);
-    V_t = ``transition_end_m_s`` or V_stall rounded up to :data:`SPEED_GRID_M_S`;
-    V_c = ``cruise_m_s`` or :data:`CRUISE_OVER_STALL` V_stall rounded up to the grid (and
-    above V_t). DS-1: V_stall 12.73, V_t 13, V_c 18 m/s (its design card's numbers).
+    The airframe's own :attr:`Airframe.airspeeds` (declared in its file or derived by the
+    loader's rule: V_t = V_stall rounded up to :data:`SPEED_GRID_M_S`, V_c =
+    :data:`CRUISE_OVER_STALL` V_stall rounded up, above V_t), unless overridden here.
+    DS-1: V_stall 12.73, V_t 13, V_c 18 m/s (its design card's numbers).
 
     Parameters
     ----------
@@ -252,10 +248,18 @@ def transition_speeds(af: Airframe, transition_end_m_s: float | None = None,
     >>> round(sp.stall_m_s, 2), sp.transition_end_m_s, sp.cruise_m_s
     (12.73, 13.0, 18.0)
     """
-    vs = af.stall_speed_m_s()
-    vt = _round_up(vs) if transition_end_m_s is None else float(transition_end_m_s)
-    vc = (max(_round_up(CRUISE_OVER_STALL * vs), vt + SPEED_GRID_M_S) if cruise_m_s is None
-          else float(cruise_m_s))
+    own = af.airspeeds
+    vs = own.stall_m_s if own is not None else af.stall_speed_m_s()
+    if transition_end_m_s is not None:
+        vt = float(transition_end_m_s)
+    else:
+        vt = own.transition_end_m_s if own is not None else round_up_speed(vs)
+    if cruise_m_s is not None:
+        vc = float(cruise_m_s)
+    elif own is not None and transition_end_m_s is None:
+        vc = own.cruise_m_s
+    else:
+        vc = max(round_up_speed(CRUISE_OVER_STALL * vs), vt + SPEED_GRID_M_S)
     if not vt > 0.0 or vt < vs - 1e-6:
         raise AirframeError(f"{_who(af)}: transition end {vt:g} m/s: expected at least the "
                             f"stall speed {vs:.2f} m/s")

@@ -89,7 +89,7 @@ from vtolftc.firmware_sim.autopilot.output import (
     FW_ROTOR_RESERVE_WEIGHT,
     OutputStage,
 )
-from vtolftc.firmware_sim.autopilot.parameters import default_parameters
+from vtolftc.firmware_sim.autopilot.parameters import airframe_airspeed_defaults, default_parameters
 from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
 
 __all__ = [
@@ -202,6 +202,8 @@ class Autopilot:
         record of FLIGHT_INFORMATION (:mod:`.arming`)."""
         self.outer.navigator = self.commander.navigator = self.navigator
         self.commander.arming = self.arming
+        for name, value in airframe_airspeed_defaults(af).items():  # the airframe's own
+            self.params.set_default(name, value)
 
     def battery_update(self, time_usec: int, voltage_v: float, current_a: float) -> None:
         """A power-module reading (pack voltage [V], current [A]) from the vehicle."""

@@ -160,6 +160,14 @@ class ParameterStore:
         """Current value of parameter ``name`` (ParamError if unknown)."""
         return self._lookup(name).value
 
+    def set_default(self, name: str, value: float) -> Parameter:
+        """Make ``value`` both the default and the current value of ``name`` (an airframe's
+        own default, like a PX4 airframe file's ``param set-default``); checked like
+        :meth:`set`."""
+        p = self.set(name, value)
+        p.default = p.value
+        return p
+
     def set(self, name: str, value: float) -> Parameter:
         """Set ``name`` to ``value`` (checked against type and bounds); returns the parameter."""
         p = self._lookup(name)

@@ -5,10 +5,11 @@ The navigator, the battery and the arming monitors register theirs on the same s
 
 from __future__ import annotations
 
+from vtolftc.airframe.loader import SPEED_GRID_M_S, Airframe, round_up_speed
 from vtolftc.firmware_sim.autopilot.arming import ARMING_PARAMS
 from vtolftc.firmware_sim.autopilot.interface import ParameterStore, ParamType
 
-__all__ = ["AUTOPILOT_PARAMS", "default_parameters"]
+__all__ = ["AUTOPILOT_PARAMS", "airframe_airspeed_defaults", "default_parameters"]
 
 #: (name, default, type, min, max, description) of every autopilot parameter.
 AUTOPILOT_PARAMS: tuple[tuple[str, float, ParamType, float, float, str], ...] = (
@@ -64,3 +65,31 @@ def default_parameters() -> ParameterStore:
     for name, default, typ, lo, hi, desc in (*AUTOPILOT_PARAMS, *ARMING_PARAMS):
         ps.register(name, default, typ, lo, hi, desc)
     return ps
+
+
+FW_AIRSPD_MIN_OVER_STALL = 1.1
+"""``FW_AIRSPD_MIN`` over the stall speed [-] (PX4's guidance: 10-20 % above the stall)."""
+FW_AIRSPD_MAX_OVER_CRUISE = 1.2
+"""``FW_AIRSPD_MAX`` over the cruise speed [-]."""
+
+
+def airframe_airspeed_defaults(af: Airframe) -> dict[str, float]:
+    """The airspeed parameters of ``af`` [m/s], from its :attr:`Airframe.airspeeds` (declared
+    in its file or derived from its wing by the loader's one rule), as a PX4 airframe file
+    sets them: ``VT_ARSP_TRANS`` = transition end, ``FW_AIRSPD_TRIM`` = cruise,
+    ``FW_AIRSPD_MIN`` = 1.1 stall rounded to the nearest point of the loader's 0.5 m/s grid
+    and ``FW_AIRSPD_MAX`` = 1.2 cruise rounded up to it. DS-1: 13, 18, 14 and 22 m/s.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> airframe_airspeed_defaults(load_airframe())
+    {'VT_ARSP_TRANS': 13.0, 'FW_AIRSPD_TRIM': 18.0, 'FW_AIRSPD_MIN': 14.0, 'FW_AIRSPD_MAX': 22.0}
+    """
+    sp = af.airspeeds
+    if sp is None:
+        return {}
+    return {"VT_ARSP_TRANS": sp.transition_end_m_s, "FW_AIRSPD_TRIM": sp.cruise_m_s,
+            "FW_AIRSPD_MIN": SPEED_GRID_M_S * round(FW_AIRSPD_MIN_OVER_STALL * sp.stall_m_s
+                                                    / SPEED_GRID_M_S),
+            "FW_AIRSPD_MAX": round_up_speed(FW_AIRSPD_MAX_OVER_CRUISE * sp.cruise_m_s)}
