@@ -134,6 +134,14 @@ class SurfaceBasis:
     ------
     ValueError
         For a negative degree or ``v_hi_m_s <= v_lo_m_s``.
+
+    Examples
+    --------
+    >>> b = SurfaceBasis(1, 0.0, 18.0)
+    >>> b.normalise([0.0, 4.5, 18.0, 25.0]).tolist()      # clamped beyond v_hi
+    [-1.0, -0.5, 1.0, 1.0]
+    >>> b.evaluate([4.5]).tolist()
+    [[1.0, -0.5]]
     """
 
     degree: int
@@ -154,13 +162,35 @@ class SurfaceBasis:
         return self.degree + 1
 
     def normalise(self, airspeed_m_s: ArrayLike) -> NDArray[np.float64]:
-        """s(V) = 2 (V - V_lo) / (V_hi - V_lo) - 1, clamped to [-1, 1] (dimensionless)."""
+        """s(V) = 2 (V - V_lo) / (V_hi - V_lo) - 1, clamped to [-1, 1].
+
+        Parameters
+        ----------
+        airspeed_m_s : array_like of float
+            Airspeeds V [m/s].
+
+        Returns
+        -------
+        ndarray of float, shape (n,)
+            s (dimensionless).
+        """
         v = np.atleast_1d(np.asarray(airspeed_m_s, dtype=float))
         s = 2.0 * (v - self.v_lo_m_s) / (self.v_hi_m_s - self.v_lo_m_s) - 1.0
         return np.clip(s, -1.0, 1.0)
 
     def evaluate(self, airspeed_m_s: ArrayLike) -> NDArray[np.float64]:
-        """phi_j(s(V)) for every airspeed [m/s]: shape (n, d + 1)."""
+        """phi_j(s(V)) for every airspeed.
+
+        Parameters
+        ----------
+        airspeed_m_s : array_like of float
+            Airspeeds V [m/s].
+
+        Returns
+        -------
+        ndarray of float, shape (n, d + 1)
+            ``out[i, j] = P_j(s(V_i))``.
+        """
         return legendre_basis(self.normalise(airspeed_m_s), self.degree)
 
 
@@ -177,6 +207,15 @@ class GainSurface:
         kp_angle 1/s, kp_rate N m s/rad, ki_rate N m/rad, kd_rate N m s^2/rad, tf_rate_s s).
     lower, upper : ndarray of float, shape (5,)
         Gain bounds; :meth:`gains_at` clips to them (default: unbounded).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> b = SurfaceBasis(1, 0.0, 10.0)
+    >>> c = np.array([[2.0, 1.0], [0.5, 0.0], [0.1, 0.0], [0.01, 0.0], [0.02, 0.0]])
+    >>> sf = GainSurface(b, c, lower=np.zeros(5), upper=np.full(5, 2.5))
+    >>> [round(sf.gains_at(v)["kp_angle"], 3) for v in (0.0, 5.0, 10.0)]  # 1, 2, 3 -> clip
+    [1.0, 2.0, 2.5]
     """
 
     basis: SurfaceBasis
@@ -197,8 +236,23 @@ class GainSurface:
     def constant(cls, basis: SurfaceBasis, gains: Mapping[str, float], *,
                  lower: ArrayLike | None = None, upper: ArrayLike | None = None,
                  ) -> GainSurface:
-        """The surface of constant ``gains`` (keys :data:`PARAM_NAMES`) in ``basis``: c_0 the
-        gain, every other coefficient 0 (P_0 = 1, so the gains are reproduced exactly)."""
+        """The surface of constant gains: c_0 the gain, every other coefficient 0 (P_0 = 1,
+        so the gains are reproduced exactly at every airspeed).
+
+        Parameters
+        ----------
+        basis : SurfaceBasis
+            The basis.
+        gains : mapping of str to float
+            The gains (keys :data:`PARAM_NAMES`).
+        lower, upper : array_like of float, shape (5,), optional
+            Gain bounds (default: none).
+
+        Returns
+        -------
+        GainSurface
+            The constant surface.
+        """
         c = np.zeros((len(PARAM_NAMES), basis.size))
         c[:, 0] = [float(gains[k]) for k in PARAM_NAMES]
         lo = np.full(5, -np.inf) if lower is None else np.asarray(lower, float)
@@ -206,8 +260,24 @@ class GainSurface:
         return cls(basis, c, lo, hi)
 
     def embed(self, degree: int) -> GainSurface:
-        """The same surface in the basis of degree ``degree`` >= this one's (new coefficients
-        0: the same gains at every airspeed, bit for bit)."""
+        """The same surface in a basis of higher degree (new coefficients 0: the same gains
+        at every airspeed, bit for bit).
+
+        Parameters
+        ----------
+        degree : int
+            The new degree, at least this surface's.
+
+        Returns
+        -------
+        GainSurface
+            The embedded surface (same airspeed range and bounds).
+
+        Raises
+        ------
+        ValueError
+            If ``degree`` is below this surface's.
+        """
         if degree < self.basis.degree:
             raise ValueError(f"cannot embed degree {self.basis.degree} in degree {degree}")
         b = SurfaceBasis(degree, self.basis.v_lo_m_s, self.basis.v_hi_m_s)
@@ -216,13 +286,34 @@ class GainSurface:
         return GainSurface(b, c, self.lower, self.upper)
 
     def gain_matrix(self, airspeeds_m_s: ArrayLike) -> NDArray[np.float64]:
-        """Gains at every airspeed [m/s], clipped to the bounds: shape (n, 5), columns in
-        :data:`PARAM_NAMES` order."""
+        """Gains at every airspeed, clipped to the bounds.
+
+        Parameters
+        ----------
+        airspeeds_m_s : array_like of float
+            Airspeeds [m/s].
+
+        Returns
+        -------
+        ndarray of float, shape (n, 5)
+            Columns in :data:`PARAM_NAMES` order.
+        """
         K = self.basis.evaluate(airspeeds_m_s) @ self.coefficients.T
         return np.clip(K, self.lower, self.upper)
 
     def gains_at(self, airspeed_m_s: float) -> dict[str, float]:
-        """The gains at one airspeed [m/s] as a name -> value dict."""
+        """The gains at one airspeed.
+
+        Parameters
+        ----------
+        airspeed_m_s : float
+            Airspeed [m/s].
+
+        Returns
+        -------
+        dict of str to float
+            Gain name -> value (clipped to the bounds).
+        """
         row = self.gain_matrix([airspeed_m_s])[0]
         return dict(zip(PARAM_NAMES, (float(x) for x in row), strict=True))
 
@@ -238,6 +329,18 @@ def surface_grid(points: Sequence[DesignPoint], density: int = 2) -> tuple[Desig
     perturbed range interpolated linearly between the pair's ranges (widened to contain its
     airspeed). Numbered from :data:`GRID_NUMBER_OFFSET` + 1. ``density`` 2 gives
     2 n - 1 points (DS-1's seven robust points: 13).
+
+    Parameters
+    ----------
+    points : sequence of DesignPoint
+        The design points (e.g. :func:`~vtolftc.synthesis.robust.robust_points`).
+    density : int
+        Grid intervals per design interval (>= 1; 1: the design points themselves).
+
+    Returns
+    -------
+    tuple of DesignPoint
+        The grid, by increasing airspeed.
 
     Raises
     ------
@@ -285,7 +388,18 @@ class SurfaceChannel:
     upper: NDArray[np.float64]
 
     def gains(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The five gains at this grid point for the coefficient vector ``theta``."""
+        """The five gains at this grid point.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (5 (d + 1),)
+            The coefficient vector.
+
+        Returns
+        -------
+        ndarray of float, shape (5,)
+            The clipped gains in :data:`PARAM_NAMES` order.
+        """
         C = np.asarray(theta, float).reshape(len(PARAM_NAMES), self.phi.size)
         return np.clip(C @ self.phi, self.lower, self.upper)
 
@@ -293,7 +407,19 @@ class SurfaceChannel:
         return self.inner(self.gains(theta))
 
     def realize_batch(self, thetas: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-        """The channel at every row of ``thetas`` (through ``inner.realize_batch``)."""
+        """The channel at every row of ``thetas`` (through ``inner.realize_batch``; each
+        slice equals ``self(thetas[i])``).
+
+        Parameters
+        ----------
+        thetas : ndarray of float, shape (nb, 5 (d + 1))
+            Coefficient vectors, one per row.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            Stacked realisations, each of shape (nb, ., .).
+        """
         T = np.asarray(thetas, float).reshape(-1, len(PARAM_NAMES), self.phi.size)
         return self.inner.realize_batch(np.clip(T @ self.phi, self.lower, self.upper))
 
@@ -302,7 +428,7 @@ class SurfaceChannel:
 class SurfaceProblem:
     """The tuning problem of one axis' gain surface and what it was made of.
 
-    Attributes
+    Parameters
     ----------
     problem : TuningProblem
         Over the flattened coefficients (gain-major).
@@ -327,12 +453,35 @@ class SurfaceProblem:
     gain_parameters: list[Parameter]
 
     def surface(self, theta: ArrayLike) -> GainSurface:
-        """The gain surface of coefficient vector ``theta``."""
+        """The gain surface of a coefficient vector.
+
+        Parameters
+        ----------
+        theta : array_like of float, shape (5 (d + 1),)
+            Coefficients, gain-major.
+
+        Returns
+        -------
+        GainSurface
+            The surface (with this problem's gain bounds).
+        """
         c = np.asarray(theta, float).reshape(len(PARAM_NAMES), self.basis.size)
         return GainSurface(self.basis, c, self.lower, self.upper)
 
     def grid_norms(self, theta: ArrayLike) -> NDArray[np.float64]:
-        """Per grid point, the max norm over its channels (the objective is their max)."""
+        """Per grid point, the max H-infinity norm over its channels (the objective is
+        their max).
+
+        Parameters
+        ----------
+        theta : array_like of float, shape (5 (d + 1),)
+            Coefficients, gain-major.
+
+        Returns
+        -------
+        ndarray of float, shape (n_grid,)
+            The norms (inf where a loop is unstable).
+        """
         vals = self.problem.channel_norms(np.asarray(theta, float))
         out = np.full(len(self.grid), -np.inf)
         for v, i in zip(vals, self.point_of_channel, strict=True):
@@ -430,7 +579,7 @@ def surface_problem(method: DesignMethod, af: Airframe, axis: Axis,
 class SurfaceDesign:
     """The constant (SHIF) and surface (GS-SHIF) designs of one axis over one grid.
 
-    Attributes
+    Parameters
     ----------
     axis : str
         The axis.
@@ -464,7 +613,13 @@ class SurfaceDesign:
     messages: dict[str, str]
 
     def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready summary (coefficients, objectives, per-point norms, times)."""
+        """A JSON-ready summary.
+
+        Returns
+        -------
+        dict
+            Basis, grid, objectives, per-point norms, coefficients, times [s].
+        """
         return {"axis": self.axis, "degree": self.surface.basis.degree,
                 "basis": "legendre", "v_lo_m_s": self.surface.basis.v_lo_m_s,
                 "v_hi_m_s": self.surface.basis.v_hi_m_s,
@@ -566,6 +721,17 @@ def schedule_from_surfaces(af: Airframe, surfaces: Mapping[str, GainSurface],
     -------
     dict
         The document.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> b = SurfaceBasis(0, 0.0, 18.0)
+    >>> g = {"kp_angle": 2.0, "kp_rate": 0.5, "ki_rate": 0.1, "kd_rate": 0.01,
+    ...      "tf_rate_s": 0.02}
+    >>> doc = schedule_from_surfaces(load_airframe(), {ax: GainSurface.constant(b, g)
+    ...                              for ax in ("roll", "pitch", "yaw")}, [0.0, 9.0, 18.0])
+    >>> doc["format"], doc["axes"]["pitch"]["kp_rate"]
+    ('vtolftc-gain-schedule/1', [0.5, 0.5, 0.5])
     """
     bps = [float(v) for v in breakpoints_m_s]
     gains = {ax: [dict(zip(PARAM_NAMES, (float(x) for x in row), strict=True))
