@@ -14,6 +14,14 @@ temporary gains directory holding ``gs-shif.json`` = the surface sampled at the 
     python benchmarks/bench_surfaces.py [--degree 2] [--max-iter 8] [--jobs 2] [--no-fly]
 
 The shipped gains and ``vtolftc synth`` are not touched.
+
+Measured (2026-12-02, defaults: degree 2, max_iter 8, one SHIF random start, jobs 2; the 2
+cores shared with other sessions, load average 5-8): roll 134 s, pitch 114 s, yaw 73 s
+(wall, per axis), 187 s in all: the 90 s target is not met on a loaded box. Objectives
+(SHIF -> GS-SHIF): roll 1.520 -> 1.489, pitch 1.993 -> 1.889, yaw 5.855 -> 2.253. Case 1
+RMSE roll / pitch / yaw [deg]: SHIF 0.274 / 0.405 / 0.199, GS-SHIF 0.268 / 0.411 / 0.317
+(neither crashed): the objective's gain does not carry over to the nonlinear RMSE on yaw
+(issue 23, item 2).
 """
 
 from __future__ import annotations

@@ -54,6 +54,7 @@ from numpy.typing import ArrayLike, NDArray
 from vtolftc.airframe.loader import Airframe
 from vtolftc.synthesis.design_loop import DesignMethod, point_seed
 from vtolftc.synthesis.export import schedule_document
+from vtolftc.synthesis.hinfnorm import as_state_space
 from vtolftc.synthesis.loops import PARAM_NAMES
 from vtolftc.synthesis.models import Axis
 from vtolftc.synthesis.structured import Parameter, TuningProblem, tune
@@ -421,7 +422,11 @@ class SurfaceChannel:
             Stacked realisations, each of shape (nb, ., .).
         """
         T = np.asarray(thetas, float).reshape(-1, len(PARAM_NAMES), self.phi.size)
-        return self.inner.realize_batch(np.clip(T @ self.phi, self.lower, self.upper))
+        G = np.clip(T @ self.phi, self.lower, self.upper)
+        if hasattr(self.inner, "realize_batch"):
+            return self.inner.realize_batch(G)
+        mats = [as_state_space(self.inner(g)) for g in G]
+        return tuple(np.stack([m[i] for m in mats]) for i in range(4))
 
 
 @dataclass
@@ -511,7 +516,10 @@ def surface_problem(method: DesignMethod, af: Airframe, axis: Axis,
     Parameters
     ----------
     method : DesignMethod
-        E.g. :class:`~vtolftc.synthesis.robust.RobustMethod` (its channels, weights, bounds).
+        A method whose weights are defined at any airspeed, e.g.
+        :class:`~vtolftc.synthesis.robust.RobustMethod` (its channels, weights, bounds; its
+        weights are formulae of the airspeed and the perturbed range). The paper's method is
+        not one: its Ws comes from table 2, defined only at table 1's six points.
     af : Airframe
         The airframe.
     axis : {"roll", "pitch", "yaw"}
