@@ -31,18 +31,16 @@ import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 from typing import Any
 
 from vtolftc.airframe.loader import load_airframe
-from vtolftc.synthesis.export import write_json
 from vtolftc.synthesis.models import AXES
 from vtolftc.synthesis.robust import RobustMethod, robust_points
 from vtolftc.synthesis.surfaces import (
     SurfaceDesign,
     design_surfaces,
-    schedule_from_surfaces,
     surface_grid,
+    write_surface_gains,
 )
 
 
@@ -91,12 +89,8 @@ def main(argv: list[str] | None = None) -> int:
     from vtolftc.scenario import paper_scenario, run_scenario
 
     af = load_airframe()
-    bps = [p.airspeed_m_s for p in designs["roll"].grid]
     with tempfile.TemporaryDirectory(prefix="vtolftc-surfaces-") as tmp:
-        write_json(Path(tmp) / "gs-shif.json", schedule_from_surfaces(
-            af, {ax: d.surface for ax, d in designs.items()}, bps, "gs-shif"))
-        write_json(Path(tmp) / "shif.json", schedule_from_surfaces(
-            af, {ax: d.constant for ax, d in designs.items()}, bps, "shif"))
+        write_surface_gains(af, designs, tmp)
         print("case 1, RMSE roll / pitch / yaw [deg]:")
         for ctl, label in (("shif", "SHIF (constant)"), ("gs-shif", "GS-SHIF (surface)")):
             m = run_scenario(paper_scenario(1), ctl, airframe=af, gains_dir=tmp).metrics

@@ -46,6 +46,7 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -53,7 +54,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from vtolftc.airframe.loader import Airframe
 from vtolftc.synthesis.design_loop import DesignMethod, point_seed
-from vtolftc.synthesis.export import schedule_document
+from vtolftc.synthesis.export import schedule_document, write_json
 from vtolftc.synthesis.hinfnorm import as_state_space
 from vtolftc.synthesis.loops import PARAM_NAMES
 from vtolftc.synthesis.models import Axis
@@ -73,6 +74,7 @@ __all__ = [
     "schedule_from_surfaces",
     "surface_grid",
     "surface_problem",
+    "write_surface_gains",
 ]
 
 #: Grid points are numbered from this offset (so no grid point is mistaken for one of the
@@ -753,3 +755,47 @@ def schedule_from_surfaces(af: Airframe, surfaces: Mapping[str, GainSurface],
                          for ax, sf in surfaces.items()}}
     meta.update(metadata or {})
     return schedule_document(af, controller, bps, gains, metadata=meta)
+
+
+def write_surface_gains(af: Airframe, designs: Mapping[str, SurfaceDesign],
+                        out_dir: str | Path) -> dict[str, Path]:
+    """Write a gains directory of surface designs that the autopilot flies
+    (``vtolftc fly --gains DIR``, ``run_scenario(..., gains_dir=DIR)``).
+
+    ``gs-shif.json``: the surfaces sampled at the grid airspeeds (the breakpoints);
+    ``shif.json``: the constant (degree-0) designs; ``surfaces.json``: every design's
+    :meth:`SurfaceDesign.to_dict`. No ``lqr.json`` (copy the shipped one to fly LQR from it).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe the designs are for (its sha256 goes in the files).
+    designs : mapping of str to SurfaceDesign
+        One design per axis (roll, pitch, yaw), all on the same grid.
+    out_dir : str or pathlib.Path
+        The directory (created if missing).
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        ``"gs-shif"``, ``"shif"``, ``"surfaces"`` -> the files written.
+
+    Raises
+    ------
+    ValueError
+        If the designs are not on one grid.
+    """
+    grids = {tuple(p.airspeed_m_s for p in d.grid) for d in designs.values()}
+    if len(grids) != 1:
+        raise ValueError("the axes' surface designs are on different grids")
+    bps = list(grids.pop())
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = {"axes": {ax: d.to_dict() for ax, d in designs.items()}}
+    return {
+        "gs-shif": write_json(out / "gs-shif.json", schedule_from_surfaces(
+            af, {ax: d.surface for ax, d in designs.items()}, bps, "gs-shif")),
+        "shif": write_json(out / "shif.json", schedule_from_surfaces(
+            af, {ax: d.constant for ax, d in designs.items()}, bps, "shif")),
+        "surfaces": write_json(out / "surfaces.json", summary),
+    }

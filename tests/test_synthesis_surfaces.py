@@ -5,12 +5,14 @@ design on its objective (DS-1), and the export is a schedule the autopilot reads
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
 from numpy.polynomial import legendre
 
 from vtolftc.airframe.loader import load_airframe
+from vtolftc.firmware_sim.autopilot.attitude import make_controller
 from vtolftc.firmware_sim.autopilot.schedule import GainSchedule
 from vtolftc.synthesis import surfaces as surf
 from vtolftc.synthesis.loops import PARAM_NAMES
@@ -24,6 +26,7 @@ from vtolftc.synthesis.surfaces import (
     schedule_from_surfaces,
     surface_grid,
     surface_problem,
+    write_surface_gains,
 )
 from vtolftc.synthesis.uncertainty import DesignPoint
 
@@ -185,3 +188,22 @@ def test_export_is_a_schedule_the_autopilot_reads() -> None:
             want = sf.gains_at(v)
             for k in PARAM_NAMES:
                 assert getattr(got[ax], k) == pytest.approx(want[k], rel=1e-5)
+
+
+def test_written_gains_directory_is_what_the_autopilot_flies(tmp_path: Path) -> None:
+    af = load_airframe()
+    d = design_surfaces(RobustMethod(), af, "roll", _small_grid(), 1, n_starts=0,
+                        max_iter=1)
+    files = write_surface_gains(af, {ax: d for ax in ("roll", "pitch", "yaw")}, tmp_path)
+    assert set(files) == {"gs-shif", "shif", "surfaces"}
+    for name, sf in (("gs-shif", d.surface), ("shif", d.constant)):
+        ctl = make_controller(name, tmp_path, airframe_name=af.name,
+                              airframe_sha256=af.sha256)
+        gs = GainSchedule.load(files[name])
+        assert gs.breakpoints_m_s == tuple(p.airspeed_m_s for p in d.grid)
+        assert ctl.name == name
+        for v in gs.breakpoints_m_s:
+            want = sf.gains_at(v)
+            got = gs.gains_at(v)["roll"]
+            for k in PARAM_NAMES:
+                assert getattr(got, k) == pytest.approx(want[k], rel=1e-5)
