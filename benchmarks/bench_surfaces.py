@@ -11,7 +11,7 @@ Then flies the paper's case 1 with both designs (``vtolftc.scenario.run_scenario
 temporary gains directory holding ``gs-shif.json`` = the surface sampled at the grid, and
 ``shif.json`` = the constant) and prints RMSE roll / pitch / yaw [deg] over the metrics window::
 
-    python benchmarks/bench_surfaces.py [--degree 2] [--max-iter 8] [--jobs 2] [--no-fly]
+    python benchmarks/bench_surfaces.py [--degree 1] [--max-iter 5] [--jobs 2] [--no-fly]
 
 The shipped gains and ``vtolftc synth`` are not touched.
 
