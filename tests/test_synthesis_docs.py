@@ -38,6 +38,7 @@ ENTRY_POINTS = {
     "uncertainty": ("UncertaintyWeight", "fit_weight", "cover"),
     "models": ("axis_coefficients", "rate_model", "attitude_model"),
     "loops": ("SensitivityWeight", "closed_loop"),
+    "surfaces": ("SurfaceBasis", "GainSurface", "schedule_from_surfaces"),
     "baselines": ("lqr_axis",),
     "scaling": ("actuator_bandwidth", "transition_speeds", "scaled_design_points"),
     "design_loop": ("point_seed",),

@@ -1,0 +1,109 @@
+"""Benchmark of the gain-surface design of DS-1 (issue 23, item 1; target < 90 s on 2 cores).
+
+Per axis (roll, pitch, yaw; one worker process per axis with ``--jobs``): the robust method's
+weights at every airspeed of the dense grid (:func:`vtolftc.synthesis.surfaces.surface_grid`
+of the seven robust points, density 2: 13 airspeeds, 0-18 m/s), SHIF = the degree-0 surface
+tuned over the grid, then GS-SHIF = the degree-``--degree`` surface started from SHIF. Prints
+the wall time per axis and both objectives (max over the grid of the point design's channel
+norms; the surface's is never above the constant's).
+
+Then flies the paper's case 1 with both designs (``vtolftc.scenario.run_scenario`` with a
+temporary gains directory holding ``gs-shif.json`` = the surface sampled at the grid, and
+``shif.json`` = the constant) and prints RMSE roll / pitch / yaw [deg] over the metrics window::
+
+    python benchmarks/bench_surfaces.py [--degree 1] [--max-iter 5] [--jobs 2] [--no-fly]
+
+The shipped gains and ``vtolftc synth`` are not touched.
+
+Measured (2026-12-02, 2 cores shared with other sessions; SHIF one random start, jobs 2):
+
+- defaults (degree 1, max_iter 5): wall 46.8 s in all at load average 4.5 (81.7 s at load 6;
+  per axis roll 41.9, pitch 37.0, yaw 9.6 s). Objectives SHIF -> GS-SHIF: roll
+  1.520 -> 1.491, pitch 2.000 -> 1.713, yaw 5.867 -> 4.341. Case 1 RMSE roll / pitch / yaw
+  [deg]: SHIF 0.271 / 0.413 / 0.196, GS-SHIF 0.268 / 0.654 / 0.195.
+- ``--degree 2 --max-iter 8``: 187 s in all at load 5-8 (roll 134, pitch 114, yaw 73 s).
+  Objectives: roll 1.520 -> 1.489, pitch 1.993 -> 1.889, yaw 5.855 -> 2.253. Case 1 RMSE:
+  SHIF 0.274 / 0.405 / 0.199, GS-SHIF 0.268 / 0.411 / 0.317.
+
+Neither crashed. A lower objective does not bring a lower nonlinear RMSE on every axis
+(pitch at degree 1, yaw at degree 2): the objective does not predict table 4 (issue 23,
+item 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+from vtolftc.airframe.loader import load_airframe
+from vtolftc.synthesis.models import AXES
+from vtolftc.synthesis.robust import RobustMethod, robust_points
+from vtolftc.synthesis.surfaces import (
+    SurfaceDesign,
+    design_surfaces,
+    surface_grid,
+    write_surface_gains,
+)
+
+
+def _axis_job(args: tuple[Any, ...]) -> tuple[str, SurfaceDesign, float]:
+    axis, degree, n_starts, max_iter, density = args
+    af = load_airframe()
+    t0 = time.perf_counter()
+    grid = surface_grid(robust_points(af), density)
+    d = design_surfaces(RobustMethod(), af, axis, grid, degree, n_starts=n_starts,
+                        max_iter=max_iter)
+    return axis, d, time.perf_counter() - t0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark (see the module docstring); returns the exit status."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--degree", type=int, default=1)
+    ap.add_argument("--max-iter", type=int, default=5)
+    ap.add_argument("--starts", type=int, default=1, help="random starts of the SHIF tune")
+    ap.add_argument("--density", type=int, default=2)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--no-fly", action="store_true")
+    a = ap.parse_args(argv)
+    if a.degree < 0 or a.max_iter < 1 or a.starts < 0 or a.density < 1 or a.jobs < 1:
+        print("bench_surfaces: expected --degree >= 0, --max-iter >= 1, --starts >= 0, "
+              "--density >= 1, --jobs >= 1", file=sys.stderr)
+        return 2
+    jobs = [(ax, a.degree, a.starts, a.max_iter, a.density) for ax in AXES]
+    t0 = time.perf_counter()
+    if a.jobs > 1:
+        with ProcessPoolExecutor(max_workers=a.jobs) as ex:
+            out = list(ex.map(_axis_job, jobs))
+    else:
+        out = [_axis_job(j) for j in jobs]
+    total = time.perf_counter() - t0
+    designs = {ax: d for ax, d, _ in out}
+    print(f"surface design of DS-1: degree {a.degree}, max_iter {a.max_iter}, "
+          f"{len(designs['roll'].grid)} grid airspeeds, jobs {a.jobs}")
+    print(f"{'axis':6} {'time_s':>8} {'SHIF obj':>10} {'GS-SHIF obj':>12} {'kept start':>11}")
+    for ax, d, dt in out:
+        print(f"{ax:6} {dt:8.1f} {d.constant_objective:10.4f} {d.surface_objective:12.4f} "
+              f"{d.kept_start!s:>11}")
+    print(f"total wall time {total:.1f} s")
+    if a.no_fly:
+        return 0
+    from vtolftc.scenario import paper_scenario, run_scenario
+
+    af = load_airframe()
+    with tempfile.TemporaryDirectory(prefix="vtolftc-surfaces-") as tmp:
+        write_surface_gains(af, designs, tmp)
+        print("case 1, RMSE roll / pitch / yaw [deg]:")
+        for ctl, label in (("shif", "SHIF (constant)"), ("gs-shif", "GS-SHIF (surface)")):
+            m = run_scenario(paper_scenario(1), ctl, airframe=af, gains_dir=tmp).metrics
+            print(f"  {label:18} {m['rmse_roll_deg']:.3f} / {m['rmse_pitch_deg']:.3f} / "
+                  f"{m['rmse_yaw_deg']:.3f}  crashed={m.get('crashed')}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
