@@ -7,7 +7,7 @@ tuned over the grid, then GS-SHIF = the degree-``--degree`` surface started from
 the wall time per axis and both objectives (max over the grid of the point design's channel
 norms; the surface's is never above the constant's).
 
-Then flies the paper's case 1 with both designs (``vtolftc.scenario.run_scenario`` with a
+Then flies the paper's case 1 with both designs (``vtolftc.runners.scenario.run_scenario`` with a
 temporary gains directory holding ``gs-shif.json`` = the surface sampled at the grid, and
 ``shif.json`` = the constant) and prints RMSE roll / pitch / yaw [deg] over the metrics window::
 
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"total wall time {total:.1f} s")
     if a.no_fly:
         return 0
-    from vtolftc.scenario import paper_scenario, run_scenario
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
 
     af = load_airframe()
     with tempfile.TemporaryDirectory(prefix="vtolftc-surfaces-") as tmp:
