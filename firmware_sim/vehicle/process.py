@@ -95,6 +95,7 @@ from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SER
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.hil import NavState, encode_hil_state
 from vtolftc.rotation import quat_to_euler as dyn_quat_to_euler
+from vtolftc.telemetry.streamstats import DurationStats
 
 __all__ = ["AUTOPILOT_COMPONENT_ID", "AUTOPILOT_SYSTEM_ID", "EXIT_PEER_LOST", "SAFE_OUTPUT",
            "VehicleProcess"]
@@ -179,8 +180,9 @@ class VehicleProcess:
         self.faults: dict[str, Fault] = {}
         self.change_count = 0
         self.steps = 0
-        self.step_rtt_s: list[float] = []
-        """Lockstep: wall time from sending a step's state to receiving its controls (s)."""
+        self.step_rtt_s = DurationStats()
+        """Lockstep: wall time from sending a step's state to receiving its controls [s]
+        (bounded memory: count, mean, max exact; quantiles to 0.5 %)."""
         self.part_wall_s = {"record_and_physics": 0.0, "sensors_and_encode": 0.0, "send": 0.0}
         """Lockstep: wall time summed over the steps [s] of the vehicle's own part of the
         critical path (after the controls arrived, until the next state is sent)."""
@@ -555,7 +557,7 @@ class VehicleProcess:
                 for m in msgs:
                     got = self.handle(m) or got
             t_got = pc()
-            self.step_rtt_s.append(t_got - t_sent)
+            self.step_rtt_s.add(t_got - t_sent)
             if self.delay_usec:
                 self._apply_due()
             self._record(flush=False)
@@ -628,12 +630,8 @@ class VehicleProcess:
             "rejected": dict(self.rejected), "watchdog_trips": self.watchdog_trips,
             "hil_delay_ms": self.delay_usec / 1000, "hil_loss": self.loss,
         }
-        if self.step_rtt_s:
-            rtt = np.asarray(self.step_rtt_s) * 1e6
-            summary["step_round_trip_us"] = {
-                "mean": float(np.mean(rtt)),
-                "median": float(np.median(rtt)), "p90": float(np.percentile(rtt, 90)),
-                "p99": float(np.percentile(rtt, 99)), "n": int(rtt.size)}
+        if self.step_rtt_s.n:
+            summary["step_round_trip_us"] = self.step_rtt_s.summary(1e6)
             summary["part_mean_us"] = {k: 1e6 * x / max(1, self.steps)
                                        for k, x in self.part_wall_s.items()}
         if self._events is not None:
