@@ -14,7 +14,7 @@ import hashlib
 import math
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -131,7 +131,9 @@ class DerivativeTables:
 
 @dataclass(frozen=True)
 class Surfaces:
-    """Control surfaces: the five named in :data:`SURFACE_NAMES`, sharing their dynamics."""
+    """Control surfaces sharing their dynamics: one or two ailerons, the elevator, one or two
+    rudders (:data:`SURFACE_NAMES` when two of each; a single one is ``aileron`` /
+    ``rudder``, carrying the whole aircraft derivative)."""
 
     names: tuple[str, ...]
     max_deflection_rad: float
@@ -149,6 +151,29 @@ class LandingGear:
     damping_N_s_m: float
     friction_N_s_m: float
     friction_coefficient: float
+
+
+TRANSITION_END_OVER_STALL = 1.05
+"""Transition-end airspeed over the stall speed when the file declares none [-]."""
+
+CRUISE_OVER_STALL = 1.4
+"""Cruise airspeed over the stall speed when the file declares none [-]."""
+
+
+@dataclass(frozen=True)
+class Airspeeds:
+    """The airspeeds that matter [m/s]: stall, end of the transition, cruise.
+
+    Declared in the optional ``[airspeeds]`` section or derived from the wing: stall = the
+    wing alone at CL_max carrying the weight, transition end =
+    :data:`TRANSITION_END_OVER_STALL` x stall, cruise = :data:`CRUISE_OVER_STALL` x stall.
+    ``declared`` names the ones the file gave.
+    """
+
+    stall_m_s: float
+    transition_end_m_s: float
+    cruise_m_s: float
+    declared: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -170,6 +195,7 @@ class Airframe:
     surfaces: Surfaces
     landing_gear: LandingGear
     actuator_names: tuple[str, ...] = field(default=())
+    airspeeds: Airspeeds | None = None
 
     @property
     def weight_N(self) -> float:
@@ -289,6 +315,8 @@ _SCHEMA: dict[str, dict[str, Any]] = {
     "lift_rotors": _ROTOR_GROUP,
     "pushers": _ROTOR_GROUP,
     "surfaces": {
+        "ailerons": _Num("", 1.0, 2.0),
+        "rudders": _Num("", 1.0, 2.0),
         "max_deflection_deg": _Num("deg", **_POS, hi=60.0),
         "time_constant_s": _Num("s", **_POS, hi=2.0),
         "rate_limit_deg_s": _Num("deg/s", **_POS, hi=5000.0),
@@ -308,7 +336,22 @@ _ROTOR_SCHEMA: dict[str, Any] = {
     "y_m": _Num("m", -20.0, 20.0),
     "z_m": _Num("m", -20.0, 20.0),
     "spin": ("cw", "ccw"),
+    "axis": "axis",
 }
+_ROTOR_OPTIONAL = frozenset({"axis"})
+_OPTIONAL: dict[str, frozenset[str]] = {"surfaces": frozenset({"ailerons", "rudders"})}
+"""Optional keys per section (``[surfaces] ailerons`` / ``rudders``: 1 or 2, default 2)."""
+
+HIL_OUTPUTS = 16
+"""Outputs of HIL_ACTUATOR_CONTROLS: an airframe has at most this many actuators."""
+
+MIN_HOVER_THRUST_TO_WEIGHT = 1.2
+"""Smallest accepted ratio of the lift rotors' total vertical thrust to the weight [-]."""
+
+MAX_CANT_RAD = math.radians(20.0)
+"""Largest accepted angle between a rotor's declared thrust axis and its nominal one [rad]."""
+
+_AIRSPEED_KEYS = ("stall_m_s", "transition_end_m_s", "cruise_m_s")
 
 
 class _Reader:
@@ -322,7 +365,8 @@ class _Reader:
             f"{self.source}: field '{where}' = {value!r}: expected {expected}"
         )
 
-    def check_keys(self, table: Mapping[str, Any], allowed: Mapping[str, Any], where: str):
+    def check_keys(self, table: Mapping[str, Any], allowed: Mapping[str, Any], where: str,
+                   optional: frozenset[str] = frozenset()):
         for key in table:
             if key not in allowed:
                 near = ", ".join(sorted(allowed))
@@ -331,7 +375,7 @@ class _Reader:
                     f"{self.source}: unknown key '{at}': expected one of: {near}"
                 )
         for key in allowed:
-            if key not in table:
+            if key not in table and key not in optional:
                 at = f"{where}.{key}" if where else key
                 raise AirframeError(f"{self.source}: missing field '{at}'")
 
@@ -354,10 +398,12 @@ class _Reader:
         if not isinstance(table, dict):
             raise self.fail(name, table, "a table ([section])")
         schema = _SCHEMA[name]
-        self.check_keys(table, schema, name)
+        self.check_keys(table, schema, name, _OPTIONAL.get(name, frozenset()))
         out: dict[str, Any] = {}
         for key, spec in schema.items():
             at = f"{name}.{key}"
+            if key not in table:
+                continue
             if isinstance(spec, _Num):
                 out[key] = self.number(table, key, spec, name)
             elif spec is str:
@@ -402,10 +448,14 @@ class _Reader:
             where = f"{at}[{i}]"
             if not isinstance(entry, dict):
                 raise self.fail(where, entry, "a table with name, x_m, y_m, z_m, spin")
-            self.check_keys(entry, _ROTOR_SCHEMA, where)
+            self.check_keys(entry, _ROTOR_SCHEMA, where, _ROTOR_OPTIONAL)
             r: dict[str, Any] = {}
             for key, spec in _ROTOR_SCHEMA.items():
-                if isinstance(spec, _Num):
+                if key not in entry:
+                    continue
+                if spec == "axis":
+                    r[key] = self.axis(entry[key], f"{where}.{key}")
+                elif isinstance(spec, _Num):
                     r[key] = self.number(entry, key, spec, where)
                 elif spec is str:
                     name = entry[key]
@@ -422,6 +472,29 @@ class _Reader:
             seen.add(r["name"])
             rotors.append(r)
         return rotors
+
+
+    def axis(self, value: Any, at: str) -> np.ndarray:
+        ok = isinstance(value, list) and len(value) == 3
+        ok = ok and all(isinstance(x, int | float) and not isinstance(x, bool) for x in value)
+        arr = np.array(value, dtype=float) if ok else np.zeros(3)
+        if not ok or not np.all(np.isfinite(arr)) or np.linalg.norm(arr) < 1e-6:
+            raise self.fail(at, value, "a thrust direction [x, y, z] (body FRD, non-zero; "
+                            "normalised on load, like PX4's CA_ROTORn_AX/AY/AZ)")
+        return arr / np.linalg.norm(arr)
+
+    def airspeeds(self, doc: Mapping[str, Any]) -> dict[str, float]:
+        """The optional ``[airspeeds]`` section: declared stall / transition-end / cruise."""
+        if "airspeeds" not in doc:
+            return {}
+        table = doc["airspeeds"]
+        if not isinstance(table, dict):
+            raise self.fail("airspeeds", table, "a table ([airspeeds])")
+        allowed = dict.fromkeys(_AIRSPEED_KEYS, _Num("m/s", **_POS, hi=100.0))
+        self.check_keys(table, allowed, "airspeeds", frozenset(_AIRSPEED_KEYS))
+        out = {k: self.number(table, k, allowed[k], "airspeeds") for k in table}
+        full = {**out}
+        return full
 
 
 def _rotor_names_ok(name: str) -> bool:
@@ -456,8 +529,9 @@ def airframe_from_dict(
 ) -> Airframe:
     """Validate an already-parsed airframe document (same rules as :func:`load_airframe`)."""
     rd = _Reader(source)
-    rd.check_keys(doc, _SCHEMA, "")
+    rd.check_keys(doc, {**_SCHEMA, "airspeeds": None}, "", frozenset({"airspeeds"}))
     s = {name: rd.section(doc, name) for name in _SCHEMA}
+    declared_speeds = rd.airspeeds(doc)
 
     mass = s["mass"]
     jx, jy, jz, jxz = mass["Jx_kg_m2"], mass["Jy_kg_m2"], mass["Jz_kg_m2"], mass["Jxz_kg_m2"]
@@ -510,13 +584,23 @@ def airframe_from_dict(
 
     def build_rotors(sec: dict[str, Any], axis_thrust: tuple[float, float, float], prefix: str):
         out = []
-        t_axis = np.array(axis_thrust)
-        for r in sec["rotor"]:
+        nominal = np.array(axis_thrust)
+        for i, r in enumerate(sec["rotor"]):
             # Lift rotors: spin seen from above (looking along +z, down): cw -> +z.
             # Pushers: spin seen from behind (looking along +x, forward): cw -> +x.
             look = np.array([0.0, 0.0, 1.0]) if prefix == "lift_rotors" else np.array(
                 [1.0, 0.0, 0.0])
             spin_axis = look if r["spin"] == "cw" else -look
+            t_axis = nominal
+            if "axis" in r:  # a canted rotor: thrust and spin along the declared axis
+                t_axis = r["axis"]
+                cant = math.acos(min(1.0, float(t_axis @ nominal)))
+                if cant > MAX_CANT_RAD:
+                    raise rd.fail(f"{prefix}.rotor[{i}].axis", r["axis"].round(6).tolist(),
+                                  f"a thrust axis within {math.degrees(MAX_CANT_RAD):g} deg of "
+                                  f"{nominal.tolist()} (a small cant; found "
+                                  f"{math.degrees(cant):.1f} deg)")
+                spin_axis = t_axis * float(look @ nominal) * (1.0 if r["spin"] == "cw" else -1.0)
             out.append(Rotor(
                 name=r["name"], position_m=_frozen([r["x_m"], r["y_m"], r["z_m"]]),
                 thrust_axis=_frozen(t_axis), spin_axis=_frozen(spin_axis),
@@ -528,9 +612,20 @@ def airframe_from_dict(
 
     lift = build_rotors(s["lift_rotors"], (0.0, 0.0, -1.0), "lift_rotors")
     pushers = build_rotors(s["pushers"], (1.0, 0.0, 0.0), "pushers")
+    if len(pushers) > 2:
+        raise rd.fail("pushers.rotor", [r.name for r in pushers], "one or two pushers")
     su = s["surfaces"]
+    counts = {}
+    for key in ("ailerons", "rudders"):
+        counts[key] = su.get(key, 2.0)
+        if counts[key] not in (1.0, 2.0):
+            raise rd.fail(f"surfaces.{key}", counts[key], "1 or 2")
+    surface_names = (
+        ("aileron_left", "aileron_right") if counts["ailerons"] == 2.0 else ("aileron",)
+    ) + ("elevator",) + (
+        ("rudder_left", "rudder_right") if counts["rudders"] == 2.0 else ("rudder",))
     surfaces = Surfaces(
-        names=SURFACE_NAMES, max_deflection_rad=math.radians(su["max_deflection_deg"]),
+        names=surface_names, max_deflection_rad=math.radians(su["max_deflection_deg"]),
         time_constant_s=su["time_constant_s"],
         rate_limit_rad_s=math.radians(su["rate_limit_deg_s"]),
     )
@@ -543,10 +638,14 @@ def airframe_from_dict(
     names = (
         tuple(f"rotor_{r.name}" for r in lift)
         + tuple(f"pusher_{r.name}" for r in pushers)
-        + SURFACE_NAMES
+        + surface_names
     )
     if len(set(names)) != len(names):
         raise AirframeError(f"{source}: actuator names are not unique: {names}")
+    if len(names) > HIL_OUTPUTS:
+        raise rd.fail("lift_rotors.rotor", f"{len(lift)} lift rotors",
+                      f"at most {HIL_OUTPUTS} actuators in all (HIL_ACTUATOR_CONTROLS has "
+                      f"{HIL_OUTPUTS} outputs; this file has {len(names)})")
     af = Airframe(
         name=s["airframe"]["name"], description=s["airframe"]["description"], source=source,
         sha256=sha256, air_density_kg_m3=s["environment"]["air_density_kg_m3"],
@@ -554,9 +653,64 @@ def airframe_from_dict(
         inertia_kg_m2=_frozen(inertia), wing=wing, derivatives=tables, lift_rotors=lift,
         pushers=pushers, surfaces=surfaces, landing_gear=gear, actuator_names=names,
     )
-    hover_thrust = sum(r.max_thrust_N for r in lift)
-    if hover_thrust <= af.weight_N:
+    hover_thrust = sum(r.max_thrust_N * -float(r.thrust_axis[2]) for r in lift)
+    if hover_thrust < MIN_HOVER_THRUST_TO_WEIGHT * af.weight_N:
         raise rd.fail("lift_rotors.max_thrust_N", s["lift_rotors"]["max_thrust_N"],
-                      f"lift rotors that together exceed the weight ({af.weight_N:.1f} N)")
-    return af
+                      f"lift rotors whose vertical thrust is at least "
+                      f"{MIN_HOVER_THRUST_TO_WEIGHT:g} x the weight ({af.weight_N:.1f} N): "
+                      f"thrust-to-weight {hover_thrust / af.weight_N:.2f}")
+    reason = hover_authority_problem(af)
+    if reason:
+        raise rd.fail("lift_rotors.rotor", [r.name for r in lift], reason)
+    return _with_airspeeds(af, declared_speeds, rd)
+
+
+def hover_effectiveness(af: Airframe) -> np.ndarray:
+    """Hover effectiveness of the lift rotors: rows (-Fz, Mx, My, Mz) per newton of thrust.
+
+    Column ``j`` is the upward force [N] and the body moments [N m] (FRD, about the CG) of
+    one newton of thrust of lift rotor ``j``: ``r x (T a) - k T s`` with ``a`` its thrust axis,
+    ``s`` its spin axis and ``k`` its torque-to-thrust ratio [m].
+    """
+    cols = []
+    for r in af.lift_rotors:
+        m = np.cross(r.position_m, r.thrust_axis) - r.torque_to_thrust_m * r.spin_axis
+        cols.append([-float(r.thrust_axis[2]), *m.tolist()])
+    return np.array(cols).T
+
+
+def hover_authority_problem(af: Airframe) -> str:
+    """Why the lift rotors cannot control the airframe in hover, or ``""`` when they can.
+
+    Rank check: the 4 x n hover effectiveness (:func:`hover_effectiveness`) must have rank 4
+    (thrust, roll, pitch and yaw independent). Sign check: the yaw row must have entries of
+    both signs (rotors that can only push yaw one way leave it uncontrollable at zero thrust
+    change), and so must the roll and pitch rows.
+    """
+    B = hover_effectiveness(af)
+    scale = np.maximum(np.max(np.abs(B), axis=1, keepdims=True), 1e-12)
+    Bn = B / scale
+    for row, axis_name in ((3, "yaw"), (1, "roll"), (2, "pitch")):
+        if not (np.any(Bn[row] > 1e-6) and np.any(Bn[row] < -1e-6)):
+            return (f"lift rotors that can turn the airframe both ways in {axis_name} in hover "
+                    f"(no {axis_name} authority in hover: check spin directions, positions "
+                    f"and cant)")
+    if np.linalg.matrix_rank(Bn, tol=1e-6) < 4:
+        return ("lift rotors whose thrust, roll, pitch and yaw effects are independent "
+                "(hover effectiveness of rank < 4: no yaw authority in hover; check spin "
+                "directions and cant)")
+    return ""
+
+
+def _with_airspeeds(af: Airframe, declared: Mapping[str, float], rd: _Reader) -> Airframe:
+    """The airframe with its stall / transition-end / cruise airspeeds, declared or derived."""
+    stall = declared.get("stall_m_s", af.stall_speed_m_s())
+    end = declared.get("transition_end_m_s", TRANSITION_END_OVER_STALL * stall)
+    cruise = declared.get("cruise_m_s", CRUISE_OVER_STALL * stall)
+    if not stall <= end <= cruise:
+        bad = "transition_end_m_s" if end < stall else "cruise_m_s"
+        raise rd.fail(f"airspeeds.{bad}", declared.get(bad, end if end < stall else cruise),
+                      f"stall <= transition end <= cruise (here {stall:.2f}, {end:.2f}, "
+                      f"{cruise:.2f} m/s)")
+    return replace(af, airspeeds=Airspeeds(stall, end, cruise, tuple(sorted(declared))))
 

@@ -11,7 +11,7 @@ default, or any link URL). The page shows
   a camera round trip to the browser (which a loaded machine delays by seconds);
 - live traces of roll/pitch/yaw, altitude and airspeed (uPlot);
 - mode, armed state, VTOL state, airspeed, altitude and the link state (heartbeat age);
-- actuator bars: the eight lift rotors laid out as on the airframe (top view), the pushers and
+- actuator bars: the airframe's lift rotors laid out as on the airframe (top view), the pushers and
   the surfaces;
 - buttons for arm, disarm, takeoff, transition to fixed-wing and back, and fault injection
   (actuator or group, loss slider, inject / clear); each sends a real MAVLink command through

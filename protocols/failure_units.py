@@ -1,19 +1,17 @@
 """Actuator names <-> MAVLink failure units and instances (MAV_CMD_INJECT_FAILURE numbering).
 
 PX4 numbers motors and servos from 1 in the order of the vehicle's outputs. For an airframe
-with actuator order ``lift rotors, pushers, surfaces`` (DS-1:
-rotor_1a .. rotor_4b, pusher_left, pusher_right, aileron_left, aileron_right, elevator,
-rudder_left, rudder_right):
+with actuator order ``lift rotors, pushers, surfaces`` (``n_l`` lift rotors, ``n_p`` pushers;
+DS-1: rotor_1a .. rotor_4b, pusher_left, pusher_right, aileron_left, aileron_right, elevator,
+rudder_left, rudder_right, so n_l = 8, n_p = 2):
 
-================================  ===========================  =========
+================================  ===========================  ====================
 actuator                          unit                         instance
-================================  ===========================  =========
-lift rotors in airframe order     FAILURE_UNIT_SYSTEM_MOTOR    1 .. 8
-pushers (left, right)             FAILURE_UNIT_SYSTEM_MOTOR    9, 10
-aileron_left, aileron_right,      FAILURE_UNIT_SYSTEM_SERVO    1 .. 5
-elevator, rudder_left,
-rudder_right
-================================  ===========================  =========
+================================  ===========================  ====================
+lift rotors in airframe order     FAILURE_UNIT_SYSTEM_MOTOR    1 .. n_l
+pushers in airframe order         FAILURE_UNIT_SYSTEM_MOTOR    n_l + 1 .. n_l + n_p
+surfaces in airframe order        FAILURE_UNIT_SYSTEM_SERVO    1 .. 5
+================================  ===========================  ====================
 
 Instance 0 means every instance of the unit. The vehicle process, the autopilot's
 ground-station endpoint and the ground station (:mod:`vtolftc.gcs.actuators`) all build this table
@@ -85,6 +83,9 @@ class ActuatorTable:
     def groups(self) -> dict[str, tuple[str, ...]]:
         """Named actuator groups (``lift_rotors``, ``pushers``, surfaces ...) -> actuator names."""
         g = dict(GROUPS)
+        for group, prefix in (("ailerons", "aileron"), ("rudders", "rudder")):
+            g[group] = tuple(n for n in self.servos if n.startswith(prefix))
+        g["surfaces"] = self.servos
         g["lift_rotors"] = tuple(n for n in self.motors if n.startswith("rotor_"))
         g["pushers"] = tuple(n for n in self.motors if n.startswith("pusher_"))
         g["motors"] = self.motors

@@ -6,8 +6,13 @@
   flat-earth projection about home. The vehicle encodes its state with them; the autopilot
   decodes what it receives; the in-process runner passes the vehicle state through the *same*
   pair, so an in-process run and a lockstep SITL run see bit-identical inputs.
-- :func:`wire_commands`: the 15 normalised actuator commands rounded to float32 exactly as
-  HIL_ACTUATOR_CONTROLS carries them.
+- :func:`wire_commands`: the airframe's normalised actuator commands (any number up to
+  :data:`HIL_OUTPUTS`) rounded to float32 exactly as HIL_ACTUATOR_CONTROLS carries them.
+
+HIL mapping (as PX4's actuator functions: motors first, then servos): slot ``i`` of
+HIL_ACTUATOR_CONTROLS' 16 carries actuator ``i`` of the airframe's order (lift rotors,
+pushers, surfaces); unused slots are 0. An airframe with more than 16 actuators cannot be
+carried and is refused by the airframe loader.
 
 Frames and units: NED world frame with its origin at home (metres), FRD body frame,
 quaternion scalar-first rotating body vectors into NED, SI units, radians. This module knows
@@ -28,6 +33,7 @@ from vtolftc.geodesy import EARTH_RADIUS_M, FlatEarth
 
 __all__ = [
     "EARTH_RADIUS_M",
+    "HIL_OUTPUTS",
     "N_ACTUATORS",
     "HilRoundTrip",
     "HilState",
@@ -38,7 +44,11 @@ __all__ = [
 ]
 
 N_ACTUATORS = 15
-"""Actuators carried in HIL_ACTUATOR_CONTROLS slots 0..14 (8 lift rotors, 2 pushers, 5 surfaces)."""
+"""Actuators of the reference airframe DS-1 (8 lift rotors, 2 pushers, 5 surfaces): the
+default size before an airframe is known. Other airframes carry ``airframe.n_actuators``."""
+
+HIL_OUTPUTS = 16
+"""Outputs of HIL_ACTUATOR_CONTROLS: the most actuators an airframe can have."""
 
 """Radius of the flat-earth projection about home [m] (WGS-84 equatorial radius)."""
 
@@ -219,10 +229,25 @@ class HilRoundTrip:
 
 
 def wire_commands(u: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:
-    """Commands as HIL_ACTUATOR_CONTROLS carries them: float32, 16 slots (ours are 0..14)."""
+    """Commands as HIL_ACTUATOR_CONTROLS carries them: float32 in slots ``0..n-1``.
+
+    Parameters
+    ----------
+    u : array_like
+        The ``n <= 16`` normalised actuator commands in the airframe's order.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``n`` float64 values, each exactly the float32 the wire carries.
+
+    Raises
+    ------
+    ValueError
+        More than :data:`HIL_OUTPUTS` commands, or not a flat vector.
+    """
     arr = np.asarray(u, dtype=np.float64)
-    if arr.shape == (N_ACTUATORS,):  # the usual case: same float32 rounding, 1 us less
-        return arr.astype(np.float32).astype(np.float64)
-    out = np.zeros(16, dtype=np.float32)
-    out[: arr.size] = arr
-    return out[:N_ACTUATORS].astype(np.float64)
+    if arr.ndim != 1 or arr.size > HIL_OUTPUTS:
+        raise ValueError(f"commands of shape {arr.shape}: HIL_ACTUATOR_CONTROLS carries at "
+                         f"most {HIL_OUTPUTS} actuators")
+    return arr.astype(np.float32).astype(np.float64)

@@ -41,7 +41,6 @@ import hashlib
 import hmac
 import importlib
 import io
-import os
 import re
 import shutil
 import struct
@@ -54,7 +53,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from vtolftc.jsonio import atomic_write_text
+from vtolftc.jsonio import atomic_write, atomic_write_text
 
 __all__ = [
     "DIALECT_NAME",
@@ -147,8 +146,8 @@ def dialect_sources(xml: Path = DIALECT_XML) -> list[Path]:
 def generate_dialect(target: Path, xml: Path = DIALECT_XML) -> Path:
     """Run mavgen (MAVLink 2.0, Python 3) on ``xml`` and write the module to ``target``.
 
-    The file is written to a temporary directory beside ``target`` and published with an atomic
-    :func:`os.replace`: a reader never sees half a module.
+    mavgen writes into a temporary directory beside ``target``; the module is published with
+    :func:`vtolftc.jsonio.atomic_write`: a reader never sees half a module.
 
     Parameters
     ----------
@@ -190,7 +189,7 @@ def generate_dialect(target: Path, xml: Path = DIALECT_XML) -> Path:
                 raise RuntimeError(f"mavgen failed on {xml}:\n{log.getvalue()}") from exc
             if not ok or not out_py.is_file():
                 raise RuntimeError(f"mavgen failed on {xml}:\n{log.getvalue()}")
-            os.replace(out_py, target)
+            atomic_write(target, lambda f: f.write(out_py.read_bytes()))
         finally:
             shutil.rmtree(work, ignore_errors=True)
     return target

@@ -46,7 +46,25 @@ LQR_R = 0.5
 
 @dataclass(frozen=True)
 class LqrAxis:
-    """LQR gains of one axis and the closed-loop poles of the design model (1/s)."""
+    """LQR gains of one axis and the closed-loop poles of the design model.
+
+    Parameters
+    ----------
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    k_int : float
+        Gain on the integral of the angle error (N m / (rad s)).
+    k_angle : float
+        Gain on the angle error (N m / rad).
+    k_rate : float
+        Gain on the body rate (N m s / rad).
+    poles : tuple of complex
+        Closed-loop poles of the design model (1/s).
+    A : ndarray of float, shape (3, 3)
+        State matrix of the design model (states [xi, angle, rate]).
+    B : ndarray of float, shape (3, 1)
+        Its input matrix (moment, N m).
+    """
 
     axis: Axis
     k_int: float
@@ -57,13 +75,36 @@ class LqrAxis:
     B: NDArray[np.float64]
 
     def gains(self) -> dict[str, float]:
-        """``k_int``, ``k_angle``, ``k_rate`` of this axis as a dict."""
+        """``k_int``, ``k_angle``, ``k_rate`` of this axis as a dict.
+
+        Returns
+        -------
+        dict of str to float
+            N m / (rad s), N m / rad, N m s / rad.
+        """
         return {"k_int": self.k_int, "k_angle": self.k_angle, "k_rate": self.k_rate}
 
 
 def design_model(af: Airframe, axis: Axis, airspeed_m_s: float = 0.0,
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(A, B) of the integral-augmented axis model, states [xi, angle, rate]."""
+    """(A, B) of the integral-augmented axis model, states [xi, angle, rate].
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    airspeed_m_s : float
+        Airspeed (m/s) of the model; 0 is hover.
+
+    Returns
+    -------
+    A : ndarray of float, shape (3, 3)
+        State matrix.
+    B : ndarray of float, shape (3, 1)
+        Input matrix of the moment (N m).
+    """
     c = axis_coefficients(af, axis, airspeed_m_s)
     A = np.array([[0.0, -1.0, 0.0],
                   [0.0, 0.0, 1.0],
@@ -74,7 +115,31 @@ def design_model(af: Airframe, axis: Axis, airspeed_m_s: float = 0.0,
 
 def lqr_axis(af: Airframe, axis: Axis, Q: tuple[float, float, float] = LQR_Q,
              R: float = LQR_R) -> LqrAxis:
-    """LQR of one axis on the hover model (module docstring)."""
+    """LQR of one axis on the hover model (module docstring).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    Q : (float, float, float)
+        State weights on [xi, angle, rate] (1/(rad s)^2, 1/rad^2, s^2/rad^2).
+    R : float
+        Weight on the moment (1/(N m)^2).
+
+    Returns
+    -------
+    LqrAxis
+        Gains and closed-loop poles.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> k = lqr_axis(load_airframe(), "roll")
+    >>> all(p.real < 0 for p in k.poles), k.k_angle > 0
+    (True, True)
+    """
     A, B = design_model(af, axis, 0.0)
     K, _, E = ct.lqr(A, B, np.diag(Q), np.array([[R]]))
     k1, k2, k3 = (float(x) for x in np.asarray(K).ravel())
@@ -83,5 +148,20 @@ def lqr_axis(af: Airframe, axis: Axis, Q: tuple[float, float, float] = LQR_Q,
 
 def lqr_design(af: Airframe, Q: tuple[float, float, float] = LQR_Q, R: float = LQR_R,
                ) -> dict[Axis, LqrAxis]:
-    """LQR gains of the three axes."""
+    """LQR gains of the three axes.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    Q : (float, float, float)
+        State weights on [xi, angle, rate], as in :func:`lqr_axis`.
+    R : float
+        Weight on the moment.
+
+    Returns
+    -------
+    dict of str to LqrAxis
+        Keyed by "roll", "pitch", "yaw".
+    """
     return {ax: lqr_axis(af, ax, Q, R) for ax in AXES}

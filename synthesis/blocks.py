@@ -77,11 +77,28 @@ class TunableBlock:
     n_states: int
 
     def parameters(self) -> list[Parameter]:
-        """The block's parameters (names prefixed with the block name)."""
+        """The block's parameters (names prefixed with the block name).
+
+        Returns
+        -------
+        list of Parameter
+            In the order of the block's slice of theta.
+        """
         raise NotImplementedError
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """(Ak, Bk, Ck, Dk) for this block's slice of theta."""
+        """(Ak, Bk, Ck, Dk) for this block's slice of theta.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_params,)
+            The block's parameter values.
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            Shapes (n_states, n_states), (n_states, n_in), (n_out, n_states), (n_out, n_in).
+        """
         raise NotImplementedError
 
     @property
@@ -108,25 +125,36 @@ class TunableBlock:
 
 @dataclass
 class StaticGain(TunableBlock):
-    """A tunable n_out x n_in static gain u = K y.
+    """A tunable n_out x n_in static gain u = K y (units: the plant's controls per measurement).
 
     Parameters
     ----------
-    name:
+    name : str
         Block name (parameter names are ``name.K[i,j]``).
-    n_out, n_in:
+    n_out, n_in : int
         Shape of K.
-    initial:
-        Start value (default zeros).
-    plant:
+    initial : array_like, optional
+        Start value, shape (n_out, n_in) (default zeros).
+    plant : GeneralizedPlant, optional
         If given (and ``scale`` is None), entry scales from :meth:`GeneralizedPlant.gain_scale`
         for the random starts and the bounds (the optimiser's step unit stays 1); the block
         must then map all the plant's measurements to all its controls.
-    scale:
+    scale : float or array_like, optional
         Typical magnitude per entry (scalar or n_out x n_in); default 1 or the plant's.
-    bound:
+    bound : float or array_like, optional
         |K_ij| <= bound (scalar or array); default ``DEFAULT_BOUND_FACTOR * scale``; ``inf``
         for unbounded.
+
+    Raises
+    ------
+    ValueError
+        For shapes that do not fit, or a plant whose sizes differ from the block's.
+
+    Examples
+    --------
+    >>> K = StaticGain("K", 1, 2)
+    >>> [p.name for p in K.parameters()]
+    ['K.K[0,0]', 'K.K[0,1]']
     """
 
     name: str
@@ -156,7 +184,13 @@ class StaticGain(TunableBlock):
         self._initial = _grid(self.initial, shape, "initial", 0.0)
 
     def parameters(self) -> list[Parameter]:
-        """The gain matrix entries ``K[i,j]``, row-major, as parameters."""
+        """The gain matrix entries ``K[i,j]``, row-major, as parameters.
+
+        Returns
+        -------
+        list of Parameter
+            n_out * n_in parameters.
+        """
         # a plant-derived scale sets the random starts and the bounds, not the optimiser's
         # step unit: on COMPleib HE3 (||A|| = 9.8 from a gravity coupling, eigenvalues below
         # 1.01 rad/s) plant-scaled steps stall at 0.94 where unit steps reach 0.82 (issue 23)
@@ -164,7 +198,18 @@ class StaticGain(TunableBlock):
         return self._matrix_params("K", self._initial, self._scale, self._bound, unit)
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """Static gain: no states, ``D = theta`` reshaped to (n_out, n_in)."""
+        """Static gain: no states, ``D = theta`` reshaped to (n_out, n_in).
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_out * n_in,)
+            The entries, row-major.
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            Empty state matrices and D of shape (n_out, n_in).
+        """
         K = np.asarray(theta, float).reshape(self.n_out, self.n_in)
         return np.zeros((0, 0)), np.zeros((0, self.n_in)), np.zeros((self.n_out, 0)), K
 
@@ -173,10 +218,29 @@ class StaticGain(TunableBlock):
 class StateSpaceBlock(TunableBlock):
     """A tunable fixed-order state space (Ak, Bk, Ck, Dk), every entry free.
 
-    ``order`` states. Initial realisation: Ak = -rate I (rate: the plant's ||A|| if
-    ``plant`` is given, else 1 [1/s]), Bk = I-like, Ck = 0, Dk = 0 (or ``initial`` =
-    (Ak, Bk, Ck, Dk)). Scales: Ak ~ rate, Bk ~ 1, Ck and Dk ~ the plant gain scale.
-    ``bound_factor`` x scale bounds every entry.
+    Initial realisation: Ak = -rate I (rate: the plant's ||A|| if ``plant`` is given, else
+    1 [1/s]), Bk = I-like, Ck = 0, Dk = 0 (or ``initial``). Scales: Ak ~ rate, Bk ~ 1, Ck and
+    Dk ~ the plant gain scale.
+
+    Parameters
+    ----------
+    name : str
+        Block name (parameter prefix).
+    order : int
+        Number of states.
+    n_out, n_in : int
+        Outputs (controls) and inputs (measurements).
+    initial : tuple of array_like, optional
+        (Ak, Bk, Ck, Dk) to start from.
+    plant : GeneralizedPlant, optional
+        Plant whose scales set the start and the parameter scales.
+    bound_factor : float
+        Every entry is bounded by ``bound_factor`` x its scale.
+
+    Raises
+    ------
+    ValueError
+        For order < 1 or an ``initial`` realisation of the wrong shapes.
     """
 
     name: str
@@ -219,14 +283,31 @@ class StateSpaceBlock(TunableBlock):
                         gscale)
 
     def parameters(self) -> list[Parameter]:
-        """All entries of A, B, C and D (in that order, row-major) as parameters."""
+        """All entries of A, B, C and D (in that order, row-major) as parameters.
+
+        Returns
+        -------
+        list of Parameter
+            order^2 + order (n_in + n_out) + n_out n_in parameters.
+        """
         out: list[Parameter] = []
         for label, x0, s in zip("ABCD", self._init, self._scales, strict=True):
             out += self._matrix_params(label, x0, s, self.bound_factor * s)
         return out
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """``(A, B, C, D)`` cut from ``theta`` in the order of :meth:`parameters`."""
+        """``(A, B, C, D)`` cut from ``theta`` in the order of :meth:`parameters`.
+
+        Parameters
+        ----------
+        theta : ndarray of float
+            The block's parameter values.
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            Shapes (order, order), (order, n_in), (n_out, order), (n_out, n_in).
+        """
         k, p, m = self.order, self.n_out, self.n_in
         th = np.asarray(theta, float)
         i = 0
@@ -241,8 +322,16 @@ class StateSpaceBlock(TunableBlock):
 class PIDBlock(TunableBlock):
     """SISO PID kp + ki/s + kd s/(tf s + 1) (:func:`vtolftc.synthesis.structured.pid`).
 
-    Parameters ``name.kp``, ``name.ki``, ``name.kd``, ``name.tf`` with the given initial
-    values and bounds (ki > 0 and tf > 0 are required by the realisation).
+    Parameters
+    ----------
+    name : str
+        Block name; parameters ``name.kp``, ``name.ki``, ``name.kd``, ``name.tf``.
+    kp, ki, kd : float
+        Initial gains (ki > 0 is required by the realisation).
+    tf : float
+        Initial derivative filter time constant (s), > 0.
+    bounds : dict of str to (float, float)
+        Optional (lower, upper) per gain name.
     """
 
     name: str
@@ -257,7 +346,13 @@ class PIDBlock(TunableBlock):
         self.n_states = 2
 
     def parameters(self) -> list[Parameter]:
-        """``kp``, ``ki``, ``kd`` and the derivative filter time constant ``tf`` (s)."""
+        """``kp``, ``ki``, ``kd`` and the derivative filter time constant ``tf`` (s).
+
+        Returns
+        -------
+        list of Parameter
+            Four parameters.
+        """
         dflt = {"kp": (-1e6, 1e6), "ki": (1e-9, 1e6), "kd": (-1e6, 1e6), "tf": (1e-4, 1e3)}
         out = []
         for k in ("kp", "ki", "kd", "tf"):
@@ -268,7 +363,18 @@ class PIDBlock(TunableBlock):
         return out
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """State-space PID with filtered derivative for ``theta = (kp, ki, kd, tf)``."""
+        """State-space PID with filtered derivative for ``theta = (kp, ki, kd, tf)``.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (4,)
+            kp, ki, kd, tf (s).
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            As :func:`vtolftc.synthesis.structured.pid`.
+        """
         return pid(*(float(v) for v in theta))
 
 
@@ -276,9 +382,22 @@ class PIDBlock(TunableBlock):
 class PPIDBlock(TunableBlock):
     """The paper's P-PID cascade as one 1 x 2 block: u = K_rate(s) (kp_angle e - rate).
 
-    Inputs [e = angle_ref - angle (rad); body rate (rad/s)], output moment (N m). The five
-    parameters are named ``name.<g>`` for g in :data:`vtolftc.synthesis.loops.PARAM_NAMES`;
-    ``gains`` gives initial values, ``bounds`` optional (lower, upper) per gain.
+    Inputs [e = angle_ref - angle (rad); body rate (rad/s)], output moment (N m).
+
+    Parameters
+    ----------
+    name : str
+        Block name; the five parameters are named ``name.<g>`` for g in
+        :data:`vtolftc.synthesis.loops.PARAM_NAMES`.
+    gains : dict of str to float
+        Initial values per gain name.
+    bounds : dict of str to (float, float)
+        Optional (lower, upper) per gain.
+
+    Raises
+    ------
+    ValueError
+        If ``gains`` lacks one of the five initial gains.
     """
 
     name: str
@@ -294,7 +413,13 @@ class PPIDBlock(TunableBlock):
         self.n_in, self.n_out, self.n_states = 2, 1, 2
 
     def parameters(self) -> list[Parameter]:
-        """The five cascaded P-PID gains (angle P, rate P, I, D, derivative filter s)."""
+        """The five cascaded P-PID gains (angle P, rate P, I, D, derivative filter s).
+
+        Returns
+        -------
+        list of Parameter
+            In :data:`vtolftc.synthesis.loops.PARAM_NAMES` order.
+        """
         from vtolftc.synthesis.loops import PARAM_NAMES
 
         dflt = {"kp_angle": (1e-6, 1e3), "kp_rate": (1e-9, 1e6), "ki_rate": (1e-9, 1e6),
@@ -311,6 +436,16 @@ class PPIDBlock(TunableBlock):
         """Cascaded P-PID for ``theta``: inputs (angle error (rad), rate (rad/s)), output moment.
 
         The rate loop sees ``kp_angle * e - rate``.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (5,)
+            The gains in :data:`vtolftc.synthesis.loops.PARAM_NAMES` order.
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            Shapes (2, 2), (2, 2), (1, 2), (1, 2); output in N m.
         """
         from vtolftc.synthesis.loops import rate_controller
 
@@ -326,6 +461,16 @@ class ControllerStructure:
     K's inputs are the blocks' inputs concatenated in order (they must add up to the plant's
     measurements), its outputs the blocks' outputs (the plant's controls). ``parameters``
     concatenates the blocks' parameters; :meth:`split` and :meth:`realize` map theta back.
+
+    Parameters
+    ----------
+    blocks : sequence of TunableBlock or TunableBlock
+        The blocks, in order.
+
+    Raises
+    ------
+    ValueError
+        Without blocks, or with duplicate block names.
     """
 
     def __init__(self, blocks: Sequence[TunableBlock] | TunableBlock):
@@ -348,16 +493,44 @@ class ControllerStructure:
         self.n_out = sum(b.n_out for b in self.blocks)
 
     def parameters(self) -> list[Parameter]:
-        """Parameters of all blocks, concatenated in block order."""
+        """Parameters of all blocks, concatenated in block order.
+
+        Returns
+        -------
+        list of Parameter
+            The structure's theta layout.
+        """
         return [p for ps in self._params for p in ps]
 
     def split(self, theta: NDArray[np.float64]) -> dict[str, NDArray[np.float64]]:
-        """theta -> {block name: its parameter slice}."""
+        """theta -> {block name: its parameter slice}.
+
+        Parameters
+        ----------
+        theta : array_like, shape (n_params,)
+            All parameters.
+
+        Returns
+        -------
+        dict of str to ndarray
+            Each block's slice.
+        """
         th = np.asarray(theta, float)
         return {b.name: th[s] for b, s in zip(self.blocks, self._slices, strict=True)}
 
     def realize(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """(Ak, Bk, Ck, Dk) of the block-diagonal controller at theta."""
+        """(Ak, Bk, Ck, Dk) of the block-diagonal controller at theta.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_params,)
+            All parameters.
+
+        Returns
+        -------
+        Ak, Bk, Ck, Dk : ndarray
+            The block-diagonal realisation (inputs and outputs concatenated in block order).
+        """
         th = np.asarray(theta, float)
         parts = [b.realize(th[s]) for b, s in zip(self.blocks, self._slices, strict=True)]
         from scipy.linalg import block_diag
@@ -379,7 +552,20 @@ class ControllerStructure:
 
 
 class LFTChannel:
-    """Picklable tuning channel theta -> F_l(P, K(theta)) (A, B, C, D)."""
+    """Picklable tuning channel theta -> F_l(P, K(theta)) (A, B, C, D).
+
+    Parameters
+    ----------
+    plant : GeneralizedPlant
+        The plant.
+    structure : ControllerStructure
+        The controller structure closing it.
+
+    Raises
+    ------
+    ValueError
+        If the structure's inputs/outputs do not match the plant's measurements/controls.
+    """
 
     def __init__(self, plant: GeneralizedPlant, structure: ControllerStructure):
         d = plant.dims
@@ -404,9 +590,42 @@ def lft_problem(
 ) -> TuningProblem:
     """The structured H-infinity problem min_theta max_i ||F_l(P_i, K(theta))||_inf.
 
-    One channel per plant (several models = a multi-model design). Returns a
-    :class:`~vtolftc.synthesis.structured.TuningProblem` for
-    :func:`~vtolftc.synthesis.structured.tune`.
+    One channel per plant (several models = a multi-model design).
+
+    Parameters
+    ----------
+    plants : GeneralizedPlant or sequence of GeneralizedPlant
+        The plant(s).
+    structure : ControllerStructure, TunableBlock or sequence of TunableBlock
+        The controller structure.
+    names : sequence of str, optional
+        Channel names (default one per plant).
+    stability_margin : float
+        Required closed-loop decay rate (1/s).
+
+    Returns
+    -------
+    TuningProblem
+        For :func:`~vtolftc.synthesis.structured.tune`.
+
+    Raises
+    ------
+    ValueError
+        If a plant does not fit the structure.
+
+    Examples
+    --------
+    Static output feedback u = k y of x' = x + w1 + u (unstable), y = x + w2, z = [x; u];
+    the optimum is k = -(1 + sqrt(3)) with norm 1 + sqrt(3):
+
+    >>> from vtolftc.synthesis.lft import GeneralizedPlant
+    >>> from vtolftc.synthesis.structured import tune
+    >>> P = GeneralizedPlant.from_matrices(A=[[1.0]], B1=[[1.0, 0.0]], B2=[[1.0]],
+    ...                                    C1=[[1.0], [0.0]], C2=[[1.0]],
+    ...                                    D12=[[0.0], [1.0]], D21=[[0.0, 1.0]])
+    >>> res = tune(lft_problem(P, StaticGain("K", 1, 1, initial=[[-3.0]])))
+    >>> res.stable, round(res.value, 6), round(float(res.theta[0]), 4)
+    (True, 2.732051, -2.7321)
     """
     if isinstance(plants, GeneralizedPlant):
         plants = [plants]

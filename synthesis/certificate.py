@@ -76,13 +76,13 @@ from numpy.typing import NDArray
 from scipy.optimize import brentq
 
 from vtolftc.airframe.loader import Airframe
-from vtolftc.synthesis.dg_scaling import BlockStructure
 from vtolftc.synthesis.hinfnorm import StateSpaceData, frequency_response
 from vtolftc.synthesis.lft import GeneralizedPlant, lft
 from vtolftc.synthesis.loops import PARAM_NAMES, rate_controller
 from vtolftc.synthesis.mixed_mu import mixed_mu_lower, mixed_mu_upper, mixed_mu_upper_start
 from vtolftc.synthesis.models import Axis, axis_coefficients
 from vtolftc.synthesis.mu import Block, MuSweep
+from vtolftc.synthesis.mu_blocks import BlockStructure
 from vtolftc.synthesis.robust import LoopDelays, actuator_time_constant
 from vtolftc.synthesis.uncertainty import GAMMA_RANGE, DesignPoint
 
@@ -130,8 +130,27 @@ _STIFF = {"pitch": "C_malpha", "yaw": "C_nbeta"}
 
 
 def airspeed_pieces(af: Airframe, point: DesignPoint) -> list[tuple[float, float]]:
-    """The point's airspeed interval [m/s] split at the derivative-table breakpoints inside
-    it: on each piece the tables are linear in V."""
+    """The point's airspeed interval split at the derivative-table breakpoints inside it.
+
+    On each piece the tables are linear in V.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe (its derivative tables).
+    point : DesignPoint
+        The design point (its perturbed airspeed range).
+
+    Returns
+    -------
+    list of (float, float)
+        (v_lo, v_hi) of each piece (m/s), in increasing order.
+
+    Raises
+    ------
+    ValueError
+        For an empty airspeed range.
+    """
     lo, hi = float(point.v_min_m_s), float(point.v_max_m_s)
     if not hi > lo:
         raise ValueError(f"design point {point.number}: empty airspeed range [{lo}, {hi}]")
@@ -142,12 +161,27 @@ def airspeed_pieces(af: Airframe, point: DesignPoint) -> list[tuple[float, float
 
 @dataclass(frozen=True)
 class ParametricFamily:
-    """One axis on one linear piece: the coefficients as polynomials in the normalised
-    parameters (``numpy.polynomial`` order, lowest power first).
+    """One axis on one linear piece: the coefficients as polynomials in the normalised parameters.
 
-    ``damping`` [N m s/rad] and ``stiffness`` [N m/rad] in dV; effectiveness
-    1 - gamma = ``b0`` - ``rg`` dg; ``tau_s`` the lag of the plant [s] (None: the paper's
-    plant, no lag). V = ``v_centre`` + ``v_half`` dV [m/s], gamma = ``g_centre`` + ``rg`` dg.
+    Polynomials are in ``numpy.polynomial`` order (lowest power first). V = ``v_centre`` +
+    ``v_half`` dV [m/s], gamma = ``g_centre`` + ``rg`` dg, dV and dg in [-1, 1].
+
+    Parameters
+    ----------
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    inertia : float
+        J of the axis (kg m^2).
+    damping : ndarray of float
+        Damping polynomial in dV (N m s / rad).
+    stiffness : ndarray of float
+        Stiffness polynomial in dV (N m / rad).
+    v_centre, v_half : float
+        Centre and half width of the airspeed piece (m/s).
+    g_centre, rg : float
+        Centre and half width of the gamma range; effectiveness 1 - gamma = ``b0`` - ``rg`` dg.
+    tau_s : float or None
+        The lag of the plant (s) (None: the paper's plant, no lag).
     """
 
     axis: Axis
@@ -187,8 +221,20 @@ class ParametricFamily:
         return ([Block.real(self.n_v)] if self.n_v > 0 else []) + [Block.real(1)]
 
     def coefficients(self, dV: Any, dg: Any) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
-        """(damping, stiffness, 1 - gamma) at normalised parameters (arrays broadcast); the
-        polynomials continued beyond [-1, 1]."""
+        """(damping, stiffness, 1 - gamma) at normalised parameters.
+
+        The polynomials are continued beyond [-1, 1].
+
+        Parameters
+        ----------
+        dV, dg : float or array_like
+            Normalised airspeed and effectiveness-loss parameters (arrays broadcast).
+
+        Returns
+        -------
+        damping, stiffness, effectiveness : ndarray
+            N m s / rad, N m / rad and 1 - gamma.
+        """
         dV = np.asarray(dV, float)
         dg = np.asarray(dg, float)
         return (npoly.polyval(dV, self.damping) + 0 * dg,
@@ -196,8 +242,21 @@ class ParametricFamily:
                 self.b0 - self.rg * dg + 0 * dV)
 
     def scaled(self, factor: float) -> ParametricFamily:
-        """The same family with its box scaled by ``factor`` about the centre (dV, dg
-        renormalised: the polynomial coefficients of dV^i times factor^i)."""
+        """The same family with its box scaled by ``factor`` about the centre.
+
+        dV and dg are renormalised: the polynomial coefficients of dV^i are multiplied by
+        factor^i.
+
+        Parameters
+        ----------
+        factor : float
+            Box scaling (1: unchanged).
+
+        Returns
+        -------
+        ParametricFamily
+            The scaled family.
+        """
         f = float(factor)
         pw = f ** np.arange(max(self.damping.size, self.stiffness.size))
         return ParametricFamily(self.axis, self.inertia, self.damping * pw[: self.damping.size],
@@ -205,11 +264,33 @@ class ParametricFamily:
                                 self.v_half * f, self.g_centre, self.rg * f, self.tau_s)
 
     def airspeed(self, dV: Any) -> Any:
-        """V [m/s] at normalised dV."""
+        """V [m/s] at normalised dV.
+
+        Parameters
+        ----------
+        dV : float or array_like
+            Normalised airspeed parameter.
+
+        Returns
+        -------
+        float or ndarray
+            Airspeed (m/s).
+        """
         return self.v_centre + self.v_half * np.asarray(dV, float)
 
     def gamma(self, dg: Any) -> Any:
-        """gamma at normalised dg."""
+        """gamma at normalised dg.
+
+        Parameters
+        ----------
+        dg : float or array_like
+            Normalised effectiveness-loss parameter.
+
+        Returns
+        -------
+        float or ndarray
+            The loss of effectiveness gamma.
+        """
         return self.g_centre + self.rg * np.asarray(dg, float)
 
 
@@ -224,13 +305,38 @@ def _plant_tau(af: Airframe, plant: PlantKind, delays: LoopDelays) -> float | No
 def family(af: Airframe, axis: Axis, v_lo: float, v_hi: float,
            gamma_range: tuple[float, float] = GAMMA_RANGE, plant: PlantKind = "lagged",
            delays: LoopDelays = DEFAULT_DELAYS) -> ParametricFamily:
-    """The exact polynomial parametrisation of ``axis`` on the airspeed piece
-    [``v_lo``, ``v_hi``] (m/s; the tables must be linear on it, see :func:`airspeed_pieces`).
+    """The exact polynomial parametrisation of ``axis`` on one airspeed piece.
 
     Same formulas as :func:`vtolftc.synthesis.models.axis_coefficients` (tested against it):
     damping = rho V S L^2 C_rate(V) / 4 (L = span for roll and yaw, chord for pitch),
     stiffness = qbar S c C_malpha(V) (pitch), -qbar S b C_nbeta(V) (yaw), 0 (roll), with
     C(V) = C(V_c) + (C(V_b) - C(V_a)) / 2 dV on the piece.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    v_lo, v_hi : float
+        The piece (m/s); the tables must be linear on it (see :func:`airspeed_pieces`).
+    gamma_range : (float, float)
+        Range of the loss of effectiveness.
+    plant : {"lagged", "paper"}
+        With the actuator and loop-delay lag of the robust design, or the paper's plant.
+    delays : LoopDelays
+        Loop delays of the lagged plant.
+
+    Returns
+    -------
+    ParametricFamily
+        The family.
+
+    Raises
+    ------
+    ValueError
+        For a piece outside 0 <= v_lo < v_hi, one that straddles a table breakpoint, or an
+        unknown plant kind.
     """
     if not v_hi > v_lo >= 0.0:
         raise ValueError(f"airspeed piece [{v_lo}, {v_hi}]: expected 0 <= v_lo < v_hi m/s")
@@ -268,8 +374,21 @@ def family(af: Airframe, axis: Axis, v_lo: float, v_hi: float,
 
 
 def plant_lft(fam: ParametricFamily) -> GeneralizedPlant:
-    """Generalised plant with inputs [w (n_v + 1); u] and outputs [z (n_v + 1); rate; angle]
-    (module docstring): closing w = diag(dV I_n, dg) z gives the plant of (V, gamma)."""
+    """Generalised plant of the family with its real parameters pulled out.
+
+    Inputs [w (n_v + 1); u] and outputs [z (n_v + 1); rate; angle] (module docstring):
+    closing w = diag(dV I_n, dg) z gives the plant of (V, gamma).
+
+    Parameters
+    ----------
+    fam : ParametricFamily
+        The family.
+
+    Returns
+    -------
+    GeneralizedPlant
+        The LFT form (u in N m, rate in rad/s, angle in rad).
+    """
     p = fam.row
     n = p.shape[0] - 1
     J = fam.inertia
@@ -316,12 +435,38 @@ def _controller(theta: Any) -> StateSpaceData:
 
 
 def closed_loop_lft(fam: ParametricFamily, theta: Any) -> StateSpaceData:
-    """M(s): the closed loop (controller ``theta``) seen by the real blocks, w -> z."""
+    """M(s): the closed loop (controller ``theta``) seen by the real blocks, w -> z.
+
+    Parameters
+    ----------
+    fam : ParametricFamily
+        The family.
+    theta : sequence of float or mapping
+        P-PID gains (:data:`vtolftc.synthesis.loops.PARAM_NAMES`).
+
+    Returns
+    -------
+    A, B, C, D : ndarray
+        M(s) as state space.
+    """
     return lft(plant_lft(fam), _controller(theta))
 
 
 def upper_lft_plant(fam: ParametricFamily, dV: float, dg: float) -> StateSpaceData:
-    """The plant u -> [rate; angle] with the real blocks closed (for checks)."""
+    """The plant u -> [rate; angle] with the real blocks closed (for checks).
+
+    Parameters
+    ----------
+    fam : ParametricFamily
+        The family.
+    dV, dg : float
+        Normalised airspeed and effectiveness-loss parameters, in [-1, 1].
+
+    Returns
+    -------
+    A, B, C, D : ndarray
+        The plant, moment (N m) -> [rate (rad/s); angle (rad)].
+    """
     P = plant_lft(fam)
     n = fam.n_v
     Delta = np.diag([dV] * n + [dg])
@@ -340,10 +485,28 @@ def upper_lft_plant(fam: ParametricFamily, dV: float, dg: float) -> StateSpaceDa
 
 def true_closed_loop_matrices(inertia: float, damping: Any, stiffness: Any, effectiveness: Any,
                               tau_s: float | None, theta: Any) -> NDArray[np.float64]:
-    """Closed-loop state matrices (batch, n, n) of the P-PID cascade around the physical
-    plant J q' = D q + K angle + b u_in (u_in = u, or the lag output), assembled directly
-    from the coefficients (arrays of one shape). States [angle, rate, (lag), integral,
-    filter], as :func:`vtolftc.synthesis.loops.closed_loop` of the same plant."""
+    """Closed-loop state matrices of the P-PID cascade around the physical plant.
+
+    The plant J q' = D q + K angle + b u_in (u_in = u, or the lag output), assembled directly
+    from the coefficients. States [angle, rate, (lag), integral, filter], as
+    :func:`vtolftc.synthesis.loops.closed_loop` of the same plant.
+
+    Parameters
+    ----------
+    inertia : float
+        J (kg m^2).
+    damping, stiffness, effectiveness : array_like
+        D (N m s / rad), K (N m / rad) and b = 1 - gamma, arrays of one shape (batch,).
+    tau_s : float or None
+        Lag time constant (s), or None for no lag.
+    theta : sequence of float or mapping
+        P-PID gains.
+
+    Returns
+    -------
+    ndarray of float, shape (batch, n, n)
+        The state matrices (n = 4, or 5 with the lag).
+    """
     th = [float(theta[k]) for k in PARAM_NAMES] if isinstance(theta, Mapping) else [
         float(x) for x in theta]
     kpa, kp, ki, kd, tf = th
@@ -378,7 +541,17 @@ def true_closed_loop_matrices(inertia: float, damping: Any, stiffness: Any, effe
 
 @dataclass(frozen=True)
 class GridCheck:
-    """Closed-loop poles of the true family over an n x n grid of V x gamma."""
+    """Closed-loop poles of the true family over an n x n grid of V x gamma.
+
+    Parameters
+    ----------
+    max_real_pole : float
+        Largest real part of a closed-loop pole over the grid (rad/s).
+    unstable_members, members : int
+        Unstable grid members and all members.
+    worst_airspeed_m_s, worst_gamma : float
+        The member with the largest real pole.
+    """
 
     max_real_pole: float     # rad/s, over the grid
     unstable_members: int
@@ -396,8 +569,32 @@ def grid_check(af: Airframe, axis: Axis, point: DesignPoint, theta: Any,
                plant: PlantKind = "lagged", n: int = 41,
                gamma_range: tuple[float, float] = GAMMA_RANGE,
                delays: LoopDelays = DEFAULT_DELAYS) -> GridCheck:
-    """Dense-grid verdict of the true model family (``axis_coefficients``) on the point's
-    box, on the same plant as the LFT."""
+    """Dense-grid verdict of the true model family on the point's box, on the LFT's plant.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    point : DesignPoint
+        The design point (airspeed range).
+    theta : sequence of float or mapping
+        P-PID gains.
+    plant : {"lagged", "paper"}
+        The plant kind.
+    n : int
+        Grid points per parameter.
+    gamma_range : (float, float)
+        Range of the loss of effectiveness.
+    delays : LoopDelays
+        Loop delays of the lagged plant.
+
+    Returns
+    -------
+    GridCheck
+        The poles' verdict.
+    """
     tau = _plant_tau(af, plant, delays)
     Vs = np.linspace(point.v_min_m_s, point.v_max_m_s, n)
     gs = np.linspace(gamma_range[0], gamma_range[1], n)
@@ -422,9 +619,29 @@ def _max_re_scaled(fam: ParametricFamily, theta: Any, k: float, n: int) -> float
 
 def grid_margin(fam: ParametricFamily, theta: Any, n: int = 41, k_max: float = K_MAX,
                 iters: int = 16) -> tuple[float, float]:
-    """(k_lo, k_hi): the n x n grid of the piece's box scaled by k (about its centre) is
-    stable at k_lo and has an unstable member at k_hi (bisection; k_hi = inf if stable up
-    to ``k_max``; k_lo = k_hi = 0 if the centre itself is unstable)."""
+    """Stability margin of the scaled parameter box, by bisection on a grid.
+
+    The n x n grid of the piece's box scaled by k (about its centre) is stable at k_lo and
+    has an unstable member at k_hi.
+
+    Parameters
+    ----------
+    fam : ParametricFamily
+        The family.
+    theta : sequence of float or mapping
+        P-PID gains.
+    n : int
+        Grid points per parameter.
+    k_max : float
+        Largest scaling tried.
+    iters : int
+        Bisection steps.
+
+    Returns
+    -------
+    k_lo, k_hi : float
+        k_hi = inf if stable up to ``k_max``; k_lo = k_hi = 0 if the centre itself is unstable.
+    """
     if _max_re_scaled(fam, theta, 0.0, 1) >= 0.0:
         return 0.0, 0.0
     if not _has_unstable_scaled(fam, theta, k_max, n):
@@ -460,9 +677,27 @@ def _has_unstable_scaled(fam: ParametricFamily, theta: Any, k: float, n: int) ->
 
 def zero_frequency_margin(M0: NDArray[Any], fam: ParametricFamily, n: int = 401,
                           k_max: float = K_MAX) -> float:
-    """Smallest ||(dV, dg)||_inf on an n x n grid of [-k_max, k_max]^2 at which
-    det(I - M(0) Delta) <= 0 (it is 1 at Delta = 0): a real closed-loop pole crosses the
-    origin within that box, so mu(M(0)) >= 1 / value. inf if none on the grid."""
+    """Smallest box scaling at which a real closed-loop pole crosses the origin.
+
+    The smallest ||(dV, dg)||_inf on an n x n grid of [-k_max, k_max]^2 at which
+    det(I - M(0) Delta) <= 0 (it is 1 at Delta = 0): then mu(M(0)) >= 1 / value.
+
+    Parameters
+    ----------
+    M0 : ndarray, shape (n_v + 1, n_v + 1)
+        M(0), the DC gain of :func:`closed_loop_lft`.
+    fam : ParametricFamily
+        The family.
+    n : int
+        Grid points per parameter.
+    k_max : float
+        Box half width.
+
+    Returns
+    -------
+    float
+        The scaling; inf if none on the grid.
+    """
     d = np.linspace(-k_max, k_max, n)
     dV, dg = np.meshgrid(d, d, indexing="ij")
     nv = fam.n_v
@@ -487,12 +722,30 @@ def zero_frequency_margin(M0: NDArray[Any], fam: ParametricFamily, n: int = 401,
 
 def vertex_crossings(fam: ParametricFamily, theta: Any, k_max: float = K_MAX,
                      n: int = 400) -> list[float]:
-    """Frequencies [rad/s] at which the family first loses stability along the rays
-    (dV, dg) = t (+-1, +-1) towards the box's vertices (scan of t in (0, k_max], then
-    bisection; the crossing pole's |Im|). With two real parameters the real mu over
-    frequency is the inverse of max(|dV(w)|, |dg(w)|) along the stability boundary: its
-    peak is either a smooth maximum (found by the refined grid) or a kink where
-    |dV| = |dg|, i.e. on one of these rays, at one of these frequencies."""
+    """Frequencies at which the family first loses stability along the rays to the vertices.
+
+    Along (dV, dg) = t (+-1, +-1): a scan of t in (0, k_max], then bisection; the crossing
+    pole's |Im|. With two real parameters the real mu over frequency is the inverse of
+    max(|dV(w)|, |dg(w)|) along the stability boundary: its peak is either a smooth maximum
+    (found by the refined grid) or a kink where |dV| = |dg|, i.e. on one of these rays, at
+    one of these frequencies.
+
+    Parameters
+    ----------
+    fam : ParametricFamily
+        The family.
+    theta : sequence of float or mapping
+        P-PID gains.
+    k_max : float
+        Largest scaling along a ray.
+    n : int
+        Scan points per ray.
+
+    Returns
+    -------
+    list of float
+        Crossing frequencies (rad/s).
+    """
     out = []
     ts = np.linspace(k_max / n, k_max, n)
     for sv in (-1.0, 1.0):
@@ -521,11 +774,29 @@ def vertex_crossings(fam: ParametricFamily, theta: Any, k_max: float = K_MAX,
 
 def two_parameter_lower(M: NDArray[Any], n_v: int, k_max: float = K_MAX,
                         n: int = 801) -> float:
-    """Real-mu lower bound of M for the structure diag(dV I_n_v, dg): det(I - M Delta) is
-    affine in dg, a(dV) + b(dV) dg, so for each dV of a fine grid on [-k_max, k_max] the
-    only candidate is dg = -a / b, admissible where it is real (Im(a conj(b)) = 0: sign
-    changes, refined by Brent's method). Each candidate is verified (sigma_min(I - M Delta)
-    ~ 0); the value is 1 / the smallest max(|dV|, |dg|) found (0 if none)."""
+    """Real-mu lower bound of M for the structure diag(dV I_n_v, dg).
+
+    det(I - M Delta) is affine in dg, a(dV) + b(dV) dg, so for each dV of a fine grid on
+    [-k_max, k_max] the only candidate is dg = -a / b, admissible where it is real
+    (Im(a conj(b)) = 0: sign changes, refined by Brent's method). Each candidate is verified
+    (sigma_min(I - M Delta) ~ 0).
+
+    Parameters
+    ----------
+    M : ndarray of complex, shape (n_v + 1, n_v + 1)
+        M(j w).
+    n_v : int
+        Repetitions of dV.
+    k_max : float
+        Search range of dV.
+    n : int
+        Grid points of dV.
+
+    Returns
+    -------
+    float
+        1 / the smallest max(|dV|, |dg|) found (0 if none).
+    """
     m = n_v + 1
     eye = np.eye(m)
     M = np.asarray(M)
@@ -586,11 +857,11 @@ def two_parameter_lower(M: NDArray[Any], n_v: int, k_max: float = K_MAX,
 def mu_real_sweep(fam: ParametricFamily, theta: Any,
                   omegas: NDArray[np.float64] | None = None, refine: int = 2,
                   seed: int = 0, rtol: float = 1e-3) -> MuSweep:
-    """Mixed-mu bounds of M(j w) over w = 0 plus ``omegas`` (default :data:`SWEEP_OMEGAS`),
-    refined ``refine`` times on a 7-point grid between the neighbours of each of the (up to
-    three) largest local maxima of the upper bound, and the :func:`vertex_crossings`.
+    """Mixed-mu bounds of the family's M(j w) over frequency, refined at the peaks.
 
-    Only the peak matters for the certificate. The D-G upper bound
+    Over w = 0 plus ``omegas``, refined ``refine`` times on a 7-point grid between the
+    neighbours of each of the (up to three) largest local maxima of the upper bound, and the
+    :func:`vertex_crossings`. Only the peak matters for the certificate. The D-G upper bound
     (:func:`vtolftc.synthesis.mixed_mu.mixed_mu_upper`) starts from a verified lower bound
     at w = 0 as its ``target`` and is optimised, frequency by frequency in decreasing order
     of the cheap D-only bound, only until it is below the current target (which rises only
@@ -605,9 +876,28 @@ def mu_real_sweep(fam: ParametricFamily, theta: Any,
     The lower bound (:func:`two_parameter_lower`, exact for this structure up to its grid;
     at the upper peak also :func:`vtolftc.synthesis.mixed_mu.mixed_mu_lower` where the
     largest of the first is more than 1 % below the peak upper bound; both verified real
-    perturbations) is
-    computed at w = 0, the vertex-crossing frequencies and the four largest upper values,
-    and is zero at the other frequencies.
+    perturbations) is computed at w = 0, the vertex-crossing frequencies and the four
+    largest upper values, and is zero at the other frequencies.
+
+    Parameters
+    ----------
+    fam : ParametricFamily
+        The family.
+    theta : sequence of float or mapping
+        P-PID gains.
+    omegas : ndarray of float, optional
+        Frequencies (rad/s); default :data:`SWEEP_OMEGAS`.
+    refine : int
+        Refinement rounds at the peaks.
+    seed : int
+        Seed of the random lower-bound starts.
+    rtol : float
+        Relative tolerance of the upper bound.
+
+    Returns
+    -------
+    MuSweep
+        Bounds at every sampled frequency (sorted) and their peaks.
     """
     M = closed_loop_lft(fam, theta)
     crossings = vertex_crossings(fam, theta)
@@ -705,7 +995,27 @@ def mu_real_sweep(fam: ParametricFamily, theta: Any,
 
 @dataclass(frozen=True)
 class PieceResult:
-    """Mixed mu and grid margin of one airspeed piece (its own normalisation)."""
+    """Mixed mu and grid margin of one airspeed piece (its own normalisation).
+
+    Parameters
+    ----------
+    v_lo_m_s, v_hi_m_s : float
+        The piece (m/s).
+    n_v : int
+        Repetitions of the airspeed parameter in the LFT.
+    mu_upper, mu_lower : float
+        Peak mixed-mu bounds over frequency.
+    peak_frequency_rad_s : float
+        Frequency of the upper peak (rad/s).
+    mu_upper_at_zero : float
+        Upper bound at w = 0 (tight only if it is the peak).
+    zero_frequency_k : float
+        det(I - M(0) Delta) <= 0 first at this box scaling.
+    grid_k_lo, grid_k_hi : float
+        The scaled grid is stable at k_lo, has an unstable member at k_hi (inf: none).
+    centre_stable : bool
+        Whether the piece's centre model is stable.
+    """
 
     v_lo_m_s: float
     v_hi_m_s: float
@@ -726,7 +1036,13 @@ class PieceResult:
             math.inf if self.grid_k_hi == 0 else 1.0 / self.grid_k_hi)
 
     def to_dict(self) -> dict[str, Any]:
-        """All fields (and ``grid_mu``) as a JSON-ready dict (inf as None)."""
+        """All fields (and ``grid_mu``) as a JSON-ready dict (inf as None).
+
+        Returns
+        -------
+        dict
+            The fields.
+        """
         d = {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
              for k, v in self.__dict__.items()}
         g = self.grid_mu
@@ -736,7 +1052,27 @@ class PieceResult:
 
 @dataclass(frozen=True)
 class PointCertificate:
-    """One axis at one design point: the three numbers and the verdict."""
+    """One axis at one design point: the three numbers and the verdict.
+
+    Parameters
+    ----------
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    point : int
+        Design point number.
+    v_min_m_s, v_max_m_s : float
+        Airspeed range (m/s).
+    plant : {"lagged", "paper"}
+        The plant kind.
+    mu_upper, mu_lower : float
+        Max over pieces of the mixed-mu bounds.
+    grid : GridCheck
+        The dense-grid verdict.
+    grid_mu : float
+        Max over pieces of 1 / k_hi.
+    pieces : list of PieceResult
+        Per-piece results.
+    """
 
     axis: Axis
     point: int
@@ -769,7 +1105,13 @@ class PointCertificate:
         return "not certified: bound >= 1"
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary with the pieces."""
+        """JSON-ready summary with the pieces.
+
+        Returns
+        -------
+        dict
+            The summary.
+        """
         g = self.grid
         return {"axis": self.axis, "point": self.point, "v_min_m_s": self.v_min_m_s,
                 "v_max_m_s": self.v_max_m_s, "plant": self.plant,
@@ -794,8 +1136,34 @@ def certify_point(af: Airframe, axis: Axis, point: DesignPoint, theta: Any,
                   margin: bool = True) -> PointCertificate:
     """Mixed mu (every piece), the dense grid and the grid margin of one axis-point.
 
-    ``theta``: the P-PID gains (mapping with :data:`vtolftc.synthesis.loops.PARAM_NAMES`
-    keys or a sequence in that order). ``margin=False`` skips the grid-margin bisection.
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    point : DesignPoint
+        The design point.
+    theta : sequence of float or mapping
+        The P-PID gains (mapping with :data:`vtolftc.synthesis.loops.PARAM_NAMES` keys or a
+        sequence in that order).
+    plant : {"lagged", "paper"}
+        The plant kind.
+    grid_n : int
+        Grid points per parameter of the dense grid.
+    gamma_range : (float, float)
+        Range of the loss of effectiveness.
+    delays : LoopDelays
+        Loop delays of the lagged plant.
+    seed : int
+        Seed of the random lower-bound starts.
+    margin : bool
+        False skips the grid-margin bisection.
+
+    Returns
+    -------
+    PointCertificate
+        The certificate.
     """
     pieces = []
     for lo, hi in airspeed_pieces(af, point):
@@ -822,15 +1190,42 @@ def certify_point(af: Airframe, axis: Axis, point: DesignPoint, theta: Any,
 
 
 def gains_at(doc: Mapping[str, Any], axis: Axis, index: int) -> dict[str, float]:
-    """The P-PID gains of breakpoint ``index`` of a ``vtolftc-gain-schedule/1`` document
-    (a constant schedule, one breakpoint, gives the same gains at every index)."""
+    """The P-PID gains of one breakpoint of a ``vtolftc-gain-schedule/1`` document.
+
+    A constant schedule (one breakpoint) gives the same gains at every index.
+
+    Parameters
+    ----------
+    doc : mapping
+        The gain-schedule document (parsed JSON).
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    index : int
+        Breakpoint index.
+
+    Returns
+    -------
+    dict of str to float
+        Gains keyed by :data:`vtolftc.synthesis.loops.PARAM_NAMES`.
+    """
     t = doc["axes"][axis]
     i = 0 if len(doc["airspeed_breakpoints_m_s"]) == 1 else index
     return {k: float(t[k][i]) for k in PARAM_NAMES}
 
 
 def design_points(doc: Mapping[str, Any]) -> list[DesignPoint]:
-    """The design points recorded in a gain-schedule document."""
+    """The design points recorded in a gain-schedule document.
+
+    Parameters
+    ----------
+    doc : mapping
+        The gain-schedule document (parsed JSON).
+
+    Returns
+    -------
+    list of DesignPoint
+        In the document's order.
+    """
     return [DesignPoint(int(p["number"]), float(p["airspeed_m_s"]), float(p["v_min_m_s"]),
                         float(p["v_max_m_s"])) for p in doc["design_points"]]
 
@@ -838,8 +1233,31 @@ def design_points(doc: Mapping[str, Any]) -> list[DesignPoint]:
 def certify_schedule(af: Airframe, doc: Mapping[str, Any], plant: PlantKind,
                      axes: Sequence[Axis] = ("roll", "pitch", "yaw"), *, grid_n: int = 41,
                      seed: int = 0) -> list[dict[str, Any]]:
-    """Records (one per axis and design point) for a gain-schedule document: the lumped
-    complex mu_RS the document records (table 3 form, ``mu_rs``), and the certificate."""
+    """Certificate records (one per axis and design point) for a gain-schedule document.
+
+    Each record holds the lumped complex mu_RS the document records (table 3 form,
+    ``mu_rs``) and the certificate.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    doc : mapping
+        The gain-schedule document (parsed JSON).
+    plant : {"lagged", "paper"}
+        The plant kind.
+    axes : sequence of str
+        Axes to certify.
+    grid_n : int
+        Grid points per parameter of the dense grid.
+    seed : int
+        Seed of the random lower-bound starts.
+
+    Returns
+    -------
+    list of dict
+        JSON-ready records.
+    """
     out = []
     for axis in axes:
         meta = doc["axes"][axis].get("metadata", {})

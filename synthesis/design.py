@@ -1,24 +1,33 @@
 """The paper's attitude design: weights, structured H-infinity tuning at the six design points
 for the three axes (GS-SHIF), and the constant multi-model design over all points (SHIF).
 
+Design points: the paper's table 1 scaled to the airframe's transition range
+(:func:`paper_points`: table 1's airspeeds times V_t / 13 m/s, V_t the transition end derived
+from the wing or declared, :mod:`vtolftc.synthesis.scaling`); table 1 itself for DS-1.
+
 Weights per axis and design point (paper section 3.1.3):
 
 - ``Ws`` (eq. 5) with the paper's table 2 values of M and omega_b (:data:`TABLE2`) and
   A = 1e-3 (0.1 % steady-state error; A > 0 is required for a finite weighted norm; the
-  integral action of the P-PID makes S(0) = 0, so A hardly matters).
+  integral action of the P-PID makes S(0) = 0, so A hardly matters). Table 2 holds for DS-1;
+  for another aircraft M is kept and omega_b scaled by the ratio of the authority bandwidths
+  sqrt(u_max / (J r_max)) of the two aircraft at the same point (:func:`table2_scaled`).
 - ``Wt``: the multiplicative uncertainty weight fitted by
   :func:`vtolftc.synthesis.uncertainty.cover`
   over the point's airspeed range and gamma in [0, 0.6].
-- ``Wr`` (eq. 6) with omega_a = 5 rad/s (paper), r_max = 30 deg (the largest attitude
+- ``Wr`` (eq. 6) with omega_a = 5 rad/s (paper; scaled by the actuator bandwidth for another
+  aircraft, :func:`control_weight_bandwidth`), r_max = 30 deg (the largest attitude
   reference step the autopilot commands) and u_max = :func:`moment_authority` (the moment the
   airframe can produce about the axis at the nominal airspeed).
 
-Tunable gains (:data:`vtolftc.synthesis.loops.PARAM_NAMES`) with bounds (:func:`parameters`):
-kp_angle in [0.3, 8] 1/s (outer loop of a few rad/s at most; PX4's default roll P is 6.5);
-kp_rate in [0.5 J, 40 J] N m s/rad (the rate-loop crossover kp_rate/J between 0.5 and
-40 rad/s); ki_rate in [2 J, 40 J] N m/rad; kd_rate in [0, 2 J] N m s^2/rad; tf_rate_s in
-[0.01, 1] s (the autopilot runs at 250 Hz: a derivative filter faster than 0.01 s would act
-near its Nyquist frequency). J is the axis inertia (kg m^2).
+Tunable gains (:data:`vtolftc.synthesis.loops.PARAM_NAMES`) with bounds (:func:`parameters`,
+which gives each as a formula of the actuator bandwidth omega_act = 1 / tau_act, the
+autopilot period T = 4 ms and the axis inertia J; the numbers here are DS-1's, omega_act =
+20 rad/s): kp_angle in [0.3, 8] 1/s (outer loop of a few rad/s at most; PX4's default roll
+P is 6.5); kp_rate in [0.5 J, 40 J] N m s/rad (the rate-loop crossover kp_rate/J between
+0.5 and 40 rad/s); ki_rate in [2 J, 40 J] N m/rad; kd_rate in [0, 2 J] N m s^2/rad;
+tf_rate_s in [0.01, 1] s (the autopilot runs at 250 Hz: a derivative filter faster than
+0.01 s would act near its Nyquist frequency). J is the axis inertia (kg m^2).
 
 The lower bound of ki_rate is a design decision, not the paper's: eq. 8 only weighs the
 reference-to-error S, not the rejection of a constant moment at the plant input (what an
@@ -28,9 +37,10 @@ ki_rate >= 2 J the integral removes a fault's constant moment in a few seconds; 
 case 1 the roll RMSE drops from 1.84 to 1.28 deg against ki_rate >= 0.5 J, for a stacked
 norm a few percent higher (roll point 6: 0.679 -> 0.700).
 
-Start point: a classical design (rate-loop crossover omega_r = min(6, sqrt(4 u_max /
-(r_max J))) rad/s, kp_rate = J omega_r, ki_rate = kp_rate omega_r / 5, kd_rate = 0.05 J,
-tf = 0.02 s, kp_angle = omega_r / 4), plus ``n_starts`` seeded random starts.
+Start point: a classical design (rate-loop crossover omega_r = min(0.3 omega_act,
+sqrt(4 u_max / (r_max J))) rad/s (a 6 rad/s cap for DS-1), kp_rate = J omega_r, ki_rate =
+kp_rate omega_r / 5, kd_rate = 0.05 J, tf = 0.02 s, kp_angle = omega_r / 4), plus
+``n_starts`` seeded random starts.
 
 Tie-break: among the starts whose stacked norm is within 0.1 % of the best, the one with the
 smallest ||Ws S||_inf is kept. Where a low-frequency floor of |Wt T_u| (= |Wt(0)|, since
@@ -44,17 +54,26 @@ markedly worse (yaw RMSE about 3 deg instead of 0.3 deg in the paper's case 1).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor, as_completed
-from dataclasses import dataclass, field
+from concurrent.futures import Executor
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
-from vtolftc.airframe.loader import Airframe
-from vtolftc.synthesis.hinfnorm import hinf_norm
+from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.synthesis.design_loop import (
+    SHIF_TAG,
+    AxisDesign,
+    TuningSetup,
+    achieved_norms,
+    pick_start,
+    point_seed,
+    run_design_loop,
+    tune_axis,
+)
 from vtolftc.synthesis.loops import (
     PARAM_NAMES,
     CascadeChannel,
@@ -62,17 +81,18 @@ from vtolftc.synthesis.loops import (
     SensitivityWeight,
     closed_loop,
 )
-from vtolftc.synthesis.models import AXES, Axis, attitude_model
-from vtolftc.synthesis.structured import (
-    Parameter,
-    StartRecord,
-    TuneResult,
-    TuningProblem,
-    collect_starts,
-    run_start,
-    start_jobs,
-    tune,
+from vtolftc.synthesis.models import Axis, attitude_model
+from vtolftc.synthesis.scaling import (
+    AUTOPILOT_PERIOD_S,
+    actuator_bandwidth,
+    actuator_time_constant,
+    authority_bandwidth,
+    axis_inertia,
+    require_authority,
+    require_bounds,
+    scaled_design_points,
 )
+from vtolftc.synthesis.structured import Parameter, TuneResult, TuningProblem
 from vtolftc.synthesis.uncertainty import PAPER_DESIGN_POINTS, DesignPoint, UncertaintyWeight, cover
 
 __all__ = [
@@ -82,11 +102,21 @@ __all__ = [
     "TABLE2",
     "AxisDesign",
     "AxisWeights",
+    "PaperMethod",
+    "achieved_norms",
+    "axis_inertia",
+    "control_weight_bandwidth",
     "design_gs_shif",
     "design_point",
     "design_shif",
     "moment_authority",
+    "paper_points",
     "parameters",
+    "pick_start",
+    "point_seed",
+    "reference_airframe",
+    "run_designs",
+    "table2_scaled",
     "weights_for",
 ]
 
@@ -150,84 +180,103 @@ class AxisWeights:
 def weights_for(af: Airframe, axis: Axis, point: DesignPoint,
                 table2: dict[str, Sequence[tuple[float, float]]] | None = None,
                 ) -> AxisWeights:
-    """Ws (table 2), Wt (``cover``) and Wr (eq. 6) of ``axis`` at ``point``."""
-    tab = TABLE2 if table2 is None else table2
-    M, wb = tab[axis][point.number - 1]
-    Wt, _ = cover(af, axis, point)
+    """Ws (table 2 scaled to ``af``, :func:`table2_scaled`; or ``table2`` as given), Wt
+    (``cover``) and Wr (eq. 6, omega_a of :func:`control_weight_bandwidth`) of ``axis`` at
+    ``point``.
+
+    Raises
+    ------
+    AirframeError
+        ``af`` has no moment about ``axis`` at the point's airspeed.
+    """
     u_max = moment_authority(af, axis, point.airspeed_m_s)
+    require_authority(af, axis, point.airspeed_m_s, u_max)
+    M, wb = (table2_scaled(af, axis, point) if table2 is None
+             else table2[axis][point.number - 1])
+    Wt, _ = cover(af, axis, point)
     return AxisWeights(axis, point, SensitivityWeight(M, wb, A_SENSITIVITY), Wt,
-                       ControlWeight(R_MAX_RAD, u_max, OMEGA_A_RAD_S))
+                       ControlWeight(R_MAX_RAD, u_max, control_weight_bandwidth(af)))
 
 
-def axis_inertia(af: Airframe, axis: Axis) -> float:
-    """The principal moment of inertia of ``axis`` (kg m^2, FRD body axes)."""
-    return float(np.diag(af.inertia_kg_m2)[AXES.index(axis)])
+def table2_scaled(af: Airframe, axis: Axis, point: DesignPoint) -> tuple[float, float]:
+    """(M, omega_b [rad/s]) of Ws for ``axis`` at ``point``: table 2 scaled to ``af``.
+
+    Table 2 was designed for the paper's aircraft, of which the reference airframe DS-1
+    (``airframe/ds1.toml``) is our stand-in; for DS-1 this is table 2 itself. For another
+    aircraft the peak M (dimensionless: a robustness margin) is kept and the bandwidth is
+    scaled with the aircraft's attitude time scale at the same fraction of its transition:
+
+        omega_b = omega_b,table2 * omega_u(af, V) / omega_u(DS-1, V_table1)
+
+    with omega_u = sqrt(u_max / (J r_max)) (:func:`~vtolftc.synthesis.scaling.
+    authority_bandwidth`, u_max = :func:`moment_authority`, J the axis inertia) at the
+    point's airspeed V (the table 1 airspeed of the same point number for DS-1): an aircraft
+    with twice the inertia for the same authority tracks sqrt(2) times slower.
+    """
+    M, wb = TABLE2[axis][point.number - 1]
+    ref = reference_airframe()
+    v_ref = PAPER_DESIGN_POINTS[point.number - 1].airspeed_m_s
+    u = moment_authority(af, axis, point.airspeed_m_s)
+    require_authority(af, axis, point.airspeed_m_s, u)
+    wu = authority_bandwidth(u, axis_inertia(af, axis), R_MAX_RAD)
+    wu_ref = authority_bandwidth(moment_authority(ref, axis, v_ref), axis_inertia(ref, axis),
+                                 R_MAX_RAD)
+    return M, wb * (wu / wu_ref)
+
+
+def control_weight_bandwidth(af: Airframe) -> float:
+    """omega_a [rad/s] of Wr (eq. 6): the paper's 5 rad/s for DS-1, scaled with the actuator
+    bandwidth, omega_a = 5 omega_act(af) / omega_act(DS-1)
+    (:func:`~vtolftc.synthesis.scaling.actuator_bandwidth`)."""
+    return OMEGA_A_RAD_S * (actuator_bandwidth(af) / actuator_bandwidth(reference_airframe()))
+
+
+@functools.lru_cache(maxsize=1)
+def reference_airframe() -> Airframe:
+    """DS-1 (``airframe/ds1.toml``), the stand-in for the paper's aircraft that table 2's
+    weights were designed for (loaded once)."""
+    return load_airframe(None)
 
 
 def parameters(af: Airframe, axis: Axis, u_max: float) -> list[Parameter]:
-    """The five tunable gains with bounds and the classical start (module docstring)."""
-    J = axis_inertia(af, axis)
-    wr = min(6.0, math.sqrt(4.0 * u_max / (R_MAX_RAD * J)))
-    kp = J * wr
-    return [
-        Parameter("kp_angle", wr / 4.0, 0.3, 8.0, scale=1.0),
-        Parameter("kp_rate", kp, 0.5 * J, 40.0 * J, scale=J),
-        Parameter("ki_rate", max(kp * wr / 5.0, 2.0 * J), 2.0 * J, 40.0 * J, scale=J),
-        Parameter("kd_rate", 0.05 * J, 0.0, 2.0 * J, scale=0.1 * J),
-        Parameter("tf_rate_s", 0.02, 0.01, 1.0, scale=0.02),
-    ]
+    """The five tunable gains with bounds and the classical start (module docstring), scaled
+    by the actuator bandwidth omega_act = 1 / tau_act, the autopilot period T and the
+    authority bandwidth omega_u (:mod:`vtolftc.synthesis.scaling`):
 
+    - kp_angle in [min(0.015 omega_act, omega_r / 4), 0.4 omega_act] 1/s;
+    - kp_rate in [J omega_act / 40, 2 J omega_act] (rate crossover kp_rate / J);
+    - ki_rate in [J omega_act^2 / 200, J omega_act^2 / 10];
+    - kd_rate in [0, 2 J] (kd_rate / J is dimensionless);
+    - tf_rate_s in [2.5 T, 20 tau_act];
+    - start: omega_r = min(0.3 omega_act, 2 omega_u) (actuator lag at most atan(0.3) =
+      17 deg at the start's crossover), kp_rate = J omega_r, ki_rate = max(kp_rate
+      omega_r / 5, lower bound), kd_rate = 0.05 J, tf = 5 T, kp_angle = omega_r / 4.
 
-@dataclass
-class AxisDesign:
-    """Result of one tune: gains, per-requirement norms, closed-loop poles, weights used.
-
-    ``norms`` keys: ``gamma`` (the stacked norm of eq. 8, max over models for SHIF),
-    ``Ws*S``, ``Wt*T``, ``Wr*R`` (each requirement alone; for SHIF the max over models).
+    For DS-1 (omega_act = 20 rad/s, T = 4 ms) these are the bounds of the module docstring.
     """
+    J = axis_inertia(af, axis)
+    w_act = actuator_bandwidth(af)
+    tau = actuator_time_constant(af)
+    T = AUTOPILOT_PERIOD_S
+    wr = min(0.3 * w_act, 2.0 * authority_bandwidth(u_max, J, R_MAX_RAD))
+    kp = J * wr
+    b = {"kp_angle": (min(0.015 * w_act, wr / 4.0), 0.4 * w_act),
+         "kp_rate": (J * (w_act / 40), J * (2 * w_act)),
+         "ki_rate": (J * (w_act**2 / 200), J * (w_act**2 / 10)),
+         "kd_rate": (0.0, 2.0 * J), "tf_rate_s": (2.5 * T, 20 * tau)}
+    require_bounds(af, axis, b)
 
-    axis: Axis
-    label: str                      # "point 3" or "all points"
-    gains: dict[str, float]
-    norms: dict[str, float]
-    stable: bool
-    poles: list[list[complex]]      # closed-loop poles per model
-    weights: list[AxisWeights]
-    starts: int
-    message: str = ""
-    per_model_norms: list[dict[str, float]] = field(default_factory=list)
+    def clip(name: str, x: float) -> float:
+        return min(max(x, b[name][0]), b[name][1])
 
-    @property
-    def theta(self) -> NDArray[np.float64]:
-        """The P-PID gains as a vector in :data:`PARAM_NAMES` order."""
-        return np.array([self.gains[k] for k in PARAM_NAMES])
-
-
-def achieved_norms(ch: CascadeChannel, theta: NDArray[np.float64]) -> dict[str, float]:
-    """The exact H-infinity norm of the channel (``"gamma"``) and of each of its weighted rows
-    (e.g. ``"Ws*S"``) at the gains ``theta``, by name."""
-    out = {"gamma": hinf_norm(ch(theta)).value}
-    for name, sys in ch.rows(theta).items():
-        out[name] = hinf_norm(sys).value
-    return out
-
-
-def _secondary(ch: CascadeChannel, theta: NDArray[np.float64]) -> float:
-    """||Ws S||_inf: the tie-break among equally good starts (module docstring)."""
-    A, B, C, D = ch(theta)
-    keep = [i for i, n in enumerate(ch.outputs) if n == "Ws*S"]
-    return hinf_norm((A, B, C[keep], D[keep])).value if keep else 0.0
-
-
-def pick_start(res: TuneResult, channels: Sequence[CascadeChannel]) -> NDArray[np.float64]:
-    """Tie-break among near-optimal starts (module docstring)."""
-    if not res.stable:
-        return res.theta
-    best = res.value
-    cands = [r for r in res.starts if math.isfinite(r.value) and r.value <= best * (1 + 1e-3)]
-    scored = [(max(_secondary(c, r.theta) for c in channels), r.index, r.theta) for r in cands]
-    scored.sort(key=lambda t: (t[0], t[1]))
-    return np.asarray(scored[0][2], float)
+    return [
+        Parameter("kp_angle", clip("kp_angle", wr / 4.0), *b["kp_angle"], scale=1.0),
+        Parameter("kp_rate", clip("kp_rate", kp), *b["kp_rate"], scale=J),
+        Parameter("ki_rate", clip("ki_rate", max(kp * wr / 5.0, b["ki_rate"][0])),
+                  *b["ki_rate"], scale=J),
+        Parameter("kd_rate", 0.05 * J, *b["kd_rate"], scale=0.1 * J),
+        Parameter("tf_rate_s", 5 * T, *b["tf_rate_s"], scale=0.02),
+    ]
 
 
 def _problem(af: Airframe, axis: Axis, weights: list[AxisWeights],
@@ -242,138 +291,75 @@ def _problem(af: Airframe, axis: Axis, weights: list[AxisWeights],
     return pb, plants, chans
 
 
-def _design(axis: Axis, weights: list[AxisWeights], label: str, n_starts: int,
-            plants: list[Any], chans: list[CascadeChannel], res: TuneResult) -> AxisDesign:
-    """The design of a finished tune: tie-break, norms per point, poles."""
-    theta = pick_start(res, chans)
-    per = [achieved_norms(c, theta) for c in chans]
-    norms = {k: max(p[k] for p in per) for k in per[0]}
-    poles = [closed_loop(G, theta).poles for G in plants]
-    stable = all(float(np.max(p.real)) < 0 for p in poles)
-    return AxisDesign(axis, label, dict(zip(PARAM_NAMES, (float(x) for x in theta),
-                                            strict=True)),
-                      norms, stable, [[complex(z) for z in p] for p in poles], weights,
-                      n_starts + 1, res.message, per)
+@dataclass(frozen=True)
+class PaperMethod:
+    """The paper's design as a :class:`~vtolftc.synthesis.design_loop.DesignMethod`: weights
+    of :func:`weights_for`, eq. 8 on the eq. 1-3 model, tie-break of :func:`pick_start`."""
+
+    def weights(self, af: Airframe, axis: Axis, point: DesignPoint) -> AxisWeights:
+        """:func:`weights_for` ``(af, axis, point)``."""
+        return weights_for(af, axis, point)
+
+    def setup(self, af: Airframe, axis: Axis, weights: list[AxisWeights]) -> TuningSetup:
+        """The eq. 7-8 problem over the points of ``weights``."""
+        pb, plants, chans = _problem(af, axis, weights)
+        return TuningSetup(pb, plants, chans)
+
+    def design(self, axis: Axis, weights: list[AxisWeights], label: str, n_starts: int,
+               setup: TuningSetup, res: TuneResult) -> AxisDesign:
+        """The design of a finished tune: tie-break, norms per point, poles."""
+        theta = pick_start(res, setup.chans)
+        per = [achieved_norms(c, theta) for c in setup.chans]
+        norms = {k: max(p[k] for p in per) for k in per[0]}
+        poles = [closed_loop(G, theta).poles for G in setup.plants]
+        stable = all(float(np.max(p.real)) < 0 for p in poles)
+        return AxisDesign(axis, label, dict(zip(PARAM_NAMES, (float(x) for x in theta),
+                                                strict=True)),
+                          norms, stable, [[complex(z) for z in p] for p in poles], weights,
+                          n_starts + 1, res.message, per)
 
 
-def _tune(af: Airframe, axis: Axis, weights: list[AxisWeights], label: str, n_starts: int,
-          seed: int, max_iter: int) -> AxisDesign:
-    pb, plants, chans = _problem(af, axis, weights)
-    res = tune(pb, n_starts=n_starts, seed=seed, max_iter=max_iter)
-    return _design(axis, weights, label, n_starts, plants, chans, res)
-
-
-def point_seed(seed: int, axis: Axis, tag: int) -> int:
-    """The random-start seed of one tune: independent streams per (seed, axis, point tag)."""
-    return int(np.random.SeedSequence([seed, AXES.index(axis), tag]).generate_state(1)[0])
+def paper_points(af: Airframe) -> tuple[DesignPoint, ...]:
+    """The paper method's six design points for ``af``: table 1 scaled to its transition
+    range (:func:`~vtolftc.synthesis.scaling.scaled_design_points`; table 1 for DS-1)."""
+    return scaled_design_points(af, cruise=False)
 
 
 def design_point(af: Airframe, axis: Axis, point: DesignPoint, *, n_starts: int = 6,
                  seed: int = 0, max_iter: int = 40) -> AxisDesign:
     """Tune one axis at one design point (eq. 7-8 for the nominal model of the point)."""
-    w = weights_for(af, axis, point)
-    return _tune(af, axis, [w], f"point {point.number}", n_starts,
-                 point_seed(seed, axis, point.number), max_iter)
+    return tune_axis(PaperMethod(), af, axis, [weights_for(af, axis, point)],
+                     f"point {point.number}", n_starts, point_seed(seed, axis, point.number),
+                     max_iter)
 
 
-def design_shif(af: Airframe, axis: Axis, points: Sequence[DesignPoint] = PAPER_DESIGN_POINTS,
+def design_shif(af: Airframe, axis: Axis, points: Sequence[DesignPoint] | None = None,
                 *, n_starts: int = 6, seed: int = 0, max_iter: int = 40) -> AxisDesign:
-    """One constant P-PID for ``axis`` minimising the max over all points of the stacked
-    norm (multi-model minimax, the same weights per point as GS-SHIF)."""
-    ws = [weights_for(af, axis, p) for p in points]
-    return _tune(af, axis, ws, "all points", n_starts, point_seed(seed, axis, 100), max_iter)
-
-
-def _job(args: tuple[Any, ...]) -> tuple[tuple[str, int], AxisDesign]:
-    kind, af, axis, point, n_starts, seed = args
-    if kind == "gs":
-        return (axis, point.number), design_point(af, axis, point, n_starts=n_starts, seed=seed)
-    return (axis, 0), design_shif(af, axis, n_starts=n_starts, seed=seed)
-
-
-def _weights_job(args: tuple[Any, ...]) -> tuple[tuple[str, DesignPoint], AxisWeights]:
-    af, axis, point = args
-    return (axis, point), weights_for(af, axis, point)
-
-
-def _gs_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], AxisDesign]:
-    """One GS-SHIF tune with its point's weights given (:func:`design_point`)."""
-    af, axis, w, n_starts, seed, max_iter = args
-    return (axis, w.point.number), _tune(af, axis, [w], f"point {w.point.number}", n_starts,
-                                         point_seed(seed, axis, w.point.number), max_iter)
-
-
-def _start_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], StartRecord]:
-    axis, job = args
-    return (axis, int(job[1])), run_start(job)
+    """One constant P-PID for ``axis`` minimising the max over all points (default
+    :func:`paper_points`) of the stacked norm (multi-model minimax, the same weights per
+    point as GS-SHIF)."""
+    pts = paper_points(af) if points is None else points
+    ws = [weights_for(af, axis, p) for p in pts]
+    return tune_axis(PaperMethod(), af, axis, ws, "all points", n_starts,
+                     point_seed(seed, axis, SHIF_TAG), max_iter)
 
 
 def run_designs(af: Airframe, *, n_starts: int = 6, seed: int = 0,
-                points: Sequence[DesignPoint] = PAPER_DESIGN_POINTS,
+                points: Sequence[DesignPoint] | None = None,
                 executor: Executor | None = None, shif: bool = True,
                 progress: Callable[[str], None] | None = None, max_iter: int = 40,
                 on_design: Callable[[tuple[str, int], AxisDesign], None] | None = None,
                 ) -> tuple[dict[Axis, list[AxisDesign]], dict[Axis, AxisDesign]]:
-    """All GS-SHIF tunes (axes x points) and, with ``shif``, the three SHIF tunes (over the
-    paper's six points, :func:`design_shif`'s default).
-
-    Deterministic: each tune's seed derives from (seed, axis, point), whatever the execution
-    order. ``executor`` (e.g. a ``ProcessPoolExecutor``) runs the work in parallel, cut finer
-    than one job per tune so that every worker stays busy: the weights of every (axis,
-    point) once, then every start of the SHIF tunes (the longest jobs, first) and the
-    GS-SHIF tunes; a SHIF tune's start records are combined in start order
-    (:func:`vtolftc.synthesis.structured.collect_starts`), the same result bit for bit as
-    :func:`design_shif`. ``progress`` is called with a label after each finished tune,
-    ``on_design(key, design)`` with each finished design (key ``(axis, point number)``,
-    ``(axis, 0)`` for SHIF).
+    """All GS-SHIF tunes (axes x ``points``, default :func:`paper_points`) and, with
+    ``shif``, the three SHIF tunes over the six paper points of ``af`` (:func:`design_shif`'s
+    default): :func:`vtolftc.synthesis.design_loop.run_design_loop` with
+    :class:`PaperMethod` (deterministic, the same bit for bit with or without
+    ``executor``; ``progress`` and ``on_design`` as there).
     """
-    results: dict[tuple[str, int], AxisDesign] = {}
-
-    def done(key: tuple[str, int], d: AxisDesign) -> None:
-        results[key] = d
-        if on_design is not None:
-            on_design(key, d)
-        if progress is not None:
-            progress(f"{key[0]} {'SHIF' if key[1] == 0 else f'point {key[1]}'}")
-
-    if executor is None:
-        jobs: list[tuple[Any, ...]] = []
-        if shif:  # the longest jobs first
-            jobs += [("shif", af, ax, None, n_starts, seed) for ax in AXES]
-        jobs += [("gs", af, ax, p, n_starts, seed) for ax in AXES for p in points]
-        for key, d in map(_job, jobs):
-            done(key, d)
-    else:
-        need = list(points) + [p for p in PAPER_DESIGN_POINTS if shif and p not in points]
-        wfuts = [executor.submit(_weights_job, (af, ax, p)) for ax in AXES for p in need]
-        weights = dict(f.result() for f in wfuts)
-        shif_pb: dict[Axis, tuple[Any, ...]] = {}
-        records: dict[Axis, list[StartRecord]] = {ax: [] for ax in AXES}
-        futs = []
-        if shif:
-            for ax in AXES:
-                ws = [weights[(ax, p)] for p in PAPER_DESIGN_POINTS]
-                prob = _problem(af, ax, ws)
-                shif_pb[ax] = (ws, prob)
-                for job in start_jobs(prob[0], n_starts=n_starts, seed=point_seed(seed, ax, 100),
-                                      max_iter=max_iter):
-                    futs.append(executor.submit(_start_job, (ax, job)))
-        futs += [executor.submit(_gs_job, (af, ax, weights[(ax, p)], n_starts, seed,
-                                           max_iter)) for ax in AXES for p in points]
-        for f in as_completed(futs):
-            key, r = f.result()
-            if isinstance(r, AxisDesign):
-                done(key, r)
-                continue
-            ax = key[0]
-            records[ax].append(r)
-            if len(records[ax]) == n_starts + 1:
-                ws, (pb, plants, chans) = shif_pb[ax]
-                res = collect_starts(pb, records[ax])
-                done((ax, 0), _design(ax, ws, "all points", n_starts, plants, chans, res))
-    gs = {ax: [results[(ax, p.number)] for p in points] for ax in AXES}
-    sh = {ax: results[(ax, 0)] for ax in AXES} if shif else {}
-    return gs, sh
+    pts = paper_points(af) if points is None else tuple(points)
+    return run_design_loop(PaperMethod(), af, pts, shif_points=paper_points(af),
+                           n_starts=n_starts, seed=seed, executor=executor, shif=shif,
+                           progress=progress, max_iter=max_iter, on_design=on_design)
 
 
 def design_gs_shif(af: Airframe, **kw: Any) -> dict[Axis, list[AxisDesign]]:

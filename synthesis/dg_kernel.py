@@ -28,10 +28,37 @@ def dg_objective(M: NDArray[np.complex128], x: NDArray[np.float64], tpos: NDArra
                  gd_pos: NDArray[np.intp], gd_par: NDArray[np.intp], gu_r: NDArray[np.intp],
                  gu_c: NDArray[np.intp], gu_re: NDArray[np.intp], gu_im: NDArray[np.intp],
                  smooth: float, want_grad: bool) -> tuple[float, float, NDArray[np.float64]]:
-    """(lambda_max, smoothed value f, df/dx) at scalings ``x`` (the index arrays those of
-    ``_DG``; ``smooth`` the relative log-sum-exp width, 0: f = lambda_max). Without
-    ``want_grad`` the gradient is all zeros and f = lambda_max. Raises
-    ``numpy.linalg.LinAlgError`` where the eigenproblem fails (non-finite entries)."""
+    """The D-G objective lambda_max(M^H D M + j(G M - M^H G), D), smoothed, and its gradient.
+
+    Parameters
+    ----------
+    M : ndarray of complex, shape (n, n)
+        The (padded, square) matrix.
+    x : ndarray of float, shape (n_params,)
+        The scaling parameters.
+    tpos, tpar, tcoef, off_r, off_c, off_re, off_im : ndarray
+        The index arrays of ``dg_scaling._DG`` for T (where each parameter enters it).
+    gd_pos, gd_par, gu_r, gu_c, gu_re, gu_im : ndarray
+        The index arrays of ``dg_scaling._DG`` for Ghat.
+    smooth : float
+        Relative log-sum-exp width (0: f = lambda_max).
+    want_grad : bool
+        Compute the gradient; without it the gradient is all zeros and f = lambda_max.
+
+    Returns
+    -------
+    lam : float
+        lambda_max.
+    f : float
+        The smoothed value.
+    grad : ndarray of float, shape (n_params,)
+        df/dx.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Where the eigenproblem fails (non-finite entries).
+    """
     n = M.shape[0]
     tdiag = np.exp(tcoef * x[tpar])
     has_off = off_r.size > 0

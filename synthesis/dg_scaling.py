@@ -1,6 +1,7 @@
-"""Mixed real/complex mu upper bound by D-G scaling (Young, Newlin & Doyle; MATLAB's mussv),
-and the block structure of possibly non-square M. The analysis functions built on it are in
-:mod:`.mixed_mu`; see there for the theory and the validation.
+"""Mixed real/complex mu upper bound by D-G scaling (Young, Newlin & Doyle; MATLAB's mussv)
+on a :class:`~vtolftc.synthesis.mu_blocks.BlockStructure` (possibly non-square M; the type
+is re-exported here). The analysis functions built on it are in :mod:`.mixed_mu`; see there
+for the theory and the validation.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from vtolftc.synthesis.dg_kernel import dg_objective
-from vtolftc.synthesis.mu_blocks import Block
+from vtolftc.synthesis.mu_blocks import Block, BlockStructure
 
 __all__ = [
     "BlockStructure",
@@ -25,127 +26,6 @@ __all__ = [
     "mixed_mu_upper",
     "mixed_mu_upper_start",
 ]
-
-
-# ------------------------------------------------------------------------------------------
-# block structure
-# ------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class BlockStructure:
-    """A block-diagonal uncertainty structure and the shape of the M it applies to.
-
-    Parameters
-    ----------
-    blocks:
-        The blocks (:class:`vtolftc.synthesis.mu.Block`) in order. ``Block.full(r, c)`` is an
-        r x c complex block; ``Block.real(n)`` / ``Block.repeated_complex(n)`` are delta I_n.
-
-    Attributes
-    ----------
-    m_shape:
-        (rows, cols) of M = (sum of block cols, sum of block rows).
-    delta_shape:
-        (rows, cols) of Delta = (sum of block rows, sum of block cols).
-    """
-
-    blocks: tuple[Block, ...]
-
-    def __init__(self, blocks: Sequence[Block] | Block | BlockStructure):
-        if isinstance(blocks, BlockStructure):
-            blocks = blocks.blocks
-        if isinstance(blocks, Block):
-            blocks = [blocks]
-        blocks = tuple(blocks)
-        if not blocks:
-            raise ValueError("the block structure is empty; expected a list of Block objects")
-        for b in blocks:
-            if not isinstance(b, Block):
-                raise ValueError(
-                    f"unknown block specification {b!r}; expected Block.full(rows, cols), "
-                    "Block.repeated_complex(n) or Block.real(n)"
-                )
-        object.__setattr__(self, "blocks", blocks)
-
-    @property
-    def m_shape(self) -> tuple[int, int]:
-        """Shape (rows, cols) of the matrix M that the structure closes a loop around."""
-        return sum(b.cols for b in self.blocks), sum(b.rows for b in self.blocks)
-
-    @property
-    def delta_shape(self) -> tuple[int, int]:
-        """Shape (rows, cols) of the block-diagonal perturbation Delta."""
-        return sum(b.rows for b in self.blocks), sum(b.cols for b in self.blocks)
-
-    @property
-    def has_real(self) -> bool:
-        """True when a block is a real (parametric) scalar block."""
-        return any(b.kind == "real" for b in self.blocks)
-
-    def ab13md_spec(self) -> tuple[NDArray[np.int64], NDArray[np.int64]] | None:
-        """(nblock, itype) for SLICOT AB13MD, or None if the structure is outside its scope.
-
-        AB13MD takes square full complex blocks and 1 x 1 real blocks only.
-        """
-        nblock, itype = [], []
-        for b in self.blocks:
-            if b.kind == "full" and b.rows == b.cols:
-                nblock.append(b.rows)
-                itype.append(2)
-            elif b.kind == "real" and b.rows == 1:
-                nblock.append(1)
-                itype.append(1)
-            else:
-                return None
-        return np.array(nblock, dtype=np.int64), np.array(itype, dtype=np.int64)
-
-    def check(self, M: Any) -> NDArray[np.complex128]:
-        """M as a complex array, with a one-line error if its shape does not fit."""
-        M = np.asarray(M)
-        if M.ndim != 2:
-            raise ValueError(f"M must be a 2-D matrix, got shape {M.shape}")
-        if M.shape != self.m_shape:
-            raise ValueError(
-                f"M is {M.shape[0]}x{M.shape[1]} but the block structure needs "
-                f"{self.m_shape[0]}x{self.m_shape[1]} (rows = sum of block cols, cols = sum "
-                "of block rows)"
-            )
-        if not np.all(np.isfinite(M)):
-            raise ValueError("M contains NaN or inf entries")
-        return M.astype(complex)
-
-    # padding to square blocks -----------------------------------------------------------
-    def padded(self) -> tuple[BlockStructure, NDArray[np.intp], NDArray[np.intp]]:
-        """Square-block structure and the positions of M's rows/cols in the padded M."""
-        rows_keep: list[int] = []
-        cols_keep: list[int] = []
-        new: list[Block] = []
-        r0 = 0
-        for b in self.blocks:
-            s = max(b.rows, b.cols)
-            rows_keep.extend(range(r0, r0 + b.cols))  # M rows of this block: b.cols
-            cols_keep.extend(range(r0, r0 + b.rows))  # M cols of this block: b.rows
-            new.append(Block.full(s) if b.kind == "full" else b)
-            r0 += s
-        return BlockStructure(new), np.array(rows_keep, np.intp), np.array(cols_keep, np.intp)
-
-    def pad(self, M: NDArray[Any]) -> tuple[NDArray[np.complex128], BlockStructure]:
-        """Zero-padded square M and its square-block structure (mu is unchanged)."""
-        sq, rk, ck = self.padded()
-        if self.m_shape[0] == len(rk) == len(ck) and np.array_equal(rk, ck) and (
-            rk.size == 0 or rk[-1] == rk.size - 1
-        ):
-            return M, sq
-        n = sq.m_shape[0]
-        Mp = np.zeros((n, n), dtype=complex)
-        Mp[np.ix_(rk, ck)] = M
-        return Mp, sq
-
-    def unpad_delta(self, Delta: NDArray[Any]) -> NDArray[np.complex128]:
-        """Delta of the padded problem restricted to this structure (drops padding)."""
-        _, rk, ck = self.padded()
-        return np.asarray(Delta)[np.ix_(ck, rk)]
 
 
 # ------------------------------------------------------------------------------------------
@@ -398,16 +278,16 @@ class _DGObjective:
 class MixedMuUpper:
     """A certified mixed-mu upper bound: mu(M) <= value.
 
-    Attributes
+    Parameters
     ----------
-    value:
+    value : float
         The bound beta (>= 0; 0 means mu = 0 is certified).
-    D, G:
+    D, G : ndarray of complex, shape (N, N)
         The scalings of the certificate, for the square (padded) M: D > 0 commutes with Delta,
         G Hermitian on the real blocks, M^H D M + j(G M - M^H G) <= value^2 D.
-    method:
+    method : {"dg", "ab13md"}
         ``"ab13md"`` or ``"dg"`` (the D-G optimisation of this module).
-    params:
+    params : ndarray of float, optional
         Internal parametrisation of (D, G) for ``warm_start`` (``"dg"`` only), or AB13MD's
         ``x`` vector.
     """
@@ -467,9 +347,29 @@ def dg_upper_bound(
     M: NDArray[Any], st: BlockStructure, x0: NDArray[np.float64] | None, target: float,
     rtol: float, maxiter: int,
 ) -> MixedMuUpper:
-    """The D-G optimiser's upper bound of mixed mu of ``M`` (from the start ``x0``, or the
-    identity and Osborne starts), stopping once ``target`` is proven or within ``rtol``; the
-    value returned is the one the returned (D, G) prove (:func:`certified_value`)."""
+    """The D-G optimiser's upper bound of mixed mu of a square-block problem.
+
+    Parameters
+    ----------
+    M : ndarray of complex, shape (N, N)
+        Square matrix of a square-block structure.
+    st : BlockStructure
+        Its structure (square blocks).
+    x0 : ndarray of float or None
+        Start parameters (a previous ``MixedMuUpper.params``), or None for the identity and
+        Osborne starts.
+    target : float
+        Stop once a bound <= target (1 + rtol) is proven.
+    rtol : float
+        Relative tolerance on beta.
+    maxiter : int
+        BFGS iterations per continuation stage.
+
+    Returns
+    -------
+    MixedMuUpper
+        The bound that the returned (D, G) prove (:func:`certified_value`).
+    """
     par = _dg_parametrisation(st.blocks)
     obj = _DGObjective(M, par)
     starts = [np.zeros(par.n_params), _osborne_x(M, par)]
@@ -517,8 +417,22 @@ def dg_upper_bound(
 def ab13md_upper_bound(
     M: NDArray[Any], spec: tuple[NDArray[Any], NDArray[Any]], x: NDArray[np.float64] | None
 ) -> MixedMuUpper | None:
-    """SLICOT AB13MD's upper bound (``spec``: its block sizes and types), or None when AB13MD
-    fails or its (D, G) do not prove its value."""
+    """SLICOT AB13MD's mixed-mu upper bound, checked.
+
+    Parameters
+    ----------
+    M : ndarray of complex, shape (N, N)
+        Square matrix.
+    spec : (ndarray, ndarray)
+        AB13MD's block sizes and types (``BlockStructure.ab13md_spec()``).
+    x : ndarray of float or None
+        AB13MD's warm-start vector, or None for a cold start.
+
+    Returns
+    -------
+    MixedMuUpper or None
+        The bound with its (D, G); None when AB13MD fails or its (D, G) do not prove its value.
+    """
     from slycot import ab13md
 
     try:
@@ -554,14 +468,27 @@ def certified_value(M: Any, D: Any, G: Any | None = None) -> float:
     beta = sqrt(max(lambda_max(M^H D M + j(G M - M^H G), D), 0)), the largest generalised
     eigenvalue with D > 0: then M^H D M + j(G M - M^H G) <= beta^2 D, which implies
     mu(M) <= beta when D commutes with the structure and G is Hermitian on its real blocks
-    (module :mod:`.mixed_mu`). Returns ``inf`` when D is not numerically positive definite.
+    (module :mod:`.mixed_mu`).
 
     Parameters
     ----------
-    M:
+    M : array_like, shape (N, N)
         Square complex matrix (the padded M for non-square structures).
-    D, G:
-        The scalings (G = None or 0 for a pure D scaling).
+    D : array_like, shape (N, N)
+        Hermitian positive definite scaling.
+    G : array_like, shape (N, N), optional
+        Hermitian scaling of the real blocks (None or 0 for a pure D scaling).
+
+    Returns
+    -------
+    float
+        beta; ``inf`` when D is not numerically positive definite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> round(certified_value(np.array([[3.0]]), np.eye(1)), 12)
+    3.0
     """
     from scipy.linalg import eigh
 
@@ -583,14 +510,26 @@ _UPPER_METHODS = ("auto", "ab13md", "dg")
 
 
 def mixed_mu_upper_start(M: Any, blocks: Sequence[Block] | BlockStructure) -> float:
-    """The D-G bound at the optimiser's starting scalings, without optimising: the smaller of
-    sigma_max(M) (D = I, G = 0) and the block-Osborne balanced D (G = 0).
+    """The D-G bound at the optimiser's starting scalings, without optimising.
 
-    A valid upper bound of mu(M) (each is a certificate), cheap, and the value of
+    The smaller of sigma_max(M) (D = I, G = 0) and the block-Osborne balanced D (G = 0). A
+    valid upper bound of mu(M) (each is a certificate), cheap, and the value of
     ``mixed_mu_upper(M, blocks, method="dg", maxiter=0, target=inf)`` to rounding (that one
     also re-checks its scalings outside the compiled kernel and returns the larger of the two
     evaluations, which may differ in the last bits): a sweep uses it to order frequencies and
     to skip those already below a known lower bound.
+
+    Parameters
+    ----------
+    M : array_like, shape ``BlockStructure(blocks).m_shape``
+        Complex matrix.
+    blocks : sequence of Block or BlockStructure
+        The uncertainty structure.
+
+    Returns
+    -------
+    float
+        The upper bound.
     """
     st = BlockStructure(blocks)
     Mp, sq = st.pad(st.check(M))
@@ -611,24 +550,26 @@ def mixed_mu_upper(
     maxiter: int = 200,
     target: float = 0.0,
 ) -> MixedMuUpper:
-    """Mixed real/complex mu upper bound with D-G scaling (module docstring).
+    """Mixed real/complex mu upper bound with D-G scaling (see :mod:`.mixed_mu`).
 
     Parameters
     ----------
-    M:
-        Complex matrix of shape ``BlockStructure(blocks).m_shape`` (non-square allowed).
-    blocks:
-        The uncertainty structure (list of :class:`~vtolftc.synthesis.mu.Block`).
-    method:
+    M : array_like, shape ``BlockStructure(blocks).m_shape``
+        Complex matrix (non-square allowed).
+    blocks : sequence of Block or BlockStructure
+        The uncertainty structure.
+    method : {"auto", "ab13md", "dg"}
         ``"auto"`` (AB13MD where it applies, else ``"dg"``), ``"ab13md"`` (error if the
         structure has repeated or non-square blocks) or ``"dg"`` (D-G optimisation: scipy BFGS
         on the compiled objective of :mod:`vtolftc.synthesis.dg_kernel`).
-    warm_start:
+    warm_start : MixedMuUpper, optional
         A previous result for the same structure (a neighbouring frequency): its scalings
         start the optimiser.
-    rtol, maxiter:
-        Optimiser tolerance (relative, on beta) and BFGS iterations per continuation stage.
-    target:
+    rtol : float
+        Optimiser tolerance (relative, on beta).
+    maxiter : int
+        BFGS iterations per continuation stage.
+    target : float
         Stop as soon as the bound is <= target (1 + rtol), e.g. a known lower bound.
 
     Returns
@@ -638,6 +579,19 @@ def mixed_mu_upper(
         it is returned (:func:`certified_value`): ``value`` is at least what (D, G) prove,
         and AB13MD's result is replaced by the D-G optimiser's where its scalings do not
         prove AB13MD's value.
+
+    Raises
+    ------
+    ValueError
+        If M does not fit the structure, ``method`` is unknown, or ``"ab13md"`` is asked for a
+        structure outside its scope.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> r = mixed_mu_upper(np.diag([1.0, 2j]), [Block.real(2)], method="dg")
+    >>> round(r.value, 4), round(certified_value(np.diag([1.0, 2j]), r.D, r.G), 4)
+    (1.0, 1.0)
     """
     st = BlockStructure(blocks)
     Mc = st.check(M)

@@ -14,24 +14,22 @@
   law: tau = k_int int(angle_ref - angle) dt + k_angle (angle_ref - angle) - k_rate rate,
   units k_int N m/(rad s), k_angle N m/rad, k_rate N m s/rad; one value per breakpoint.
 
-Every file is written atomically (temporary file in the same folder, then ``os.replace``), so
-an interrupted run never leaves a truncated file behind.
+Every file is written atomically (:func:`vtolftc.jsonio.atomic_write_text`), so an interrupted
+run never leaves a truncated file behind, in the project's one JSON convention
+(:func:`vtolftc.jsonio.json_safe`: a NaN or infinity is written as ``null``).
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from vtolftc.airframe.loader import Airframe
-from vtolftc.jsonio import atomic_write_text
+from vtolftc.jsonio import atomic_write_text, json_safe
 from vtolftc.synthesis.loops import PARAM_NAMES
 from vtolftc.synthesis.models import AXES
 
@@ -51,7 +49,13 @@ LQR_FORMAT = "vtolftc-lqr-gains/1"
 
 
 def tool_version() -> str:
-    """Version string of the installed vtol-ftc distribution (``unknown`` if not installed)."""
+    """Version string of the installed vtol-ftc distribution.
+
+    Returns
+    -------
+    str
+        The version, or ``unknown`` if the distribution is not installed.
+    """
     try:
         from importlib.metadata import version
 
@@ -60,35 +64,27 @@ def tool_version() -> str:
         return "unknown"
 
 
-def jsonable(x: Any) -> Any:
-    """numpy scalars/arrays, complex numbers, dataclass-free containers -> JSON values.
-
-    Complex numbers become [re, im]; non-finite floats become strings ("inf", "nan") so the
-    file stays strict JSON.
-    """
-    if isinstance(x, Mapping):
-        return {str(k): jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return [jsonable(v) for v in x.tolist()]
-    if isinstance(x, complex | np.complexfloating):
-        return [jsonable(float(x.real)), jsonable(float(x.imag))]
-    if isinstance(x, bool | np.bool_):
-        return bool(x)
-    if isinstance(x, int | np.integer):
-        return int(x)
-    if isinstance(x, float | np.floating):
-        f = float(x)
-        return f if math.isfinite(f) else str(f)
-    return x
-
-
+#: the JSON conversion of the project (:func:`vtolftc.jsonio.json_safe`: NaN / inf -> null,
+#: complex -> [re, im]), under the name this package has always exported
+jsonable = json_safe
 
 
 def write_json(path: str | os.PathLike[str], doc: Mapping[str, Any]) -> Path:
-    """Atomically write a JSON document (strict JSON, indented)."""
-    return atomic_write_text(path, json.dumps(jsonable(doc), indent=2, allow_nan=False) + "\n")
+    """Atomically write a JSON document (strict JSON, indented).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination file.
+    doc : mapping
+        The document (passed through :func:`jsonable`: NaN / inf become null).
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+    """
+    return atomic_write_text(path, json.dumps(json_safe(doc), indent=2, allow_nan=False) + "\n")
 
 
 def _common(af: Airframe) -> dict[str, Any]:
@@ -105,9 +101,34 @@ def schedule_document(af: Airframe, controller: str, breakpoints_m_s: Sequence[f
                       metadata: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """A ``vtolftc-gain-schedule/1`` document.
 
-    ``gains[axis][i]`` is the gain dict (keys :data:`vtolftc.synthesis.loops.PARAM_NAMES`) at
-    breakpoint i. Values are rounded to 6 significant digits (well below the design's
-    sensitivity) so the files stay readable.
+    Values are rounded to 6 significant digits (well below the design's sensitivity) so the
+    files stay readable.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe (its file's sha256 is recorded).
+    controller : str
+        Controller name, e.g. ``"gs-shif"``.
+    breakpoints_m_s : sequence of float
+        Airspeed breakpoints (m/s).
+    gains : mapping of str to sequence of mapping
+        ``gains[axis][i]`` is the gain dict (keys :data:`vtolftc.synthesis.loops.PARAM_NAMES`)
+        at breakpoint i.
+    axes_metadata : mapping, optional
+        Extra per-axis entries.
+    metadata : mapping, optional
+        Extra top-level metadata.
+
+    Returns
+    -------
+    dict
+        The document, ready for :func:`write_json`.
+
+    Raises
+    ------
+    ValueError
+        If an axis has not one gain set per breakpoint.
     """
     axes: dict[str, Any] = {}
     for ax in AXES:
@@ -133,7 +154,19 @@ def lqr_document(af: Airframe, gains: Mapping[str, Mapping[str, float]],
                  metadata: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """A ``vtolftc-lqr-gains/1`` document with one breakpoint (0 m/s): constant gains.
 
-    ``gains[axis]`` has keys k_int, k_angle, k_rate (units in the module docstring).
+    Parameters
+    ----------
+    af : Airframe
+        The airframe (its file's sha256 is recorded).
+    gains : mapping of str to mapping
+        ``gains[axis]`` with keys k_int, k_angle, k_rate (units in the module docstring).
+    metadata : mapping, optional
+        Extra top-level metadata.
+
+    Returns
+    -------
+    dict
+        The document, ready for :func:`write_json`.
     """
     common = _common(af)
     doc: dict[str, Any] = {

@@ -193,8 +193,25 @@ _EMPTY3 = np.zeros((0, 0, 0))
 
 def siso_sigma(A: NDArray[np.float64], B: NDArray[np.float64], C: NDArray[np.float64],
                D: NDArray[np.float64], w: NDArray[np.float64]) -> NDArray[np.float64]:
-    """||T(j w_k)||_2 of a single-input channel (B: n x 1) at the frequencies ``w`` (rad/s;
-    +inf: D). Raises ``numpy.linalg.LinAlgError`` where j w is an eigenvalue of A."""
+    """||T(j w_k)||_2 of a single-input channel at the frequencies ``w``.
+
+    Parameters
+    ----------
+    A, B, C, D : ndarray of float
+        The channel, shapes (n, n), (n, 1), (q, n), (q, 1).
+    w : ndarray of float, shape (m,)
+        Frequencies (rad/s; +inf: D).
+
+    Returns
+    -------
+    ndarray of float, shape (m,)
+        The gains.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Where j w is an eigenvalue of A.
+    """
     sig, _, ok = _kernel(A, B, C, D, w, np.zeros((0, A.shape[0], A.shape[0])), _EMPTY3,
                          _EMPTY3, _EMPTY3, False)
     if not ok:
@@ -206,8 +223,29 @@ def siso_sigma_grad(A: NDArray[np.float64], B: NDArray[np.float64], C: NDArray[n
                     D: NDArray[np.float64], w: NDArray[np.float64], dA: NDArray[np.float64],
                     dB: NDArray[np.float64], dC: NDArray[np.float64], dD: NDArray[np.float64],
                     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """:func:`siso_sigma` and its gradient, (m,) and (m, p), from the derivatives stacked
-    over the p parameters: dA (p, n, n), dB (p, n, 1), dC (p, q, n), dD (p, q, 1)."""
+    """:func:`siso_sigma` and its gradient with respect to p parameters.
+
+    Parameters
+    ----------
+    A, B, C, D : ndarray of float
+        The channel, shapes (n, n), (n, 1), (q, n), (q, 1).
+    w : ndarray of float, shape (m,)
+        Frequencies (rad/s).
+    dA, dB, dC, dD : ndarray of float
+        Derivatives stacked over the p parameters: (p, n, n), (p, n, 1), (p, q, n), (p, q, 1).
+
+    Returns
+    -------
+    sigma : ndarray of float, shape (m,)
+        The gains.
+    grad : ndarray of float, shape (m, p)
+        Their derivatives.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Where j w is an eigenvalue of A.
+    """
     sig, g, ok = _kernel(A, B, C, D, w, dA, dB, dC, dD, True)
     if not ok:
         raise np.linalg.LinAlgError("singular j w I - A: a frequency is a pole of the channel")

@@ -53,6 +53,26 @@ class GeneralizedPlant:
     Build with :meth:`from_matrices` (COMPleib order A, B1, B2, C1, C2, D11, D12, D21, D22;
     missing D blocks are zero) or :meth:`from_ss` (a state space with the last ``ny`` outputs
     measured and the last ``nu`` inputs controlled, MATLAB ``hinfstruct`` convention).
+    Signals are in the plant's own units; x has n states, w nw exogenous inputs, u nu
+    controls, z nz performance outputs, y ny measurements.
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+        State matrix.
+    B1, B2 : ndarray, shapes (n, nw), (n, nu)
+        Input matrices of w and u.
+    C1, C2 : ndarray, shapes (nz, n), (ny, n)
+        Output matrices of z and y.
+    D11, D12, D21, D22 : ndarray, shapes (nz, nw), (nz, nu), (ny, nw), (ny, nu)
+        Feedthrough matrices.
+
+    Examples
+    --------
+    >>> P = GeneralizedPlant.from_matrices(A=[[-1.0]], B1=[[1.0]], B2=[[1.0]], C1=[[1.0]],
+    ...                                    C2=[[1.0]])
+    >>> P.D22.shape
+    (1, 1)
     """
 
     A: NDArray[np.float64]
@@ -70,7 +90,25 @@ class GeneralizedPlant:
         cls, A: Any, B1: Any, B2: Any, C1: Any, C2: Any, D11: Any = None, D12: Any = None,
         D21: Any = None, D22: Any = None,
     ) -> GeneralizedPlant:
-        """Validated plant from its nine blocks (None = zero of the right size)."""
+        """Validated plant from its nine blocks (None = zero of the right size).
+
+        Parameters
+        ----------
+        A, B1, B2, C1, C2 : array_like
+            State, input (w, u) and output (z, y) matrices, COMPleib order.
+        D11, D12, D21, D22 : array_like, optional
+            Feedthrough matrices; None is a zero block.
+
+        Returns
+        -------
+        GeneralizedPlant
+            The plant.
+
+        Raises
+        ------
+        ValueError
+            For inconsistent shapes or non-finite entries.
+        """
         A = np.atleast_2d(np.asarray(A, dtype=float))
         if A.ndim != 2 or A.shape[0] != A.shape[1]:
             raise ValueError(f"A must be square (nx, nx), got shape {A.shape}")
@@ -89,7 +127,27 @@ class GeneralizedPlant:
 
     @classmethod
     def from_ss(cls, P: Any, ny: int, nu: int) -> GeneralizedPlant:
-        """Partition a state space (A, B, C, D): last ``ny`` outputs = y, last ``nu`` inputs = u."""
+        """Partition a state space (A, B, C, D): last ``ny`` outputs = y, last ``nu`` inputs = u.
+
+        Parameters
+        ----------
+        P : control.StateSpace or tuple
+            The state space (see :func:`vtolftc.synthesis.hinfnorm.as_state_space`).
+        ny : int
+            Number of measurements (the last outputs).
+        nu : int
+            Number of controls (the last inputs).
+
+        Returns
+        -------
+        GeneralizedPlant
+            The partitioned plant.
+
+        Raises
+        ------
+        ValueError
+            If ny or nu do not fit the system.
+        """
         A, B, C, D = as_state_space(P)
         p, m = D.shape
         if not (0 < ny < p + 1 and 0 < nu < m + 1):
@@ -112,6 +170,11 @@ class GeneralizedPlant:
         A gain that moves the closed-loop eigenvalues by about the plant's own rate:
         max(||A||, 1e-3) / (||B2[:, i]|| ||C2[j, :]||) (entries with a zero column/row get 1).
         Used to scale random starts and default bounds of matrix blocks.
+
+        Returns
+        -------
+        ndarray of float, shape (nu, ny)
+            The scales (controls per measurement unit).
         """
         a = max(float(np.linalg.norm(self.A, 2)) if self.A.size else 0.0, 1e-3)
         b = np.linalg.norm(self.B2, axis=0)
@@ -123,7 +186,18 @@ class GeneralizedPlant:
         return out
 
     def closed_loop(self, K: Any) -> StateSpaceData:
-        """Closed loop (A, B, C, D) from w to z with u = K y; see :func:`lft`."""
+        """Closed loop (A, B, C, D) from w to z with u = K y; see :func:`lft`.
+
+        Parameters
+        ----------
+        K : array_like, tuple or LTI
+            The controller, as for :func:`lft`.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            The closed loop.
+        """
         return lft(self, K)
 
 
@@ -148,24 +222,34 @@ def lft(P: GeneralizedPlant, K: Any, *, wellposed_tol: float = 1e-10) -> StateSp
 
     Parameters
     ----------
-    P:
-        The :class:`GeneralizedPlant`.
-    K:
+    P : GeneralizedPlant
+        The plant.
+    K : array_like, tuple or control.StateSpace/TransferFunction
         A static gain (nu x ny array), a state space (Ak, Bk, Ck, Dk) tuple or a
         python-control StateSpace/TransferFunction.
-    wellposed_tol:
+    wellposed_tol : float
         The loop is rejected as ill-posed if sigma_min(I - Dk D22) <= wellposed_tol
         (1 + ||Dk|| ||D22||).
 
     Returns
     -------
-    (Acl, Bcl, Ccl, Dcl)
-        State [x; xk].
+    Acl, Bcl, Ccl, Dcl : ndarray
+        The closed loop, state [x; xk].
 
     Raises
     ------
     ValueError
         Wrong controller shape or an ill-posed loop (I - Dk D22 singular).
+
+    Examples
+    --------
+    x' = -x + w + u, z = x, y = x closed by u = -2 y: x' = -3 x + w.
+
+    >>> P = GeneralizedPlant.from_matrices(A=[[-1.0]], B1=[[1.0]], B2=[[1.0]], C1=[[1.0]],
+    ...                                    C2=[[1.0]])
+    >>> Acl, Bcl, Ccl, Dcl = lft(P, [[-2.0]])
+    >>> Acl.tolist(), Dcl.tolist()
+    ([[-3.0]], [[0.0]])
     """
     d = P.dims
     nu, ny = d["nu"], d["ny"]

@@ -60,9 +60,26 @@ PARAM_NAMES: tuple[str, ...] = ("kp_angle", "kp_rate", "ki_rate", "kd_rate", "tf
 class SensitivityWeight:
     """Ws(s) = (s/M + omega_b) / (s + A omega_b) (paper eq. 5).
 
-    ``M``: allowed peak of |S| (high-frequency gain 1/M); ``omega_b`` [rad/s]: the required
-    bandwidth (|Ws| = 1 near omega_b); ``A``: allowed steady-state error (low-frequency gain
-    1/A). A must be > 0 (A = 0 puts a pole at s = 0 and the weighted norm is infinite).
+    Parameters
+    ----------
+    M : float
+        Allowed peak of |S| (high-frequency gain 1/M), > 0.
+    omega_b_rad_s : float
+        Required bandwidth (rad/s): |Ws| = 1 near omega_b.
+    A : float
+        Allowed steady-state error (low-frequency gain 1/A), > 0 (A = 0 puts a pole at s = 0
+        and the weighted norm is infinite).
+
+    Raises
+    ------
+    ValueError
+        For a value that is not a finite number > 0.
+
+    Examples
+    --------
+    >>> Ws = SensitivityWeight(2.0, 1.0, 1e-3)
+    >>> round(float(abs(Ws.tf()(0))), 1), round(float(abs(Ws.tf()(1e9j))), 3)
+    (1000.0, 0.5)
     """
 
     M: float
@@ -76,23 +93,52 @@ class SensitivityWeight:
                                  "number > 0 (A = 0 gives an infinite weighted norm)")
 
     def tf(self) -> ct.TransferFunction:
-        """Ws(s) as a python-control transfer function."""
+        """Ws(s) as a python-control transfer function.
+
+        Returns
+        -------
+        control.TransferFunction
+            Ws(s).
+        """
         return ct.tf([1.0 / self.M, self.omega_b_rad_s], [1.0, self.A * self.omega_b_rad_s])
 
     def ss(self) -> StateSpaceData:
-        """First-order state-space realisation ``(A, B, C, D)`` of Ws(s)."""
+        """First-order state-space realisation ``(A, B, C, D)`` of Ws(s).
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            Each of shape (1, 1).
+        """
         a = -self.A * self.omega_b_rad_s
         # (s/M + wb)/(s - a) = 1/M + (wb + a/M)/(s - a)
         return (np.array([[a]]), np.array([[1.0]]),
                 np.array([[self.omega_b_rad_s + a / self.M]]), np.array([[1.0 / self.M]]))
 
     def response(self, omegas: NDArray[np.float64]) -> NDArray[np.complex128]:
-        """Ws(j omega) at the frequencies ``omegas`` (rad/s)."""
+        """Ws(j omega) at the frequencies ``omegas`` (rad/s).
+
+        Parameters
+        ----------
+        omegas : array_like, shape (nw,)
+            Frequencies (rad/s).
+
+        Returns
+        -------
+        ndarray of complex, shape (nw,)
+            Ws(j omega).
+        """
         s = 1j * np.asarray(omegas, float)
         return (s / self.M + self.omega_b_rad_s) / (s + self.A * self.omega_b_rad_s)
 
     def to_dict(self) -> dict[str, float]:
-        """The parameters ``M``, ``omega_b_rad_s``, ``A`` as a JSON-ready dict."""
+        """The parameters ``M``, ``omega_b_rad_s``, ``A`` as a JSON-ready dict.
+
+        Returns
+        -------
+        dict of str to float
+            The parameters.
+        """
         return {"M": self.M, "omega_b_rad_s": self.omega_b_rad_s, "A": self.A}
 
 
@@ -100,10 +146,22 @@ class SensitivityWeight:
 class ControlWeight:
     """Wr(s) = ((r_max/u_max) s + omega_a 1e-3) / (s + omega_a) (paper eq. 6).
 
-    ``r_max`` [rad]: largest angle reference step; ``u_max`` [N m]: the largest moment the
-    actuators produce about the axis; ``omega_a`` [rad/s]: actuator bandwidth (paper: 5).
     High-frequency gain r_max/u_max, so ||Wr R|| <= 1 keeps the moment of a reference step of
     r_max within u_max.
+
+    Parameters
+    ----------
+    r_max_rad : float
+        Largest angle reference step (rad), > 0.
+    u_max_N_m : float
+        The largest moment the actuators produce about the axis (N m), > 0.
+    omega_a_rad_s : float
+        Actuator bandwidth (rad/s; paper: 5).
+
+    Raises
+    ------
+    ValueError
+        For a value that is not a finite number > 0.
     """
 
     r_max_rad: float
@@ -122,23 +180,52 @@ class ControlWeight:
         return self.r_max_rad / self.u_max_N_m
 
     def tf(self) -> ct.TransferFunction:
-        """Wr(s) = (h s + 1e-3 omega_a) / (s + omega_a) as a python-control transfer function."""
+        """Wr(s) = (h s + 1e-3 omega_a) / (s + omega_a) as a python-control transfer function.
+
+        Returns
+        -------
+        control.TransferFunction
+            Wr(s), h = r_max / u_max (rad / (N m)).
+        """
         return ct.tf([self.high_gain, self.omega_a_rad_s * 1e-3], [1.0, self.omega_a_rad_s])
 
     def ss(self) -> StateSpaceData:
-        """First-order state-space realisation ``(A, B, C, D)`` of Wr(s)."""
+        """First-order state-space realisation ``(A, B, C, D)`` of Wr(s).
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            Each of shape (1, 1).
+        """
         wa, h = self.omega_a_rad_s, self.high_gain
         # (h s + wa 1e-3)/(s + wa) = h + (wa 1e-3 - h wa)/(s + wa)
         return (np.array([[-wa]]), np.array([[1.0]]), np.array([[wa * 1e-3 - h * wa]]),
                 np.array([[h]]))
 
     def response(self, omegas: NDArray[np.float64]) -> NDArray[np.complex128]:
-        """Wr(j omega) at the frequencies ``omegas`` (rad/s)."""
+        """Wr(j omega) at the frequencies ``omegas`` (rad/s).
+
+        Parameters
+        ----------
+        omegas : array_like, shape (nw,)
+            Frequencies (rad/s).
+
+        Returns
+        -------
+        ndarray of complex, shape (nw,)
+            Wr(j omega).
+        """
         s = 1j * np.asarray(omegas, float)
         return (self.high_gain * s + self.omega_a_rad_s * 1e-3) / (s + self.omega_a_rad_s)
 
     def to_dict(self) -> dict[str, float]:
-        """The parameters ``r_max_rad``, ``u_max_N_m``, ``omega_a_rad_s`` as a JSON-ready dict."""
+        """The parameters ``r_max_rad``, ``u_max_N_m``, ``omega_a_rad_s`` as a JSON-ready dict.
+
+        Returns
+        -------
+        dict of str to float
+            The parameters.
+        """
         return {"r_max_rad": self.r_max_rad, "u_max_N_m": self.u_max_N_m,
                 "omega_a_rad_s": self.omega_a_rad_s}
 
@@ -149,7 +236,29 @@ class ControlWeight:
 
 
 def rate_controller(kp: float, ki: float, kd: float, tf: float) -> StateSpaceData:
-    """K_rate(s) = kp + ki/s + kd s/(tf s + 1) as (A, B, C, D); states: integral, filter."""
+    """K_rate(s) = kp + ki/s + kd s/(tf s + 1) as (A, B, C, D); states: integral, filter.
+
+    Parameters
+    ----------
+    kp : float
+        Proportional gain (N m s / rad).
+    ki : float
+        Integral gain (N m / rad).
+    kd : float
+        Derivative gain (N m s^2 / rad).
+    tf : float
+        Derivative filter time constant (s), > 0.
+
+    Returns
+    -------
+    A, B, C, D : ndarray
+        Shapes (2, 2), (2, 1), (1, 2), (1, 1); input rate error (rad/s), output moment (N m).
+
+    Raises
+    ------
+    ValueError
+        If tf <= 0.
+    """
     if not tf > 0:
         raise ValueError(f"derivative filter time constant tf_rate_s must be > 0 s, got {tf}")
     return (np.array([[0.0, 0.0], [0.0, -1.0 / tf]]), np.array([[1.0], [1.0 / tf]]),
@@ -157,7 +266,20 @@ def rate_controller(kp: float, ki: float, kd: float, tf: float) -> StateSpaceDat
 
 
 def series(H: StateSpaceData, W: StateSpaceData) -> StateSpaceData:
-    """W(s) H(s) (H first) as state space, states [x_H; x_W]."""
+    """W(s) H(s) (H first) as state space, states [x_H; x_W].
+
+    Parameters
+    ----------
+    H : tuple of ndarray
+        (A, B, C, D) of the first system.
+    W : tuple of ndarray
+        (A, B, C, D) of the second; its inputs are H's outputs.
+
+    Returns
+    -------
+    A, B, C, D : ndarray
+        The series connection.
+    """
     Ah, Bh, Ch, Dh = H
     Aw, Bw, Cw, Dw = W
     nh, nw = Ah.shape[0], Aw.shape[0]
@@ -170,8 +292,19 @@ def series(H: StateSpaceData, W: StateSpaceData) -> StateSpaceData:
 
 @dataclass(frozen=True)
 class ClosedLoop:
-    """Closed loop of one axis: state [x_plant (2); x_controller (2)], inputs [r, d],
-    outputs [e, u, rate, angle] (see the module docstring)."""
+    """Closed loop of one axis (see the module docstring).
+
+    Parameters
+    ----------
+    A : ndarray of float, shape (4, 4)
+        State [x_plant (2); x_controller (2)].
+    B : ndarray of float, shape (4, 2)
+        Inputs [r (rad), d (N m)].
+    C : ndarray of float, shape (4, 4)
+        Outputs [e (rad), u (N m), rate (rad/s), angle (rad)].
+    D : ndarray of float, shape (4, 2)
+        Feedthrough.
+    """
 
     A: NDArray[np.float64]
     B: NDArray[np.float64]
@@ -183,19 +316,43 @@ class ClosedLoop:
                 sign * self.D[[out]][:, [inp]])
 
     def S(self) -> StateSpaceData:
-        """e/r."""
+        """Sensitivity e/r.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            SISO state space (rad/rad).
+        """
         return self._siso(0, 0)
 
     def R(self) -> StateSpaceData:
-        """u/r."""
+        """Control sensitivity u/r.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            SISO state space (N m / rad).
+        """
         return self._siso(1, 0)
 
     def T_u(self) -> StateSpaceData:
-        """-u/d: complementary sensitivity at the plant input."""
+        """-u/d: complementary sensitivity at the plant input.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            SISO state space (dimensionless).
+        """
         return self._siso(1, 1, -1.0)
 
     def S_ud(self) -> StateSpaceData:
-        """e/d (= -G_angle S_u)."""
+        """e/d (= -G_angle S_u), the angle error per input moment.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            SISO state space (rad / (N m)).
+        """
         return self._siso(0, 1)
 
     @property
@@ -204,11 +361,28 @@ class ClosedLoop:
         return np.linalg.eigvals(self.A)
 
     def stable(self, margin: float = 0.0) -> bool:
-        """True when every closed-loop pole has real part < ``-margin`` (rad/s)."""
+        """True when every closed-loop pole has real part < ``-margin`` (rad/s).
+
+        Parameters
+        ----------
+        margin : float
+            Required decay rate (1/s).
+
+        Returns
+        -------
+        bool
+            The verdict.
+        """
         return bool(np.max(self.poles.real) < -margin)
 
     def lti(self) -> ct.StateSpace:
-        """The closed loop as a python-control state-space system."""
+        """The closed loop as a python-control state-space system.
+
+        Returns
+        -------
+        control.StateSpace
+            Inputs [r, d], outputs [e, u, rate, angle].
+        """
         return ct.ss(self.A, self.B, self.C, self.D)
 
 
@@ -333,8 +507,35 @@ _CLB_CACHE_SIZE = 64
 
 
 def closed_loop(G: Any, theta: Any) -> ClosedLoop:
-    """Closed loop of plant ``G`` (moment -> [rate; angle]) and the P-PID gains ``theta``
-    (sequence in :data:`PARAM_NAMES` order, or a mapping with those keys)."""
+    """Closed loop of an attitude plant and the P-PID gains.
+
+    Parameters
+    ----------
+    G : control.StateSpace or tuple
+        Plant moment (N m) -> [rate (rad/s); angle (rad)], strictly proper (as
+        :func:`vtolftc.synthesis.models.attitude_model`).
+    theta : sequence of float or mapping
+        The gains in :data:`PARAM_NAMES` order, or a mapping with those keys.
+
+    Returns
+    -------
+    ClosedLoop
+        The loop with inputs [r, d] and outputs [e, u, rate, angle].
+
+    Raises
+    ------
+    ValueError
+        For a plant of the wrong shape or not strictly proper, or not five gains.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> from vtolftc.synthesis.models import attitude_model
+    >>> G = attitude_model(load_airframe(), "roll", 0.0)
+    >>> cl = closed_loop(G, [4.0, 2.0, 0.5, 0.05, 0.02])
+    >>> cl.stable(), cl.A.shape
+    (True, (4, 4))
+    """
     if isinstance(theta, dict):
         theta = [theta[k] for k in PARAM_NAMES]
     th = np.asarray(theta, float).reshape(-1)
@@ -368,11 +569,23 @@ class CascadeChannel:
     Any of the weights may be None (its row is omitted). Picklable (no closures), so it can
     be sent to worker processes. ``outputs`` names the rows.
 
-    ``Wd`` (optional, not in eq. 8): a weight on the angle response to a moment at the plant
-    input, row ``"Wd*Sd"`` = Wd e/d (e/d = -G_angle / (1 + L_u), rad per N m); a constant
-    d_max / e_max makes ||Wd e/d|| <= 1 mean "a moment d_max leaves an angle error of at most
-    about e_max" (the input-disturbance objective of the robust design). Its states come
-    after all the others, so a channel without ``Wd`` is exactly the eq. 8 channel.
+    Parameters
+    ----------
+    G : control.StateSpace or tuple
+        Plant moment (N m) -> [rate (rad/s); angle (rad)].
+    Ws, Wt, Wr : LTI, tuple or scalar, optional
+        Weights of S, T_u and R (eq. 8).
+    Wd : LTI, tuple or scalar, optional
+        A weight (not in eq. 8) on the angle response to a moment at the plant input, row
+        ``"Wd*Sd"`` = Wd e/d (e/d = -G_angle / (1 + L_u), rad per N m); a constant
+        d_max / e_max makes ||Wd e/d|| <= 1 mean "a moment d_max leaves an angle error of at
+        most about e_max" (the input-disturbance objective of the robust design). Its states
+        come after all the others, so a channel without ``Wd`` is exactly the eq. 8 channel.
+
+    Raises
+    ------
+    ValueError
+        If no weight is given or the plant has the wrong shape.
     """
 
     G: Any
@@ -467,9 +680,21 @@ class CascadeChannel:
         return A, B, C, D
 
     def realize_batch(self, thetas: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-        """The channel at every row of ``thetas`` (nb, 5): (A, B, C, D) stacked (nb, ., .),
-        each slice equal to ``self(thetas[i])`` bit for bit (same element operations; used
-        for the tuner's finite-difference realisations, all at once)."""
+        """The channel at every row of ``thetas``, all at once.
+
+        Each slice equals ``self(thetas[i])`` bit for bit (same element operations; used for the
+        tuner's finite-difference realisations).
+
+        Parameters
+        ----------
+        thetas : ndarray of float, shape (nb, 5)
+            P-PID gains, one set per row.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            Stacked realisations, each of shape (nb, ., .).
+        """
         if not hasattr(self, "_A0"):
             self._template()
             self._plan()
@@ -526,12 +751,34 @@ class CascadeChannel:
                                   Bw[:, 0].copy(), Dw[0, 0], self._rows["Wd*Sd"], 0, 1))
 
     def rows(self, theta: NDArray[np.float64]) -> dict[str, StateSpaceData]:
-        """Each weighted function on its own (name -> (A, B, C, D))."""
+        """Each weighted function on its own.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (5,)
+            P-PID gains.
+
+        Returns
+        -------
+        dict of str to tuple of ndarray
+            Row name -> (A, B, C, D).
+        """
         A, B, C, D = self(theta)
         return {n: (A, B, C[[i]], D[[i]]) for i, n in enumerate(self.outputs)}
 
     def reference(self, theta: NDArray[np.float64]) -> StateSpaceData:
-        """The same channel assembled the slow, obvious way (series + stack; for tests)."""
+        """The same channel assembled the slow, obvious way (series + stack; for tests).
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (5,)
+            P-PID gains.
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            The channel.
+        """
         cl = _closed(self._G, np.asarray(theta, float))
         Ws, Wt, Wr = self._W
         parts = []

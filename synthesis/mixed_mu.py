@@ -53,12 +53,12 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from vtolftc.synthesis.dg_scaling import (
-    BlockStructure,
     MixedMuUpper,
     mixed_mu_upper,
     mixed_mu_upper_start,
 )
-from vtolftc.synthesis.mu import Block, BlockIndex, MuSweep, makes_singular, power_lower_bound
+from vtolftc.synthesis.mu import Block, MuSweep, makes_singular, power_lower_bound
+from vtolftc.synthesis.mu_blocks import BlockStructure
 
 __all__ = [
     "BlockStructure",
@@ -84,8 +84,39 @@ def mixed_mu_lower(
 
     Power iteration (complex blocks; real blocks as +-1 signs), vertex enumeration of the
     real parameters and a 1-D search along real directions with the complex part solved
-    exactly (see the module docstring). Every returned Delta is verified. ``(0.0, None)``
-    if no destabilising perturbation was found (e.g. mu = 0).
+    exactly (see the module docstring). Every returned Delta is verified.
+
+    Parameters
+    ----------
+    M : array_like, shape ``BlockStructure(blocks).m_shape``
+        Complex matrix (non-square allowed).
+    blocks : sequence of Block or BlockStructure
+        The uncertainty structure.
+    n_starts : int
+        Seeded random power-iteration starts (>= 0).
+    seed : int
+        Seed of the random starts.
+    iters : int
+        Power iterations per start.
+
+    Returns
+    -------
+    value : float
+        The lower bound (0 if no destabilising perturbation was found, e.g. mu = 0).
+    Delta : ndarray of complex, shape ``BlockStructure(blocks).delta_shape`` or None
+        The structured perturbation that proves it.
+
+    Raises
+    ------
+    ValueError
+        If M does not fit the structure or ``n_starts`` < 0.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> value, Delta = mixed_mu_lower(np.array([[0.0, 1.0], [4.0, 0.0]]), [Block.real(1)] * 2)
+    >>> round(value, 6), np.allclose(Delta, Delta.real)
+    (2.0, True)
     """
 
     st = BlockStructure(blocks)
@@ -93,7 +124,7 @@ def mixed_mu_lower(
     if n_starts < 0:
         raise ValueError(f"n_starts must be >= 0, got {n_starts}")
     Mp, sq = st.pad(Mc)
-    s = BlockIndex(list(sq.blocks), Mp.shape[0])
+    s = sq.require_square(Mp.shape[0])
     rng = np.random.default_rng(seed)
     val, Delta, _ = power_lower_bound(Mp, s, n_starts, rng, [], iters)
     if all(b.kind == "real" for b in sq.blocks):
@@ -163,7 +194,17 @@ def _real_det_search(
 
 @dataclass(frozen=True)
 class MixedMuBounds:
-    """lower <= mu(M) <= upper, with the lower bound's Delta and the upper bound's (D, G)."""
+    """lower <= mu(M) <= upper, with the lower bound's Delta and the upper bound's (D, G).
+
+    Parameters
+    ----------
+    lower, upper : float
+        The bounds (dimensionless).
+    delta : ndarray of complex or None
+        The destabilising perturbation that proves ``lower`` (None if lower == 0).
+    certificate : MixedMuUpper
+        The (D, G) scalings that prove ``upper``.
+    """
 
     lower: float
     upper: float
@@ -185,7 +226,40 @@ def mixed_mu_bounds(
     seed: int = 0,
     rtol: float = 1e-9,
 ) -> MixedMuBounds:
-    """Both mixed-mu bounds of M (:func:`mixed_mu_lower`, :func:`mixed_mu_upper`)."""
+    """Both mixed-mu bounds of M (:func:`mixed_mu_lower`, :func:`mixed_mu_upper`).
+
+    Parameters
+    ----------
+    M : array_like, shape ``BlockStructure(blocks).m_shape``
+        Complex matrix (non-square allowed).
+    blocks : sequence of Block or BlockStructure
+        The uncertainty structure.
+    method : {"auto", "ab13md", "dg"}
+        Upper-bound method, see :func:`mixed_mu_upper`.
+    n_starts : int
+        Random starts of the lower bound.
+    seed : int
+        Seed of the random starts.
+    rtol : float
+        Relative tolerance of the upper-bound optimiser.
+
+    Returns
+    -------
+    MixedMuBounds
+        Both bounds with their proofs.
+
+    Raises
+    ------
+    ValueError
+        If M does not fit the structure or ``method`` is unknown.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> b = mixed_mu_bounds(np.diag([1.0, 2j]), [Block.real(2)])
+    >>> round(b.lower, 4), round(b.upper, 4)    # a complex scalar would give 2
+    (1.0, 1.0)
+    """
     st = BlockStructure(blocks)
     lo, Delta = mixed_mu_lower(M, st, n_starts=n_starts, seed=seed)
     up = mixed_mu_upper(M, st, method=method, rtol=rtol, target=lo)
@@ -207,22 +281,23 @@ def mixed_mu_sweep(
 
     Parameters
     ----------
-    freq_response:
-        Array (nw, rows, cols) of M(j w), e.g. from
-        :func:`vtolftc.synthesis.hinfnorm.frequency_response`; rows x cols must be
-        ``BlockStructure(blocks).m_shape``.
-    blocks:
+    freq_response : array_like, shape (nw, rows, cols)
+        M(j w), e.g. from :func:`vtolftc.synthesis.hinfnorm.frequency_response`; rows x cols
+        must be ``BlockStructure(blocks).m_shape``.
+    blocks : sequence of Block or BlockStructure
         The structure, e.g. ``[Block.real(2), Block.real(1), Block.full(2, 3)]``.
-    omegas:
-        The nw frequencies (rad/s).
-    method:
+    omegas : array_like, shape (nw,)
+        The frequencies (rad/s).
+    method : {"auto", "ab13md", "dg"}
         Upper-bound method, see :func:`mixed_mu_upper`.
-    n_starts:
+    n_starts : int
         Random power-iteration starts per frequency for the lower bound (in addition to the
         eigenvector and warm starts).
-    rtol:
+    seed : int
+        Seed of the random starts.
+    rtol : float
         Relative tolerance of the upper-bound optimiser.
-    lower:
+    lower : bool
         False skips the lower bound (then ``lower`` is all zeros).
 
     Returns
@@ -231,6 +306,20 @@ def mixed_mu_sweep(
         Pointwise bounds and their grid peaks (the same type as
         :func:`vtolftc.synthesis.mu.mu_sweep`). Scalings are warm-started from the previous
         frequency.
+
+    Raises
+    ------
+    ValueError
+        If the response's shape does not fit the structure or ``omegas``, or it is not finite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> w = np.array([0.5, 1.0, 2.0])
+    >>> F = np.array([[[1 / (1j * wi + 1)]] for wi in w])
+    >>> sw = mixed_mu_sweep(F, [Block.real(1)], w)
+    >>> sw.peak_upper < 1e-6     # at w > 0 no real delta makes 1 - delta / (jw + 1) vanish
+    True
     """
     st = BlockStructure(blocks)
     F = np.asarray(freq_response)
@@ -250,7 +339,7 @@ def mixed_mu_sweep(
     up = np.zeros(w.size)
     prev: MixedMuUpper | None = None
     sq = st.padded()[0]
-    s = BlockIndex(list(sq.blocks), sq.m_shape[0])
+    s = sq.require_square(sq.m_shape[0])
     rng = np.random.default_rng(seed)
     vec: list[tuple[NDArray[Any], NDArray[Any]]] = []
     for i in range(w.size):

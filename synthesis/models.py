@@ -32,7 +32,21 @@ AXES: tuple[Axis, ...] = ATTITUDE_AXES  # type: ignore[assignment]
 
 @dataclass(frozen=True)
 class AxisCoefficients:
-    """Dimensional coefficients of one axis at one airspeed (SI: kg m^2, N m s, N m)."""
+    """Dimensional coefficients of one axis at one airspeed (SI; body axes FRD).
+
+    Parameters
+    ----------
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    airspeed_m_s : float
+        Airspeed V (m/s).
+    inertia : float
+        Jx, Jy or Jz (kg m^2).
+    damping : float
+        Mx^p, My^q or Mz^r (N m s / rad), <= 0.
+    stiffness : float
+        My^alpha or -qbar S b C_nbeta (N m / rad), <= 0; 0 for roll.
+    """
 
     axis: Axis
     airspeed_m_s: float
@@ -47,7 +61,34 @@ def _check_gamma(gamma: float) -> None:
 
 
 def axis_coefficients(af: Airframe, axis: Axis, airspeed_m_s: float) -> AxisCoefficients:
-    """The paper's dimensional derivatives of ``axis`` at ``airspeed_m_s``."""
+    """The paper's dimensional derivatives of ``axis`` at ``airspeed_m_s``.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe (wing geometry, derivative tables, inertia, air density).
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    airspeed_m_s : float
+        Airspeed (m/s), >= 0.
+
+    Returns
+    -------
+    AxisCoefficients
+        Inertia, damping and stiffness of the axis.
+
+    Raises
+    ------
+    ValueError
+        For an unknown axis or a negative or NaN airspeed.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> c = axis_coefficients(load_airframe(), "roll", 0.0)
+    >>> c.inertia, c.damping == 0.0, c.stiffness == 0.0    # hover: a pure inertia (DS-1 Jx)
+    (1.6, True, True)
+    """
     if axis not in AXES:
         raise ValueError(f"axis {axis!r}: expected one of {', '.join(AXES)}")
     V = float(airspeed_m_s)
@@ -76,6 +117,34 @@ def rate_model(af: Airframe, axis: Axis, airspeed_m_s: float, gamma: float = 0.0
 
     Roll is first order; pitch and yaw are written over the common denominator
     J s^2 - M_rate s - M_stiffness with a zero at the origin, as in the paper.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    airspeed_m_s : float
+        Airspeed (m/s), >= 0.
+    gamma : float
+        Loss of control effectiveness of the axis' moment, in [0, 1].
+
+    Returns
+    -------
+    control.TransferFunction
+        G(s), SISO.
+
+    Raises
+    ------
+    ValueError
+        For an unknown axis, a negative airspeed or gamma outside [0, 1].
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> G = rate_model(load_airframe(), "pitch", 13.0, gamma=0.2)
+    >>> G.num[0][0].tolist()[1]          # the zero at the origin of eq 2
+    0.0
     """
     _check_gamma(gamma)
     c = axis_coefficients(af, axis, airspeed_m_s)
@@ -87,9 +156,40 @@ def rate_model(af: Airframe, axis: Axis, airspeed_m_s: float, gamma: float = 0.0
 
 def attitude_model(af: Airframe, axis: Axis, airspeed_m_s: float, gamma: float = 0.0,
                    ) -> ct.StateSpace:
-    """Moment -> [rate; angle] of ``axis`` as a minimal state-space model (states: angle,
-    rate). Outputs: 0 = rate (rad/s), 1 = angle (rad). For pitch and yaw this is the
-    rate model of eq 2-3 with the zero at the origin cancelled by the integration to angle."""
+    """Moment -> [rate; angle] of ``axis`` as a minimal state-space model.
+
+    For pitch and yaw this is the rate model of eq 2-3 with the zero at the origin cancelled
+    by the integration to angle.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    airspeed_m_s : float
+        Airspeed (m/s), >= 0.
+    gamma : float
+        Loss of control effectiveness of the axis' moment, in [0, 1].
+
+    Returns
+    -------
+    control.StateSpace
+        States [angle (rad), rate (rad/s)], input the moment (N m), outputs 0 = rate (rad/s)
+        and 1 = angle (rad).
+
+    Raises
+    ------
+    ValueError
+        For an unknown axis, a negative airspeed or gamma outside [0, 1].
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> sys = attitude_model(load_airframe(), "roll", 0.0)
+    >>> sys.nstates, sys.noutputs
+    (2, 2)
+    """
     _check_gamma(gamma)
     c = axis_coefficients(af, axis, airspeed_m_s)
     k = 1.0 - gamma

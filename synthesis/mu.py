@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize, minimize_scalar
 
-from vtolftc.synthesis.mu_blocks import Block
+from vtolftc.synthesis.mu_blocks import Block, BlockStructure
 from vtolftc.synthesis.power_kernel import power_iteration, power_iteration_scalar
 
 __all__ = [
@@ -68,15 +68,25 @@ __all__ = [
 class DScaling:
     """D-scaling of the upper bound: bound = sigma_max(left @ M @ inv(right)).
 
-    ``left`` acts on M's rows (partition by block cols), ``right`` on M's columns
-    (partition by block rows); for structures of square blocks they are equal.
-    ``params`` is the internal log-parametrisation (usable as a warm start).
-
     With real blocks the bound is the mixed D-G bound: ``g`` is then the Hermitian G of the
     certificate M^H D M + j (G M - M^H G) <= bound^2 D with D = left^H left (square
-    structures), and sigma_max(left M right^-1) alone may exceed the bound. ``method`` says
-    which algorithm produced it (``"ab13md"``, ``"dg"`` or ``"dscale"``), ``warm`` is that
-    algorithm's warm-start vector.
+    structures), and sigma_max(left M right^-1) alone may exceed the bound.
+
+    Parameters
+    ----------
+    left : ndarray of complex, shape (n, n)
+        D_l, acting on M's rows (partition by block cols).
+    right : ndarray of complex, shape (n, n)
+        D_r, acting on M's columns (partition by block rows); equal to ``left`` for
+        structures of square blocks.
+    params : ndarray of float, shape (n_params,)
+        The internal log-parametrisation of the D-scaling (usable as a warm start).
+    g : ndarray of complex, shape (n, n), optional
+        G of the D-G certificate (real blocks), else None.
+    method : {"dscale", "ab13md", "dg"}
+        The algorithm that produced the scaling.
+    warm : ndarray of float, optional
+        That algorithm's warm-start vector.
     """
 
     left: NDArray[np.complex128]
@@ -87,17 +97,36 @@ class DScaling:
     warm: NDArray[np.float64] | None = field(default=None, repr=False)
 
     def scaled(self, M: NDArray[Any]) -> NDArray[np.complex128]:
-        """Return D_l M D_r^-1."""
+        """Return D_l M D_r^-1.
+
+        Parameters
+        ----------
+        M : array_like, shape (n, n)
+            The matrix the scaling applies to.
+
+        Returns
+        -------
+        ndarray of complex, shape (n, n)
+            ``left @ M @ inv(right)``.
+        """
         return self.left @ np.asarray(M) @ np.linalg.inv(self.right)
 
 
 @dataclass(frozen=True)
 class MuBounds:
-    """Lower and upper bounds on mu and the (absolute) gap upper - lower.
+    """Lower and upper bounds on mu and the (absolute) gap upper - lower (dimensionless).
 
-    ``scaling`` is the optimal D found for the upper bound, ``delta`` the destabilising
-    structured perturbation of the lower bound: det(I - M delta) ~ 0 and
-    sigma_max(delta) = 1 / lower (``None`` if lower == 0).
+    Parameters
+    ----------
+    lower, upper : float
+        lower <= mu(M) <= upper.
+    gap : float
+        upper - lower.
+    scaling : DScaling, optional
+        The scaling that proves the upper bound.
+    delta : ndarray of complex, optional
+        The destabilising structured perturbation of the lower bound: det(I - M delta) ~ 0
+        and sigma_max(delta) = 1 / lower (``None`` if lower == 0).
     """
 
     lower: float
@@ -117,6 +146,17 @@ class MuSweep:
     """mu bounds over a frequency grid (paper eqs. 13-14 checked pointwise in frequency).
 
     The peaks are grid maxima: the true sup over w of mu can be larger between grid points.
+
+    Parameters
+    ----------
+    omegas : ndarray of float, shape (nw,)
+        Frequencies (rad/s).
+    lower, upper : ndarray of float, shape (nw,)
+        Bounds on mu(M(j w)) at each frequency.
+    peak_lower, peak_upper : float
+        Largest lower and upper bound over the grid.
+    peak_lower_frequency_rad_s, peak_upper_frequency_rad_s : float
+        Frequencies (rad/s) of those peaks.
     """
 
     omegas: NDArray[np.float64]
@@ -134,142 +174,44 @@ class MuSweep:
 
 
 # ------------------------------------------------------------------------------------------
-# structure bookkeeping
+# D-scalings of a structure (index maps in BlockStructure)
 # ------------------------------------------------------------------------------------------
 
 
-class BlockIndex:
-    """Index maps of a block structure for a square matrix of size n."""
+def _scalings(
+    st: BlockStructure, x: NDArray[np.float64]
+) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]]:
+    """Return D_l, D_r^-1 and the diagonal values (dl, dr) of the parameters x."""
+    dl = np.exp(x[st.diag_param_l])
+    dr = np.exp(x[st.diag_param_r])
+    if not st.has_off:
+        return np.diag(dl), np.diag(1.0 / dr), dl, dr
+    z = x[st.off_pre] + 1j * x[st.off_pim]
+    Dl = np.diag(dl).astype(complex)
+    Dr = np.diag(dr).astype(complex)
+    Dl[st.off_il, st.off_jl] = z
+    Dr[st.off_ir, st.off_jr] = z
+    return Dl, np.linalg.inv(Dr), dl, dr
 
-    def __init__(self, blocks: Sequence[Block], n: int):
-        if isinstance(blocks, Block):
-            blocks = [blocks]
-        blocks = list(blocks)
-        if not blocks:
-            raise ValueError("the block structure is empty; expected a list of Block objects")
-        for b in blocks:
-            if not isinstance(b, Block):
-                raise ValueError(
-                    f"unknown block specification {b!r}; expected Block.full(rows, cols), "
-                    "Block.repeated_complex(n) or Block.real(n)"
-                )
-        sum_r = sum(b.rows for b in blocks)
-        sum_c = sum(b.cols for b in blocks)
-        if sum_r != n or sum_c != n:
-            raise ValueError(
-                f"block sizes do not match M: sum of block rows = {sum_r}, sum of block "
-                f"cols = {sum_c}, but M is {n}x{n} (both sums must equal {n})"
-            )
-        self.blocks = blocks
-        self.n = n
-        self.K = len(blocks)
-        self.row_idx: list[NDArray[np.intp]] = []  # positions in M's row space (cols_k)
-        self.col_idx: list[NDArray[np.intp]] = []  # positions in M's column space (rows_k)
-        r0 = c0 = 0
-        for b in blocks:
-            self.row_idx.append(np.arange(r0, r0 + b.cols))
-            self.col_idx.append(np.arange(c0, c0 + b.rows))
-            r0 += b.cols
-            c0 += b.rows
-        self.blk_of_row = np.concatenate([np.full(b.cols, k) for k, b in enumerate(blocks)])
-        self.blk_of_col = np.concatenate([np.full(b.rows, k) for k, b in enumerate(blocks)])
-        self.is_full = np.array([b.kind == "full" for b in blocks])
-        self.is_real = np.array([b.kind == "real" for b in blocks])
-        self.has_real = bool(self.is_real.any())
-        self.all_square = all(b.rows == b.cols for b in blocks)
-        self.scalar = all(b.rows == b.cols == 1 for b in blocks)
-        # element maps for repeated blocks (row position -> column position)
-        rep = [k for k, b in enumerate(blocks) if b.kind != "full"]
-        self.rep_blocks = rep
-        self.rep_row = (
-            np.concatenate([self.row_idx[k] for k in rep]) if rep else np.zeros(0, np.intp)
-        )
-        self.rep_col = (
-            np.concatenate([self.col_idx[k] for k in rep]) if rep else np.zeros(0, np.intp)
-        )
-        self.rep_blk = self.blk_of_row[self.rep_row]
-        full = [k for k, b in enumerate(blocks) if b.kind == "full"]
-        self.full_row = (
-            np.concatenate([self.row_idx[k] for k in full]) if full else np.zeros(0, np.intp)
-        )
-        self.full_col = (
-            np.concatenate([self.col_idx[k] for k in full]) if full else np.zeros(0, np.intp)
-        )
-        self.row_starts = np.array([ix[0] for ix in self.row_idx])
-        self.col_starts = np.array([ix[0] for ix in self.col_idx])
-        # --- D-scaling parametrisation -----------------------------------------------------
-        # diag entries: parameter index for every diagonal entry of D_l (rows) / D_r (cols)
-        self.diag_param_l = np.zeros(n, np.intp)
-        self.diag_param_r = np.zeros(n, np.intp)
-        off_il: list[int] = []
-        off_jl: list[int] = []
-        off_ir: list[int] = []
-        off_jr: list[int] = []
-        off_pre: list[int] = []
-        off_pim: list[int] = []
-        p = 0
-        self.block_param_slices: list[slice] = []
-        for k, b in enumerate(blocks):
-            start = p
-            if b.kind == "full":
-                self.diag_param_l[self.row_idx[k]] = p
-                self.diag_param_r[self.col_idx[k]] = p
-                p += 1
-            else:
-                m = b.rows
-                self.diag_param_l[self.row_idx[k]] = p + np.arange(m)
-                self.diag_param_r[self.col_idx[k]] = p + np.arange(m)
-                p += m
-                iu, ju = np.triu_indices(m, 1)
-                nu = iu.size
-                off_il.extend(self.row_idx[k][iu])
-                off_jl.extend(self.row_idx[k][ju])
-                off_ir.extend(self.col_idx[k][iu])
-                off_jr.extend(self.col_idx[k][ju])
-                off_pre.extend(range(p, p + nu))
-                off_pim.extend(range(p + nu, p + 2 * nu))
-                p += 2 * nu
-            self.block_param_slices.append(slice(start, p))
-        self.n_params = p
-        self.off_il = np.array(off_il, np.intp)
-        self.off_jl = np.array(off_jl, np.intp)
-        self.off_ir = np.array(off_ir, np.intp)
-        self.off_jr = np.array(off_jr, np.intp)
-        self.off_pre = np.array(off_pre, np.intp)
-        self.off_pim = np.array(off_pim, np.intp)
-        self.has_off = self.off_il.size > 0
 
-    # D-scalings ------------------------------------------------------------------------
-    def scalings(
-        self, x: NDArray[np.float64]
-    ) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]]:
-        """Return D_l, D_r^-1 and the diagonal values (dl, dr)."""
-        dl = np.exp(x[self.diag_param_l])
-        dr = np.exp(x[self.diag_param_r])
-        if not self.has_off:
-            return np.diag(dl), np.diag(1.0 / dr), dl, dr
-        z = x[self.off_pre] + 1j * x[self.off_pim]
-        Dl = np.diag(dl).astype(complex)
-        Dr = np.diag(dr).astype(complex)
-        Dl[self.off_il, self.off_jl] = z
-        Dr[self.off_ir, self.off_jr] = z
-        return Dl, np.linalg.inv(Dr), dl, dr
+def _scaled(st: BlockStructure, M: NDArray[Any], x: NDArray[np.float64]) -> NDArray[Any]:
+    """D_l M D_r^-1 for the parameters x."""
+    if not st.has_off:
+        dl = np.exp(x[st.diag_param_l])
+        dr = np.exp(x[st.diag_param_r])
+        return (dl[:, None] * M) / dr[None, :]
+    Dl, Dr_inv, _, _ = _scalings(st, x)
+    return Dl @ M @ Dr_inv
 
-    def scaled(self, M: NDArray[Any], x: NDArray[np.float64]) -> NDArray[Any]:
-        if not self.has_off:
-            dl = np.exp(x[self.diag_param_l])
-            dr = np.exp(x[self.diag_param_r])
-            return (dl[:, None] * M) / dr[None, :]
-        Dl, Dr_inv, _, _ = self.scalings(x)
-        return Dl @ M @ Dr_inv
 
-    def dscaling(self, x: NDArray[np.float64]) -> DScaling:
-        Dl, Dr_inv, _, _ = self.scalings(x)
-        return DScaling(
-            left=np.asarray(Dl, dtype=complex),
-            right=np.asarray(np.linalg.inv(Dr_inv), dtype=complex),
-            params=np.array(x, dtype=float),
-        )
+def _dscaling(st: BlockStructure, x: NDArray[np.float64]) -> DScaling:
+    """The :class:`DScaling` of the parameters x."""
+    Dl, Dr_inv, _, _ = _scalings(st, x)
+    return DScaling(
+        left=np.asarray(Dl, dtype=complex),
+        right=np.asarray(np.linalg.inv(Dr_inv), dtype=complex),
+        params=np.array(x, dtype=float),
+    )
 
 
 def _check_matrix(M: Any) -> NDArray[np.complex128]:
@@ -288,7 +230,7 @@ def _check_matrix(M: Any) -> NDArray[np.complex128]:
 # ------------------------------------------------------------------------------------------
 
 
-def _osborne_init(M: NDArray[Any], st: BlockIndex, sweeps: int = 20) -> NDArray[np.float64]:
+def _osborne_init(M: NDArray[Any], st: BlockStructure, sweeps: int = 20) -> NDArray[np.float64]:
     """Osborne balancing of the block-norm matrix: minimise ||D B D^-1||_F (log params)."""
     K = st.K
     Bn = np.zeros((K, K))
@@ -323,7 +265,7 @@ def _osborne_init(M: NDArray[Any], st: BlockIndex, sweeps: int = 20) -> NDArray[
     return x
 
 
-def _eig_init(M: NDArray[Any], st: BlockIndex, x: NDArray[np.float64]) -> NDArray[np.float64]:
+def _eig_init(M: NDArray[Any], st: BlockStructure, x: NDArray[np.float64]) -> NDArray[np.float64]:
     """Replace the scalings of repeated blocks by R from QR(V^-1) of their diagonal block.
 
     For a single repeated complex block this gives sigma_max(R M R^-1) = rho(M) exactly
@@ -357,7 +299,7 @@ def _eig_init(M: NDArray[Any], st: BlockIndex, x: NDArray[np.float64]) -> NDArra
 class _UpperObjective:
     """Smoothed sigma_max(D_l M D_r^-1) and its gradient in the log-parametrisation."""
 
-    def __init__(self, M: NDArray[Any], st: BlockIndex):
+    def __init__(self, M: NDArray[Any], st: BlockStructure):
         self.M = M
         self.st = st
         self.smooth = 0.0
@@ -366,7 +308,7 @@ class _UpperObjective:
         self.nfev = 0
 
     def true_value(self, x: NDArray[np.float64]) -> float:
-        N = self.st.scaled(self.M, x)
+        N = _scaled(self.st, self.M, x)
         val = float(np.linalg.norm(N, 2))
         self._record(val, x)
         return val
@@ -379,7 +321,7 @@ class _UpperObjective:
     def __call__(self, x: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
         st = self.st
         self.nfev += 1
-        Dl, Dr_inv, dl, dr = st.scalings(x)
+        Dl, Dr_inv, dl, dr = _scalings(st, x)
         N = Dl @ self.M @ Dr_inv if st.has_off else (dl[:, None] * self.M) / dr[None, :]
         try:
             U, s, Vh = np.linalg.svd(N)
@@ -422,7 +364,7 @@ class _UpperObjective:
 
 def _upper(
     M: NDArray[Any],
-    st: BlockIndex,
+    st: BlockStructure,
     x0: NDArray[np.float64] | None,
     target: float,
     rtol: float,
@@ -466,23 +408,9 @@ def _upper(
 _MU_METHODS = ("auto", "ab13md", "dg", "dscale")
 
 
-def _ab13md_spec(st: BlockIndex) -> tuple[NDArray[Any], NDArray[Any]] | None:
-    nblock, itype = [], []
-    for b in st.blocks:
-        if b.kind == "full" and b.rows == b.cols:
-            nblock.append(b.rows)
-            itype.append(2)
-        elif b.kind == "real" and b.rows == 1:
-            nblock.append(1)
-            itype.append(1)
-        else:
-            return None
-    return np.array(nblock), np.array(itype)
-
-
 def _upper_any(
     M: NDArray[Any],
-    st: BlockIndex,
+    st: BlockStructure,
     warm: DScaling | None,
     target: float,
     rtol: float,
@@ -492,7 +420,7 @@ def _upper_any(
     """Upper bound by AB13MD (where it applies), D-G scaling (real blocks) or D-scaling."""
     if method not in _MU_METHODS:
         raise ValueError(f"unknown method {method!r}; expected one of {_MU_METHODS}")
-    spec = _ab13md_spec(st) if st.all_square else None
+    spec = st.ab13md_spec() if st.all_square else None
     if method == "ab13md" and spec is None:
         raise ValueError(
             "AB13MD only takes square full complex blocks and 1x1 real blocks; use "
@@ -511,22 +439,22 @@ def _upper_any(
             x = np.log(d[st.row_starts])
             return res_ab.value, DScaling(Dl, Dl.copy(), x, G, "ab13md", res_ab.params)
     if st.has_real and method in ("auto", "dg", "ab13md"):
-        from vtolftc.synthesis.dg_scaling import BlockStructure, dg_upper_bound
+        from vtolftc.synthesis.dg_scaling import dg_upper_bound
 
         x0 = warm.warm if warm is not None and warm.method == "dg" else None
         # the budget of mixed_mu_upper (200 per stage), so that the two agree
-        res = dg_upper_bound(M, BlockStructure(st.blocks), x0, target, rtol, max(maxiter, 200))
+        res = dg_upper_bound(M, st, x0, target, rtol, max(maxiter, 200))
         T = np.linalg.cholesky(res.D).conj().T  # D = T^H T
         return res.value, DScaling(T, T.copy(), np.zeros(st.n_params), res.G, "dg",
                                    res.params)
     x0 = warm.params if warm is not None and warm.method == "dscale" else None
     val, x = _upper(M, st, x0, target, rtol, maxiter)
-    return val, st.dscaling(x)
+    return val, _dscaling(st, x)
 
 
 def mu_upper_bound(
     M: NDArray[Any],
-    blocks: Sequence[Block],
+    blocks: Sequence[Block] | BlockStructure,
     *,
     warm_start: DScaling | NDArray[np.float64] | None = None,
     rtol: float = 1e-6,
@@ -537,17 +465,18 @@ def mu_upper_bound(
 
     Parameters
     ----------
-    M:
-        Square complex matrix (n x n).
-    blocks:
-        Block structure (list of :class:`Block`); sizes must sum to n.
-    warm_start:
+    M : array_like, shape (n, n)
+        Square complex matrix.
+    blocks : sequence of Block or BlockStructure
+        Block structure; sizes must sum to n.
+    warm_start : DScaling or ndarray, optional
         A previous :class:`DScaling` (or its ``params``) for the same structure, e.g. from a
         neighbouring frequency.
-    rtol, maxiter:
-        Optimiser tolerance and iteration cap per continuation stage.
-
-    method:
+    rtol : float
+        Optimiser relative tolerance per continuation stage.
+    maxiter : int
+        Optimiser iteration cap per continuation stage.
+    method : {"auto", "ab13md", "dg", "dscale"}
         ``"auto"`` (default): SLICOT AB13MD where it applies (square full complex blocks and
         1x1 real blocks), the mixed D-G bound of :mod:`vtolftc.synthesis.mixed_mu` for other
         structures with real blocks, D-scaling otherwise. ``"ab13md"``, ``"dg"`` or
@@ -555,12 +484,28 @@ def mu_upper_bound(
 
     Returns
     -------
-    (value, D):
+    value : float
         ``value`` >= mu(M), value <= sigma_max(M). Without real blocks value =
-        sigma_max(D.left @ M @ inv(D.right)); with real blocks (D-G bound) ``D.g`` holds G.
+        sigma_max(D.left @ M @ inv(D.right)).
+    D : DScaling
+        The scaling; with real blocks (D-G bound) ``D.g`` holds G.
+
+    Raises
+    ------
+    ValueError
+        If M is not square and finite, the blocks do not fit it, or ``method`` is unknown or
+        does not apply to the structure.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> M = np.array([[1.0, 10.0], [0.0, 1.0]])
+    >>> value, D = mu_upper_bound(M, [Block.full(1), Block.full(1)])
+    >>> round(value, 4)                 # sigma_max(M) = 10.1; the scalings bring it to rho(M)
+    1.0
     """
     Mc = _check_matrix(M)
-    st = BlockIndex(blocks, Mc.shape[0])
+    st = BlockStructure(blocks).require_square(Mc.shape[0])
     if isinstance(warm_start, DScaling):
         warm = warm_start
     elif warm_start is not None:
@@ -583,7 +528,7 @@ def _blk_norms(v: NDArray[Any], idx_blk: NDArray[np.intp], K: int) -> NDArray[np
 class _Power:
     """Packard-Fan-Doyle power iteration for the complex (and signed real) mu lower bound."""
 
-    def __init__(self, M: NDArray[Any], st: BlockIndex):
+    def __init__(self, M: NDArray[Any], st: BlockStructure):
         self.M = M
         self.Mh = M.conj().T
         self.st = st
@@ -716,7 +661,7 @@ class _Power:
 
 
 def _delta_from_q(
-    M: NDArray[Any], Q: NDArray[Any], st: BlockIndex
+    M: NDArray[Any], Q: NDArray[Any], st: BlockStructure
 ) -> tuple[float, NDArray[np.complex128] | None]:
     """Valid bound |lambda| from Delta = Q / lambda, lambda an eigenvalue of M Q (||Q|| = 1).
 
@@ -741,7 +686,20 @@ def _delta_from_q(
 
 
 def makes_singular(M: NDArray[Any], Delta: NDArray[Any]) -> bool:
-    """True if I - M Delta is singular to working accuracy."""
+    """True if I - M Delta is singular to working accuracy.
+
+    Parameters
+    ----------
+    M : ndarray, shape (n, m)
+        The matrix.
+    Delta : ndarray, shape (m, n)
+        The perturbation.
+
+    Returns
+    -------
+    bool
+        sigma_min(I - M Delta) <= 1e-8 (1 + ||M||_2 ||Delta||_2).
+    """
     n = M.shape[0]
     smin = float(np.linalg.svd(np.eye(n) - M @ Delta, compute_uv=False)[-1])
     return smin <= 1e-8 * (1.0 + float(np.linalg.norm(M, 2)) * float(np.linalg.norm(Delta, 2)))
@@ -756,7 +714,7 @@ def _sign_vectors(kr: int, rng: np.random.Generator, cap: int = 16) -> list[NDAr
 
 def _lower_real(
     M: NDArray[Any],
-    st: BlockIndex,
+    st: BlockStructure,
     lb: float,
     rng: np.random.Generator,
     dirs_extra: Sequence[NDArray[Any]],
@@ -790,7 +748,7 @@ def _lower_real(
     cc = np.concatenate([st.col_idx[k] for k in cidx])
     Mrr, Mrc = M[np.ix_(rr, cr)], M[np.ix_(rr, cc)]
     Mcr, Mcc = M[np.ix_(rc, cr)], M[np.ix_(rc, cc)]
-    sub = BlockIndex([st.blocks[k] for k in cidx], rc.size)
+    sub = BlockStructure([st.blocks[k] for k in cidx]).require_square(rc.size)
     single_full = sub.K == 1 and sub.blocks[0].kind == "full"
     sizes = np.array([st.blocks[k].rows for k in ridx])
     eye_r = np.eye(rr.size)
@@ -846,7 +804,7 @@ def _lower_real(
 
 def power_lower_bound(
     M: NDArray[Any],
-    st: BlockIndex,
+    st: BlockStructure,
     n_starts: int,
     rng: np.random.Generator,
     vec_starts: Sequence[tuple[NDArray[Any], NDArray[Any]]],
@@ -856,9 +814,34 @@ def power_lower_bound(
 ) -> tuple[float, NDArray[np.complex128] | None, tuple[NDArray[Any], NDArray[Any]] | None]:
     """Lower bound of mu by the power iteration (Packard-Fan-Doyle; signed for real blocks).
 
-    Returns the bound, the destabilising structured ``Delta`` of norm 1/bound that proves it
-    (checked with :func:`makes_singular`; None if none was found) and the converged vector pair
-    (a warm start for the next frequency).
+    Parameters
+    ----------
+    M : ndarray of complex, shape (n, n)
+        The matrix.
+    st : BlockStructure
+        Its (square) block structure.
+    n_starts : int
+        Seeded random starts, in addition to the deterministic ones.
+    rng : numpy.random.Generator
+        Source of the random starts.
+    vec_starts : sequence of (ndarray, ndarray)
+        Vector pairs (b, w) to start from, e.g. the converged pair of a neighbouring frequency.
+    iters : int
+        Power iterations per start.
+    include_eig : bool
+        Also start from the dominant eigenvectors of M.
+    real_search : bool
+        With real blocks, also search the real directions (see :mod:`.mixed_mu`).
+
+    Returns
+    -------
+    value : float
+        The lower bound (0 if no destabilising perturbation was found).
+    Delta : ndarray of complex, shape (n, n) or None
+        The destabilising structured perturbation of norm 1/value that proves it (checked
+        with :func:`makes_singular`).
+    vectors : (ndarray, ndarray) or None
+        The converged vector pair (a warm start for the next frequency).
     """
     n = st.n
     if st.has_real:
@@ -902,7 +885,7 @@ def power_lower_bound(
             cb = [k for k in range(st.K) if not st.is_real[k]]
             ri = np.concatenate([st.row_idx[k] for k in cb])
             ci = np.concatenate([st.col_idx[k] for k in cb])
-            sub = BlockIndex([st.blocks[k] for k in cb], ri.size)
+            sub = BlockStructure([st.blocks[k] for k in cb]).require_square(ri.size)
             val, Dsub, _ = power_lower_bound(M[np.ix_(ri, ci)], sub, max(1, n_starts // 2),
                                              rng, [], iters)
             if val > best[0] and Dsub is not None:
@@ -917,7 +900,7 @@ def power_lower_bound(
 
 def mu_lower_bound(
     M: NDArray[Any],
-    blocks: Sequence[Block],
+    blocks: Sequence[Block] | BlockStructure,
     *,
     n_starts: int = 4,
     seed: int = 0,
@@ -930,15 +913,37 @@ def mu_lower_bound(
     blocks are square and complex), the singular vectors of D_l M D_r^-1 if a ``scaling``
     from :func:`mu_upper_bound` is given, and ``n_starts`` seeded random vectors.
 
+    Parameters
+    ----------
+    M : array_like, shape (n, n)
+        Square complex matrix.
+    blocks : sequence of Block or BlockStructure
+        Block structure; sizes must sum to n.
+    n_starts : int
+        Seeded random starts.
+    seed : int
+        Seed of the random starts.
+    iters : int
+        Power iterations per start.
+    scaling : DScaling, optional
+        Upper-bound scaling whose singular vectors give a further start.
+
     Returns
     -------
-    (value, Delta):
-        Delta is a structured perturbation with det(I - M Delta) = 0 (to rounding) and
-        sigma_max(Delta) = 1 / value, which proves mu(M) >= value. ``(0.0, None)`` if no
+    value : float
+        The lower bound.
+    Delta : ndarray of complex, shape (n, n) or None
+        A structured perturbation with det(I - M Delta) = 0 (to rounding) and
+        sigma_max(Delta) = 1 / value, which proves mu(M) >= value; ``(0.0, None)`` if no
         destabilising perturbation was found.
+
+    Raises
+    ------
+    ValueError
+        If M is not square and finite or the blocks do not fit it.
     """
     Mc = _check_matrix(M)
-    st = BlockIndex(blocks, Mc.shape[0])
+    st = BlockStructure(blocks).require_square(Mc.shape[0])
     if n_starts < 0:
         raise ValueError(f"n_starts must be >= 0, got {n_starts}")
     starts = [] if scaling is None else [_svd_start(Mc, scaling)]
@@ -964,7 +969,7 @@ def _svd_start(M: NDArray[Any], D: DScaling) -> tuple[NDArray[Any], NDArray[Any]
 
 def _bounds(
     M: NDArray[Any],
-    st: BlockIndex,
+    st: BlockStructure,
     warm: DScaling | None,
     extra_starts: Sequence[tuple[NDArray[Any], NDArray[Any]]],
     n_starts: int,
@@ -990,7 +995,7 @@ def _bounds(
 
 def mu_bounds(
     M: NDArray[Any],
-    blocks: Sequence[Block],
+    blocks: Sequence[Block] | BlockStructure,
     *,
     n_starts: int = 4,
     seed: int = 0,
@@ -1000,12 +1005,44 @@ def mu_bounds(
 ) -> MuBounds:
     """Lower and upper bounds of mu_Delta(M) (eq. 12); see the module docstring.
 
-    ``n_starts`` random power-iteration starts are added to the deterministic ones (eigen-
-    and singular-vector based); ``seed`` makes them reproducible. The gap is upper - lower.
-    ``method`` selects the upper-bound algorithm (see :func:`mu_upper_bound`).
+    Parameters
+    ----------
+    M : array_like, shape (n, n)
+        Square complex matrix.
+    blocks : sequence of Block or BlockStructure
+        Block structure; sizes must sum to n.
+    n_starts : int
+        Random power-iteration starts added to the deterministic ones (eigen- and
+        singular-vector based).
+    seed : int
+        Makes the random starts reproducible.
+    rtol : float
+        Relative tolerance of the upper-bound optimiser.
+    warm_start : DScaling, optional
+        Scaling of a neighbouring problem for the upper bound.
+    method : {"auto", "ab13md", "dg", "dscale"}
+        Upper-bound algorithm (see :func:`mu_upper_bound`).
+
+    Returns
+    -------
+    MuBounds
+        ``lower <= mu(M) <= upper`` with the scaling and the destabilising Delta.
+
+    Raises
+    ------
+    ValueError
+        If M is not square and finite, the blocks do not fit it, or ``method`` is unknown.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> M = np.array([[0.5, 2.0], [0.125, 0.5]])
+    >>> b = mu_bounds(M, [Block.full(1), Block.full(1)])
+    >>> round(b.lower, 6), round(b.upper, 6)      # mu = |0.5| + sqrt(2 * 0.125)
+    (1.0, 1.0)
     """
     Mc = _check_matrix(M)
-    st = BlockIndex(blocks, Mc.shape[0])
+    st = BlockStructure(blocks).require_square(Mc.shape[0])
     if n_starts < 0:
         raise ValueError(f"n_starts must be >= 0, got {n_starts}")
     res, _ = _bounds(Mc, st, warm_start, [], n_starts, np.random.default_rng(seed), rtol, 60,
@@ -1015,7 +1052,7 @@ def mu_bounds(
 
 def mu_sweep(
     freq_response: NDArray[Any],
-    blocks: Sequence[Block],
+    blocks: Sequence[Block] | BlockStructure,
     omegas: NDArray[np.float64],
     *,
     n_starts: int = 1,
@@ -1025,23 +1062,46 @@ def mu_sweep(
 ) -> MuSweep:
     """mu bounds of M(j w_i) over a frequency grid (robust stability/performance, eqs. 13-14).
 
-    Parameters
-    ----------
-    freq_response:
-        Array (nw, n, n) of M(j w) (e.g. from
-        :func:`vtolftc.synthesis.hinfnorm.frequency_response`).
-    blocks:
-        Block structure.
-    omegas:
-        The nw frequencies in rad/s (used for reporting the peak frequencies).
-    n_starts:
-        Random power-iteration starts per frequency in addition to the warm starts from the
-        neighbouring frequency and from the upper-bound scaling.
-    method:
-        Upper-bound algorithm (see :func:`mu_upper_bound`; AB13MD where it applies).
-
     For non-square M or mixed real/complex structures with repeated real scalars see also
     :func:`vtolftc.synthesis.mixed_mu.mixed_mu_sweep`.
+
+    Parameters
+    ----------
+    freq_response : ndarray of complex, shape (nw, n, n)
+        M(j w) (e.g. from :func:`vtolftc.synthesis.hinfnorm.frequency_response`).
+    blocks : sequence of Block or BlockStructure
+        Block structure.
+    omegas : ndarray of float, shape (nw,)
+        The frequencies in rad/s (used for reporting the peak frequencies).
+    n_starts : int
+        Random power-iteration starts per frequency in addition to the warm starts from the
+        neighbouring frequency and from the upper-bound scaling.
+    seed : int
+        Seed of the random starts.
+    rtol : float
+        Relative tolerance of the upper-bound optimiser.
+    method : {"auto", "ab13md", "dg", "dscale"}
+        Upper-bound algorithm (see :func:`mu_upper_bound`; AB13MD where it applies).
+
+    Returns
+    -------
+    MuSweep
+        Bounds at every frequency and their peaks.
+
+    Raises
+    ------
+    ValueError
+        If the response is not (nw, n, n), does not match ``omegas``, is empty or not finite,
+        or the blocks do not fit it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> w = np.array([0.1, 1.0, 10.0])
+    >>> F = np.array([np.diag([1 / (1j * wi + 1), 0.5]) for wi in w])
+    >>> sw = mu_sweep(F, [Block.full(1), Block.full(1)], w)
+    >>> round(sw.peak_upper, 4), sw.peak_upper_frequency_rad_s
+    (0.995, 0.1)
     """
     F = np.asarray(freq_response)
     w = np.asarray(omegas, dtype=float).reshape(-1)
@@ -1057,7 +1117,7 @@ def mu_sweep(
         raise ValueError("empty frequency grid")
     if not np.all(np.isfinite(F)):
         raise ValueError("freq_response contains NaN or inf entries")
-    st = BlockIndex(blocks, F.shape[1])
+    st = BlockStructure(blocks).require_square(F.shape[1])
     rng = np.random.default_rng(seed)
     lower = np.zeros(w.size)
     upper = np.zeros(w.size)

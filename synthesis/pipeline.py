@@ -27,6 +27,8 @@ from vtolftc.synthesis.design import (
     OMEGA_A_RAD_S,
     R_MAX_RAD,
     TABLE2,
+    control_weight_bandwidth,
+    paper_points,
     run_designs,
 )
 from vtolftc.synthesis.export import lqr_document, schedule_document, write_json
@@ -64,10 +66,13 @@ def _weights_meta(res: SynthesisResult) -> dict[str, Any]:
                          for ax in AXES},
         }
     return {
-        "Ws_form": "(s/M + omega_b) / (s + A omega_b)  (paper eq. 5, table 2)",
+        "Ws_form": "(s/M + omega_b) / (s + A omega_b)  (paper eq. 5, table 2 for DS-1; "
+                   "another aircraft: M kept, omega_b times its authority bandwidth over "
+                   "DS-1's, synthesis/design.py table2_scaled)",
         "Wr_form": "((r_max/u_max) s + omega_a 1e-3) / (s + omega_a)  (paper eq. 6)",
         "Wt_form": "gain * prod (s/z_i + 1)/(s/p_i + 1)  (fitted cover, paper fig. 3)",
-        "A": A_SENSITIVITY, "omega_a_rad_s": OMEGA_A_RAD_S, "r_max_rad": R_MAX_RAD,
+        "A": A_SENSITIVITY, "omega_a_rad_s": control_weight_bandwidth(res.airframe),
+        "r_max_rad": R_MAX_RAD,
         "gamma_range": list(GAMMA_RANGE),
         "per_axis": {ax: [w.to_dict() for d in res.gs[ax] for w in d.weights] for ax in AXES},
     }
@@ -107,7 +112,20 @@ def _axis_meta_shif(res: SynthesisResult, ax: Axis) -> dict[str, Any]:
 
 
 def write_gain_files(res: SynthesisResult, out_dir: Path) -> dict[str, Path]:
-    """(Re)write gs-shif.json, shif.json and lqr.json from ``res`` (atomically)."""
+    """(Re)write gs-shif.json, shif.json and lqr.json from ``res`` (atomically).
+
+    Parameters
+    ----------
+    res : SynthesisResult
+        The synthesis result.
+    out_dir : pathlib.Path
+        Output folder.
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        The files written, keyed by controller (``"gs-shif"``, ``"shif"``, ``"lqr"``).
+    """
     af = res.airframe
     common = {
         "design_points": _design_points_meta(res.points),
@@ -156,20 +174,49 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
                   ) -> SynthesisResult:
     """The whole synthesis; see the module docstring.
 
-    ``method``: one of :data:`METHODS`. ``points``: the design points (default: the
-    method's, six for ``paper``, seven for ``robust``). ``progress(label, n)`` is called when
-    ``n`` more work units are done (the total is :func:`work_units`). ``jobs`` worker
-    processes (1 = in-process).
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    out_dir : str or pathlib.Path
+        Output folder (gain files and report).
+    n_starts : int
+        Random starts per tune.
+    jobs : int
+        Worker processes (1 = in-process).
+    seed : int
+        Seed of the random starts.
+    report : bool
+        Write the report.
+    mu : bool
+        Run the mu analysis.
+    points : tuple of DesignPoint, optional
+        The design points (default: the method's, six for ``paper``, seven for ``robust``).
+    progress : callable, optional
+        ``progress(label, n)`` is called when ``n`` more work units are done (the total is
+        :func:`work_units`).
+    method : str
+        One of :data:`METHODS`.
+
+    Returns
+    -------
+    SynthesisResult
+        Everything produced, with the files written and per-stage times.
+
+    Raises
+    ------
+    ValueError
+        For an unknown method.
     """
     if method not in METHODS:
         raise ValueError(f"method {method!r}: expected one of {', '.join(METHODS)}")
     if points is None:
         if method == "robust":
-            from vtolftc.synthesis.robust import ROBUST_DESIGN_POINTS
+            from vtolftc.synthesis.robust import robust_points
 
-            points = ROBUST_DESIGN_POINTS
+            points = robust_points(af)
         else:
-            points = PAPER_DESIGN_POINTS
+            points = paper_points(af)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     times: dict[str, float] = {}
@@ -360,7 +407,22 @@ def _nominally_stable(res: SynthesisResult, job: tuple[Any, ...]) -> bool:
 
 def work_units(n_points: int = len(PAPER_DESIGN_POINTS), mu: bool = True,
                report: bool = True) -> int:
-    """Total of the ``progress`` units of :func:`run_synthesis`."""
+    """Total of the ``progress`` units of :func:`run_synthesis`.
+
+    Parameters
+    ----------
+    n_points : int
+        Number of design points.
+    mu : bool
+        Whether the mu analysis runs.
+    report : bool
+        Whether the report is written.
+
+    Returns
+    -------
+    int
+        The total.
+    """
     n = 3 * n_points + 3 + 1
     if mu:
         n += 2 * 3 * n_points
@@ -370,7 +432,20 @@ def work_units(n_points: int = len(PAPER_DESIGN_POINTS), mu: bool = True,
 
 
 def fmt(x: float, nd: int = 3) -> str:
-    """Number for tables: fixed or scientific as fits; inf/nan spelled out."""
+    """Number for tables: fixed or scientific as fits; inf/nan spelled out.
+
+    Parameters
+    ----------
+    x : float
+        The number.
+    nd : int
+        Significant digits.
+
+    Returns
+    -------
+    str
+        The formatted number.
+    """
     if not math.isfinite(x):
         return str(x)
     if x != 0 and (abs(x) < 10 ** -nd or abs(x) >= 1e5):

@@ -79,8 +79,28 @@ def power_iteration(M: NDArray[np.complex128], b: NDArray[np.complex128],
                     rep_row: NDArray[np.intp], rep_col: NDArray[np.intp],
                     rep_blk: NDArray[np.intp], is_real: NDArray[np.bool_],
                     ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
-    """The general iteration (any mix of full, repeated complex and repeated real blocks);
-    returns (a, w), a normalised. The index maps are those of ``mu.BlockIndex``."""
+    """The mu power iteration for any mix of full, repeated complex and repeated real blocks.
+
+    Parameters
+    ----------
+    M : ndarray of complex, shape (n, n)
+        The matrix.
+    b, w : ndarray of complex, shape (n,)
+        Start vectors (unit norm).
+    iters : int
+        Maximum iterations.
+    tol : float
+        Relative tolerance on the change of the iteration's growth estimate beta.
+    K : int
+        Number of blocks.
+    blk_of_row, blk_of_col, full_row, full_col, rep_row, rep_col, rep_blk, is_real : ndarray
+        The index maps of ``mu_blocks.BlockStructure``.
+
+    Returns
+    -------
+    a, w : ndarray of complex, shape (n,)
+        The converged vector pair, a normalised.
+    """
     Mh = np.ascontiguousarray(np.conj(M).T)
     has_rep = rep_row.size > 0
     a = _matvec(M, b)
@@ -131,9 +151,25 @@ def power_iteration(M: NDArray[np.complex128], b: NDArray[np.complex128],
 def power_iteration_scalar(M: NDArray[np.complex128], b: NDArray[np.complex128],
                            w: NDArray[np.complex128], iters: int, tol: float,
                            ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
-    """The iteration when every block is 1 x 1 (real ones iterate as complex); returns
-    (a, w) as ``power_iteration`` does for that structure, without the final normalisation
-    of a (as the numpy reference)."""
+    """The mu power iteration when every block is 1 x 1 (real ones iterate as complex).
+
+    Parameters
+    ----------
+    M : ndarray of complex, shape (n, n)
+        The matrix.
+    b, w : ndarray of complex, shape (n,)
+        Start vectors (unit norm).
+    iters : int
+        Maximum iterations.
+    tol : float
+        Relative tolerance on the change of the iteration's growth estimate beta.
+
+    Returns
+    -------
+    a, w : ndarray of complex, shape (n,)
+        As :func:`power_iteration` returns for that structure, without the final
+        normalisation of a (as the numpy reference).
+    """
     Mh = np.ascontiguousarray(np.conj(M).T)
     n = b.size
     a = _matvec(M, b)

@@ -49,9 +49,27 @@ def _g(x: float) -> str:
 
 def crossovers(af: Any, axis: Axis, airspeed_m_s: float, gains: dict[str, float],
                ) -> tuple[float, float]:
-    """(rate-loop crossover, plant-input loop crossover) [rad/s]: the highest frequencies
-    where |K_rate G_rate| and |L_u| = |K_rate (kp_angle G_angle + G_rate)| fall through 1
-    (nan if they never cross on 1e-3..1e4 rad/s)."""
+    """Rate-loop and plant-input loop crossover frequencies of one axis.
+
+    The highest frequencies where |K_rate G_rate| and |L_u| = |K_rate (kp_angle G_angle +
+    G_rate)| fall through 1.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    airspeed_m_s : float
+        Airspeed of the plant (m/s).
+    gains : dict of str to float
+        P-PID gains.
+
+    Returns
+    -------
+    rate_crossover, input_crossover : float
+        Frequencies (rad/s); nan if they never cross on 1e-3..1e4 rad/s.
+    """
     G = attitude_model(af, axis, airspeed_m_s)
     w = np.logspace(-3, 4, 1400)
     F = frequency_response(G, w)
@@ -183,8 +201,20 @@ _PNG_KINDS = ("wt", "poles", "mu")
 
 
 def png_order(names: list[str]) -> list[str]:
-    """The report's PNG names in the report's order (kind: weights, poles, mu; then axis),
-    whichever order the per-axis jobs of :func:`design_plots` / :func:`mu_plots` finish."""
+    """The report's PNG names in the report's order (kind: weights, poles, mu; then axis).
+
+    Whichever order the per-axis jobs of :func:`design_plots` / :func:`mu_plots` finish.
+
+    Parameters
+    ----------
+    names : list of str
+        PNG file names.
+
+    Returns
+    -------
+    list of str
+        The names, sorted.
+    """
     def key(n: str) -> tuple[int, int, str]:
         kind, _, rest = n.partition("_")
         ax = rest.removesuffix(".png")
@@ -195,10 +225,25 @@ def png_order(names: list[str]) -> list[str]:
 
 def design_plots(res: SynthesisResult, out_dir: str | Path,
                  axes: tuple[Axis, ...] = AXES) -> list[str]:
-    """The report's PNGs that do not need the mu analysis (uncertainty weights, poles) of
-    ``axes``, written into ``out_dir``; returns their names. Picklable work: the pipeline
-    draws them in the workers (one job per axis) while the mu analysis finishes and passes
-    the names to :func:`write_report` (``design_pngs``)."""
+    """The report's PNGs that do not need the mu analysis (uncertainty weights, poles).
+
+    Picklable work: the pipeline draws them in the workers (one job per axis) while the mu
+    analysis finishes and passes the names to :func:`write_report` (``design_pngs``).
+
+    Parameters
+    ----------
+    res : SynthesisResult
+        The synthesis result.
+    out_dir : str or pathlib.Path
+        Output folder.
+    axes : tuple of str
+        Axes to draw.
+
+    Returns
+    -------
+    list of str
+        Names of the PNGs written.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if getattr(res, "method", "paper") == "robust":
@@ -208,8 +253,22 @@ def design_plots(res: SynthesisResult, out_dir: str | Path,
 
 def mu_plots(res: SynthesisResult, out_dir: str | Path,
              axes: tuple[Axis, ...] = AXES) -> list[str]:
-    """The report's mu figures of ``axes`` (those with a GS-SHIF mu analysis in ``res``),
-    written into ``out_dir``; returns their names (``mu_pngs`` of :func:`write_report`)."""
+    """The report's mu figures of ``axes`` (those with a GS-SHIF mu analysis in ``res``).
+
+    Parameters
+    ----------
+    res : SynthesisResult
+        The synthesis result.
+    out_dir : str or pathlib.Path
+        Output folder.
+    axes : tuple of str
+        Axes to draw.
+
+    Returns
+    -------
+    list of str
+        Names of the PNGs written (``mu_pngs`` of :func:`write_report`).
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if getattr(res, "method", "paper") == "robust":
@@ -228,10 +287,23 @@ def _pngs(res: SynthesisResult, out: Path, design_pngs: list[str] | None,
 def write_report(res: SynthesisResult, out_dir: str | Path,
                  design_pngs: list[str] | None = None,
                  mu_pngs: list[str] | None = None) -> Path:
-    """Write ``README.md`` and the PNGs into ``out_dir``; returns the markdown path.
+    """Write ``README.md`` and the PNGs into ``out_dir``.
 
-    ``design_pngs`` / ``mu_pngs``: the names :func:`design_plots` / :func:`mu_plots`
-    returned for this ``res`` and ``out_dir`` (those figures are then not drawn again)."""
+    Parameters
+    ----------
+    res : SynthesisResult
+        The synthesis result.
+    out_dir : str or pathlib.Path
+        Output folder.
+    design_pngs, mu_pngs : list of str, optional
+        The names :func:`design_plots` / :func:`mu_plots` returned for this ``res`` and
+        ``out_dir`` (those figures are then not drawn again).
+
+    Returns
+    -------
+    pathlib.Path
+        The markdown file.
+    """
     if getattr(res, "method", "paper") == "robust":
         return write_robust_report(res, out_dir, design_pngs, mu_pngs)
     out = Path(out_dir)
@@ -250,10 +322,15 @@ def write_report(res: SynthesisResult, out_dir: str | Path,
                       for p in res.points]))
 
     md += ["", "## Table 2: weights", "",
-           "Ws = (s/M + omega_b)/(s + A omega_b) with the paper's table 2 values and A = "
+           "Ws = (s/M + omega_b)/(s + A omega_b) with the paper's table 2 values (for DS-1; "
+           "for another aircraft M is kept and omega_b scaled by the ratio of its authority "
+           "bandwidth sqrt(u_max / (J r_max)) to DS-1's at the same point, "
+           "`vtolftc.synthesis.design.table2_scaled`) and A = "
            f"{res.gs['roll'][0].weights[0].Ws.A:g}; Wr = ((r_max/u_max) s + omega_a 1e-3)/"
            f"(s + omega_a), r_max = {math.degrees(res.gs['roll'][0].weights[0].Wr.r_max_rad):g}"
-           " deg, omega_a = 5 rad/s, u_max = moment authority of the airframe about the axis "
+           f" deg, omega_a = {res.gs['roll'][0].weights[0].Wr.omega_a_rad_s:g} rad/s (the "
+           "paper's 5 rad/s times the actuator bandwidth over DS-1's), u_max = moment "
+           "authority of the airframe about the axis "
            "at the nominal airspeed (lift rotors around their hover share + surfaces at full "
            "deflection; `vtolftc.synthesis.design.moment_authority`). W_t = gain prod (s/z + 1)/"
            "(s/p + 1), fitted over the relative errors (fig. 3 plots).", ""]
@@ -503,9 +580,25 @@ def _active_bounds(d: Any, tol: float = 5e-3) -> list[str]:
 def write_robust_report(res: SynthesisResult, out_dir: str | Path,
                         design_pngs: list[str] | None = None,
                         mu_pngs: list[str] | None = None) -> Path:
-    """Report of the robust method (``synthesis/robust.py``): points with their centred
-    nominals, weights by rule beside table 2, rotor-out moments, norms, gains and active
-    bounds, mu next to the disk and delay margins, SHIF and LQR."""
+    """Report of the robust method (``synthesis/robust.py``).
+
+    Points with their centred nominals, weights by rule beside table 2, rotor-out moments,
+    norms, gains and active bounds, mu next to the disk and delay margins, SHIF and LQR.
+
+    Parameters
+    ----------
+    res : SynthesisResult
+        The synthesis result (``method == "robust"``).
+    out_dir : str or pathlib.Path
+        Output folder.
+    design_pngs, mu_pngs : list of str, optional
+        As in :func:`write_report`.
+
+    Returns
+    -------
+    pathlib.Path
+        The markdown file.
+    """
     from vtolftc.synthesis.robust import (
         RobustSpec,
         disturbance_peak,

@@ -1,4 +1,5 @@
-"""The robust attitude design of DS-1 (``vtolftc synth --method robust``, the default).
+"""The robust attitude design (``vtolftc synth --method robust``, the default), for DS-1
+and any airframe of its class (every scale from the airframe file: :mod:`.scaling`).
 
 The method stays the paper's: structured H-infinity mixed sensitivity of the fixed P-PID
 cascade (fig. 5) at airspeed design points, faults as multiplicative input uncertainty, mu
@@ -32,14 +33,21 @@ d. **Ws by rule** (:func:`sensitivity_rule`): omega_b = min(omega_act / 8, omega
    sqrt((u_max - d_max) / (J r_max)) the bandwidth at which a reference step r_max takes the
    authority left after the worst rotor-out; M = the sensitivity peak of the second-order loop
    whose step overshoot is :data:`OVERSHOOT` (20 %). Table 2's values are printed beside.
-f. **Cruise point** 18 m/s (range 13-20 m/s), so the schedule covers the envelope flown;
-   in fixed-wing the allocator keeps the lift rotors as a reserve (autopilot).
+e. **Design points from the transition range** (:func:`robust_points`): the paper's six
+   scaled to the airframe's transition end V_t (table 1's airspeeds times V_t / 13 m/s) and
+f. **a cruise point** V_c over [V_t, V_c + 0.4 (V_c - V_t)] (DS-1: 18 m/s over 13-20 m/s;
+   V_t and V_c from the wing or declared, :func:`~vtolftc.synthesis.scaling.
+   transition_speeds`), so the schedule covers the envelope flown; in fixed-wing the
+   allocator keeps the lift rotors as a reserve (autopilot).
 g. **Gain bounds from physics** (:func:`robust_parameters`): outer loop <= omega_act / 2;
    rate-loop crossover kp_rate / J <= omega_act; the controller's high-frequency gain
    kp_rate + kd_rate / tf_rate_s bounded by gyro noise (3 sigma of
    :data:`GYRO_NOISE_RAD_S` must not cost more than 5 % of u_max, nor slew the moment faster
    than the actuators' rate limit allows in one control period); each of kp_rate and
-   kd_rate / tf_min is held below that bound. Every active bound is reported.
+   kd_rate / tf_min is held below that bound; the other bounds and the start are multiples
+   of omega_act, omega_act^2, tau_act or the control period (formulas in
+   :func:`robust_parameters`; DS-1's former numbers exactly). Every active bound is
+   reported. An axis without authority is refused (``AirframeError``, one line).
 
 Channels (all minimised together, minimax, :func:`vtolftc.synthesis.structured.tune`): eq. 8
 ``[Ws S; Wt T_u; Wr R]`` normalised by its own floor ``max(1, |Wt(0)|)`` (with integral action
@@ -55,7 +63,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor, as_completed
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from typing import Any
 
@@ -63,18 +71,23 @@ import control as ct
 import numpy as np
 from numpy.typing import NDArray
 
-from vtolftc.airframe.loader import Airframe
+from vtolftc.airframe.loader import Airframe, load_airframe
 from vtolftc.synthesis.design import (
     A_SENSITIVITY,
     OMEGA_A_RAD_S,
     R_MAX_RAD,
     TABLE2,
-    AxisDesign,
     AxisWeights,
+)
+from vtolftc.synthesis.design_loop import (
+    SHIF_TAG,
+    AxisDesign,
+    TuningSetup,
     achieved_norms,
-    axis_inertia,
     pick_start,
     point_seed,
+    run_design_loop,
+    tune_axis,
 )
 from vtolftc.synthesis.hinfnorm import StateSpaceData, as_state_space, frequency_response
 from vtolftc.synthesis.loops import (
@@ -85,23 +98,19 @@ from vtolftc.synthesis.loops import (
     closed_loop,
     rate_controller,
 )
-from vtolftc.synthesis.models import AXES, Axis, attitude_model
-from vtolftc.synthesis.structured import (
-    Parameter,
-    StartRecord,
-    TuneResult,
-    TuningProblem,
-    collect_starts,
-    run_start,
-    start_jobs,
-    tune,
+from vtolftc.synthesis.models import Axis, attitude_model
+from vtolftc.synthesis.scaling import (
+    AUTOPILOT_PERIOD_S,
+    actuator_bandwidth,
+    actuator_time_constant,
+    authority_bandwidth,
+    axis_inertia,
+    require_authority,
+    require_bounds,
+    scaled_design_points,
 )
-from vtolftc.synthesis.uncertainty import (
-    PAPER_DESIGN_POINTS,
-    DesignPoint,
-    centred_nominal,
-    cover,
-)
+from vtolftc.synthesis.structured import Parameter, TuneResult, TuningProblem
+from vtolftc.synthesis.uncertainty import DesignPoint, centred_nominal, cover
 
 __all__ = [
     "EXCURSION_RAD",
@@ -110,6 +119,7 @@ __all__ = [
     "ROBUST_DESIGN_POINTS",
     "LoopDelays",
     "LoopMargins",
+    "RobustMethod",
     "RobustSpec",
     "delay_weight",
     "design_plant",
@@ -117,6 +127,7 @@ __all__ = [
     "loop_margins",
     "moment_authority_robust",
     "robust_parameters",
+    "robust_points",
     "robust_weights",
     "rotor_out_moment",
     "run_robust_designs",
@@ -124,9 +135,18 @@ __all__ = [
     "trim_rotor_thrusts",
 ]
 
-#: The paper's six points plus the wing-borne cruise point (18 m/s, range 13-20 m/s).
-ROBUST_DESIGN_POINTS: tuple[DesignPoint, ...] = (*PAPER_DESIGN_POINTS,
-                                                 DesignPoint(7, 18.0, 13.0, 20.0))
+
+
+def robust_points(af: Airframe) -> tuple[DesignPoint, ...]:
+    """The robust method's design points for ``af``: the paper's six scaled to its
+    transition range plus the wing-borne cruise point V_c over [V_t, V_c + 0.4 (V_c - V_t)]
+    (:func:`~vtolftc.synthesis.scaling.scaled_design_points`)."""
+    return scaled_design_points(af, cruise=True)
+
+
+#: DS-1's points (the shipped airframe): the paper's six plus the wing-borne cruise point
+#: (18 m/s, range 13-20 m/s), :func:`robust_points` of ``airframe/ds1.toml``.
+ROBUST_DESIGN_POINTS: tuple[DesignPoint, ...] = robust_points(load_airframe(None))
 #: Declared worst single rotor-out angle excursion [rad] (15 deg).
 EXCURSION_RAD = math.radians(15.0)
 #: The H-infinity bound on e/d is a frequency-domain proxy of the step peak; designing for
@@ -144,7 +164,7 @@ class LoopDelays:
     and output: 1.5 periods of delay), declared HIL transport (one-way state + command, as
     the design assumes it), and the extra loop delay the design must tolerate."""
 
-    control_period_s: float = 0.004
+    control_period_s: float = AUTOPILOT_PERIOD_S
     hil_transport_s: float = 0.002
     extra_margin_s: float = 0.050
 
@@ -177,12 +197,6 @@ class RobustSpec:
 # ------------------------------------------------------------------------------------------
 # physics from the airframe file
 # ------------------------------------------------------------------------------------------
-
-
-def actuator_time_constant(af: Airframe) -> float:
-    """The slowest moment actuator's first-order time constant [s] (lift rotors, surfaces)."""
-    return float(max([r.time_constant_s for r in af.lift_rotors]
-                     + [af.surfaces.time_constant_s]))
 
 
 def trim_rotor_thrusts(af: Airframe, airspeed_m_s: float) -> NDArray[np.float64]:
@@ -269,8 +283,8 @@ def sensitivity_rule(af: Airframe, axis: Axis, point: DesignPoint, u_max: float,
                      ) -> tuple[SensitivityWeight, dict[str, float]]:
     """Ws of the documented rule (module docstring, d) and the numbers behind it."""
     J = axis_inertia(af, axis)
-    w_act = 1.0 / actuator_time_constant(af)
-    w_u = math.sqrt(max(u_max - d_max, 1e-3 * u_max) / (J * R_MAX_RAD))
+    w_act = actuator_bandwidth(af)
+    w_u = authority_bandwidth(max(u_max - d_max, 1e-3 * u_max), J, R_MAX_RAD)
     wb = min(w_act / 8.0, w_u / 2.0)
     M = _overshoot_sensitivity_peak(spec.overshoot)
     return SensitivityWeight(M, wb, A_SENSITIVITY), {
@@ -291,38 +305,76 @@ def high_frequency_gain_bound(af: Airframe, u_max: float, spec: RobustSpec) -> d
 def robust_parameters(af: Airframe, axis: Axis, u_max: float, spec: RobustSpec = RobustSpec(),
                       ) -> tuple[list[Parameter], dict[str, dict[str, Any]]]:
     """The five gains with physical bounds (module docstring, g), the classical start, and
-    where each bound comes from."""
+    where each bound comes from.
+
+    Every bound is a formula of the actuator bandwidth omega_act = 1 / tau_act
+    (:func:`~vtolftc.synthesis.scaling.actuator_bandwidth`), the axis inertia J, the
+    authority u_max about the axis (``u_max``, N m), the control period T and the
+    high-frequency gain bound k_hf (:func:`high_frequency_gain_bound`, from gyro noise and
+    the actuators' rate limits):
+
+    - rate crossover limit omega_r,max = kp_hi / J with kp_hi = min(J omega_act, k_hf);
+      start crossover omega_r = min(0.3 omega_act, 2 omega_u, omega_r,max) with omega_u =
+      sqrt(u_max / (J r_max)) (the actuator lag costs at most atan(0.3) = 17 deg there);
+    - kp_angle in [min(0.015 omega_act, omega_r / 4), omega_act / 2], start omega_r / 4
+      (the outer loop no slower than 1/66 of the actuator bandwidth, a 3.3 s time constant
+      for 50 ms actuators, unless the authority or gyro noise keep the rate loop so slow
+      that a quarter of its crossover is slower: a cascade needs the outer loop about 4x
+      below the inner one);
+    - kp_rate in [J omega_act / 100, kp_hi], start min(J omega_r, kp_hi);
+    - ki_rate in [J omega_act^2 / 4000, J omega_act^2 / 4], start kp0 omega_r / 5;
+    - kd_rate in [0, min(2 J, k_hf tf_min)] (kd_rate / J is dimensionless), start 0.05 J;
+    - tf_rate_s in [2.5 T, 20 tau_act], start 5 T.
+
+    For DS-1 (omega_act = 20 rad/s, T = 4 ms): kp_angle >= 0.3, kp_rate >= 0.2 J, ki_rate
+    >= 0.1 J, tf in [0.01, 1] s, the start's crossover capped at 6 rad/s.
+
+    Raises
+    ------
+    AirframeError
+        A gain with no admissible value (no authority about the axis).
+    """
     J = axis_inertia(af, axis)
-    w_act = 1.0 / actuator_time_constant(af)
+    w_act = actuator_bandwidth(af)
+    tau = actuator_time_constant(af)
+    T = spec.delays.control_period_s
     hf = high_frequency_gain_bound(af, u_max, spec)
-    tf_min = max(0.01, 2.5 * spec.delays.control_period_s)
+    tf_min = 2.5 * T
     kp_hi = min(J * w_act, hf["k_hf_max"])
     kd_hi = min(2.0 * J, hf["k_hf_max"] * tf_min)
     ki_hi = J * w_act**2 / 4.0
-    wr = min(6.0, math.sqrt(4.0 * u_max / (R_MAX_RAD * J)), kp_hi / J)
+    wr = min(0.3 * w_act, 2.0 * authority_bandwidth(u_max, J, R_MAX_RAD), kp_hi / J)
     kp0 = min(J * wr, kp_hi)
+    b = {"kp_angle": (min(0.015 * w_act, wr / 4.0), w_act / 2.0),
+         "kp_rate": (J * (w_act / 100), kp_hi),
+         "ki_rate": (J * (w_act**2 / 4000), ki_hi),
+         "kd_rate": (0.0, kd_hi),
+         "tf_rate_s": (tf_min, 20 * tau)}
+    require_bounds(af, axis, b)
     why = {
-        "kp_angle": {"lower": 0.3, "upper": w_act / 2.0,
+        "kp_angle": {"lower": b["kp_angle"][0], "upper": w_act / 2.0,
+                     "lower_from": ("omega_act / 66" if b["kp_angle"][0] == 0.015 * w_act
+                                    else "a quarter of the start's rate crossover"),
                      "upper_from": "outer loop <= omega_act / 2"},
-        "kp_rate": {"lower": 0.2 * J, "upper": kp_hi,
+        "kp_rate": {"lower": b["kp_rate"][0], "upper": kp_hi,
                     "upper_from": ("rate crossover <= omega_act" if kp_hi == J * w_act
                                    else "gyro noise (high-frequency gain)")},
-        "ki_rate": {"lower": 0.1 * J, "upper": ki_hi,
+        "ki_rate": {"lower": b["ki_rate"][0], "upper": ki_hi,
                     "upper_from": "integral zero below omega_act / 2"},
         "kd_rate": {"lower": 0.0, "upper": kd_hi,
                     "upper_from": ("2 J" if kd_hi == 2.0 * J
                                    else "gyro noise (kd / tf_min <= k_hf_max)")},
-        "tf_rate_s": {"lower": tf_min, "upper": 1.0,
+        "tf_rate_s": {"lower": tf_min, "upper": b["tf_rate_s"][1],
                       "lower_from": "2.5 control periods (below: near Nyquist)"},
         "k_hf": hf,
     }
     params = [
-        Parameter("kp_angle", min(wr / 4.0, w_act / 2.0), 0.3, w_act / 2.0, scale=1.0),
-        Parameter("kp_rate", kp0, 0.2 * J, kp_hi, scale=J),
-        Parameter("ki_rate", min(max(kp0 * wr / 5.0, 0.1 * J), ki_hi), 0.1 * J, ki_hi,
-                  scale=J),
-        Parameter("kd_rate", min(0.05 * J, kd_hi), 0.0, kd_hi, scale=0.1 * J),
-        Parameter("tf_rate_s", max(0.02, tf_min), tf_min, 1.0, scale=0.02),
+        Parameter("kp_angle", min(wr / 4.0, w_act / 2.0), *b["kp_angle"], scale=1.0),
+        Parameter("kp_rate", max(kp0, b["kp_rate"][0]), *b["kp_rate"], scale=J),
+        Parameter("ki_rate", min(max(kp0 * wr / 5.0, b["ki_rate"][0]), ki_hi),
+                  *b["ki_rate"], scale=J),
+        Parameter("kd_rate", min(0.05 * J, kd_hi), *b["kd_rate"], scale=0.1 * J),
+        Parameter("tf_rate_s", max(5 * T, tf_min), *b["tf_rate_s"], scale=0.02),
     ]
     return params, why
 
@@ -356,6 +408,7 @@ def robust_weights(af: Airframe, axis: Axis, point: DesignPoint,
     nom = centred_nominal(af, axis, point)
     Wt, _ = cover(af, axis, point, nominal=nom)
     u_max = moment_authority_robust(af, axis, point.airspeed_m_s)
+    require_authority(af, axis, point.airspeed_m_s, u_max)
     d = rotor_out_moment(af, axis, point.airspeed_m_s)
     Ws, rule = sensitivity_rule(af, axis, point, u_max, d, spec)
     M2, wb2 = TABLE2[axis][point.number - 1] if point.number <= 6 else (math.nan, math.nan)
@@ -419,155 +472,87 @@ def _robust_problem(af: Airframe, axis: Axis, weights: list[RobustWeights], spec
     return TuningProblem(params, chans, names), plants, chans, names, why
 
 
-def _robust_design(axis: Axis, weights: list[RobustWeights], label: str, n_starts: int,
-                   spec: RobustSpec, plants: list[ct.StateSpace], chans: list[CascadeChannel],
-                   names: list[str], why: dict[str, dict[str, Any]], res: TuneResult,
-                   ) -> AxisDesign:
-    """The design of a finished tune: tie-break, unnormalised norms per point, poles."""
-    eq8 = [c for c, n in zip(chans, names, strict=True) if n.endswith("eq8")]
-    theta = pick_start(res, eq8)
-    per = []
-    for G, w in zip(plants, weights, strict=True):
-        n = achieved_norms(CascadeChannel(G, w.Ws, w.Wt.tf(), w.Wr), theta)
-        if w.Wd > 0:
-            n["Wd*Sd"] = achieved_norms(CascadeChannel(G, Wd=disturbance_weight(w)), theta)["gamma"]
-        wt = delay_weight(spec.delays.extra_margin_s)
-        n["Wdelay*T"] = achieved_norms(CascadeChannel(G, Wt=wt), theta)["gamma"]
-        n["tuned objective"] = float(res.value)
-        per.append(n)
-    norms = {k: max(p.get(k, 0.0) for p in per) for k in per[0] | per[-1]}
-    poles = [closed_loop(G, theta).poles for G in plants]
-    stable = all(float(np.max(p.real)) < 0 for p in poles)
-    gains = dict(zip(PARAM_NAMES, (float(x) for x in theta), strict=True))
-    d = AxisDesign(axis, label, gains, norms, stable, [[complex(z) for z in p] for p in poles],
-                   list(weights), n_starts + 1, res.message, per)
-    d.bounds = why  # type: ignore[attr-defined]
-    return d
+@dataclass(frozen=True)
+class RobustMethod:
+    """The robust design as a :class:`~vtolftc.synthesis.design_loop.DesignMethod`: weights
+    of :func:`robust_weights`, the channels of the module docstring on the design plant,
+    the tie-break on the eq. 8 channels, unnormalised norms reported."""
 
+    spec: RobustSpec = RobustSpec()
 
-def _tune_robust(af: Airframe, axis: Axis, weights: list[RobustWeights], label: str,
-                 n_starts: int, seed: int, max_iter: int, spec: RobustSpec) -> AxisDesign:
-    pb, plants, chans, names, why = _robust_problem(af, axis, weights, spec)
-    res = tune(pb, n_starts=n_starts, seed=seed, max_iter=max_iter)
-    return _robust_design(axis, weights, label, n_starts, spec, plants, chans, names, why, res)
+    def weights(self, af: Airframe, axis: Axis, point: DesignPoint) -> RobustWeights:
+        """:func:`robust_weights` ``(af, axis, point, spec)``."""
+        return robust_weights(af, axis, point, self.spec)
+
+    def setup(self, af: Airframe, axis: Axis, weights: list[RobustWeights]) -> TuningSetup:
+        """The problem of every channel of every point of ``weights``."""
+        pb, plants, chans, names, why = _robust_problem(af, axis, weights, self.spec)
+        return TuningSetup(pb, plants, chans, (names, why))
+
+    def design(self, axis: Axis, weights: list[RobustWeights], label: str, n_starts: int,
+               setup: TuningSetup, res: TuneResult) -> AxisDesign:
+        """The design of a finished tune: tie-break, unnormalised norms per point, poles."""
+        spec = self.spec
+        names, why = setup.extra
+        eq8 = [c for c, n in zip(setup.chans, names, strict=True) if n.endswith("eq8")]
+        theta = pick_start(res, eq8)
+        per = []
+        for G, w in zip(setup.plants, weights, strict=True):
+            n = achieved_norms(CascadeChannel(G, w.Ws, w.Wt.tf(), w.Wr), theta)
+            if w.Wd > 0:
+                n["Wd*Sd"] = achieved_norms(CascadeChannel(G, Wd=disturbance_weight(w)),
+                                            theta)["gamma"]
+            wt = delay_weight(spec.delays.extra_margin_s)
+            n["Wdelay*T"] = achieved_norms(CascadeChannel(G, Wt=wt), theta)["gamma"]
+            n["tuned objective"] = float(res.value)
+            per.append(n)
+        norms = {k: max(p.get(k, 0.0) for p in per) for k in per[0] | per[-1]}
+        poles = [closed_loop(G, theta).poles for G in setup.plants]
+        stable = all(float(np.max(p.real)) < 0 for p in poles)
+        gains = dict(zip(PARAM_NAMES, (float(x) for x in theta), strict=True))
+        return AxisDesign(axis, label, gains, norms, stable,
+                          [[complex(z) for z in p] for p in poles], list(weights),
+                          n_starts + 1, res.message, per, bounds=why)
 
 
 def robust_design_point(af: Airframe, axis: Axis, point: DesignPoint, *, n_starts: int = 4,
                         seed: int = 0, max_iter: int = 40,
                         spec: RobustSpec = RobustSpec()) -> AxisDesign:
     """Tune one axis at one point with the robust channels."""
-    w = robust_weights(af, axis, point, spec)
-    return _tune_robust(af, axis, [w], f"point {point.number}", n_starts,
-                        point_seed(seed, axis, point.number), max_iter, spec)
+    return tune_axis(RobustMethod(spec), af, axis, [robust_weights(af, axis, point, spec)],
+                     f"point {point.number}", n_starts, point_seed(seed, axis, point.number),
+                     max_iter)
 
 
 def robust_design_shif(af: Airframe, axis: Axis,
-                       points: Sequence[DesignPoint] = ROBUST_DESIGN_POINTS, *,
+                       points: Sequence[DesignPoint] | None = None, *,
                        n_starts: int = 4, seed: int = 0, max_iter: int = 40,
                        spec: RobustSpec = RobustSpec()) -> AxisDesign:
-    """One constant P-PID over all points with the robust channels of every point."""
-    ws = [robust_weights(af, axis, p, spec) for p in points]
-    return _tune_robust(af, axis, ws, "all points", n_starts, point_seed(seed, axis, 100),
-                        max_iter, spec)
-
-
-def _job(args: tuple[Any, ...]) -> tuple[tuple[str, int], AxisDesign]:
-    kind, af, axis, point, points, n_starts, seed, spec = args
-    if kind == "gs":
-        return (axis, point.number), robust_design_point(af, axis, point, n_starts=n_starts,
-                                                         seed=seed, spec=spec)
-    return (axis, 0), robust_design_shif(af, axis, points, n_starts=n_starts, seed=seed,
-                                         spec=spec)
-
-
-def _weights_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], RobustWeights]:
-    af, axis, point, spec = args
-    return (axis, point.number), robust_weights(af, axis, point, spec)
-
-
-def _gs_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], AxisDesign]:
-    """One GS-SHIF tune with its point's weights given (:func:`robust_design_point`)."""
-    af, axis, w, n_starts, seed, max_iter, spec = args
-    return (axis, w.point.number), _tune_robust(af, axis, [w], f"point {w.point.number}",
-                                                n_starts, point_seed(seed, axis, w.point.number),
-                                                max_iter, spec)
-
-
-def _start_job(args: tuple[Any, ...]) -> tuple[tuple[str, int], StartRecord]:
-    """One start of a SHIF tune (:func:`vtolftc.synthesis.structured.start_jobs`)."""
-    axis, job = args
-    return (axis, int(job[1])), run_start(job)
+    """One constant P-PID over all points (default :func:`robust_points`) with the robust
+    channels of every point."""
+    pts = robust_points(af) if points is None else points
+    ws = [robust_weights(af, axis, p, spec) for p in pts]
+    return tune_axis(RobustMethod(spec), af, axis, ws, "all points", n_starts,
+                     point_seed(seed, axis, SHIF_TAG), max_iter)
 
 
 def run_robust_designs(af: Airframe, *, n_starts: int = 4, seed: int = 0,
-                       points: Sequence[DesignPoint] = ROBUST_DESIGN_POINTS,
+                       points: Sequence[DesignPoint] | None = None,
                        executor: Executor | None = None, shif: bool = True,
                        progress: Callable[[str], None] | None = None,
                        spec: RobustSpec = RobustSpec(), max_iter: int = 40,
                        on_design: Callable[[tuple[str, int], AxisDesign], None] | None = None,
                        ) -> tuple[dict[Axis, list[AxisDesign]], dict[Axis, AxisDesign]]:
-    """All robust GS-SHIF tunes (axes x points) and the SHIF tunes; deterministic as
-    :func:`vtolftc.synthesis.design.run_designs`.
-
-    With an ``executor`` the work is cut finer than one job per tune, so that both workers
-    stay busy to the end: first the weights of every (axis, point), each computed once (a
-    SHIF tune needs the seven of its axis, a GS-SHIF tune its point's); then every start of
-    the SHIF tunes (the longest jobs, submitted first) and the GS-SHIF tunes. Each start is
-    the same deterministic local run as in :func:`vtolftc.synthesis.structured.tune` and the
-    records are combined in start order, so the result is the same, bit for bit, as one
-    :func:`robust_design_shif` / :func:`robust_design_point` call per tune (and as the
-    sequential run without an executor). ``on_design(key, design)`` is called as each tune
-    finishes (key ``(axis, point number)``, ``(axis, 0)`` for SHIF), e.g. to queue its
-    analysis behind the tunes still running.
+    """All robust GS-SHIF tunes (axes x ``points``, default :func:`robust_points`) and the
+    SHIF tunes over the same points: :func:`vtolftc.synthesis.design_loop.run_design_loop`
+    with :class:`RobustMethod` (deterministic, the same bit for bit with or without
+    ``executor``, as one :func:`robust_design_shif` / :func:`robust_design_point` call per
+    tune; ``progress`` and ``on_design`` as there).
     """
-    results: dict[tuple[str, int], AxisDesign] = {}
-
-    def done(key: tuple[str, int], d: AxisDesign) -> None:
-        results[key] = d
-        if on_design is not None:
-            on_design(key, d)
-        if progress is not None:
-            progress(f"{key[0]} {'SHIF' if key[1] == 0 else f'point {key[1]}'}")
-
-    if executor is None:
-        jobs: list[tuple[Any, ...]] = []
-        if shif:
-            jobs += [("shif", af, ax, None, tuple(points), n_starts, seed, spec) for ax in AXES]
-        jobs += [("gs", af, ax, p, tuple(points), n_starts, seed, spec) for ax in AXES
-                 for p in points]
-        for key, d in map(_job, jobs):
-            done(key, d)
-    else:
-        wfuts = [executor.submit(_weights_job, (af, ax, p, spec)) for ax in AXES for p in points]
-        weights = dict(f.result() for f in wfuts)
-        shif_pb: dict[Axis, tuple[Any, ...]] = {}
-        records: dict[Axis, list[StartRecord]] = {ax: [] for ax in AXES}
-        futs = []
-        if shif:
-            for ax in AXES:
-                ws = [weights[(ax, p.number)] for p in points]
-                prob = _robust_problem(af, ax, ws, spec)
-                shif_pb[ax] = (ws, prob)
-                for job in start_jobs(prob[0], n_starts=n_starts, seed=point_seed(seed, ax, 100),
-                                      max_iter=max_iter):
-                    futs.append(executor.submit(_start_job, (ax, job)))
-        futs += [executor.submit(_gs_job, (af, ax, weights[(ax, p.number)], n_starts, seed,
-                                           max_iter, spec)) for ax in AXES for p in points]
-        for f in as_completed(futs):
-            key, r = f.result()
-            if isinstance(r, AxisDesign):
-                done(key, r)
-                continue
-            ax = key[0]
-            records[ax].append(r)
-            if len(records[ax]) == n_starts + 1:
-                ws, (pb, plants, chans, names, why) = shif_pb[ax]
-                res = collect_starts(pb, records[ax])
-                done((ax, 0), _robust_design(ax, ws, "all points", n_starts, spec, plants,
-                                             chans, names, why, res))
-    gs = {ax: [results[(ax, p.number)] for p in points] for ax in AXES}
-    sh = {ax: results[(ax, 0)] for ax in AXES} if shif else {}
-    return gs, sh
+    pts = robust_points(af) if points is None else tuple(points)
+    return run_design_loop(RobustMethod(spec), af, pts, n_starts=n_starts, seed=seed,
+                           executor=executor, shif=shif, progress=progress,
+                           max_iter=max_iter, on_design=on_design)
 
 
 # ------------------------------------------------------------------------------------------

@@ -68,11 +68,25 @@ def _resp(W: Any, omegas: NDArray[np.float64]) -> NDArray[np.complex128]:
 
 def rp_matrix(G: Any, theta: Any, Ws: Any, Wt: Any, Wr: Any | None,
               omegas: NDArray[np.float64]) -> NDArray[np.complex128]:
-    """N(j w) of the module docstring, shape (nw, 3, 2) (or (nw, 2, 2) if ``Wr`` is None).
+    """N(j w) of the module docstring (robust-performance matrix of one axis loop).
 
-    ``G``: moment -> [rate; angle] plant; ``theta``: the P-PID gains; weights: objects with
-    ``response`` (:class:`vtolftc.synthesis.loops.SensitivityWeight`, ``ControlWeight``), an
-    :class:`vtolftc.synthesis.uncertainty.UncertaintyWeight` or any SISO LTI.
+    Parameters
+    ----------
+    G : control.StateSpace or tuple
+        Plant moment (N m) -> [rate (rad/s); angle (rad)].
+    theta : sequence of float or mapping
+        The P-PID gains.
+    Ws, Wt, Wr : weight or None
+        Objects with ``response`` (:class:`vtolftc.synthesis.loops.SensitivityWeight`,
+        ``ControlWeight``), an :class:`vtolftc.synthesis.uncertainty.UncertaintyWeight` or any
+        SISO LTI; ``Wr`` may be None.
+    omegas : ndarray of float, shape (nw,)
+        Frequencies (rad/s).
+
+    Returns
+    -------
+    ndarray of complex, shape (nw, 3, 2)
+        N(j w); (nw, 2, 2) if ``Wr`` is None.
     """
     w = np.asarray(omegas, float)
     cl = closed_loop(G, theta)
@@ -87,7 +101,18 @@ def rp_matrix(G: Any, theta: Any, Ws: Any, Wt: Any, Wr: Any | None,
 
 
 def square_rp(N: NDArray[np.complex128]) -> NDArray[np.complex128]:
-    """Pad N (nw, 1 + k, 2) with zero columns to (nw, 1 + k, 1 + k) for ``RP_BLOCKS``."""
+    """Pad N with zero columns to a square matrix for ``RP_BLOCKS``.
+
+    Parameters
+    ----------
+    N : ndarray of complex, shape (nw, 1 + k, 2)
+        From :func:`rp_matrix`.
+
+    Returns
+    -------
+    ndarray of complex, shape (nw, 1 + k, 1 + k)
+        N with zero columns appended.
+    """
     nw, p, m = N.shape
     out = np.zeros((nw, p, p), complex)
     out[:, :, :m] = N
@@ -98,10 +123,19 @@ def square_rp(N: NDArray[np.complex128]) -> NDArray[np.complex128]:
 class AxisRobustness:
     """mu results of one axis loop at one design point.
 
-    ``rs``/``rp``: the sweeps (lower/upper bounds per frequency); ``mu_rs``/``mu_rp``: their
-    peak upper bounds (the certified values); ``gap_rs``/``gap_rp``: the largest absolute
-    upper - lower gap over the grid; ``rs_check``: max over the grid of
-    |mu_upper - |W_t T_u|| (the closed form of the 1 x 1 robust-stability case).
+    Properties ``mu_rs``/``mu_rp`` give the sweeps' peak upper bounds (the certified
+    values), ``gap_rs``/``gap_rp`` the largest absolute upper - lower gap over the grid.
+
+    Parameters
+    ----------
+    omegas : ndarray of float, shape (nw,)
+        Frequencies (rad/s).
+    rs, rp : MuSweep
+        Robust-stability and robust-performance sweeps (lower/upper bounds per frequency).
+    rs_closed_form : ndarray of float, shape (nw,)
+        |W_t T_u|, the closed form of the 1 x 1 robust-stability case.
+    rs_check : float
+        Max over the grid of |mu_upper - |W_t T_u||.
     """
 
     omegas: NDArray[np.float64]
@@ -131,7 +165,13 @@ class AxisRobustness:
         return float(np.max(self.rp.gap))
 
     def summary(self) -> dict[str, float]:
-        """Peaks, lower bounds, peak frequencies (rad/s), gaps, the closed-form check, as a dict."""
+        """Peaks, lower bounds, peak frequencies (rad/s), gaps and the closed-form check.
+
+        Returns
+        -------
+        dict of str to float
+            The numbers, by name.
+        """
         return {
             "mu_rs": self.mu_rs, "mu_rs_lower": self.rs.peak_lower,
             "mu_rs_peak_frequency_rad_s": self.rs.peak_upper_frequency_rad_s,
@@ -143,13 +183,38 @@ class AxisRobustness:
 
 
 def default_grid() -> NDArray[np.float64]:
-    """Frequency grid of the sweeps: 1e-3 .. 1e3 rad/s, 121 points (log)."""
+    """Frequency grid of the sweeps: 1e-3 .. 1e3 rad/s, 121 points (log).
+
+    Returns
+    -------
+    ndarray of float, shape (121,)
+        Frequencies (rad/s).
+    """
     return np.logspace(-3, 3, 121)
 
 
 def analyse(G: Any, theta: Any, Ws: Any, Wt: Any, Wr: Any | None,
             omegas: NDArray[np.float64] | None = None, *, seed: int = 0) -> AxisRobustness:
-    """Robust stability (eq. 13) and robust performance (eq. 14) sweeps of one axis loop."""
+    """Robust stability (eq. 13) and robust performance (eq. 14) sweeps of one axis loop.
+
+    Parameters
+    ----------
+    G : control.StateSpace or tuple
+        Plant moment (N m) -> [rate (rad/s); angle (rad)].
+    theta : sequence of float or mapping
+        The P-PID gains.
+    Ws, Wt, Wr : weight or None
+        As in :func:`rp_matrix`.
+    omegas : ndarray of float, optional
+        Frequencies (rad/s); default :func:`default_grid`.
+    seed : int
+        Seed of the random lower-bound starts.
+
+    Returns
+    -------
+    AxisRobustness
+        The sweeps.
+    """
     w = default_grid() if omegas is None else np.asarray(omegas, float)
     if not closed_loop(G, theta).stable():
         raise ValueError("the nominal closed loop is unstable: mu analysis of robust "

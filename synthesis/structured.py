@@ -86,13 +86,28 @@ The state dimension (and input/output sizes) must not depend on theta."""
 
 @dataclass(frozen=True)
 class Parameter:
-    """A tunable scalar: name, initial value, bounds and a typical magnitude (``scale``).
+    """A tunable scalar: name, initial value, bounds and a typical magnitude.
 
-    ``scale`` sets the unit of the optimiser's step and of random restarts; by default
-    max(|initial|, 1e-3) if initial != 0, else 1. Use ``lower=0`` for gains that must stay
-    non-negative. ``sample_sd``, if given, makes random starts initial + sample_sd N(0, 1)
-    (clipped to the bounds), e.g. a gain scale derived from the plant
-    (:mod:`vtolftc.synthesis.blocks`); otherwise see :func:`tune`'s ``spread``.
+    Parameters
+    ----------
+    name : str
+        Name (unique within a problem).
+    initial : float
+        Initial value (the first start of :func:`tune`), in the parameter's own unit.
+    lower, upper : float
+        Bounds; use ``lower=0`` for gains that must stay non-negative.
+    scale : float, optional
+        Unit of the optimiser's step and of random restarts; by default max(|initial|, 1e-3)
+        if initial != 0, else 1.
+    sample_sd : float, optional
+        If given, random starts are initial + sample_sd N(0, 1) (clipped to the bounds), e.g.
+        a gain scale derived from the plant (:mod:`vtolftc.synthesis.blocks`); otherwise see
+        :func:`tune`'s ``spread``.
+
+    Raises
+    ------
+    ValueError
+        For bounds that do not contain the initial value, or a non-positive scale.
     """
 
     name: str
@@ -134,16 +149,22 @@ class TuningProblem:
 
     Parameters
     ----------
-    parameters:
+    parameters : sequence of Parameter
         The tunable parameters (order defines theta).
-    channels:
+    channels : sequence of callable
         Callables theta -> (A, B, C, D) (or python-control LTI) of weighted closed loops.
         One channel per design model / requirement; the objective is their max.
-    channel_names:
-        Optional labels for reporting.
-    stability_margin:
+    channel_names : sequence of str, optional
+        Labels for reporting.
+    stability_margin : float
         Required decay rate (1/s): every channel's A must have eigenvalues with real part
         < -stability_margin. 0 means plain (strict) internal stability.
+
+    Raises
+    ------
+    ValueError
+        Without parameters or channels, for a channel that is not callable, duplicate
+        parameter names or a negative stability margin.
     """
 
     parameters: Sequence[Parameter]
@@ -199,12 +220,34 @@ class TuningProblem:
         return np.array([p.typical for p in self.parameters], dtype=float)
 
     def realize(self, theta: NDArray[np.float64]) -> list[StateSpaceData]:
-        """State-space data (A, B, C, D) of every channel at theta."""
+        """State-space data (A, B, C, D) of every channel at theta.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_params,)
+            The parameter values.
+
+        Returns
+        -------
+        list of tuple of ndarray
+            One (A, B, C, D) per channel.
+        """
         theta = self._check_theta(theta)
         return [as_state_space(c(theta)) for c in self.channels]
 
     def channel_norms(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        """||channel_i(theta)||_inf for every channel (inf if unstable / margin violated)."""
+        """||channel_i(theta)||_inf for every channel.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_params,)
+            The parameter values.
+
+        Returns
+        -------
+        ndarray of float, shape (n_channels,)
+            The norms (inf if unstable or the stability margin is violated).
+        """
         out = []
         for A, B, C, D in self.realize(theta):
             if self.stability_margin > 0 and A.size and (
@@ -216,7 +259,18 @@ class TuningProblem:
         return np.array(out)
 
     def objective(self, theta: NDArray[np.float64]) -> float:
-        """max_i ||channel_i(theta)||_inf (the gamma of eq. 8)."""
+        """max_i ||channel_i(theta)||_inf (the gamma of eq. 8).
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (n_params,)
+            The parameter values.
+
+        Returns
+        -------
+        float
+            The objective.
+        """
         return float(np.max(self.channel_norms(theta)))
 
     def _check_theta(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -235,7 +289,23 @@ TunableSystem = TuningProblem
 
 @dataclass(frozen=True)
 class StartRecord:
-    """Outcome of one local run: start point, final point, objective history, status."""
+    """Outcome of one local run of :func:`tune`.
+
+    Parameters
+    ----------
+    index : int
+        Start index (0 = the initial point).
+    theta0, theta : ndarray of float, shape (n_params,)
+        Start and final points.
+    value : float
+        Final objective.
+    history : list of float
+        Objective after each accepted step.
+    iterations : int
+        Outer iterations run.
+    status : str
+        Why the run stopped.
+    """
 
     index: int
     theta0: NDArray[np.float64]
@@ -248,10 +318,27 @@ class StartRecord:
 
 @dataclass(frozen=True)
 class TuneResult:
-    """Best point over all starts.
+    """Best point over all starts of :func:`tune`.
 
-    ``value`` is the achieved max_i ||channel_i||_inf (inf if no stabilising point was
-    found), ``channel_values`` the per-channel norms, ``starts`` the per-start records.
+    Parameters
+    ----------
+    theta : ndarray of float, shape (n_params,)
+        The best point.
+    names : list of str
+        Parameter names, in theta's order.
+    value : float
+        The achieved max_i ||channel_i||_inf (inf if no stabilising point was found), plus the
+        regularisation penalty if any.
+    channel_values : ndarray of float, shape (n_channels,)
+        The per-channel norms.
+    channel_names : list of str
+        Channel labels.
+    stable : bool
+        Whether the best point stabilises every channel.
+    starts : list of StartRecord
+        The per-start records.
+    message : str
+        Summary (best start, stop reason).
     """
 
     theta: NDArray[np.float64]
@@ -669,9 +756,18 @@ class _Options:
 class Progress:
     """What :func:`tune`'s ``progress`` callback receives after each accepted step.
 
-    ``start``: index of the start (0 = the initial point), ``iteration`` within it,
-    ``value``: the start's current objective (max norm, plus the regularisation if any),
-    ``theta``: its current point, ``elapsed_s``: seconds since :func:`tune` was called.
+    Parameters
+    ----------
+    start : int
+        Index of the start (0 = the initial point).
+    iteration : int
+        Iteration within the start.
+    value : float
+        The start's current objective (max norm, plus the regularisation if any).
+    theta : ndarray of float, shape (n_params,)
+        Its current point.
+    elapsed_s : float
+        Seconds (wall clock) since :func:`tune` was called.
     """
 
     start: int
@@ -989,53 +1085,74 @@ def tune(
 ) -> TuneResult:
     """Minimise max_i ||channel_i(theta)||_inf over theta (paper eqs. 7-8, ``systune`` role).
 
+    Ctrl-C (KeyboardInterrupt) during a sequential run stops it and returns the best point
+    found so far (message "interrupted").
+
     Parameters
     ----------
-    problem:
-        The :class:`TuningProblem`.
-    n_starts:
+    problem : TuningProblem
+        The problem.
+    n_starts : int
         Number of random starts in addition to the initial point (``Parameter.initial``).
-    seed:
+    seed : int or None
         Seed of the random starts (``SeedSequence(seed).spawn``); same seed, same result.
-    max_iter, tol:
-        Outer iterations per start and relative-decrease tolerance. ``None`` (default): run
-        each start to convergence: until a step is stationary for the frequency model, the
-        decrease falls below ``tol``, the trust region collapses, or the objective fell by
-        less than ``PROGRESS_TOL`` over the last ``PROGRESS_WINDOW`` iterations (at most
-        ``ITER_CAP`` iterations). An int is a hard cap (the stationarity tests still apply,
-        the progress test does not).
-    max_freqs:
+    max_iter : int or None
+        Outer iterations per start. ``None`` (default): run each start to convergence: until
+        a step is stationary for the frequency model, the decrease falls below ``tol``, the
+        trust region collapses, or the objective fell by less than ``PROGRESS_TOL`` over the
+        last ``PROGRESS_WINDOW`` iterations (at most ``ITER_CAP`` iterations). An int is a
+        hard cap (the stationarity tests still apply, the progress test does not).
+    tol : float
+        Relative-decrease tolerance.
+    max_freqs : int
         Cap on the size of each channel's active frequency set.
-    trust_radius:
+    trust_radius : float
         Initial trust radius in units of ``Parameter.scale``.
-    spread:
+    spread : float
         Random starts multiply positive parameters by 10**U(-spread, spread) (bounded
         parameters are drawn uniformly / log-uniformly within their bounds).
-    start_sampler:
-        Optional ``rng -> theta`` replacing the default random start distribution.
-    map_fn:
-        Optional ``map`` for parallel execution, e.g. ``ProcessPoolExecutor().map`` (the
-        problem's channels must then be picklable). Default: the starts run one after the
-        other in this process.
-    time_limit:
+    start_sampler : callable, optional
+        ``rng -> theta`` replacing the default random start distribution.
+    map_fn : callable, optional
+        ``map`` for parallel execution, e.g. ``ProcessPoolExecutor().map`` (the problem's
+        channels must then be picklable). Default: the starts run one after the other in this
+        process.
+    time_limit : float, optional
         Wall-clock budget in seconds (None: unlimited). Checked between iterations: running
         starts stop at their current point, no new start begins after it; the result says
         "time limit reached".
-    progress:
+    progress : callable, optional
         Callback receiving a :class:`Progress` after every accepted step (sequential runs;
         with ``map_fn`` only the time limit applies inside workers).
-    regularization:
+    regularization : float
         rho >= 0: minimise max_i ||T_i||_inf + rho sum_k (theta_k / scale_k)^2 instead (a
         small rho keeps gains finite on problems whose infimum is approached only as gains
         grow without bound). ``value`` then includes the penalty; ``channel_values`` do not.
-
-    Ctrl-C (KeyboardInterrupt) during a sequential run stops it and returns the best point
-    found so far (message "interrupted").
 
     Returns
     -------
     TuneResult
         The best start's theta, overall norm, per-channel norms and all start records.
+
+    Raises
+    ------
+    ValueError
+        For n_starts < 0, max_iter < 1, time_limit <= 0 or a negative or non-finite
+        regularization.
+
+    Examples
+    --------
+    A proportional gain k on the unstable G(s) = 1/(s - 1), minimising ||[0.5 S; 0.5 k S]||_inf:
+    the norm is 0.5 sqrt(1 + k^2) / (k - 1) (its DC value) for 1 < k < 2 and
+    0.5 sqrt(1 + k^2) (high frequency) above, so the optimum is k = 2, 0.5 sqrt(5):
+
+    >>> import control as ct
+    >>> ch = mixed_sensitivity_channel(ct.tf([1], [1, -1]), lambda th: th[0],
+    ...                                Ws=0.5, Wr=0.5)
+    >>> pb = TuningProblem([Parameter("k", 3.0, 0.0, 100.0)], [ch])
+    >>> res = tune(pb)
+    >>> res.stable, round(res.value, 6), round(float(res.theta[0]), 4)
+    (True, 1.118034, 2.0)
     """
     jobs = start_jobs(problem, n_starts=n_starts, seed=seed, max_iter=max_iter, tol=tol,
                       max_freqs=max_freqs, trust_radius=trust_radius, spread=spread,
@@ -1080,10 +1197,26 @@ def start_jobs(
     progress: Callable[[Progress], None] | None = None,
     regularization: float = 0.0,
 ) -> list[tuple[Any, ...]]:
-    """The independent local runs of :func:`tune` (same arguments), one picklable job per
-    start, in start order: run each with :func:`run_start` (anywhere, in any order, e.g. in
-    worker processes) and combine the records with :func:`collect_starts`; the result is
-    :func:`tune`'s, bit for bit. ``progress`` only works in this process."""
+    """The independent local runs of :func:`tune`, one picklable job per start.
+
+    Run each job with :func:`run_start` (anywhere, in any order, e.g. in worker processes)
+    and combine the records with :func:`collect_starts`; the result is :func:`tune`'s, bit
+    for bit. ``progress`` only works in this process.
+
+    Parameters
+    ----------
+    problem : TuningProblem
+        The problem.
+    n_starts, seed, max_iter, tol, max_freqs, trust_radius, spread : int, float or None
+        As in :func:`tune`.
+    start_sampler, time_limit, progress, regularization : callable, float or None
+        As in :func:`tune`.
+
+    Returns
+    -------
+    list of tuple
+        The jobs, in start order.
+    """
     if n_starts < 0:
         raise ValueError(f"n_starts must be >= 0, got {n_starts}")
     if max_iter is not None and max_iter < 1:
@@ -1117,13 +1250,41 @@ def start_jobs(
 
 
 def run_start(job: tuple[Any, ...]) -> StartRecord:
-    """One local run of a :func:`start_jobs` job (picklable; a top-level function)."""
+    """One local run of a :func:`start_jobs` job (picklable; a top-level function).
+
+    Parameters
+    ----------
+    job : tuple
+        One job of :func:`start_jobs`.
+
+    Returns
+    -------
+    StartRecord
+        The run's outcome.
+    """
     return _run_start(job)  # type: ignore[arg-type]
 
 
 def collect_starts(problem: TuningProblem, records: Sequence[StartRecord],
                    t_start: float | None = None, stopped: str = "") -> TuneResult:
-    """The :class:`TuneResult` of the start records (any order) of :func:`start_jobs`."""
+    """The :class:`TuneResult` of the start records (any order) of :func:`start_jobs`.
+
+    Parameters
+    ----------
+    problem : TuningProblem
+        The problem the jobs were made from.
+    records : sequence of StartRecord
+        The records, in any order.
+    t_start : float, optional
+        ``time.monotonic()`` when tuning began (for the message's elapsed time).
+    stopped : str
+        Stop reason to report ("" when every start ran to its end).
+
+    Returns
+    -------
+    TuneResult
+        The best start's result, as :func:`tune` returns it.
+    """
     records = sorted(records, key=lambda r: r.index)
     if t_start is None:
         t_start = time.monotonic()
@@ -1160,10 +1321,37 @@ def pid(kp: float, ki: float, kd: float, tf: float) -> StateSpaceData:
     """PID with filtered derivative K(s) = kp + ki/s + kd s/(tf s + 1) as (A, B, C, D).
 
     States: integrator and derivative filter (always present, so the state dimension does
-    not depend on the gains). ``tf`` > 0 (s). Note: with ki = 0 the integrator state is
-    unobservable and gives a closed-loop eigenvalue at 0, i.e. an infinite norm under the
-    internal-stability convention of :func:`vtolftc.synthesis.hinfnorm.hinf_norm`; keep ki > 0 or
-    use a PD structure of your own.
+    not depend on the gains). Note: with ki = 0 the integrator state is unobservable and
+    gives a closed-loop eigenvalue at 0, i.e. an infinite norm under the internal-stability
+    convention of :func:`vtolftc.synthesis.hinfnorm.hinf_norm`; keep ki > 0 or use a PD
+    structure of your own.
+
+    Parameters
+    ----------
+    kp : float
+        Proportional gain (output unit per input unit).
+    ki : float
+        Integral gain (per s).
+    kd : float
+        Derivative gain (s).
+    tf : float
+        Derivative filter time constant (s), > 0.
+
+    Returns
+    -------
+    A, B, C, D : ndarray
+        Shapes (2, 2), (2, 1), (1, 2), (1, 1).
+
+    Raises
+    ------
+    ValueError
+        If tf <= 0.
+
+    Examples
+    --------
+    >>> A, B, C, D = pid(2.0, 1.0, 0.5, 0.1)
+    >>> A.shape, float(D[0, 0])                  # D = kp + kd / tf
+    ((2, 2), 7.0)
     """
     if not tf > 0:
         raise ValueError(f"derivative filter time constant tf must be > 0 s, got {tf}")
@@ -1260,8 +1448,19 @@ def _loop(G: StateSpaceData, K: StateSpaceData) -> tuple[
 def closed_loops(G: Any, K: Any) -> tuple[Any, Any, Any]:
     """S, T, R of eq. 4 for the negative-feedback loop of plant G and controller K.
 
-    S = (I + G K)^-1 (r -> e), T = (I + G K)^-1 G K (r -> y), R = K (I + G K)^-1 (r -> u),
-    as python-control StateSpace objects sharing the realisation [x_G; x_K] (not minimal).
+    S = (I + G K)^-1 (r -> e), T = (I + G K)^-1 G K (r -> y), R = K (I + G K)^-1 (r -> u).
+
+    Parameters
+    ----------
+    G : LTI, tuple or scalar
+        The plant (python-control LTI, (A, B, C, D) or a scalar), ny outputs, nu inputs.
+    K : LTI, tuple or scalar
+        The controller, nu outputs, ny inputs.
+
+    Returns
+    -------
+    S, T, R : control.StateSpace
+        Sharing the realisation [x_G; x_K] (not minimal).
     """
     import control
 
@@ -1318,11 +1517,29 @@ def _mixed(
 def mixed_sensitivity(G: Any, K: Any, Ws: Any = None, Wt: Any = None, Wr: Any = None) -> Any:
     """Stacked weighted closed loop [Ws S; Wt T; Wr R] of eq. 8 as a python-control StateSpace.
 
-    G, K, weights: python-control LTI objects, (A, B, C, D) tuples or scalars. Weights left
-    as None are omitted. A SISO weight applied to a vector signal means W * I. Weights must
-    be proper and stable: an improper Wt or Wr (e.g. Wt(s) = s/wt + ...) raises ValueError
-    asking for extra high-frequency poles; a Ws with a pole at s = 0 (A = 0 in eq. 5) raises
-    ValueError asking for a small A > 0. (eqs. 5 and 6 of the paper are proper and stable.)
+    A SISO weight applied to a vector signal means W * I. Weights must be proper and stable
+    (eqs. 5 and 6 of the paper are).
+
+    Parameters
+    ----------
+    G : LTI, tuple or scalar
+        The plant.
+    K : LTI, tuple or scalar
+        The controller.
+    Ws, Wt, Wr : LTI, tuple or scalar, optional
+        Weights of S, T and R; None omits the row.
+
+    Returns
+    -------
+    control.StateSpace
+        The stacked channel r -> [Ws e; Wt y; Wr u].
+
+    Raises
+    ------
+    ValueError
+        For an improper Wt or Wr (e.g. Wt(s) = s/wt + ...: add high-frequency poles), a Ws
+        with a pole at s = 0 (A = 0 in eq. 5: use a small A > 0), no weight at all, or an
+        ill-posed loop (I + G(inf) K(inf) singular).
     """
     import control
 
@@ -1343,6 +1560,25 @@ def mixed_sensitivity_channel(
 
     Plant and weights are converted and validated once (see :func:`mixed_sensitivity`);
     each call only assembles numpy matrices, so it is cheap inside the tuner.
+
+    Parameters
+    ----------
+    G : LTI, tuple or scalar
+        The plant.
+    controller : callable
+        theta -> K (LTI, (A, B, C, D) or scalar).
+    Ws, Wt, Wr : LTI, tuple or scalar, optional
+        Weights of S, T and R; None omits the row.
+
+    Returns
+    -------
+    callable
+        The channel, for :class:`TuningProblem`.
+
+    Raises
+    ------
+    ValueError
+        For improper or unstable weights, as :func:`mixed_sensitivity`.
     """
     Gd = _lti(G, "plant G")
     p, m = Gd[3].shape

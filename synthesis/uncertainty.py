@@ -37,7 +37,17 @@ from vtolftc.synthesis.models import Axis, axis_coefficients
 
 @dataclass(frozen=True)
 class DesignPoint:
-    """A nominal design point and its perturbed airspeed range (paper table 1)."""
+    """A nominal design point and its perturbed airspeed range (paper table 1).
+
+    Parameters
+    ----------
+    number : int
+        Point number (1-based, as in the paper's table 1).
+    airspeed_m_s : float
+        Nominal airspeed (m/s).
+    v_min_m_s, v_max_m_s : float
+        Perturbed airspeed range (m/s), containing the nominal airspeed.
+    """
 
     number: int
     airspeed_m_s: float
@@ -58,7 +68,26 @@ GAMMA_RANGE = (0.0, 0.6)
 
 def rate_response(af: Airframe, axis: Axis, airspeed_m_s: float, gamma: float,
                   omegas: np.ndarray) -> np.ndarray:
-    """Frequency response of the eq 1-3 rate model, evaluated directly (no cancellations)."""
+    """Frequency response of the eq 1-3 rate model, evaluated directly (no cancellations).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    airspeed_m_s : float
+        Airspeed (m/s), >= 0.
+    gamma : float
+        Loss of control effectiveness, in [0, 1].
+    omegas : ndarray of float, shape (nw,)
+        Frequencies (rad/s).
+
+    Returns
+    -------
+    ndarray of complex, shape (nw,)
+        G(j w), moment (N m) -> body rate (rad/s).
+    """
     c = axis_coefficients(af, axis, airspeed_m_s)
     s = 1j * np.asarray(omegas, dtype=float)
     # Both forms reduce to (1-gamma) s / (J s^2 - D s - K); roll has K = 0.
@@ -69,8 +98,16 @@ def rate_response(af: Airframe, axis: Axis, airspeed_m_s: float, gamma: float,
 class RelativeError:
     """Relative model error ``|G_p / G_nom - 1|`` of the rate models over a grid.
 
-    ``omegas`` (rad/s); ``errors`` (n_models, n_omega); ``bound`` its maximum over the models;
-    ``models`` the (airspeed m/s, effectiveness loss gamma) of each row.
+    Parameters
+    ----------
+    omegas : ndarray of float, shape (n_omega,)
+        Frequencies (rad/s).
+    errors : ndarray of float, shape (n_models, n_omega)
+        |G_p / G_nom - 1| of each perturbed model (dimensionless).
+    bound : ndarray of float, shape (n_omega,)
+        Its maximum over the models.
+    models : tuple of (float, float)
+        (airspeed m/s, effectiveness loss gamma) of each row.
     """
     omegas: np.ndarray      # rad/s
     errors: np.ndarray      # (n_models, n_omega) |G_p/G_nom - 1|
@@ -82,8 +119,36 @@ def relative_error(af: Airframe, axis: Axis, point: DesignPoint, omegas: np.ndar
                    gamma_range: tuple[float, float] = GAMMA_RANGE, n_airspeeds: int = 17,
                    n_gammas: int = 4, nominal: tuple[float, float] | None = None,
                    ) -> RelativeError:
-    """Relative error of the perturbed set against the nominal model: the healthy one at the
-    point's nominal airspeed (paper), or ``nominal`` = (airspeed [m/s], gamma)."""
+    """Relative error of the perturbed set against the nominal model.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    point : DesignPoint
+        The design point (its airspeed range is the perturbed set's).
+    omegas : ndarray of float, shape (n_omega,)
+        Frequencies (rad/s).
+    gamma_range : (float, float)
+        Range of the loss of effectiveness gamma.
+    n_airspeeds, n_gammas : int
+        Grid sizes over the airspeed range and the gamma range.
+    nominal : (float, float), optional
+        (airspeed m/s, gamma) of the nominal model; default the healthy model at the point's
+        nominal airspeed (the paper).
+
+    Returns
+    -------
+    RelativeError
+        The errors of every grid model and their bound.
+
+    Raises
+    ------
+    ValueError
+        If the nominal airspeed lies outside the point's range.
+    """
     if point.v_min_m_s > point.airspeed_m_s or point.v_max_m_s < point.airspeed_m_s:
         raise ValueError(f"design point {point.number}: nominal airspeed {point.airspeed_m_s} "
                          f"outside its range [{point.v_min_m_s}, {point.v_max_m_s}]")
@@ -102,7 +167,22 @@ def relative_error(af: Airframe, axis: Axis, point: DesignPoint, omegas: np.ndar
 
 @dataclass(frozen=True)
 class UncertaintyWeight:
-    """A fitted W_t(s) = k prod (s/z_i + 1) / (s/p_i + 1)."""
+    """A fitted W_t(s) = k prod (s/z_i + 1) / (s/p_i + 1) (dimensionless).
+
+    Parameters
+    ----------
+    gain : float
+        k, the low-frequency gain (> 0).
+    zeros_rad_s, poles_rad_s : tuple of float
+        z_i and p_i (rad/s, > 0), as many zeros as poles.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> W = UncertaintyWeight(0.5, (2.0,), (20.0,))
+    >>> np.round(W.magnitude(np.array([0.0, 1e6])), 3).tolist()    # k at DC, k p / z above
+    [0.5, 5.0]
+    """
 
     gain: float
     zeros_rad_s: tuple[float, ...]
@@ -114,14 +194,31 @@ class UncertaintyWeight:
         return len(self.poles_rad_s)
 
     def tf(self) -> ct.TransferFunction:
-        """W_t(s) as a python-control transfer function."""
+        """W_t(s) as a python-control transfer function.
+
+        Returns
+        -------
+        control.TransferFunction
+            W_t(s).
+        """
         W = ct.tf([self.gain], [1.0])
         for z, p in zip(self.zeros_rad_s, self.poles_rad_s, strict=True):
             W = W * ct.tf([1.0 / z, 1.0], [1.0 / p, 1.0])
         return W
 
     def magnitude(self, omegas: np.ndarray) -> np.ndarray:
-        """|W_t(j omega)| at the frequencies ``omegas`` (rad/s)."""
+        """|W_t(j omega)| at the frequencies ``omegas`` (rad/s).
+
+        Parameters
+        ----------
+        omegas : array_like, shape (nw,)
+            Frequencies (rad/s).
+
+        Returns
+        -------
+        ndarray of float, shape (nw,)
+            The magnitudes.
+        """
         s = 1j * np.asarray(omegas, dtype=float)
         m = np.full(s.shape, self.gain, dtype=complex)
         for z, p in zip(self.zeros_rad_s, self.poles_rad_s, strict=True):
@@ -129,7 +226,13 @@ class UncertaintyWeight:
         return np.abs(m)
 
     def to_dict(self) -> dict[str, object]:
-        """Gain, zeros and poles (rad/s) as a JSON-ready dict."""
+        """Gain, zeros and poles (rad/s) as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            Keys ``gain``, ``zeros_rad_s``, ``poles_rad_s``.
+        """
         return {"gain": self.gain, "zeros_rad_s": list(self.zeros_rad_s),
                 "poles_rad_s": list(self.poles_rad_s)}
 
@@ -151,6 +254,36 @@ def fit_weight(omegas: np.ndarray, bound: np.ndarray, order: int = 1,
     Minimises the mean log-gap between |W| and the bound over the (log-spaced) grid subject to
     |W| >= bound at every grid point (SLSQP on log-parameters), then rescales the gain so that
     the bound holds with ``margin`` on the grid exactly.
+
+    Parameters
+    ----------
+    omegas : ndarray of float, shape (nw,)
+        Positive frequencies (rad/s), increasing.
+    bound : ndarray of float, shape (nw,)
+        The relative error to cover (dimensionless, > 0).
+    order : int
+        Number of pole/zero pairs, 0..4.
+    margin : float
+        Factor by which |W| exceeds the bound at the tightest grid point.
+
+    Returns
+    -------
+    UncertaintyWeight
+        The fitted weight.
+
+    Raises
+    ------
+    ValueError
+        For mismatched or non-positive arrays, or an order outside 0..4.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> w = np.logspace(-2, 3, 60)
+    >>> bound = np.abs(0.2 * (1j * w / 1.0 + 1) / (1j * w / 50.0 + 1))
+    >>> W = fit_weight(w, bound, order=1)
+    >>> bool(np.all(W.magnitude(w) >= bound)), round(float(np.min(W.magnitude(w) / bound)), 4)
+    (True, 1.01)
     """
     om = np.asarray(omegas, dtype=float)
     lb = np.log(np.maximum(np.asarray(bound, dtype=float), 1e-12) * margin)
@@ -192,12 +325,33 @@ def centred_nominal(af: Airframe, axis: Axis, point: DesignPoint,
                     gamma_range: tuple[float, float] = GAMMA_RANGE, n_airspeeds: int = 9,
                     n_gammas: int = 13, omegas: Sequence[float] | None = None,
                     ) -> tuple[float, float]:
-    """(airspeed [m/s], gamma) of the member of the perturbed set about which the
-    multiplicative cover is smallest: the candidate (on an ``n_airspeeds`` x ``n_gammas``
-    grid over the set) minimising the peak over frequency of the relative error bound; among
-    the candidates within 0.1 % of that peak (at hover points the peak is the low-frequency
-    error of the airspeed range, which no choice of gamma changes) the one with the smallest
-    mean log bound over frequency."""
+    """The member of the perturbed set about which the multiplicative cover is smallest.
+
+    The candidate (on an ``n_airspeeds`` x ``n_gammas`` grid over the set) minimising the
+    peak over frequency of the relative error bound; among the candidates within 0.1 % of that
+    peak (at hover points the peak is the low-frequency error of the airspeed range, which no
+    choice of gamma changes) the one with the smallest mean log bound over frequency.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    point : DesignPoint
+        The design point.
+    gamma_range : (float, float)
+        Range of the loss of effectiveness gamma.
+    n_airspeeds, n_gammas : int
+        Candidate grid sizes.
+    omegas : sequence of float, optional
+        Frequencies (rad/s) of the error evaluation (default: a log grid).
+
+    Returns
+    -------
+    (float, float)
+        (airspeed m/s, gamma) of the centred nominal model.
+    """
     om = np.logspace(-3, 3, 121) if omegas is None else np.asarray(omegas, dtype=float)
     members = [(float(V), float(g))
                for V in np.linspace(point.v_min_m_s, point.v_max_m_s, 17)
@@ -223,9 +377,44 @@ def cover(af: Airframe, axis: Axis, point: DesignPoint, omegas: Sequence[float] 
           orders: Sequence[int] = (1, 2), tolerance_db: float = 1.0,
           nominal: tuple[float, float] | None = None,
           ) -> tuple[UncertaintyWeight, RelativeError]:
-    """Fit W_t for one axis and design point: the lowest order whose mean gap to the relative
-    error is within ``tolerance_db`` of the best order tried. ``nominal`` = (airspeed, gamma)
-    of the nominal model (default: the paper's, healthy at the nominal airspeed)."""
+    """Fit W_t for one axis and design point (MATLAB ``ucover``).
+
+    The lowest order whose mean gap to the relative error is within ``tolerance_db`` of the
+    best order tried.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    point : DesignPoint
+        The design point.
+    omegas : sequence of float, optional
+        Frequencies (rad/s) of the fit (default: a log grid).
+    orders : sequence of int
+        Weight orders to try.
+    tolerance_db : float
+        Mean-gap tolerance (dB) against the best order.
+    nominal : (float, float), optional
+        (airspeed m/s, gamma) of the nominal model (default: the paper's, healthy at the
+        nominal airspeed).
+
+    Returns
+    -------
+    weight : UncertaintyWeight
+        W_t, |W_t(j w)| >= the relative error on a dense grid.
+    error : RelativeError
+        The relative error it covers.
+
+    Examples
+    --------
+    >>> from vtolftc.airframe.loader import load_airframe
+    >>> W, err = cover(load_airframe(), "roll", DesignPoint(4, 10.0, 8.5, 11.5))
+    >>> import numpy as np
+    >>> bool(np.all(W.magnitude(err.omegas) >= err.bound)), W.order
+    (True, 1)
+    """
     om = np.logspace(-3, 3, 241) if omegas is None else np.asarray(omegas, dtype=float)
     rel = relative_error(af, axis, point, om, nominal=nominal)
     # Resonances of lightly damped perturbed models make narrow peaks: the fitted weight is

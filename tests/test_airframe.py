@@ -90,7 +90,7 @@ _DELETE = object()
         ("derivatives.C_mq", [-1.0, -2.0], ["derivatives.C_mq", "8 values"]),
         ("derivatives.C_lp", [0.3] * 8, ["derivatives.C_lp", "<= 0"]),
         ("mass.Jxz_kg_m2", 5.0, ["mass.Jxz_kg_m2", "positive definite"]),
-        ("lift_rotors.max_thrust_N", 5.0, ["lift_rotors.max_thrust_N", "exceed the weight"]),
+        ("lift_rotors.max_thrust_N", 5.0, ["lift_rotors.max_thrust_N", "1.2 x the weight"]),
         ("landing_gear.points_m", [[0, 0]], ["landing_gear.points_m", "[x, y, z]"]),
     ],
 )

@@ -439,6 +439,21 @@ def test_constructor_validation():
         qp.allocate(np.zeros(5), np.zeros((5, 14)))
 
 
+@pytest.mark.parametrize("cls", [ActiveSetAllocator, QPAllocator])
+def test_problem_options_are_one_set_passed_to_the_shared_problem(cls):
+    """Each QP allocator takes the problem's options (``wls.ProblemOptions``) and hands them
+    to ``WLSAllocator`` unchanged; a misspelt option is refused, not ignored."""
+    w_v, rate = np.array([1.0, 1.0, 10.0, 10.0, 3.0]), np.full(15, 5.0)
+    a = cls(5, U_MIN, U_MAX, w_v=w_v, eps=1e-3, rate_limit=rate, dt=0.01)
+    np.testing.assert_array_equal(a.w_v, w_v)
+    np.testing.assert_array_equal(a.rate_limit, rate)
+    assert (a.eps, a.dt) == (1e-3, 0.01)
+    b = cls(5, U_MIN, U_MAX)
+    assert (b.eps, b.dt, b.rate_limit) == (1e-6, 1.0 / 250.0, None)
+    with pytest.raises(TypeError, match="w_vv"):
+        cls(5, U_MIN, U_MAX, w_vv=w_v)
+
+
 def test_stats_summary(kind):
     qp = make_qp(kind)
     qp.allocate(np.array([-122.6, 0, 0, 0, 0.0]), synth_B(0.0))

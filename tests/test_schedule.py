@@ -11,12 +11,12 @@ import pytest
 
 from vtolftc.firmware_sim.autopilot.pid import PPIDGains
 from vtolftc.firmware_sim.autopilot.schedule import (
-    AXES,
     FORMAT,
     GAIN_FIELDS,
     GainSchedule,
     GainScheduleError,
 )
+from vtolftc.rotation import ATTITUDE_AXES
 
 BP = [0.0, 1.0, 4.0, 7.0, 10.0, 13.0]
 SHA = "ab" * 32
@@ -50,7 +50,7 @@ def test_interpolation_exact_at_breakpoints():
     s = GainSchedule.from_dict(d)
     for i, V in enumerate(BP):
         g = s.gains_at(V)
-        for ax in AXES:
+        for ax in ATTITUDE_AXES:
             for f in GAIN_FIELDS:
                 assert getattr(g[ax], f) == d["axes"][ax][f][i]  # bit-exact
 
@@ -61,7 +61,7 @@ def test_interpolation_linear_between_breakpoints():
     rng = np.random.default_rng(0)
     for V in [0.5, 2.5, 5.5, 9.99, 12.0, *rng.uniform(0, 13, 20)]:
         g = s.gains_at(float(V))
-        for ax in AXES:
+        for ax in ATTITUDE_AXES:
             for f in GAIN_FIELDS:
                 expected = np.interp(V, BP, d["axes"][ax][f])
                 assert getattr(g[ax], f) == pytest.approx(expected, rel=1e-12, abs=1e-15)
@@ -84,7 +84,7 @@ def test_clamped_outside_the_range():
 
 def test_returns_ppid_gains_per_axis():
     g = GainSchedule.from_dict(schedule_dict()).gains_at(3.0)
-    assert set(g) == set(AXES)
+    assert set(g) == set(ATTITUDE_AXES)
     assert all(isinstance(x, PPIDGains) for x in g.values())
 
 
@@ -92,7 +92,7 @@ def test_single_breakpoint_constant_schedule():
     d = schedule_dict()
     d["controller"] = "shif"
     d["airspeed_breakpoints_m_s"] = [7.0]
-    for ax in AXES:
+    for ax in ATTITUDE_AXES:
         d["axes"][ax] = {f: [v[3]] for f, v in d["axes"][ax].items()}
     s = GainSchedule.from_dict(d)
     assert s.is_constant

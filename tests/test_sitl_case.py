@@ -12,6 +12,7 @@ are read back as the decimal they stand for.
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import os
 import signal
@@ -70,6 +71,10 @@ def _spray_garbage(run: SitlRun) -> None:
             time.sleep(0.2)
 
 
+def _refuse_constant(name: str) -> None:
+    raise AssertionError(f"non-standard JSON constant {name} (write through vtolftc.jsonio)")
+
+
 @pytest.mark.parametrize("transport", ["udp", "zenoh"])
 def test_case1_sitl_equals_in_process(transport, reference, tmp_path):
     """Also with garbage thrown at every reachable port before the flight."""
@@ -90,6 +95,8 @@ def test_case1_sitl_equals_in_process(transport, reference, tmp_path):
     assert len(res.outcomes) == 3 + 6  # arm, takeoff, transition; 6 actuator faults
     assert (tmp_path / "autopilot" / "telemetry.csv").is_file()
     assert (tmp_path / "vehicle" / "vehicle_truth.csv").is_file()
+    for f in ("sitl.json", "vehicle/vehicle_summary.json"):  # strict JSON: no NaN literal
+        json.loads((tmp_path / f).read_text(), parse_constant=_refuse_constant)
     rec = read_recording(tmp_path / "autopilot" / "run.rrd",
                          ["attitude/roll", "altitude", "actuators/rotors/rotor_2b"])
     for entity, (times, values) in rec.items():   # the SITL run's rerun recording

@@ -10,7 +10,8 @@ import pytest
 import scipy.linalg
 
 from vtolftc.synthesis.freq_kernel import siso_sigma, siso_sigma_grad
-from vtolftc.synthesis.mu import Block, BlockIndex, _Power, mu_bounds
+from vtolftc.synthesis.mu import Block, _Power, mu_bounds
+from vtolftc.synthesis.mu_blocks import BlockStructure
 from vtolftc.synthesis.structured import (
     Parameter,
     TuningProblem,
@@ -134,7 +135,7 @@ def test_rightmost_eigenpair_is_scipys_bit_for_bit() -> None:
     [Block.real(1), Block.real(1), Block.full(2, 2)],
 ])
 def test_power_iteration_kernel_matches_the_numpy_reference(blocks: list[Block]) -> None:
-    st = BlockIndex(blocks, sum(b.cols for b in blocks))
+    st = BlockStructure(blocks).require_square(sum(b.cols for b in blocks))
     rng = np.random.default_rng(st.n)
     for _ in range(40):
         M = rng.standard_normal((st.n, st.n)) + 1j * rng.standard_normal((st.n, st.n))

@@ -61,9 +61,11 @@ def _airspeeds(text: str) -> list[float]:
 
 def cmd_trim(args: argparse.Namespace) -> int:
     """Trim table of the airframe at the paper's airspeeds (hover, transition, cruise)."""
+    from vtolftc.firmware_sim.vehicle.flyable import check_flyable
     from vtolftc.firmware_sim.vehicle.trim import trim_table
 
     af = load_airframe(args.airframe)
+    check_flyable(af)
     speeds = _airspeeds(args.airspeeds) if args.airspeeds is not None else [
         0.0, 4.0, 7.0, 10.0, 13.0, 18.0]
     if not (math.isfinite(args.altitude) and -500.0 <= args.altitude <= 20_000.0):

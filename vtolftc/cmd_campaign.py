@@ -22,6 +22,7 @@ from types import FrameType
 from typing import Any
 
 from vtolftc.errors import UsageError
+from vtolftc.jsonio import atomic_write_text, dumps
 
 
 def _usage(msg: str) -> Exception:
@@ -76,9 +77,9 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         raise _usage(f"--out {out}: already holds {n_done} results: pass --resume to fly only "
                      "the missing scenarios, or choose another --out")
     out.mkdir(parents=True, exist_ok=True)
-    meta_path.write_text(json.dumps({
+    atomic_write_text(meta_path, dumps({
         "spec": spec.source, "spec_name": spec.name, "spec_sha256": spec.sha256,
-        "scenarios": len(scenarios)}, indent=2) + "\n", encoding="utf-8")
+        "scenarios": len(scenarios)}))
     (out / "spec.toml").write_text(spec.text, encoding="utf-8")
     done_ids = set() if done is None else set(done.column("scenario_id").to_pylist())
     todo = flight_order([s for s in scenarios if s.scenario_id not in done_ids],

@@ -197,10 +197,10 @@ def _check_common(args: argparse.Namespace) -> None:
 
 def _fly_one(case: str, controller: str, args: argparse.Namespace, run_dir: Path,
              extra_faults: list[Any]) -> Any:
-    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.firmware_sim.vehicle.flyable import load_flyable_airframe
     from vtolftc.scenario import paper_scenario, run_scenario
 
-    af = load_airframe(getattr(args, "airframe", None))
+    af = load_flyable_airframe(getattr(args, "airframe", None))
     scen = paper_scenario(case, args.duration, airframe=af, extra_faults=extra_faults,
                           window_start_s=getattr(args, "window_start", None))
     _check_controller(controller, args)
@@ -264,10 +264,10 @@ def _vehicle_options(args: argparse.Namespace) -> dict[str, Any]:
 def _check_controller(controller: str, args: argparse.Namespace) -> None:
     """Load the controller's gain file once, so that a missing or invalid file is reported
     (exit 2) before anything is flown or written."""
-    from vtolftc.airframe.loader import load_airframe
     from vtolftc.firmware_sim.autopilot.attitude import ControllerError, make_controller
+    from vtolftc.firmware_sim.vehicle.flyable import load_flyable_airframe
 
-    af = load_airframe(getattr(args, "airframe", None))
+    af = load_flyable_airframe(getattr(args, "airframe", None))
     try:
         make_controller(controller, args.gains, airframe_name=af.name,
                         airframe_sha256=af.sha256)
@@ -305,12 +305,12 @@ def _summary_lines(res: Any) -> list[str]:
 
 def cmd_fly(args: argparse.Namespace) -> int:
     """Fly one of the paper's cases in-process and write a run folder."""
-    from vtolftc.airframe.loader import load_airframe
     from vtolftc.firmware_sim.vehicle.faults import parse_fault_spec
+    from vtolftc.firmware_sim.vehicle.flyable import load_flyable_airframe
     from vtolftc.telemetry.runfolder import default_run_dir
 
     _check_common(args)
-    af = load_airframe(getattr(args, "airframe", None))
+    af = load_flyable_airframe(getattr(args, "airframe", None))
     extra: list[Any] = []
     for spec in args.fault or []:
         extra += parse_fault_spec(spec, af.actuator_names)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from pathlib import Path
 from typing import Any
 
 from vtolftc.errors import UsageError
@@ -38,6 +39,9 @@ def register(sub: Any) -> None:
                    help="seconds to wait for the autopilot's heartbeat (default 10)")
     p.add_argument("--allow-remote", action="store_true",
                    help="allow a non-loopback link address (ground station on another host)")
+    p.add_argument("--airframe", type=Path, default=None,
+                   help="airframe TOML whose actuator names and motor/servo numbering the "
+                        "vehicle uses (default: the shipped DS-1)")
     p.add_argument("--signing-passphrase", default=None,
                    help="sign outgoing frames with this MAVLink 2 key passphrase")
     ops = p.add_subparsers(dest="gcs_command", required=True, metavar="ACTION")
@@ -54,9 +58,9 @@ def register(sub: Any) -> None:
     m.add_argument("name")
     i = ops.add_parser("inject", help="inject an actuator fault (SYS_FAILURE_EN must be 1)")
     i.add_argument("--actuator", required=True,
-                   help="rotor_1a..rotor_4b, pusher_left/right, aileron_left/right, elevator, "
-                        "rudder_left/right, or a group: ailerons, rudders, surfaces, "
-                        "lift_rotors, pushers")
+                   help="an actuator of the airframe (--airframe; DS-1: rotor_1a..rotor_4b, "
+                        "pusher_left/right, aileron_left/right, elevator, rudder_left/right) "
+                        "or a group: ailerons, rudders, surfaces, lift_rotors, pushers")
     i.add_argument("--loss", type=float, default=None,
                    help="fraction of effectiveness lost, 0..1 (0 clears)")
     i.add_argument("--kind", default=None, help="loss (default with --loss), off, stuck, ok")
@@ -109,6 +113,13 @@ def cmd_gcs(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     kind = None
+    from vtolftc.gcs.actuators import ActuatorTable, default_table
+
+    table = default_table()
+    if args.airframe is not None:
+        from vtolftc.airframe.loader import load_airframe
+
+        table = ActuatorTable.from_names(load_airframe(args.airframe).actuator_names)
     if op == "inject":
         kind = (args.kind or "loss").lower()
         if kind == "loss" and args.loss is None:
@@ -120,10 +131,8 @@ def cmd_gcs(args: argparse.Namespace) -> int:
                              "(0.5 = 50 %), not a percentage")
         if kind != "loss" and args.loss is not None:
             raise UsageError(f"--kind {kind} takes no --loss")
-        from vtolftc.gcs.actuators import default_table
-
         try:
-            default_table().expand(args.actuator)
+            table.expand(args.actuator)
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     if op == "params" and args.params_command == "set":
@@ -137,7 +146,7 @@ def cmd_gcs(args: argparse.Namespace) -> int:
                if args.signing_passphrase else None)
     try:
         gs = GroundStation.connect(args.url, timeout_s=args.timeout, signing=signing,
-                                   allow_remote=args.allow_remote)
+                                   allow_remote=args.allow_remote, actuators=table)
     except GcsError as exc:
         raise RuntimeError(str(exc)) from None
     with gs:

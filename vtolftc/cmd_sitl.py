@@ -108,9 +108,9 @@ def cmd_sitl(args: argparse.Namespace) -> int:
 
     af = None
     if args.airframe is not None:
-        from vtolftc.airframe.loader import load_airframe
+        from vtolftc.firmware_sim.vehicle.flyable import load_flyable_airframe
 
-        af = load_airframe(args.airframe)
+        af = load_flyable_airframe(args.airframe)
     try:
         scenario = paper_scenario(case, args.duration, airframe=af)
     except (FaultError, ValueError) as exc:

@@ -50,10 +50,10 @@ def _check(args: argparse.Namespace) -> None:
 
 def cmd_synth(args: argparse.Namespace) -> int:
     """Structured H-infinity GS-SHIF and SHIF designs, LQR baseline, mu analysis, report."""
-    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.firmware_sim.vehicle.flyable import load_flyable_airframe
 
     _check(args)
-    af = load_airframe(args.airframe)
+    af = load_flyable_airframe(args.airframe)
     from tqdm import tqdm
 
     from vtolftc.synthesis.pipeline import run_synthesis, work_units
@@ -121,8 +121,13 @@ def register(sub: Any) -> None:
                    help="airframe TOML file (default: the shipped DS-1)")
     p.add_argument("--method", choices=("robust", "paper"), default="robust",
                    help="robust (default): centred nominal, loop delays, rotor-out and "
-                        "delay-margin objectives, Ws by rule, 18 m/s cruise point; paper: "
-                        "the paper's design as published (table 2 weights, six points)")
+                        "delay-margin objectives, Ws by rule, a cruise point; paper: the "
+                        "paper's design as published (table 2 weights, six points; for "
+                        "another aircraft than DS-1, table 1's airspeeds are scaled to its "
+                        "transition end, M kept and omega_b scaled by its authority "
+                        "bandwidth sqrt(u_max/(J r_max)) over DS-1's, omega_a by its "
+                        "actuator bandwidth). Both derive the design airspeeds and gain "
+                        "bounds from the airframe (synthesis/scaling.py)")
     p.add_argument("--out", type=Path, default=Path("synth_out"),
                    help="output directory (default synth_out)")
     p.add_argument("--starts", type=int, default=None,

@@ -1,8 +1,13 @@
 """Files the project writes: one conversion of numpy values and non-finite floats for JSON,
 and one atomic writer.
 
-Every writer of ``metrics.json``, ``run.json``, summaries and campaign results goes through
-:func:`json_safe` (or :func:`dumps`), so they agree on what a NaN or a numpy array becomes.
+Every writer of ``metrics.json``, ``run.json``, summaries, campaign results and the synthesis'
+gain files goes through :func:`json_safe` (or :func:`dumps`), so they agree on what a NaN or
+a numpy array becomes. The convention: a NaN or infinity is written as ``null``. Strict JSON has
+no such numbers, and strict readers (browsers' ``JSON.parse``, jq, most non-Python libraries)
+accept ``null`` but neither a bare ``NaN`` nor a string "nan" as a number. Files written before
+this convention spelt them ``"nan"`` / ``"inf"`` (only in gain-file metadata, which the
+readers keep as it is and never compute with), so such files still load.
 Every file that must never be seen half-written (gain files, reports, summaries, campaign
 tables) goes through :func:`atomic_write` / :func:`atomic_write_text`: a temporary file in the
 same folder, flushed to disk, then renamed over the target, so a crash, SIGKILL or Ctrl-C
@@ -16,7 +21,7 @@ import json
 import math
 import os
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO, Any
 
@@ -31,15 +36,16 @@ def json_safe(x: Any) -> Any:
     Parameters
     ----------
     x : object
-        Nested dicts, lists, tuples, numpy scalars and arrays, floats, ...
+        Nested mappings, lists, tuples, numpy scalars and arrays, floats, complex numbers, ...
 
     Returns
     -------
     object
         The same structure with dict keys as strings, tuples and arrays as lists, numpy
-        scalars as Python numbers and NaN / +-inf as ``None`` (JSON has no such numbers).
+        scalars as Python numbers, complex numbers as ``[re, im]`` and NaN / +-inf as
+        ``None`` (JSON has no such numbers).
     """
-    if isinstance(x, dict):
+    if isinstance(x, Mapping):
         return {str(k): json_safe(v) for k, v in x.items()}
     if isinstance(x, list | tuple):
         return [json_safe(v) for v in x]
@@ -47,6 +53,8 @@ def json_safe(x: Any) -> Any:
         return json_safe(x.tolist())
     if isinstance(x, np.generic):
         x = x.item()
+    if isinstance(x, complex):
+        return [json_safe(x.real), json_safe(x.imag)]
     if isinstance(x, float) and not math.isfinite(x):
         return None
     return x

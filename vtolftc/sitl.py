@@ -64,6 +64,7 @@ from pathlib import Path
 from typing import Any
 
 from vtolftc.gcs.client import CommandOutcome, GcsError, GroundStation
+from vtolftc.jsonio import atomic_write_text, json_safe
 from vtolftc.protocols.hil_signing import HIL_KEY_ENV, new_hil_key
 from vtolftc.protocols.netutil import free_tcp_port, free_udp_port
 
@@ -322,11 +323,11 @@ class SitlRun:
             flight_wall_s=flight_wall, out_dir=self.out, outcomes=outcomes,
             autopilot_summary=_read_json(self.out / "autopilot" / "autopilot_summary.json"),
             vehicle_summary=_read_json(self.out / "vehicle" / "vehicle_summary.json"))
-        (self.out / "sitl.json").write_text(json.dumps({
+        atomic_write_text(self.out / "sitl.json", json.dumps(json_safe({
             "config": {k: str(v) if isinstance(v, Path) else v
                        for k, v in cfg.__dict__.items()},
             "real_time_factor": result.real_time_factor, "flight_wall_s": flight_wall,
-            "outcomes": outcomes, "metrics": metrics}, indent=2, default=str))
+            "outcomes": outcomes, "metrics": metrics}), indent=2, default=str))
         return result
 
     def _wait_sim(self, t_s: float) -> None:

@@ -37,12 +37,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.airframe.loader import Airframe
-from vtolftc.firmware_sim.autopilot.allocation.interface import AXES_5
 
-__all__ = ["AXES", "EffectivenessModel"]
-
-#: Virtual axes, in the order of the rows of B.
-AXES: tuple[str, ...] = AXES_5
+__all__ = ["EffectivenessModel"]
 
 
 class EffectivenessModel:
@@ -79,17 +75,20 @@ class EffectivenessModel:
         def col(name: str) -> int:
             return names.index(name)
 
-        for side, sgn in (("aileron_left", 0.5), ("aileron_right", -0.5)):
+        ail = [(n, s) for n, s in (("aileron_left", 0.5), ("aileron_right", -0.5)) if n in names]
+        for side, sgn in ail or [("aileron", 1.0)]:
             j = col(side)
             self._B_q[2, j] = S * b * w.Cl_da * sgn * d
             self._B_q[4, j] = S * b * w.Cn_da * sgn * d
         j = col("elevator")
         self._B_q[0, j] = -S * w.CL_de * d
         self._B_q[3, j] = S * c * w.Cm_de * d
-        for side in ("rudder_left", "rudder_right"):
+        rud = [n for n in ("rudder_left", "rudder_right") if n in names]
+        share = 0.5 if rud else 1.0
+        for side in rud or ["rudder"]:
             j = col(side)
-            self._B_q[2, j] = S * b * w.Cl_dr * 0.5 * d
-            self._B_q[4, j] = S * b * w.Cn_dr * 0.5 * d
+            self._B_q[2, j] = S * b * w.Cl_dr * share * d
+            self._B_q[4, j] = S * b * w.Cn_dr * share * d
         self._rho = airframe.air_density_kg_m3
         self._faded = [j for j in range(n_u) if self._fade_slope[j] != 0.0]
         self._cache: dict[int, NDArray[np.float64]] = {}
@@ -115,7 +114,7 @@ class EffectivenessModel:
     def matrix_on_grid(self, airspeed_m_s: float, step_m_s: float = 0.1) -> NDArray[np.float64]:
         """``B`` at the airspeed rounded to a multiple of ``step_m_s`` (cached, read-only).
 
-        The autopilot uses it so that ``B`` (hence OSQP's KKT matrix) changes only when the
+        The autopilot uses it so that ``B`` (hence the allocator's Hessian) changes only when the
         airspeed crosses a grid point; with 0.1 m/s the dynamic pressure differs from the
         exact one by less than 1 % above 10 m/s.
         """

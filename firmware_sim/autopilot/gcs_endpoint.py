@@ -315,7 +315,7 @@ class GcsEndpoint:
         # what the worker knows
         self.nav: NavState | None = None
         self.status: AutopilotStatus | None = None
-        self.commands = np.zeros(15)
+        self.commands = np.zeros(len(actuators.motors) + len(actuators.servos))
         self.sim_usec = 0
         self._last_mode: FlightMode | None = None
         self._last_message = ""

@@ -33,10 +33,14 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-# The boundary types live in the layers below (wire forms in protocols, status in telemetry);
-# they are re-exported here so the autopilot's whole boundary reads from one place.
+# The boundary types live at the lowest layer that needs them, and are re-exported here so the
+# autopilot's whole boundary reads from one place (everything above imports them from here):
+# NavState and the HIL wire forms in protocols (the HIL codec decodes into NavState); the
+# autopilot's status and mode enums in telemetry.autopilot_status (a TelemetrySample carries
+# an AutopilotStatus; the metrics and the recorder read FlightMode; nothing in protocols does).
 from vtolftc.protocols.hil import (
     EARTH_RADIUS_M,
+    HIL_OUTPUTS,
     N_ACTUATORS,
     HilState,
     NavState,
@@ -44,10 +48,11 @@ from vtolftc.protocols.hil import (
     encode_hil_state,
     wire_commands,
 )
-from vtolftc.telemetry.samples import AutopilotStatus, FlightMode, LandedState, VtolState
+from vtolftc.telemetry.autopilot_status import AutopilotStatus, FlightMode, LandedState, VtolState
 
 __all__ = [
     "EARTH_RADIUS_M",
+    "HIL_OUTPUTS",
     "N_ACTUATORS",
     "AutopilotAPI",
     "AutopilotStatus",

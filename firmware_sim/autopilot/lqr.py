@@ -34,16 +34,14 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from os import PathLike
-from pathlib import Path
 from typing import Any
 
-from vtolftc.firmware_sim.autopilot.schedule import read_json_file
-from vtolftc.rotation import ATTITUDE_AXES
+from vtolftc.firmware_sim.autopilot.schedule import load_document
+from vtolftc.rotation import ATTITUDE_AXES as AXES
 
-__all__ = ["AXES", "FORMAT", "LQR_FIELDS", "LQRAxisGains", "LQRGains", "LQRGainsError"]
+__all__ = ["FORMAT", "LQR_FIELDS", "LQRAxisGains", "LQRGains", "LQRGainsError"]
 
 FORMAT = "vtolftc-lqr-gains/1"
-AXES: tuple[str, ...] = ATTITUDE_AXES
 LQR_FIELDS: tuple[str, ...] = ("k_int", "k_angle", "k_rate")
 _SHA256 = re.compile(r"^[0-9a-fA-F]{64}$")
 
@@ -94,11 +92,7 @@ class LQRGains:
     def load(cls, path: str | PathLike[str]) -> LQRGains:
         """Read and validate an LQR gain file (``vtolftc-lqr-gains/1``); raises
         :class:`LQRGainsError` naming the field that is wrong."""
-        data = read_json_file(path, LQRGainsError, "LQR gains")
-        try:
-            return cls.from_dict(data)
-        except LQRGainsError as exc:
-            raise LQRGainsError(f"{Path(path)}: {exc}") from None
+        return load_document(path, LQRGainsError, "LQR gains", cls.from_dict)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> LQRGains:

@@ -97,7 +97,7 @@ GLOBAL_FRAMES = frozenset({FRAME_GLOBAL, FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL
                            FRAME_GLOBAL_RELATIVE_ALT_INT})
 RELATIVE_FRAMES = frozenset({FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT})
 
-# MAV_CMD values of the items this autopilot flies (navigator.py executes them)
+# MAV_CMD values of the items this autopilot flies (the navigator's modes, nav_*.py, fly them)
 NAV_WAYPOINT = mav.MAV_CMD_NAV_WAYPOINT
 NAV_LOITER_UNLIM = mav.MAV_CMD_NAV_LOITER_UNLIM
 NAV_LOITER_TIME = mav.MAV_CMD_NAV_LOITER_TIME

@@ -40,6 +40,9 @@ already beyond it, e.g. through the P or D part); increments away from the limit
 pass, and the integral itself is kept within the output limits. The integral therefore never
 grows while saturated in the direction of saturation, and unwinds at once when the error
 changes sign.
+
+The step itself is the compiled kernel :func:`.control_kernels.ppid_step` (the one
+implementation of this law); :class:`CascadedPPID` is a view of the kernel's arrays.
 """
 
 from __future__ import annotations
@@ -49,21 +52,21 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from numpy.typing import NDArray
+
+from vtolftc.firmware_sim.autopilot import control_kernels as ck
 
 __all__ = [
     "CascadedPPID",
     "ContinuousPPID",
     "PPIDGains",
+    "gains_row",
     "wrap_angle",
 ]
 
 Method = Literal["tustin", "backward_euler"]
-TWO_PI = 2.0 * math.pi
-
-
-def wrap_angle(x: float) -> float:
-    """Wrap an angle [rad] to (-pi, pi]."""
-    return -((-x + math.pi) % TWO_PI - math.pi)
+TWO_PI = ck.TWO_PI
+wrap_angle = ck.wrap_angle
 
 
 @dataclass(frozen=True, slots=True)
@@ -100,6 +103,12 @@ class PPIDGains:
         return np.array([kp * tf + kd, kp + ki * tf, ki]), np.array([tf, 1.0, 0.0])
 
 
+def gains_row(g: PPIDGains) -> NDArray[np.float64]:
+    """The gains as the kernel's row (``control_kernels.G_*`` columns), shape (5,)."""
+    return np.array([float(g.kp_angle), float(g.kp_rate), float(g.ki_rate), float(g.kd_rate),
+                     float(g.tf_rate_s)])
+
+
 @dataclass(frozen=True, slots=True)
 class ContinuousPPID:
     """Equivalent continuous-time description of the cascaded P-PID, for analysis.
@@ -118,8 +127,20 @@ class ContinuousPPID:
     rate_den: np.ndarray
 
 
+def _array_property(array: str, col: int, doc: str) -> property:
+    """A float attribute stored in column ``col`` of this axis' row of ``self.<array>``."""
+    def get(self: CascadedPPID) -> float:
+        return float(getattr(self, array)[self._row, col])
+
+    def put(self: CascadedPPID, value: float) -> None:
+        getattr(self, array)[self._row, col] = float(value)
+
+    return property(get, put, doc=doc)
+
+
 class CascadedPPID:
-    """Discrete cascaded P-PID for one attitude axis.
+    """Discrete cascaded P-PID for one attitude axis: a view of one row of the state and
+    constant arrays that the compiled kernel (:mod:`.control_kernels`) steps.
 
     Parameters
     ----------
@@ -135,6 +156,11 @@ class CascadedPPID:
         moment limits [N m]: a scalar ``m`` means ``(-m, m)``; None = none.
     method
         ``"tustin"`` or ``"backward_euler"`` (see module docstring).
+    state, const, row
+        arrays ``(n, N_STATE)`` and ``(n, N_CONST)`` holding this axis in row ``row`` (shared
+        with the other axes of a controller, which steps them all in one compiled call);
+        None: arrays of its own. The whole arrays and the row index are kept (not a view),
+        so a deep copy or pickle of a controller keeps them shared.
     """
 
     def __init__(
@@ -146,11 +172,12 @@ class CascadedPPID:
         rate_limit: float | None = None,
         output_limit: float | tuple[float, float] | None = None,
         method: Method = "tustin",
+        state: NDArray[np.float64] | None = None,
+        const: NDArray[np.float64] | None = None,
+        row: int = 0,
     ) -> None:
         if not (dt > 0 and math.isfinite(dt)):
             raise ValueError(f"dt must be finite and > 0, got {dt}")
-        if method not in ("tustin", "backward_euler"):
-            raise ValueError(f"method must be 'tustin' or 'backward_euler', got {method!r}")
         if rate_limit is not None and not rate_limit > 0:
             raise ValueError(f"rate_limit must be > 0, got {rate_limit}")
         if output_limit is None:
@@ -161,89 +188,103 @@ class CascadedPPID:
             lo, hi = -float(output_limit), float(output_limit)
         if not lo < hi:
             raise ValueError(f"output_limit: need lower < upper, got ({lo}, {hi})")
+        self._state = np.zeros((1, ck.N_STATE)) if state is None else state
+        self._const = np.zeros((1, ck.N_CONST)) if const is None else const
+        self._row = int(row)
+        self.method = method
         self.dt = float(dt)
         self.wrap = bool(wrap)
         self.rate_limit = None if rate_limit is None else float(rate_limit)
         self.u_min, self.u_max = lo, hi
-        self.method: Method = method
         self.gains = gains
-        self._tf_cached = math.nan
-        self._a = 0.0
-        self._b = 0.0
+        self._garr_of: PPIDGains | None = None
+        self._garr = np.zeros(ck.N_GAINS)
+        self._state[self._row, ck.S_TF] = math.nan  # no filter coefficients cached yet
         self.reset()
+
+    # the constants, read and written in the kernel's array -------------------------------
+    @property
+    def wrap(self) -> bool:
+        """Wrap the angle error to (-pi, pi] (yaw)."""
+        return bool(self._const[self._row, ck.C_WRAP] != 0.0)
+
+    @wrap.setter
+    def wrap(self, value: bool) -> None:
+        self._const[self._row, ck.C_WRAP] = 1.0 if value else 0.0
+
+    @property
+    def rate_limit(self) -> float | None:
+        """Limit of the rate reference [rad/s], None for none."""
+        v = float(self._const[self._row, ck.C_RATE_LIMIT])
+        return None if v != v else v
+
+    @rate_limit.setter
+    def rate_limit(self, value: float | None) -> None:
+        self._const[self._row, ck.C_RATE_LIMIT] = math.nan if value is None else float(value)
+
+    @property
+    def method(self) -> Method:
+        """Discretisation, ``"tustin"`` or ``"backward_euler"``."""
+        return "tustin" if self._const[self._row, ck.C_TUSTIN] != 0.0 else "backward_euler"
+
+    @method.setter
+    def method(self, value: Method) -> None:
+        if value not in ("tustin", "backward_euler"):
+            raise ValueError(f"method must be 'tustin' or 'backward_euler', got {value!r}")
+        self._const[self._row, ck.C_TUSTIN] = 1.0 if value == "tustin" else 0.0
+
+    dt = _array_property("_const", ck.C_DT, "sample time [s]")
+    u_min = _array_property("_const", ck.C_U_MIN, "lower output limit [N m]")
+    u_max = _array_property("_const", ck.C_U_MAX, "upper output limit [N m]")
+
+    # the state ----------------------------------------------------------------------------
+    integral = _array_property("_state", ck.S_INTEGRAL, "integral of ki e dt [N m]")
+    derivative = _array_property("_state", ck.S_DERIVATIVE, "filtered kd de/dt [N m]")
+    rate_ref = _array_property("_state", ck.S_RATE_REF, "last rate reference [rad/s]")
+    output = _array_property("_state", ck.S_OUTPUT, "last output [N m]")
+    output_unsat = _array_property("_state", ck.S_OUTPUT_UNSAT,
+                                   "last output before the limits [N m]")
+
+    @property
+    def saturated(self) -> bool:
+        """The last output was at a limit."""
+        return bool(self._state[self._row, ck.S_SATURATED] != 0.0)
+
+    @property
+    def previous_rate_error(self) -> float:
+        """Rate error of the last step [rad/s]."""
+        return float(self._state[self._row, ck.S_E_PREV])
 
     # ------------------------------------------------------------------------------------
     def reset(self, integral: float = 0.0, rate_error: float = 0.0) -> None:
         """Reset the state: integral [N m], previous rate error [rad/s], filter state 0."""
-        self.integral = float(integral)  # ∫ ki e dt [N m]
-        self.derivative = 0.0  # filtered kd de/dt [N m]
-        self._e_prev = float(rate_error)
-        self.rate_ref = 0.0
-        self.output = 0.0
-        self.output_unsat = 0.0
-        self.saturated = False
+        st = self._state[self._row]
+        st[ck.S_INTEGRAL] = float(integral)
+        st[ck.S_DERIVATIVE] = 0.0
+        st[ck.S_E_PREV] = float(rate_error)
+        st[ck.S_RATE_REF:] = 0.0
 
-    def _filter_coeffs(self, tf: float) -> tuple[float, float]:
-        if tf != self._tf_cached:
-            dt = self.dt
-            if self.method == "tustin" and tf >= 0.5 * dt:
-                self._a = (2.0 * tf - dt) / (2.0 * tf + dt)
-                self._b = 2.0 / (2.0 * tf + dt)
-            else:
-                self._a = tf / (tf + dt)
-                self._b = 1.0 / (tf + dt)
-            self._tf_cached = tf
-        return self._a, self._b
+    def _gains_row(self) -> NDArray[np.float64]:
+        g = self.gains
+        if g is not self._garr_of:
+            self._garr = gains_row(g)
+            self._garr_of = g
+        return self._garr
 
     def rate_reference(
         self, angle_ref: float, angle: float, gains: PPIDGains | None = None, rate_ff: float = 0.0
     ) -> float:
         """Outer loop: ``kp_angle * (angle_ref - angle) + rate_ff``, limited [rad/s]."""
-        g = self.gains if gains is None else gains
-        err = angle_ref - angle
-        if self.wrap:
-            err = wrap_angle(err)
-        r = g.kp_angle * err + rate_ff
-        if self.rate_limit is not None:
-            r = min(max(r, -self.rate_limit), self.rate_limit)
-        return r
+        g = self._gains_row() if gains is None else gains_row(gains)
+        return ck.ppid_rate_reference(g, self._const, self._row, float(angle_ref),
+                                      float(angle), float(rate_ff))
 
     def update_rate(self, rate_ref: float, rate: float, gains: PPIDGains | None = None) -> float:
         """Inner loop only: one step of the PID on ``e = rate_ref - rate``; returns N m."""
         if gains is not None:
             self.gains = gains
-        g = self.gains
-        e = rate_ref - rate
-        dt = self.dt
-        e_prev = self._e_prev
-        de = e - e_prev
-        tf = g.tf_rate_s
-        if tf == self._tf_cached:
-            a, b = self._a, self._b
-        else:
-            a, b = self._filter_coeffs(tf)
-        derivative = a * self.derivative + b * g.kd_rate * de
-        self.derivative = derivative
-        dI = 0.5 * g.ki_rate * dt * (e + e_prev) if self.method == "tustin" else g.ki_rate * dt * e
-        p = g.kp_rate * e
-        integral = self.integral
-        u_min, u_max = self.u_min, self.u_max
-        u_test = p + integral + dI + derivative
-        # conditional integration: integrate at most up to the limit, never further into it
-        if dI > 0.0 and u_test > u_max:
-            dI = max(0.0, u_max - (u_test - dI))
-        elif dI < 0.0 and u_test < u_min:
-            dI = min(0.0, u_min - (u_test - dI))
-        integral = min(max(integral + dI, u_min), u_max)
-        self.integral = integral
-        u = p + integral + derivative
-        self.output_unsat = u
-        self.saturated = u >= u_max or u <= u_min
-        u = min(max(u, u_min), u_max)
-        self._e_prev = e
-        self.rate_ref = rate_ref
-        self.output = u
-        return u
+        return ck.ppid_rate_step(self._gains_row(), self._state, self._const, self._row,
+                                 float(rate_ref), float(rate))
 
     def update(
         self,
@@ -252,6 +293,9 @@ class CascadedPPID:
         rate: float,
         gains: PPIDGains | None = None,
         rate_ff: float = 0.0,
+        *,
+        sat_hi: bool = False,
+        sat_lo: bool = False,
     ) -> float:
         """One control step.
 
@@ -266,6 +310,9 @@ class CascadedPPID:
             the current ones.
         rate_ff
             rate feed-forward added to the outer loop output [rad/s].
+        sat_hi, sat_lo
+            the allocation saturated this axis upwards / downwards last step: the integral
+            does not move further that way (its increment is taken back out of the output).
 
         Returns
         -------
@@ -274,16 +321,9 @@ class CascadedPPID:
         """
         if gains is not None:
             self.gains = gains
-        g = self.gains
-        # outer loop: rate_reference(angle_ref, angle, g, rate_ff), inlined (hot path)
-        err = angle_ref - angle
-        if self.wrap:
-            err = wrap_angle(err)
-        r = g.kp_angle * err + rate_ff
-        rl = self.rate_limit
-        if rl is not None:
-            r = min(max(r, -rl), rl)
-        return self.update_rate(r, rate)
+        return ck.ppid_step(self._gains_row(), self._state, self._const, self._row,
+                            float(angle_ref), float(angle), float(rate), float(rate_ff),
+                            bool(sat_hi), bool(sat_lo))
 
     # ------------------------------------------------------------------------------------
     def continuous_coefficients(self, gains: PPIDGains | None = None) -> ContinuousPPID:
@@ -300,11 +340,7 @@ class CascadedPPID:
         """
         g = self.gains if gains is None else gains
         dt = self.dt
-        tf = g.tf_rate_s
-        if self.method == "tustin" and tf >= 0.5 * dt:
-            a, b = (2.0 * tf - dt) / (2.0 * tf + dt), 2.0 / (2.0 * tf + dt)
-        else:
-            a, b = tf / (tf + dt), 1.0 / (tf + dt)
+        a, b = ck.filter_coefficients(g.tf_rate_s, dt, self.method == "tustin")
         P = np.array([g.kp_rate])  # over den 1
         if self.method == "tustin":
             I_num, I_den = 0.5 * g.ki_rate * dt * np.array([1.0, 1.0]), np.array([1.0, -1.0])

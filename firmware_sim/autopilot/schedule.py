@@ -60,16 +60,15 @@ import bisect
 import json
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from os import PathLike
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from vtolftc.firmware_sim.autopilot.pid import PPIDGains
-from vtolftc.rotation import ATTITUDE_AXES
+from vtolftc.rotation import ATTITUDE_AXES as AXES
 
 __all__ = [
-    "AXES",
     "FORMAT",
     "GAIN_FIELDS",
     "GainSchedule",
@@ -77,7 +76,6 @@ __all__ = [
 ]
 
 FORMAT = "vtolftc-gain-schedule/1"
-AXES: tuple[str, ...] = ATTITUDE_AXES
 GAIN_FIELDS: tuple[str, ...] = ("kp_angle", "kp_rate", "ki_rate", "kd_rate", "tf_rate_s")
 _FORMAT_PREFIX = "vtolftc-gain-schedule/"
 _SHA256 = re.compile(r"^[0-9a-fA-F]{64}$")
@@ -100,6 +98,20 @@ def read_json_file(path: str | PathLike[str], error: type[ValueError], what: str
         return json.loads(text)
     except json.JSONDecodeError as exc:
         raise error(f"{p}: not valid JSON: {exc}") from exc
+
+
+T = TypeVar("T")
+
+
+def load_document(path: str | PathLike[str], error: type[ValueError], what: str,
+                  parse: Callable[[Any], T]) -> T:
+    """Read the JSON file ``path`` and validate it with ``parse`` (a ``from_dict``); any
+    ``error`` raised names the file first (see :func:`read_json_file`)."""
+    data = read_json_file(path, error, what)
+    try:
+        return parse(data)
+    except error as exc:
+        raise error(f"{Path(path)}: {exc}") from None
 
 
 def _is_number(x: Any) -> bool:
@@ -161,11 +173,7 @@ class GainSchedule:
     @classmethod
     def load(cls, path: str | PathLike[str]) -> GainSchedule:
         """Read and validate a schedule file (JSON)."""
-        data = read_json_file(path, GainScheduleError, "gain schedule")
-        try:
-            return cls.from_dict(data)
-        except GainScheduleError as exc:
-            raise GainScheduleError(f"{Path(path)}: {exc}") from None
+        return load_document(path, GainScheduleError, "gain schedule", cls.from_dict)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> GainSchedule:

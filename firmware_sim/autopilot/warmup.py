@@ -1,8 +1,8 @@
 """Warm start: compile (or load from numba's cache) every compiled path of the autopilot.
 
 The autopilot's compiled kernels (the allocation's,
-:mod:`vtolftc.firmware_sim.autopilot.allocation`, and the attitude controllers',
-:mod:`vtolftc.firmware_sim.autopilot.attitude`) are compiled by numba at their first call
+:mod:`vtolftc.firmware_sim.autopilot.allocation`, and the attitude laws',
+:mod:`vtolftc.firmware_sim.autopilot.control_kernels`) are compiled by numba at their first call
 *for the argument types of that call*: a later call with another type (a writable instead
 of a read-only array, another layout) compiles a second specialisation, on a fresh install
 1-2 s in which the control loop stands still (measured in flight: the vehicle's output

@@ -51,8 +51,10 @@ ALL_PHYSICS = GRAVITY | AERODYNAMICS | GROUND | PROPULSION
 (P_MASS, P_G, P_RHO, P_S, P_B, P_C, P_CL0, P_CLA, P_CLMAX, P_STALL_RND, P_STALL_M, P_CLQ,
  P_CLDE, P_CD0, P_K, P_CYB, P_CYP, P_CYR, P_CYDA, P_CYDR, P_CLB, P_CLR, P_CLDA, P_CLDR,
  P_CM0, P_CMDE, P_CNP, P_CNDA, P_CNDR, P_ALIN, P_ASAT, P_DEFL, P_GK, P_GC, P_GF,
- P_GMU, P_ARM_X, P_ARM_Y, P_ARM_Z) = range(39)
-N_PARAMS = 39
+ P_GMU, P_ARM_X, P_ARM_Y, P_ARM_Z, P_NAIL, P_NRUD) = range(41)
+N_PARAMS = 41
+# P_NAIL, P_NRUD: number of ailerons and of rudders (1 or 2; surfaces in the order ailerons,
+# elevator, rudders). One surface gives the whole aircraft derivative, each of two half.
 # P_ARM_*: position of the aerodynamic reference point relative to the CG, body FRD (m). Zero
 # for the airframe as designed (the coefficients are about the CG); a perturbed CG (see
 # :func:`perturb`) moves it, and the aerodynamic force then also acts through this arm.
@@ -98,6 +100,8 @@ def pack(af: Airframe) -> Packed:
     P[P_CNP], P[P_CNDA], P[P_CNDR] = w.Cn_p, w.Cn_da, w.Cn_dr
     P[P_ALIN], P[P_ASAT] = w.moment_angle_linear_rad, w.moment_angle_saturation_rad
     P[P_DEFL] = af.surfaces.max_deflection_rad
+    P[P_NAIL] = sum(n.startswith("aileron") for n in af.surfaces.names)
+    P[P_NRUD] = sum(n.startswith("rudder") for n in af.surfaces.names)
     g = af.landing_gear
     P[P_GK], P[P_GC], P[P_GF], P[P_GMU] = (
         g.stiffness_N_m, g.damping_N_s_m, g.friction_N_s_m, g.friction_coefficient)
@@ -314,12 +318,20 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
         defl = P[P_DEFL]
         s0 = nr
         d_al = eff[s0] * x[N_RIGID + s0] * defl
-        d_ar = eff[s0 + 1] * x[N_RIGID + s0 + 1] * defl
-        d_e = eff[s0 + 2] * x[N_RIGID + s0 + 2] * defl
-        d_rl = eff[s0 + 3] * x[N_RIGID + s0 + 3] * defl
-        d_rr = eff[s0 + 4] * x[N_RIGID + s0 + 4] * defl
-        d_a = 0.5 * (d_al - d_ar)
-        d_r = 0.5 * (d_rl + d_rr)
+        if P[P_NAIL] == 2.0:
+            d_ar = eff[s0 + 1] * x[N_RIGID + s0 + 1] * defl
+            d_a = 0.5 * (d_al - d_ar)
+            s0 += 2
+        else:  # one aileron: positive = trailing edge down on the left (rolls right)
+            d_a = d_al
+            s0 += 1
+        d_e = eff[s0] * x[N_RIGID + s0] * defl
+        d_rl = eff[s0 + 1] * x[N_RIGID + s0 + 1] * defl
+        if P[P_NRUD] == 2.0:
+            d_rr = eff[s0 + 2] * x[N_RIGID + s0 + 2] * defl
+            d_r = 0.5 * (d_rl + d_rr)
+        else:
+            d_r = d_rl
 
         cl, cd = lift_drag_coefficients(alpha, P)
         lift = qbar * S * (cl + P[P_CLDE] * d_e) + k_rate * c * c * P[P_CLQ] * q

@@ -103,6 +103,10 @@ GROUPS: dict[str, tuple[str, ...]] = {
 def expand_actuators(names: Iterable[str], actuator_names: Sequence[str]) -> list[str]:
     """Expand group names and check every name against the airframe's actuators."""
     groups = dict(GROUPS)
+    for g, prefix in (("ailerons", "aileron"), ("rudders", "rudder")):
+        groups[g] = tuple(n for n in actuator_names if n.startswith(prefix))
+    groups["surfaces"] = tuple(n for n in actuator_names
+                               if not n.startswith(("rotor_", "pusher_")))
     groups["lift_rotors"] = tuple(n for n in actuator_names if n.startswith("rotor_"))
     groups["pushers"] = tuple(n for n in actuator_names if n.startswith("pusher_"))
     out: list[str] = []

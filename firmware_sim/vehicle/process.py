@@ -90,6 +90,7 @@ from vtolftc.firmware_sim.vehicle.dynamics import N_RIGID
 from vtolftc.firmware_sim.vehicle.faults import Fault, FaultKind
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import SensorNoise
+from vtolftc.jsonio import atomic_write_text, dumps
 from vtolftc.protocols import SigningConfig, open_link
 from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
 from vtolftc.protocols.generated import constants as mav
@@ -642,5 +643,5 @@ class VehicleProcess:
             self._truth.close()
             self._truth = None
             assert self.out_dir is not None
-            (self.out_dir / "vehicle_summary.json").write_text(json.dumps(summary, indent=2))
+            atomic_write_text(self.out_dir / "vehicle_summary.json", dumps(summary))
         self.link.close()

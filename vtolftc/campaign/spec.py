@@ -321,10 +321,11 @@ def parse_spec(text: str, *, source: str = "<spec>", base_dir: Path | None = Non
     controllers = _controllers(r, c)
     airframe_path, gains_dir = _paths(r, c, base_dir if base_dir is not None else Path("."))
     if actuator_names is None:
-        from vtolftc.airframe.loader import AirframeError, load_airframe
+        from vtolftc.airframe.loader import AirframeError
+        from vtolftc.firmware_sim.vehicle.flyable import load_flyable_airframe
 
         try:
-            actuator_names = load_airframe(airframe_path).actuator_names
+            actuator_names = load_flyable_airframe(airframe_path).actuator_names
         except AirframeError as exc:
             raise SpecError(f"{source}: campaign.airframe: {exc}") from None
 

@@ -38,7 +38,8 @@ from numpy.typing import NDArray
 
 from vtolftc.protocols.hil import NavState
 from vtolftc.rotation import quat_to_euler
-from vtolftc.telemetry.samples import FlightMode, TelemetrySample
+from vtolftc.telemetry.autopilot_status import FlightMode
+from vtolftc.telemetry.samples import TelemetrySample
 
 __all__ = ["CRASH_ATTITUDE_DEG", "MetricsAccumulator", "compute_metrics", "is_crash"]
 

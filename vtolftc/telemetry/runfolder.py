@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from vtolftc.jsonio import json_safe
+from vtolftc.protocols.hil import N_ACTUATORS
 from vtolftc.telemetry.plotbuffer import DecimatingBuffer
 from vtolftc.telemetry.samples import TelemetrySample
 
@@ -84,7 +85,7 @@ class RunFolderWriter:
         """Create the run folder, write ``run.json``, open ``telemetry.csv`` and ``events.log``."""
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.info = dict(info)
-        self._names = list(info.get("actuator_names", [f"u{i}" for i in range(15)]))
+        self._names = list(info.get("actuator_names", [f"u{i}" for i in range(N_ACTUATORS)]))
         cfg = {**info, **self.extra_config, "seed": info.get("seed", 0),
                "versions": _versions(), "run_dir": str(self.run_dir),
                "started_utc": _dt.datetime.now(_dt.UTC).isoformat()}

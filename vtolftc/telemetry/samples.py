@@ -5,12 +5,12 @@ them to every :class:`RunObserver` (the run-folder writer, the rerun recorder, l
 A sample joins what the autopilot knew and decided (``nav``, ``status``) with what only the
 simulated vehicle knows (``truth``): the truth part is for logs and plots and never reaches the
 controller (passive FTC). In SITL the autopilot process has no truth; ``truth`` is then None
-in its samples and the vehicle process reports it on its own.
+in its samples and the vehicle process reports it on its own. The autopilot's part, its
+status and modes, is defined in :mod:`vtolftc.telemetry.autopilot_status`.
 """
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
@@ -18,69 +18,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.protocols.hil import NavState
+from vtolftc.telemetry.autopilot_status import AutopilotStatus
 
 __all__ = [
-    "AutopilotStatus",
-    "FlightMode",
-    "LandedState",
     "RunObserver",
     "TelemetrySample",
     "VehicleTruth",
-    "VtolState",
 ]
-
-
-class FlightMode(enum.IntEnum):
-    """Flight modes of the autopilot's state machine."""
-
-    IDLE = 0              # on the ground (armed or not), rotors at idle or off
-    TAKEOFF = 1           # multicopter climb to the takeoff altitude
-    HOVER = 2             # multicopter position and altitude hold
-    FRONT_TRANSITION = 3  # pusher ramps up, lift rotors hold altitude, wing takes over
-    FIXED_WING = 4        # wing-borne cruise, altitude hold by pitch
-    BACK_TRANSITION = 5   # pusher off, decelerate, lift rotors take over again
-    LAND = 6              # multicopter descent to touchdown, then IDLE
-
-
-class VtolState(enum.IntEnum):
-    """MAV_VTOL_STATE."""
-
-    UNDEFINED = 0
-    TRANSITION_TO_FW = 1
-    TRANSITION_TO_MC = 2
-    MC = 3
-    FW = 4
-
-
-class LandedState(enum.IntEnum):
-    """MAV_LANDED_STATE."""
-
-    UNDEFINED = 0
-    ON_GROUND = 1
-    IN_AIR = 2
-    TAKEOFF = 3
-    LANDING = 4
-
-
-@dataclass(slots=True)
-class AutopilotStatus:
-    """A snapshot of the autopilot for telemetry, logs and ground stations."""
-
-    time_usec: int
-    mode: FlightMode
-    armed: bool
-    vtol_state: VtolState
-    landed_state: LandedState
-    attitude_ref_rad: NDArray[np.float64]       # roll, pitch, yaw references
-    attitude_rad: NDArray[np.float64]           # roll, pitch, yaw measured
-    altitude_ref_m: float                       # above home
-    airspeed_m_s: float
-    virtual_command: NDArray[np.float64]        # [Fz (N, NED down), Fx (N, forward), L, M, N (N m)]
-    actuator_commands: NDArray[np.float64]      # 15 normalised commands
-    allocation_status: str
-    controller: str                             # "gs-shif", "shif" or "lqr"
-    message: str = ""                           # last event worth a STATUSTEXT
-    px4_custom_mode: int = -1                   # PX4 HEARTBEAT custom mode, -1: from ``mode``
 
 
 @dataclass(slots=True)

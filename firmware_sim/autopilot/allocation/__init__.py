@@ -5,10 +5,12 @@ Split as PX4 splits it: the effectiveness ``B(V)`` lives apart
 statistics, per-step bounds and the ``Allocator`` protocol; ``wls`` the weighted least-squares
 problem the QP algorithms share; one file per algorithm:
 
-``qp_osqp.QPAllocator``
-    OSQP (ADMM) finished by the compiled active-set solver.
 ``active_set.ActiveSetAllocator``
-    The compiled active-set solver alone, warm-started from the previous command.
+    The compiled active-set solver alone, warm-started from the previous command: the
+    allocator that flies (the autopilot's default).
+``qp_osqp.QPAllocator``
+    OSQP (ADMM) finished by the compiled active-set solver: an independent comparison for
+    the tests and ``benchmarks/bench_allocation.py``; needs the optional ``osqp`` extra.
 ``pseudo_inverse.PseudoInverseAllocator``
     PX4's pseudo-inverse + sequential desaturation (baseline, and the QP fallback).
 

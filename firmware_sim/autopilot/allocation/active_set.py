@@ -42,6 +42,7 @@ previous command.
 from __future__ import annotations
 
 import time
+from typing import Unpack
 
 import numba
 import numpy as np
@@ -57,6 +58,7 @@ from vtolftc.firmware_sim.autopilot.allocation.wls import (
     ST_FALLBACK,
     ST_INVALID_INPUT,
     ST_SOLVED,
+    ProblemOptions,
     WLSAllocator,
     prepare_wls,
 )
@@ -294,39 +296,19 @@ class ActiveSetAllocator(WLSAllocator):
 
     Parameters
     ----------
-    n_v, u_min, u_max, w_v, w_u, eps, u_pref, rate_limit, dt
-        The problem, see ``wls.WLSAllocator``.
+    n_v, u_min, u_max, **options
+        The problem, see ``wls.WLSAllocator`` (options: ``wls.ProblemOptions``).
     tol : float
         Relative KKT tolerance of ``box_qp`` (default 1e-15; 1e-9, the polish's, leaves the
         split among redundant actuators undetermined, see the module docstring).
     max_iter : int
         Maximum working-set changes per step (default 60).
-    thrust_axis, roll_axis, pitch_axis, yaw_axis : int or None
-        Axis indices for the fallback's sequential desaturation (defaults follow ``AXES_5``).
     """
 
-    def __init__(
-        self,
-        n_v: int,
-        u_min: np.ndarray,
-        u_max: np.ndarray,
-        *,
-        w_v: np.ndarray | None = None,
-        w_u: np.ndarray | None = None,
-        eps: float = 1e-6,
-        u_pref: np.ndarray | None = None,
-        rate_limit: np.ndarray | None = None,
-        dt: float = 1.0 / 250.0,
-        tol: float = 1e-15,
-        max_iter: int = 60,
-        thrust_axis: int | None = 0,
-        roll_axis: int | None = 2,
-        pitch_axis: int | None = 3,
-        yaw_axis: int | None = 4,
-    ) -> None:
-        super().__init__(n_v, u_min, u_max, w_v=w_v, w_u=w_u, eps=eps, u_pref=u_pref,
-                         rate_limit=rate_limit, dt=dt, thrust_axis=thrust_axis,
-                         roll_axis=roll_axis, pitch_axis=pitch_axis, yaw_axis=yaw_axis)
+    def __init__(self, n_v: int, u_min: np.ndarray, u_max: np.ndarray, *,
+                 tol: float = 1e-15, max_iter: int = 60,
+                 **options: Unpack[ProblemOptions]) -> None:
+        super().__init__(n_v, u_min, u_max, **options)
         if not (tol > 0 and np.isfinite(tol)):
             raise ValueError(f"tol must be finite and > 0, got {tol}")
         if max_iter < 1:

@@ -40,7 +40,7 @@ from the returned ``u``.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Unpack
 
 import numba
 import numpy as np
@@ -58,6 +58,7 @@ from vtolftc.firmware_sim.autopilot.allocation.wls import (
     ST_FALLBACK,
     ST_SOLVED,
     ST_SOLVED_INACCURATE,
+    ProblemOptions,
     WLSAllocator,
 )
 
@@ -113,44 +114,23 @@ class QPAllocator(WLSAllocator):
 
     Parameters
     ----------
-    n_v, u_min, u_max, w_v, w_u, eps, u_pref, rate_limit, dt
-        The problem, see ``wls.WLSAllocator``.
+    n_v, u_min, u_max, **options
+        The problem, see ``wls.WLSAllocator`` (options: ``wls.ProblemOptions``).
     settings : Mapping, optional
         OSQP setting overrides (e.g. ``{"max_iter": 50}``, ``{"time_limit": 1e-3}`` [s]).
     polish : bool
         Refine OSQP's iterate with the active-set solver (default True).
     polish_tol : float
         Relative KKT tolerance of the polish (default 1e-9, see ``active_set.box_qp``).
-    thrust_axis, roll_axis, pitch_axis, yaw_axis : int or None
-        Axis indices for the fallback's sequential desaturation (defaults follow ``AXES_5``).
     """
 
-    def __init__(
-        self,
-        n_v: int,
-        u_min: np.ndarray,
-        u_max: np.ndarray,
-        *,
-        w_v: np.ndarray | None = None,
-        w_u: np.ndarray | None = None,
-        eps: float = 1e-6,
-        u_pref: np.ndarray | None = None,
-        rate_limit: np.ndarray | None = None,
-        dt: float = 1.0 / 250.0,
-        settings: Mapping[str, Any] | None = None,
-        polish: bool = True,
-        polish_tol: float = 1e-9,
-        thrust_axis: int | None = 0,
-        roll_axis: int | None = 2,
-        pitch_axis: int | None = 3,
-        yaw_axis: int | None = 4,
-    ) -> None:
+    def __init__(self, n_v: int, u_min: np.ndarray, u_max: np.ndarray, *,
+                 settings: Mapping[str, Any] | None = None, polish: bool = True,
+                 polish_tol: float = 1e-9, **options: Unpack[ProblemOptions]) -> None:
         if osqp is None:
             raise ImportError("QPAllocator needs OSQP: pip install \"vtol-ftc[osqp]\" (the "
                               "allocator that flies, ActiveSetAllocator, does not)")
-        super().__init__(n_v, u_min, u_max, w_v=w_v, w_u=w_u, eps=eps, u_pref=u_pref,
-                         rate_limit=rate_limit, dt=dt, thrust_axis=thrust_axis,
-                         roll_axis=roll_axis, pitch_axis=pitch_axis, yaw_axis=yaw_axis)
+        super().__init__(n_v, u_min, u_max, **options)
         self.polish = bool(polish)
         self.polish_tol = float(polish_tol)
         self.settings: dict[str, Any] = dict(_DEFAULT_OSQP_SETTINGS)

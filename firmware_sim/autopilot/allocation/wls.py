@@ -37,6 +37,7 @@ the baseline allocator.
 from __future__ import annotations
 
 import time
+from typing import TypedDict, Unpack
 
 import numba
 import numpy as np
@@ -52,7 +53,25 @@ from vtolftc.firmware_sim.autopilot.allocation.interface import (
 )
 from vtolftc.firmware_sim.autopilot.allocation.pseudo_inverse import PseudoInverseAllocator
 
-__all__ = ["WLSAllocator"]
+__all__ = ["ProblemOptions", "WLSAllocator"]
+
+
+class ProblemOptions(TypedDict, total=False):
+    """The optional parts of the allocation problem, shared by every QP allocator's
+    constructor (documented in :class:`WLSAllocator`): ``w_v``, ``w_u``, ``eps``, ``u_pref``,
+    ``rate_limit``, ``dt`` and the fallback's ``thrust_axis``, ``roll_axis``, ``pitch_axis``,
+    ``yaw_axis``."""
+
+    w_v: np.ndarray | None
+    w_u: np.ndarray | None
+    eps: float
+    u_pref: np.ndarray | None
+    rate_limit: np.ndarray | None
+    dt: float
+    thrust_axis: int | None
+    roll_axis: int | None
+    pitch_axis: int | None
+    yaw_axis: int | None
 
 F64 = np.dtype(np.float64)
 _perf_counter = time.perf_counter
@@ -134,6 +153,9 @@ class WLSAllocator:
         Number of virtual axes (e.g. 5, see ``AXES_5``).
     u_min, u_max : numpy.ndarray
         Actuator position limits (n_u,), normalised units, finite, ``u_min <= u_max``.
+    **options
+        The rest of the problem, all optional (:class:`ProblemOptions`; every QP allocator
+        takes them and passes them here):
     w_v : numpy.ndarray, optional
         Virtual-axis weights (n_v,), > 0; squared in the cost. Axis priority: e.g.
         ``[1, 1, 10, 10, 3]`` (forces in N, moments in N m) tracks roll/pitch first.
@@ -152,23 +174,21 @@ class WLSAllocator:
         Axis indices for the fallback's sequential desaturation (defaults follow ``AXES_5``).
     """
 
-    def __init__(
-        self,
-        n_v: int,
-        u_min: np.ndarray,
-        u_max: np.ndarray,
-        *,
-        w_v: np.ndarray | None = None,
-        w_u: np.ndarray | None = None,
-        eps: float = 1e-6,
-        u_pref: np.ndarray | None = None,
-        rate_limit: np.ndarray | None = None,
-        dt: float = 1.0 / 250.0,
-        thrust_axis: int | None = 0,
-        roll_axis: int | None = 2,
-        pitch_axis: int | None = 3,
-        yaw_axis: int | None = 4,
-    ) -> None:
+    def __init__(self, n_v: int, u_min: np.ndarray, u_max: np.ndarray,
+                 **options: Unpack[ProblemOptions]) -> None:
+        unknown = set(options) - set(ProblemOptions.__annotations__)
+        if unknown:
+            raise TypeError(f"unexpected allocator option(s): {', '.join(sorted(unknown))}")
+        w_v = options.get("w_v")
+        w_u = options.get("w_u")
+        eps = options.get("eps", 1e-6)
+        u_pref = options.get("u_pref")
+        rate_limit = options.get("rate_limit")
+        dt = options.get("dt", 1.0 / 250.0)
+        thrust_axis = options.get("thrust_axis", 0)
+        roll_axis = options.get("roll_axis", 2)
+        pitch_axis = options.get("pitch_axis", 3)
+        yaw_axis = options.get("yaw_axis", 4)
         self.u_min = np.asarray(u_min, dtype=float).copy()
         self.u_max = np.asarray(u_max, dtype=float).copy()
         n_u = self.u_min.size

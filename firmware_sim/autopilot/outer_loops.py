@@ -1,0 +1,263 @@
+"""The autopilot's outer loops: attitude references and force commands of the flight mode.
+
+Multicopter modes (TAKEOFF, HOVER, LAND, front and back transition): the constant-gain
+altitude hold of :mod:`.altitude` gives the body z force ``Fz`` [N] (with a nominal-aerodynamics
+feed-forward of the wing's lift); hover, takeoff and land hold the horizontal position through
+small tilt references (at most ``MPC_TILTMAX_AIR``); the front transition flies roll 0,
+pitch 0 and ramps the pushers (``Fx``) at ``VT_PSHER_SLEW`` up to ``VT_F_TRANS_THR``; the back
+transition flies roll 0, pitch 0 with the pushers off.
+
+Fixed-wing: lateral guidance of the navigator (roll, heading), a TECS-like pitch from the
+altitude hold and an airspeed hold on the pushers; the lift rotors' upper bound ramps to 0
+over ``VT_TRANS_P2_DUR``, after which they become a weighted reserve (no ``Fz`` command).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from vtolftc.airframe.loader import Airframe
+from vtolftc.firmware_sim.autopilot.altitude import FixedWingAltitudeHold, MulticopterAltitudeHold
+from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
+from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
+from vtolftc.firmware_sim.autopilot.interface import FlightMode, NavState
+from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
+
+__all__ = ["OuterLoops"]
+
+#: FlightMode members as module constants (an Enum class attribute costs ~75 ns in 3.11).
+_M_BACK_TRANSITION = FlightMode.BACK_TRANSITION
+_M_FIXED_WING = FlightMode.FIXED_WING
+_M_FRONT_TRANSITION = FlightMode.FRONT_TRANSITION
+_M_LAND = FlightMode.LAND
+_M_TAKEOFF = FlightMode.TAKEOFF
+
+
+class OuterLoops:
+    """References and forces of the flight mode (see the module docstring).
+
+    Parameters
+    ----------
+    airframe
+        the airframe (mass, gravity, wing, pushers: nominal values).
+    effectiveness
+        the nominal effectiveness model (air density).
+    pp
+        the autopilot's parameters by name (``Parameter`` objects, read every step).
+    setpoints
+        the shared references (read and written).
+    estimate
+        the state intake (time of the step).
+    dt
+        control period [s].
+    """
+
+    def __init__(self, airframe: Airframe, effectiveness: EffectivenessModel,
+                 pp: dict[str, Any], setpoints: Setpoints, estimate: StateEstimate,
+                 dt: float) -> None:
+        self.airframe = airframe
+        self.effectiveness = effectiveness
+        self._p = pp
+        self.sp = setpoints
+        self.est = estimate
+        self.dt = dt
+        self.mc_alt = MulticopterAltitudeHold(self.dt)
+        self.fw_alt = FixedWingAltitudeHold(self.dt)
+        self.navigator: Any = None  # set by the autopilot once its navigator exists
+        self._wing: tuple = (None,)  # (airframe, rho, wing constants) of aero_estimate
+        self._pushers_nominal = [(r.max_thrust_N, r.zero_thrust_axial_speed_m_s)
+                                 for r in airframe.pushers]
+        self.pusher_ramp = 0.0
+        self.fw_entry_usec = 0
+        self.airspeed_int = 0.0
+
+    def enter_mode(self, mode: FlightMode, pitch: float) -> None:
+        """The loops' part of entering ``mode`` (``pitch`` the current pitch [rad])."""
+        if mode == FlightMode.FRONT_TRANSITION:
+            self.pusher_ramp = 0.0
+        elif mode == FlightMode.FIXED_WING:
+            self.fw_entry_usec = self.est.time_usec
+            self.fw_alt.reset(pitch)
+            self.airspeed_int = 0.0
+        elif mode == FlightMode.BACK_TRANSITION:
+            self.mc_alt.reset(self.mc_alt.integral)
+
+    def update(self, mode: FlightMode, nav: NavState, roll: float, pitch: float, yaw: float,
+               h: float, v_up: float, V: float) -> tuple[bool, float, float]:
+        """One step of the outer loops in an armed flight ``mode``.
+
+        Writes the attitude reference (``setpoints.ref``, rad) and the force commands
+        (``setpoints.v[0:2]``, N). ``roll``, ``pitch``, ``yaw`` [rad], ``h`` altitude [m],
+        ``v_up`` climb rate [m/s], ``V`` airspeed [m/s]. Returns ``(reserve, rotor_hi,
+        pusher_hi)``: the lift rotors are a weighted reserve (fixed-wing after the ramp), and
+        the upper bounds of the lift rotors and of the pushers (normalised).
+        """
+        sp = self.sp
+        sp.ref[2] = sp.yaw_hold
+        cos_tilt = max(0.5, math.cos(roll) * math.cos(pitch))
+        # estimate.body_velocity_f(*ql, *vel)[0] and [2], inlined (same expressions, same bits)
+        w_, x_, y_, z_ = self.est.ql
+        vn_, ve_, vd_ = self.est.vel
+        ub = ((1 - 2 * (y_ * y_ + z_ * z_)) * vn_ + 2 * (x_ * y_ + w_ * z_) * ve_
+              + 2 * (x_ * z_ - w_ * y_) * vd_)
+        wb = (2 * (x_ * z_ + w_ * y_) * vn_ + 2 * (y_ * z_ - w_ * x_) * ve_
+              + (1 - 2 * (x_ * x_ + y_ * y_)) * vd_)
+        alpha = math.atan2(wb, ub) if ub > 1.0 else 0.0
+        lift, drag = self.aero_estimate(V, alpha)
+        fz_aero = -lift * math.cos(alpha) - drag * math.sin(alpha)  # body z, N
+
+        if mode is not _M_FIXED_WING:  # TAKEOFF, HOVER, LAND, FRONT/BACK_TRANSITION
+            pusher_hi = self._outer_mc(mode, nav, yaw, h, v_up, V, cos_tilt, fz_aero)
+            return False, 1.0, pusher_hi
+        t_fw = (self.est.time_usec - self.fw_entry_usec) * 1e-6
+        ramp = self._p["VT_TRANS_P2_DUR"].value
+        rotor_hi = max(0.0, 1.0 - t_fw / ramp) if ramp > 0 else 0.0
+        reserve = False
+        if rotor_hi <= 0.0:
+            rotor_hi = 1.0   # the reserve: weighted, not bounded (allocator_fw)
+            reserve = True
+        self._outer_fw(nav, roll, pitch, yaw, h, v_up, V, cos_tilt, alpha, lift, drag,
+                       fz_aero, reserve)
+        return reserve, rotor_hi, 1.0
+
+    def _outer_mc(self, mode: FlightMode, nav: NavState, yaw: float, h: float, v_up: float,
+                  V: float, cos_tilt: float, fz_aero: float) -> float:
+        """Outer loops in the multicopter modes (TAKEOFF, HOVER, LAND, transitions).
+
+        Writes the roll/pitch references into ``setpoints.ref`` [rad] and the body z and x
+        force commands [N] into ``setpoints.v[0]`` and ``setpoints.v[1]``; returns the
+        pushers' upper bound (1 in the front transition, else 0).
+        """
+        pp = self._p
+        sp = self.sp
+        ref = sp.ref
+        override = None
+        vmax_up = pp["MPC_Z_VEL_MAX_UP"].value
+        if mode == _M_TAKEOFF:
+            vmax_up = min(vmax_up, pp["MPC_TKO_SPEED"].value)
+        if mode == _M_LAND:
+            override = -pp["MPC_LAND_SPEED"].value
+            sp.alt_ref = h
+        a_up = self.mc_alt.update(sp.alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
+                                  kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
+                                  ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
+                                  v_max_up=vmax_up, v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value,
+                                  v_up_override=override)
+        sp.v[0] = (-self.airframe.mass_kg * (self.airframe.gravity_m_s2 + a_up) / cos_tilt
+                   - fz_aero)
+        fx_cmd = 0.0
+        pusher_hi = 1.0
+        if mode == _M_FRONT_TRANSITION:
+            ref[0] = 0.0
+            ref[1] = 0.0
+            self.pusher_ramp = min(1.0, self.pusher_ramp
+                                   + pp["VT_PSHER_SLEW"].value * self.dt)
+            fx_cmd = pp["VT_F_TRANS_THR"].value * self.pusher_ramp * self.pusher_max_force(V)
+        elif mode == _M_BACK_TRANSITION:
+            ref[0] = 0.0
+            ref[1] = 0.0
+            pusher_hi = 0.0
+        else:
+            ref[0], ref[1] = self._position_hold(nav, yaw)
+            pusher_hi = 0.0
+        sp.v[1] = fx_cmd
+        return pusher_hi
+
+    def _outer_fw(self, nav: NavState, roll: float, pitch: float, yaw: float, h: float,
+                  v_up: float, V: float, cos_tilt: float, alpha: float, lift: float,
+                  drag: float, fz_aero: float, reserve: bool) -> None:
+        """Outer loops in FIXED_WING: lateral guidance, altitude (TECS-like pitch) and
+        airspeed loops.
+
+        Writes the roll/pitch/yaw references into ``setpoints.ref`` [rad] and the body z and
+        x force commands [N] into ``setpoints.v[0]`` and ``setpoints.v[1]`` (no z command in
+        the reserve, where the lift rotors are only weighted).
+        """
+        pp = self._p
+        sp = self.sp
+        ref = sp.ref
+        mass = self.airframe.mass_kg
+        g = self.airframe.gravity_m_s2
+        lim = math.radians
+        lateral = self.navigator.fw_lateral(nav, roll, yaw, V)
+        if lateral is None:
+            ref[0] = 0.0
+        else:
+            ref[0], ref[2] = lateral
+        ref[1] = self.fw_alt.update(sp.alt_ref, h, v_up, kp_alt=pp["FW_ALT_P"].value,
+                                    kp_vz=pp["FW_VZ_P"].value, ki_vz=pp["FW_VZ_I"].value,
+                                    climb_max=pp["FW_CLMB_MAX"].value,
+                                    sink_max=pp["FW_SINK_MAX"].value,
+                                    pitch_min=lim(pp["FW_P_LIM_MIN"].value),
+                                    pitch_max=lim(pp["FW_P_LIM_MAX"].value))
+        fx_max = self.pusher_max_force(V)
+        e_v = self.navigator.airspeed_setpoint() - V
+        a_x = pp["FW_AIRSPD_P"].value * e_v + self.airspeed_int
+        fx_cmd = drag * math.cos(alpha) - lift * math.sin(alpha) + mass * (
+            a_x + g * math.sin(pitch))
+        if not ((fx_cmd >= fx_max and e_v > 0) or (fx_cmd <= 0.0 and e_v < 0)):
+            self.airspeed_int = min(max(self.airspeed_int
+                                        + pp["FW_AIRSPD_I"].value * e_v * self.dt, -3.0), 3.0)
+        sp.v[1] = min(max(fx_cmd, 0.0), fx_max)
+        if not reserve:
+            a_up = self.mc_alt.update(sp.alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
+                                      kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
+                                      ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
+                                      v_max_up=pp["MPC_Z_VEL_MAX_UP"].value,
+                                      v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value)
+            sp.v[0] = -mass * (g + a_up) / cos_tilt - fz_aero
+        else:
+            sp.v[0] = 0.0
+
+    def aero_estimate(self, V: float, alpha: float) -> tuple[float, float]:
+        """Nominal wing lift and drag [N] at airspeed V [m/s] and angle of attack alpha [rad]
+        (from the airframe file, linear lift clipped at CL_max)."""
+        if V < 1.0:
+            return 0.0, 0.0
+        wing = self._wing
+        if wing[0] is not self.airframe:
+            w = self.airframe.wing
+            wing = self._wing = (self.airframe, self.effectiveness._rho, w.area_m2, w.CL0,
+                                 w.CL_alpha, w.CL_max, w.CD0, w.induced_drag_factor)
+        _, rho, area, cl0, cl_alpha, cl_max, cd0, k_i = wing
+        # effectiveness.dynamic_pressure(V) * area, inlined (V >= 1 here)
+        qS = 0.5 * rho * V * V * area
+        cl = min(max(cl0 + cl_alpha * alpha, -cl_max), cl_max)
+        cd = cd0 + k_i * cl * cl
+        return qS * cl, qS * cd
+
+    def pusher_max_force(self, V: float) -> float:
+        """Nominal total pusher thrust at full command and airspeed V [m/s], in N."""
+        tot = 0.0
+        for tmax, v0 in self._pushers_nominal:
+            tot += tmax * min(1.25, max(0.0, 1.0 - V / v0))
+        return tot
+
+    def _position_hold(self, nav: NavState, yaw: float) -> tuple[float, float]:
+        """Roll and pitch references [rad] holding the horizontal position (brake first)."""
+        pp = self._p
+        sp = self.sp
+        vn, ve = float(nav.vel_ned_m_s[0]), float(nav.vel_ned_m_s[1])
+        if not sp.hold_locked:
+            if math.hypot(vn, ve) < 0.5:
+                sp.hold_ne[:] = nav.pos_ned_m[:2]
+                sp.hold_locked = True
+            vrn, vre = 0.0, 0.0
+        else:
+            kp = pp["MPC_XY_P"].value
+            vrn = kp * (sp.hold_ne[0] - float(nav.pos_ned_m[0]))
+            vre = kp * (sp.hold_ne[1] - float(nav.pos_ned_m[1]))
+            vmax = pp["MPC_XY_VEL_MAX"].value
+            s = math.hypot(vrn, vre)
+            if s > vmax:
+                vrn, vre = vrn * vmax / s, vre * vmax / s
+        kv = pp["MPC_XY_VEL_P_ACC"].value
+        an, ae = kv * (vrn - vn), kv * (vre - ve)
+        g = self.airframe.gravity_m_s2
+        a_fwd = math.cos(yaw) * an + math.sin(yaw) * ae
+        a_right = -math.sin(yaw) * an + math.cos(yaw) * ae
+        tmax = math.radians(pp["MPC_TILTMAX_AIR"].value)
+        pitch_ref = min(max(-math.atan2(a_fwd, g), -tmax), tmax)
+        roll_ref = min(max(math.atan2(a_right, g), -tmax), tmax)
+        return roll_ref, pitch_ref

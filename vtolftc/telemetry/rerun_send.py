@@ -1,0 +1,185 @@
+"""The flushing part of a rerun recording: buffered rows to rerun in columns, and the writes.
+
+:class:`ColumnSender` sends a :class:`~vtolftc.telemetry.rerun_rows.RowBuffer` with one
+``send_columns`` call per entity (angles in degrees, the display edge), re-sends the flown
+path at most every ``path_period_usec`` of simulated time and then waits for rerun's writer.
+:class:`BackgroundFlusher` asks rerun every 0.25 s of wall time to write what it holds
+(events logged while the simulation stands still).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import threading
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from vtolftc.rotation import ATTITUDE_AXES
+from vtolftc.telemetry.rerun_rows import RowBuffer
+from vtolftc.telemetry.rerun_scene import TIMELINE, actuator_entity
+
+__all__ = ["BackgroundFlusher", "ColumnSender", "ScalarColumn", "flush_takes_timeout"]
+
+
+def flush_takes_timeout(rec: Any) -> bool:
+    """Whether ``rec.flush`` of this rerun version accepts ``timeout_sec``."""
+    import inspect
+
+    try:
+        return "timeout_sec" in inspect.signature(rec.flush).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+class ScalarColumn:
+    """A ready component column for ``send_columns``: its descriptor and arrow list array."""
+
+    __slots__ = ("_array", "_desc")
+
+    def __init__(self, desc: Any, array: Any) -> None:
+        self._desc = desc
+        self._array = array
+
+    def component_descriptor(self) -> Any:
+        """The component descriptor."""
+        return self._desc
+
+    def as_arrow_array(self) -> Any:
+        """One list (the scalars of a row) per row."""
+        return self._array
+
+
+class ColumnSender:
+    """Sends buffered rows to a rerun recording stream (see the module docstring).
+
+    Parameters
+    ----------
+    rr
+        the ``rerun`` module.
+    rec
+        the ``rerun.RecordingStream``.
+    path_period_usec
+        simulated time between two sends of the flown path [us].
+    """
+
+    def __init__(self, rr: Any, rec: Any, path_period_usec: int) -> None:
+        self._rr = rr
+        self._rec = rec
+        self._path_period_usec = path_period_usec
+        self._last_path_usec: int | None = None
+        self._scalar_desc: Any = None
+        self._flush_timeout = flush_takes_timeout(rec)
+
+    def _scalar_descriptor(self) -> Any:
+        """The component descriptor of ``Scalars:scalars`` (looked up once)."""
+        desc = self._scalar_desc
+        if desc is None:
+            col = next(iter(self._rr.Scalars.columns(scalars=np.zeros(1))))
+            desc = self._scalar_desc = col.component_descriptor()
+        return desc
+
+    def send(self, rows: RowBuffer, names: Sequence[str], final: bool = False) -> None:
+        """Send the ``rows.n`` buffered rows as columns (``names`` the actuators), the path
+        when due (always when ``final``), and (unless ``final``) wait until rerun has written
+        them. Errors are printed, never raised; the caller resets the buffer."""
+        n = rows.n
+        if n == 0:
+            return
+        rr = self._rr
+        rec = self._rec
+        try:
+            times = [rr.TimeColumn(TIMELINE,
+                                   duration=(rows.t[:n] * 1000).astype("timedelta64[ns]"))]
+
+            scalar_desc = self._scalar_descriptor()
+
+            def scalars(entity: str, values: np.ndarray) -> None:
+                # the arrow list column rr.Scalars.columns(...).partition(...) builds, made
+                # directly (a fraction of the cost: this runs for every entity and chunk)
+                width = values.shape[1] if values.ndim == 2 else 1
+                flat = pa.array(np.ascontiguousarray(values, dtype=np.float64).ravel())
+                offsets = pa.array(np.arange(0, (n + 1) * width, width, dtype=np.int32))
+                rec.send_columns(entity, indexes=times, columns=[
+                    ScalarColumn(scalar_desc, pa.ListArray.from_arrays(offsets, flat))])
+
+            b = rows.buf[:n]
+            sl = rows.sl
+            att_ref = np.degrees(b[:, sl["att_ref"]])
+            att = np.degrees(b[:, sl["att"]])
+            for j, ax in enumerate(ATTITUDE_AXES):
+                scalars(f"attitude/{ax}", np.column_stack((att_ref[:, j], att[:, j])))
+            misc = b[:, sl["misc"]]
+            scalars("altitude", misc[:, [1, 0]])
+            scalars("airspeed", misc[:, [2, 3]] if rows.has_truth else misc[:, 2])
+            scalars("mode/id", misc[:, 4])
+            scalars("mode/armed", misc[:, 5])
+            scalars("control/virtual", b[:, sl["virt"]])
+            cmd = b[:, sl["cmd"]]
+            eff = b[:, sl["eff"]]
+            for j, name in enumerate(names):
+                scalars(actuator_entity(name),
+                        np.column_stack((cmd[:, j], eff[:, j])) if rows.has_truth
+                        else cmd[:, j])
+            q = b[:, sl["q"]]
+            rec.send_columns("world/aircraft", indexes=times, columns=rr.Transform3D.columns(
+                translation=b[:, sl["pos"]], quaternion=q[:, [1, 2, 3, 0]]))
+            self._send_path(int(rows.t[n - 1]), rows.path_pts, final)
+            if not final:
+                # rerun writes the file from its own threads, later by wall-clock time: wait
+                # for it here, on simulated time, so a SIGKILL loses about file_flush_sim_s
+                # however fast the simulation runs
+                rec.flush(timeout_sec=1.0) if self._flush_timeout else rec.flush()
+        except Exception as exc:
+            print(f"rerun recorder: flush: {exc}", file=sys.stderr)
+
+    def _send_path(self, t_last: int, pts: list[tuple[float, float, float]],
+                   final: bool) -> None:
+        """The flown path ``pts`` (NED, m) at ``t_last`` [us], when due."""
+        if pts and (final or self._last_path_usec is None
+                    or t_last - self._last_path_usec >= self._path_period_usec):
+            self._last_path_usec = t_last
+            self._rec.set_time(TIMELINE, duration=np.timedelta64(t_last * 1000, "ns"))
+            if len(pts) > 4000:           # keep a long run's path light
+                pts = [*pts[::math.ceil(len(pts) / 4000)], pts[-1]]
+            self._rec.log("world/path", self._rr.LineStrips3D([pts], colors=(250, 200, 40),
+                                                              radii=0.05))
+
+
+class BackgroundFlusher:
+    """A daemon thread asking rerun to write what it holds every 0.25 s of wall time.
+
+    Parameters
+    ----------
+    rec
+        the ``rerun.RecordingStream``.
+    finished
+        tells whether the recording is closed (the thread then ends on an error).
+    """
+
+    def __init__(self, rec: Any, finished: Any) -> None:
+        self._rec = rec
+        self._finished = finished
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True, name="rerun-flush")
+        self._thread.start()
+
+    def _loop(self) -> None:
+        """Every 0.25 s of wall time, ask rerun to write what it holds (events logged while
+        the simulation stands still); a slow write (timeout) is tried again next time."""
+        timeout = flush_takes_timeout(self._rec)
+        while not self._stop.wait(0.25):
+            try:
+                self._rec.flush(timeout_sec=1.0) if timeout else self._rec.flush()
+            except Exception:  # a timeout on a loaded machine: keep going
+                if self._finished():
+                    return
+
+    def stop(self) -> None:
+        """Stop the thread (waits up to 2 s for it)."""
+        self._stop.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
