@@ -171,7 +171,7 @@ def test_every_flight_and_fault_command_rejected_at_once_while_booting():
     for cid, p in cmds:
         data = gs.command_long_encode(1, 1, cid, 0, *p).pack(gs)
         gs.seq = (gs.seq + 1) & 0xFF
-        ep._inq[0].extend(parse([data]))
+        ep.io.queues[0].extend(parse([data]))
     ep.serve_once()
     acks = [m for m in sent_messages(link.transport) if m.get_type() == "COMMAND_ACK"]
     assert [(a.command, a.result) for a in acks] == [

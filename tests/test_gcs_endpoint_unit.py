@@ -32,7 +32,7 @@ def ep():
 
 
 def _inject(ep, index: int, msgs) -> None:
-    ep._inq[index].extend(parse(list(msgs)))
+    ep.io.queues[index].extend(parse(list(msgs)))
 
 
 def _pack(codec, msg) -> bytes:
@@ -61,7 +61,7 @@ def test_flood_rate_limited_per_client_and_kept_off_the_control_thread(ep):
     _inject(ep, 0, frames)
     for _ in range(20):
         ep.serve_once()
-    cnt = ep._counters[0]
+    cnt = ep.io.counters[0]
     # one client: its burst (100) handled, the rest dropped and counted, nothing queued for
     # the control thread (unknown names and out-of-range values are refused in the worker)
     assert cnt["handled"] == pytest.approx(ep.rate_burst, abs=2)

@@ -204,7 +204,7 @@ def _command(ep, cmd: int, *params: float, link: int = 0) -> list:
     p = list(params) + [0.0] * (7 - len(params))
     data = _GS.command_long_encode(1, 1, cmd, 0, *p).pack(_GS)
     _GS.seq = (_GS.seq + 1) & 0xFF
-    ep._inq[link].extend(parse([data]))
+    ep.io.queues[link].extend(parse([data]))
     ep.serve_once()
     return _msgs(ep.links[link])
 

@@ -66,7 +66,7 @@ Threads (the control step never waits for a ground station):
   opens the links with a datagram rate limit, so a flood is dropped before it is parsed) into a
   bounded per-link queue; when it is full the oldest message is dropped (counted in
   :meth:`GcsEndpoint.link_stats` as ``queue_dropped``);
-- one worker thread handles the queues: at most :attr:`GcsEndpoint.budget_per_cycle` messages
+- one worker thread handles the queues: at most ``budget_per_cycle`` messages
   per cycle (round robin over the links), a token bucket per client (link, system, component;
   ``rate_limit_hz`` sustained, ``rate_burst`` burst; excess dropped, counted as
   ``rate_limited``), one handler per message type (:attr:`GcsEndpoint.handlers`). Everything
@@ -77,6 +77,13 @@ Threads (the control step never waits for a ground station):
   TEMPORARILY_REJECTED) and applied by :meth:`GcsEndpoint.poll` at most ``max_items`` per
   control cycle; its answers go back to the worker, which alone sends on the ground-station
   links (one sender per link: sequence numbers and signing timestamps stay consistent).
+
+Modules, along PX4's seams: this one holds the threads, the control-thread hand-over and the
+status the worker observes; link handling (receive queues, rate limits, partners, sending) is
+:mod:`.gcs_link`, the streams :mod:`.gcs_streams`, the parameter protocol :mod:`.gcs_params`,
+commands :mod:`.gcs_commands`, the simulation hold :mod:`.gcs_hold`, missions, TIMESYNC, PING
+and the geofence :mod:`.gcs_services`
+(on :mod:`.mission`), the further telemetry :mod:`.gcs_telemetry`.
 """
 
 from __future__ import annotations
@@ -87,77 +94,36 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from vtolftc.firmware_sim.autopilot.gcs_services import (
-    STREAM_RATES_HZ,
-    Px4Services,
-    command_int_params,
-)
-from vtolftc.firmware_sim.autopilot.gcs_telemetry import (
-    TELEMETRY_MSG,
-    TELEMETRY_RATES_HZ,
-    TelemetryStreams,
-)
+from vtolftc.firmware_sim.autopilot.gcs_commands import CommandService
+from vtolftc.firmware_sim.autopilot.gcs_hold import SimulationHold
+from vtolftc.firmware_sim.autopilot.gcs_link import GcsLinks, Handler
+from vtolftc.firmware_sim.autopilot.gcs_params import ParameterService
+from vtolftc.firmware_sim.autopilot.gcs_services import Px4Services
+from vtolftc.firmware_sim.autopilot.gcs_streams import DEFAULT_RATES_HZ, MSG, StreamService
+from vtolftc.firmware_sim.autopilot.gcs_telemetry import TelemetryStreams
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
 from vtolftc.firmware_sim.autopilot.interface import (
     AutopilotAPI,
     AutopilotStatus,
-    CommandResult,
     FlightMode,
-    LandedState,
     NavState,
-    ParamError,
-    ParamType,
-    VtolState,
 )
 from vtolftc.firmware_sim.autopilot.modes import px4_custom_mode
-from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
+from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.link import Link
-from vtolftc.protocols.px4 import (
-    MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-    MAV_MODE_FLAG_SAFETY_ARMED,
-    decode_param_value,
-    encode_param_value,
-)
-from vtolftc.rotation import quat_to_euler
 
 __all__ = ["DEFAULT_RATES_HZ", "UNSIGNED_ALLOWED", "GcsEndpoint", "px4_mode_of"]
 
-# 22: named VTOL_FIXEDROTOR in current MAVLink, still VTOL_RESERVED2 in this dialect's common.xml
-MAV_TYPE_VTOL_FIXEDROTOR = mav.MAV_TYPE_VTOL_RESERVED2
-MAV_AUTOPILOT_PX4 = mav.MAV_AUTOPILOT_PX4
-MAV_TYPE_GCS = mav.MAV_TYPE_GCS
 MAV_STATE_BOOT, MAV_STATE_STANDBY, MAV_STATE_ACTIVE = (
     mav.MAV_STATE_BOOT, mav.MAV_STATE_STANDBY, mav.MAV_STATE_ACTIVE)
 MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY = mav.MAV_STATE_CRITICAL, mav.MAV_STATE_EMERGENCY
-MAV_MODE_FLAG_AUTO = (mav.MAV_MODE_FLAG_AUTO_ENABLED | mav.MAV_MODE_FLAG_GUIDED_ENABLED
-                      | mav.MAV_MODE_FLAG_STABILIZE_ENABLED)
 SEVERITY_CRITICAL, SEVERITY_WARNING = mav.MAV_SEVERITY_CRITICAL, mav.MAV_SEVERITY_WARNING
 SEVERITY_NOTICE, SEVERITY_INFO = mav.MAV_SEVERITY_NOTICE, mav.MAV_SEVERITY_INFO
-
-CMD_NAV_LAND, CMD_NAV_TAKEOFF = mav.MAV_CMD_NAV_LAND, mav.MAV_CMD_NAV_TAKEOFF
-CMD_DO_SET_MODE = mav.MAV_CMD_DO_SET_MODE
-CMD_ARM_DISARM = mav.MAV_CMD_COMPONENT_ARM_DISARM
-CMD_INJECT_FAILURE = mav.MAV_CMD_INJECT_FAILURE
-CMD_DO_VTOL_TRANSITION = mav.MAV_CMD_DO_VTOL_TRANSITION
-CMD_SET_MESSAGE_INTERVAL = mav.MAV_CMD_SET_MESSAGE_INTERVAL
-CMD_GET_MESSAGE_INTERVAL = mav.MAV_CMD_GET_MESSAGE_INTERVAL
-CMD_REQUEST_MESSAGE = mav.MAV_CMD_REQUEST_MESSAGE
-CMD_REQUEST_AUTOPILOT_CAPABILITIES = mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES
-CMD_GET_HOME_POSITION = mav.MAV_CMD_GET_HOME_POSITION
-CMD_REQUEST_FLIGHT_INFORMATION = mav.MAV_CMD_REQUEST_FLIGHT_INFORMATION
-CMD_INJECT_PARTIAL_LOSS = mav.MAV_CMD_INJECT_PARTIAL_LOSS
-FLIGHT_COMMANDS = (CMD_ARM_DISARM, CMD_NAV_TAKEOFF, CMD_DO_SET_MODE, CMD_DO_VTOL_TRANSITION,
-                   CMD_NAV_LAND, mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, mav.MAV_CMD_DO_CHANGE_SPEED,
-                   mav.MAV_CMD_DO_REPOSITION, mav.MAV_CMD_DO_SET_MISSION_CURRENT,
-                   mav.MAV_CMD_MISSION_START)
-# the last five are the navigator's (see navigator.py)
-FAULT_COMMANDS = (CMD_INJECT_FAILURE, CMD_INJECT_PARTIAL_LOSS)
 
 UNSIGNED_ALLOWED = frozenset({mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_RADIO_STATUS,
                               mav.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
@@ -167,47 +133,6 @@ RADIO_STATUS (109, as ArduPilot), PARAM_REQUEST_READ (20) and PARAM_REQUEST_LIST
 (read-only). Everything else, every command, PARAM_SET and mission message included, needs
 the key."""
 
-MSG = {name: getattr(mav, "MAVLINK_MSG_ID_" + name) for name in (
-    "HEARTBEAT", "SYS_STATUS", "ATTITUDE", "ATTITUDE_QUATERNION", "LOCAL_POSITION_NED",
-    "GLOBAL_POSITION_INT", "VFR_HUD", "HIL_STATE_QUATERNION", "AUTOPILOT_VERSION",
-    "HOME_POSITION", "EXTENDED_SYS_STATE", "ACTUATOR_OUTPUT_STATUS", "FAULT_INJECTION_STATUS")}
-DEFAULT_RATES_HZ: dict[int, float] = {
-    MSG["HEARTBEAT"]: 1.0, MSG["SYS_STATUS"]: 1.0, MSG["ATTITUDE"]: 10.0,
-    MSG["ATTITUDE_QUATERNION"]: 10.0, MSG["LOCAL_POSITION_NED"]: 10.0,
-    MSG["GLOBAL_POSITION_INT"]: 5.0, MSG["VFR_HUD"]: 4.0, MSG["HIL_STATE_QUATERNION"]: 10.0,
-    MSG["HOME_POSITION"]: 0.2, MSG["EXTENDED_SYS_STATE"]: 2.0,
-    MSG["ACTUATOR_OUTPUT_STATUS"]: 10.0, MSG["FAULT_INJECTION_STATUS"]: 1.0,
-    **STREAM_RATES_HZ,  # GPS_RAW_INT, MISSION_CURRENT, BATTERY_STATUS (gcs_services.py)
-    **TELEMETRY_RATES_HZ,  # ODOMETRY, ALTITUDE, WIND_COV, ... (gcs_telemetry.py)
-}
-MSG.update({name: getattr(mav, "MAVLINK_MSG_ID_" + name)
-            for name in ("GPS_RAW_INT", "MISSION_CURRENT", "BATTERY_STATUS")})
-MSG.update(TELEMETRY_MSG)
-"""Stream rates in Hz of simulated time (PX4-like, a little lower to spare the CPU)."""
-
-# SYS_STATUS sensor bits (MAV_SYS_STATUS_SENSOR)
-_GYRO, _ACCEL, _MAG = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO, mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
-                       mav.MAV_SYS_STATUS_SENSOR_3D_MAG)
-_BARO, _DIFF, _GPS = (mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE,
-                      mav.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE,
-                      mav.MAV_SYS_STATUS_SENSOR_GPS)
-_ANGULAR_RATE_CTRL = mav.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
-_ATTITUDE_CTRL = mav.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-_MOTOR_OUTPUTS = mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
-_AHRS, _PREARM = mav.MAV_SYS_STATUS_AHRS, mav.MAV_SYS_STATUS_PREARM_CHECK
-_SENSORS_PRESENT = (_GYRO | _ACCEL | _MAG | _BARO | _DIFF | _GPS | _ANGULAR_RATE_CTRL
-                    | _ATTITUDE_CTRL | _MOTOR_OUTPUTS | _AHRS | _PREARM)
-
-SIM_HOLD_PARAM = "SIM_HOLD_MS"
-
-#: Commands that ask for one message: REQUEST_MESSAGE (param1 the id) and the older ones PX4
-#: still answers the same way (the message they stand for).
-_REQUEST_ONE: dict[int, float] = {
-    CMD_REQUEST_MESSAGE: math.nan,
-    CMD_REQUEST_AUTOPILOT_CAPABILITIES: float(MSG["AUTOPILOT_VERSION"]),
-    CMD_GET_HOME_POSITION: float(MSG["HOME_POSITION"]),
-    CMD_REQUEST_FLIGHT_INFORMATION: float(TELEMETRY_MSG["FLIGHT_INFORMATION"]),
-}
 
 
 def px4_mode_of(mode: FlightMode) -> tuple[int, int]:
@@ -215,20 +140,6 @@ def px4_mode_of(mode: FlightMode) -> tuple[int, int]:
     :func:`vtolftc.firmware_sim.autopilot.modes.px4_custom_mode`)."""
     cm = px4_custom_mode(FlightMode(mode))
     return (cm >> 16) & 0xFF, (cm >> 24) & 0xFF
-
-
-def _text(s: Any) -> str:
-    if isinstance(s, bytes | bytearray):
-        s = s.decode(errors="replace")
-    return str(s).rstrip("\x00")
-
-
-@dataclass
-class _Client:
-    """Token bucket of one ground-station client (link, system, component)."""
-
-    tokens: float
-    last: float
 
 
 class GcsEndpoint:
@@ -275,39 +186,23 @@ class GcsEndpoint:
                  ready: bool = True, start: bool = True) -> None:
         self.ap = autopilot
         self.hil = hil
-        self.links = list(links)
+        self.io = GcsLinks(links, signing_required=signing_required,
+                           rate_limit_hz=rate_limit_hz, rate_burst=rate_burst,
+                           queue_len=queue_len, budget_per_cycle=budget_per_cycle)
+        """The links, their queues, rate limits and sending (:mod:`.gcs_link`)."""
+        self.links = self.io.links
         self.actuators = actuators
-        self.signing_required = signing_required
         self.lockstep = lockstep
         self.on_event = on_event or (lambda kind, text: None)
         self.version = version
-        self.rate_limit_hz = float(rate_limit_hz)
-        self.rate_burst = float(rate_burst)
-        self.budget_per_cycle = int(budget_per_cycle)
-        params = autopilot.params
-        if SIM_HOLD_PARAM not in params:
-            params.register(SIM_HOLD_PARAM, -1, ParamType.INT32, -1, 2**31 - 1,
-                            "lockstep only: hold the simulation before the control step at "
-                            "this simulated time in ms (-1 = off)")
-        params.set(SIM_HOLD_PARAM, int(hold_ms))
-        n = len(self.links)
-        self.rates_hz: list[dict[int, float]] = [dict(DEFAULT_RATES_HZ) for _ in range(n)]
-        """Stream rates of each link (SET_MESSAGE_INTERVAL changes its own link only)."""
-        self._next_due: list[dict[int, int]] = [{} for _ in range(n)]
-        self._earliest_due = [0] * n
-        self._statustext_id = 0
-        self._inq: list[collections.deque[Any]] = [collections.deque(maxlen=queue_len)
-                                                   for _ in range(n)]
-        self._counters = [{"queue_dropped": 0, "rate_limited": 0, "handled": 0,
-                           "control_dropped": 0} for _ in range(n)]
-        self._clients: dict[tuple[int, int, int], _Client] = {}
+        self.hold = SimulationHold(autopilot.params, lockstep=lockstep, hold_ms=hold_ms)
+        """``SIM_HOLD_MS`` and its announcement (:mod:`.gcs_hold`)."""
         # control thread <-> worker
         self._control_q: collections.deque[tuple[int, Any, Callable[[], None]]] = \
             collections.deque()
         self._control_queue_len = int(control_queue_len)
         self._outbox: collections.deque[Callable[[], None]] = collections.deque()
         self._snap_lock = threading.Lock()
-        self._snap: tuple[NavState | None, AutopilotStatus | None] = (None, None)
         self._snap_seq = 0
         self._seen_seq = -1
         self._wake = threading.Event()
@@ -321,81 +216,85 @@ class GcsEndpoint:
         self._last_message = ""
         self._wall_next = 0.0
         self._last_step_wall = -math.inf
-        self._hold_notice_ms: int | None = None
-        self._hold_sent_ms: int | None = None
-        self._hold_announce_wall = 0.0
-        self._last_fault_status: Any = None
-        self.commands_answered = 0
         self.ready = ready
         """True once the autopilot is warm (HEARTBEAT says STANDBY/ACTIVE, not BOOT)."""
         self.mav_state: int | None = None
         """MAV_STATE set by a failsafe (CRITICAL / EMERGENCY), None = normal."""
-        self.last_gcs_heartbeat = -math.inf
-        """monotonic time of the last (signed, if signing is on) ground-station HEARTBEAT or
-        command addressed to this autopilot."""
-        self.handlers: dict[str, Callable[[int, Link, Any], None]] = {
-            "HEARTBEAT": self._on_heartbeat,
-            "COMMAND_LONG": self._on_command_long,
-            "COMMAND_INT": self._on_command_int,
-            "PARAM_REQUEST_LIST": self._on_param_request_list,
-            "PARAM_REQUEST_READ": self._on_param_request_read,
-            "PARAM_SET": self._on_param_set,
+        self._snap: tuple[NavState | None, AutopilotStatus | None] = (None, autopilot.status())
+        self.streams = StreamService(self, len(self.links))
+        self.services = Px4Services(self)
+        self.telemetry = TelemetryStreams(self)
+        self.command_service = CommandService(self)
+        self.param_service = ParameterService(self)
+        self.handlers: dict[str, Handler] = {
+            "HEARTBEAT": self.io.on_heartbeat,
+            **self.command_service.handlers(),
+            **self.param_service.handlers(),
         }
         """Handler per message type, run in the worker thread: ``f(link_index, link, msg)``.
         A handler that must change the autopilot hands a function to :meth:`submit`."""
-        self._status0 = autopilot.status()
-        self._snap = (None, self._status0)
-        self._snap_seq = 0
-        self.services = Px4Services(self)
-        self.telemetry = TelemetryStreams(self)
         for name in self.services.HANDLES - {"COMMAND_INT"}:  # missions, TIMESYNC, PING
             self.handlers.setdefault(name, self._on_service)
         self._threads: list[threading.Thread] = []
         if start:
-            self._threads = [threading.Thread(target=self._rx, args=(i, link), daemon=True,
-                                              name=f"gcs-rx-{i}")
-                             for i, link in enumerate(self.links)]
+            self._threads = [threading.Thread(target=self.io.receive_loop, args=(i,),
+                                              daemon=True, name=f"gcs-rx-{i}")
+                             for i in range(len(self.links))]
             self._threads.append(threading.Thread(target=self._worker, daemon=True,
                                                   name="gcs-worker"))
             for th in self._threads:
                 th.start()
 
-    # ------------------------------------------------------------------ receive threads
-    def _rx(self, index: int, link: Link) -> None:
-        q = self._inq[index]
-        cnt = self._counters[index]
-        while not self._closed:
-            try:
-                msgs = link.recv(0.25)
-            except Exception:
-                if self._closed:
-                    return
-                time.sleep(0.05)
-                continue
-            for m in msgs:
-                if len(q) == q.maxlen:
-                    cnt["queue_dropped"] += 1  # the append drops the oldest
-                q.append(m)
+    # ------------------------------------------------------------------ views of the parts
+    @property
+    def rates_hz(self) -> list[dict[int, float]]:
+        """Stream rates [Hz] of each link (:attr:`.gcs_streams.StreamService.rates_hz`)."""
+        return self.streams.rates_hz
 
+    @property
+    def rate_burst(self) -> float:
+        """Burst of the per-client token bucket [messages]."""
+        return self.io.rate_burst
+
+    @property
+    def signing_required(self) -> bool:
+        """Incoming frames must be signed (see :data:`UNSIGNED_ALLOWED`)."""
+        return self.io.signing_required
+
+    @property
+    def commands_answered(self) -> int:
+        """COMMAND_ACKs sent so far."""
+        return self.command_service.answered
+
+    @property
+    def last_gcs_heartbeat(self) -> float:
+        """monotonic time [s] of the last (signed, if signing is on) ground-station HEARTBEAT
+        or command addressed to this autopilot."""
+        return self.io.last_gcs_heartbeat
+
+    def _on_service(self, index: int, link: Link, msg: Any) -> None:
+        """Missions, TIMESYNC, PING (:mod:`.gcs_services`), answered in the worker."""
+        self.services.handle(link, msg)
+
+    # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
         """Stop the threads and close every link. Idempotent."""
         if self._closed:
             return
         self._closed = True
+        self.io.stop()
         self._wake.set()
         for th in self._threads:
             if th.name == "gcs-worker":
                 th.join(timeout=2.0)
-        for link in self.links:
-            link.close()
+        self.io.close()
         for th in self._threads:
             th.join(timeout=1.0)
 
     def link_stats(self) -> list[dict[str, Any]]:
         """Counters of every ground-station link (garbage, CRC, truncated, signature ...
         drops of the link; queue, rate-limit and control-queue drops of the endpoint)."""
-        return [{"link": repr(link), **link.stats.as_dict(), **self._counters[i]}
-                for i, link in enumerate(self.links)]
+        return self.io.stats()
 
     # ------------------------------------------------------------------ worker thread
     def _worker(self) -> None:
@@ -416,10 +315,10 @@ class GcsEndpoint:
     def serve_once(self) -> int:
         """One worker cycle: answers from the control thread, queued messages (within the
         budget), status changes, streams, wall-clock duties. Returns messages handled."""
-        n = self._serve_inputs()
+        n = self.io.serve(self.handlers)
         self._drain_outbox()
         self._observe_snapshot()
-        self._streams()
+        self.streams.run()
         self._wall_duties()
         return n
 
@@ -431,52 +330,6 @@ class GcsEndpoint:
                 return
             fn()
 
-    def _allow(self, index: int, msg: Any, now: float) -> bool:
-        key = (index, msg.get_srcSystem(), msg.get_srcComponent())
-        c = self._clients.get(key)
-        if c is None:
-            if len(self._clients) > 4096:  # a flood of made-up ids: forget the idle ones
-                self._clients = {k: v for k, v in self._clients.items() if now - v.last < 10}
-            c = self._clients[key] = _Client(self.rate_burst, now)
-        c.tokens = min(self.rate_burst, c.tokens + (now - c.last) * self.rate_limit_hz)
-        c.last = now
-        if c.tokens < 1.0:
-            return False
-        c.tokens -= 1.0
-        return True
-
-    def _serve_inputs(self) -> int:
-        budget = self.budget_per_cycle
-        handled = 0
-        now = time.monotonic()
-        active = True
-        while handled < budget and active:
-            active = False
-            for index, q in enumerate(self._inq):
-                if handled >= budget:
-                    break
-                try:
-                    msg = q.popleft()
-                except IndexError:
-                    continue
-                active = True
-                cnt = self._counters[index]
-                if not self._allow(index, msg, now):
-                    cnt["rate_limited"] += 1
-                    continue
-                handled += 1
-                cnt["handled"] += 1
-                handler = self.handlers.get(msg.get_type())
-                if handler is None:
-                    continue
-                link = self.links[index]
-                try:
-                    handler(index, link, msg)
-                except Exception as exc:  # one bad message must not stop the endpoint
-                    self.statustext(f"error handling {msg.get_type()}: {exc}",
-                                    SEVERITY_WARNING)
-        return handled
-
     # ------------------------------------------------------------------ control thread side
     def submit(self, index: int, msg: Any, fn: Callable[[], None],
                on_drop: Callable[[], None] | None = None) -> None:
@@ -486,7 +339,7 @@ class GcsEndpoint:
         q = self._control_q
         if len(q) >= self._control_queue_len:
             old_index, _old, _fn = q.popleft()
-            self._counters[old_index]["control_dropped"] += 1
+            self.io.counters[old_index]["control_dropped"] += 1
             drop = getattr(_fn, "on_drop", None)
             if drop is not None:
                 drop()
@@ -516,14 +369,14 @@ class GcsEndpoint:
         """Control thread: requests are waiting for :meth:`poll`."""
         return bool(self._control_q)
 
-    def _reply(self, fn: Callable[[], None]) -> None:
+    def reply(self, fn: Callable[[], None]) -> None:
         """Control thread: have the worker send something (it alone sends on the links)."""
         self._outbox.append(fn)
         self._wake.set()
 
     def notify(self, text: str, severity: int = SEVERITY_INFO) -> None:
         """Any thread: a STATUSTEXT to every ground station (sent by the worker)."""
-        self._reply(lambda: self.statustext(text, severity))
+        self.reply(lambda: self.statustext(text, severity))
 
     def on_step(self, nav: NavState, status: AutopilotStatus) -> None:
         """Control thread, after a control step: publish the step for the worker's streams."""
@@ -531,7 +384,7 @@ class GcsEndpoint:
             self._snap = (nav, status)
             self._snap_seq += 1
         self.services.on_step(nav)
-        self._hold_notice_ms = None
+        self.hold.notice_ms = None
         self._wake.set()
 
     def publish_status(self, status: AutopilotStatus) -> None:
@@ -543,17 +396,12 @@ class GcsEndpoint:
 
     def hold_usec(self) -> int | None:
         """Simulated time at which to hold, None if no hold (or not lockstep)."""
-        if not self.lockstep:
-            return None
-        v = int(self.ap.params.get(SIM_HOLD_PARAM))
-        return None if v < 0 else v * 1000
+        return self.hold.hold_usec()
 
     def announce_hold(self, time_usec: int) -> None:
         """Control thread: the simulation is held at ``time_usec`` (the worker tells the
         ground stations, repeated at 1 Hz)."""
-        ms = time_usec // 1000
-        if self._hold_notice_ms != ms:
-            self._hold_notice_ms = ms
+        if self.hold.announce(time_usec):
             self._wake.set()
 
     def tick(self) -> None:
@@ -565,39 +413,34 @@ class GcsEndpoint:
         self.publish_status(self.ap.status())
 
     # ------------------------------------------------------------------ sending (worker)
-    def _send_all(self, msg: Any) -> None:
-        for link in self.links:
-            link.send(msg)
+    def send_all(self, msg: Any) -> None:
+        """Worker: ``msg`` on every ground-station link."""
+        self.io.send_all(msg)
 
     def statustext(self, text: str, severity: int = SEVERITY_INFO,
                    link: Link | None = None) -> None:
-        """Worker: STATUSTEXT to one link or to all. A text longer than the field's 50 bytes
-        goes out in chunks as MAVLink 2 specifies: one ``id`` (1..65535) for all of them,
-        ``chunk_seq`` 0, 1, ..., the last chunk shorter than 50 bytes (an empty one if
-        needed)."""
-        codec = self.links[0].codec if self.links else None
-        if codec is None:
-            return
-        data = text.encode("utf-8", errors="replace")
-        if len(data) <= 50:
-            msgs = [codec.statustext_encode(severity, data)]
-        else:
-            self._statustext_id = self._statustext_id % 65535 + 1
-            chunks = [data[i:i + 50] for i in range(0, len(data), 50)][:255]
-            if len(chunks[-1]) == 50:
-                chunks.append(b"")
-            msgs = [codec.statustext_encode(severity, c, self._statustext_id, k)
-                    for k, c in enumerate(chunks)]
-        for msg in msgs:
-            if link is None:
-                self._send_all(msg)
-            else:
-                link.send(msg)
+        """Worker: STATUSTEXT to one link or to all (:meth:`.gcs_link.GcsLinks.statustext`)."""
+        self.io.statustext(text, severity, link)
 
+    def mark_reported(self, message: str) -> None:
+        """Worker: the autopilot's ``message`` went out already (with a COMMAND_ACK): do not
+        send it again as a STATUSTEXT when the status shows it."""
+        self._last_message = message
+
+    # ------------------------------------------------------------------ observed status
     @property
     def time_boot_ms(self) -> int:
         """Simulated time since boot (ms), for the messages' ``time_boot_ms``."""
         return self.sim_usec // 1000
+
+    def system_status(self) -> int:
+        """MAV_STATE of the HEARTBEAT (see the module docstring)."""
+        if not self.ready:
+            return MAV_STATE_BOOT
+        if self.mav_state is not None:
+            return self.mav_state
+        st = self.status
+        return MAV_STATE_ACTIVE if (st is not None and st.armed) else MAV_STATE_STANDBY
 
     def _observe_snapshot(self) -> None:
         with self._snap_lock:
@@ -613,7 +456,7 @@ class GcsEndpoint:
             self.nav = nav
             self.sim_usec = int(nav.time_usec)
             self._last_step_wall = time.monotonic()
-            self._hold_sent_ms = None
+            self.hold.stepped()
         if st is not None:
             self.commands = np.asarray(st.actuator_commands, dtype=float)
             self._observe(st)
@@ -632,34 +475,6 @@ class GcsEndpoint:
             self.on_event("autopilot", st.message)
         self._last_message = st.message
 
-    def _streams(self) -> None:
-        if self.nav is None:
-            return
-        fs = self.hil.fault_status
-        fid = MSG["FAULT_INJECTION_STATUS"]
-        if fs is not None and fs is not self._last_fault_status:
-            self._last_fault_status = fs
-            self._send_stream(fid)
-            for i, due in enumerate(self._next_due):
-                due[fid] = self.sim_usec + 1_000_000
-                self._earliest_due[i] = 0
-        t = self.sim_usec
-        for i, link in enumerate(self.links):
-            if t < self._earliest_due[i]:
-                continue
-            earliest = 2**63
-            next_due = self._next_due[i]
-            for msg_id, hz in self.rates_hz[i].items():
-                if hz <= 0:
-                    continue
-                due = next_due.get(msg_id, 0)
-                if t >= due:
-                    due = max(due + round(1e6 / hz), t)
-                    next_due[msg_id] = due
-                    self._send_stream(msg_id, link)
-                earliest = min(earliest, due)
-            self._earliest_due[i] = earliest
-
     def _wall_duties(self) -> None:
         """1 Hz HEARTBEAT, SYS_STATUS, EXTENDED_SYS_STATE while simulated time does not
         advance; the SIM_HOLD notice."""
@@ -668,401 +483,7 @@ class GcsEndpoint:
         if now >= self._wall_next and now - self._last_step_wall > 0.5:
             self._wall_next = now + 1.0
             for name in ("HEARTBEAT", "SYS_STATUS", "EXTENDED_SYS_STATE"):
-                self._send_stream(MSG[name])
-        ms = self._hold_notice_ms
-        if ms is not None and (self._hold_sent_ms != ms or now >= self._hold_announce_wall):
-            self._hold_sent_ms = ms
-            self._hold_announce_wall = now + 1.0
-            if self.links:
-                self._send_all(self.links[0].codec.named_value_int_encode(ms, b"SIM_HOLD", ms))
-
-    # ------------------------------------------------------------------ streams
-    def _send_stream(self, msg_id: int, link: Link | None = None) -> bool:
-        msg = self._build(msg_id)
-        if msg is None:
-            return False
-        if link is None:
-            self._send_all(msg)
-        else:
-            link.send(msg)
-        return True
-
-    def system_status(self) -> int:
-        """MAV_STATE of the HEARTBEAT (see the module docstring)."""
-        if not self.ready:
-            return MAV_STATE_BOOT
-        if self.mav_state is not None:
-            return self.mav_state
-        st = self.status
-        return MAV_STATE_ACTIVE if (st is not None and st.armed) else MAV_STATE_STANDBY
-
-    def _build(self, msg_id: int) -> Any:
-        if not self.links:
-            return None
-        c = self.links[0].codec
-        st = self.status
-        nav = self.nav
-        ms = self.time_boot_ms
-        if msg_id == MSG["HEARTBEAT"]:
-            armed = bool(st and st.armed)
-            base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | MAV_MODE_FLAG_AUTO | (
-                MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-            cm = st.px4_custom_mode if st and st.px4_custom_mode >= 0 else px4_custom_mode(
-                st.mode if st else FlightMode.IDLE)
-            return c.heartbeat_encode(MAV_TYPE_VTOL_FIXEDROTOR, MAV_AUTOPILOT_PX4, base, cm,
-                                      self.system_status())
-        if msg_id == MSG["SYS_STATUS"]:
-            healthy = _ANGULAR_RATE_CTRL | _ATTITUDE_CTRL | _MOTOR_OUTPUTS
-            if self.hil.connected and self.hil.last_sensor is not None:
-                healthy |= _GYRO | _ACCEL | _MAG | _BARO | _DIFF | _AHRS
-            gps = self.hil.last_gps
-            if self.hil.connected and gps is not None and gps.fix_type >= 3:
-                healthy |= _GPS
-            if self.hil.connected and self.hil.home is not None and nav is not None:
-                healthy |= _PREARM
-            # battery: voltage UINT16_MAX, current and remaining -1 until the first reading
-            present, enabled, more_healthy = self.services.sensor_bits()
-            mv, ca, pct = self.services.sys_status_battery()
-            return c.sys_status_encode(_SENSORS_PRESENT | present, _SENSORS_PRESENT | enabled,
-                                       healthy | more_healthy, 0, mv, ca, pct, 0, 0, 0, 0, 0,
-                                       0)
-        if msg_id == MSG["EXTENDED_SYS_STATE"]:
-            vtol = int(st.vtol_state) if st else 0
-            landed = int(st.landed_state) if st else 0
-            return c.extended_sys_state_encode(vtol or int(VtolState.MC),
-                                               landed or int(LandedState.ON_GROUND))
-        if msg_id == MSG["AUTOPILOT_VERSION"]:
-            major, minor, patch = self.version
-            sw = (major << 24) | (minor << 16) | (patch << 8) | 255
-            # exactly what is served (MAV_PROTOCOL_CAPABILITY): MISSION_FLOAT 1, PARAM_FLOAT
-            # 2, MISSION_INT 4, COMMAND_INT 8, PARAM_ENCODE_BYTEWISE 16, MAVLINK2 8192,
-            # MISSION_FENCE 16384, MISSION_RALLY 32768
-            caps = 1 | 2 | 4 | 8 | 16 | 8192 | 16384 | 32768
-            return c.autopilot_version_encode(caps, sw, sw, 0, 0, [0] * 8, [0] * 8, [0] * 8,
-                                              0, 0, 1)
-        if msg_id == MSG["HOME_POSITION"]:
-            if self.hil.home is None:
-                return None
-            lat, lon, alt = self.hil.home
-            return c.home_position_encode(round(lat * 1e7), round(lon * 1e7), round(alt * 1e3),
-                                          0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
-                                          self.sim_usec)
-        if msg_id == MSG["FAULT_INJECTION_STATUS"]:
-            fs = self.hil.fault_status
-            if fs is None:
-                return None
-            return c.fault_injection_status_encode(
-                fs.time_usec, fs.change_count, fs.motor_count, fs.servo_count,
-                fs.motor_failure, fs.motor_loss, fs.servo_failure, fs.servo_loss)
-        if msg_id in STREAM_RATES_HZ:
-            return self.services.build(msg_id)
-        if msg_id in TELEMETRY_RATES_HZ:
-            return self.telemetry.build(msg_id)
-        if msg_id == MSG["ACTUATOR_OUTPUT_STATUS"]:
-            out = [0.0] * 32
-            out[: self.commands.size] = [float(x) for x in self.commands]
-            return c.actuator_output_status_encode(self.sim_usec, self.commands.size, out)
-        if nav is None:
-            return None
-        q = nav.q_wxyz
-        w = nav.omega_body_rad_s
-        p = nav.pos_ned_m
-        v = nav.vel_ned_m_s
-        roll, pitch, yaw = quat_to_euler(q)
-        if msg_id == MSG["ATTITUDE"]:
-            return c.attitude_encode(ms, roll, pitch, yaw, w[0], w[1], w[2])
-        if msg_id == MSG["ATTITUDE_QUATERNION"]:
-            return c.attitude_quaternion_encode(ms, q[0], q[1], q[2], q[3], w[0], w[1], w[2],
-                                                [0.0, 0.0, 0.0, 0.0])
-        if msg_id == MSG["LOCAL_POSITION_NED"]:
-            return c.local_position_ned_encode(ms, p[0], p[1], p[2], v[0], v[1], v[2])
-        hs = self.hil.last_state
-        if msg_id == MSG["HIL_STATE_QUATERNION"]:
-            if hs is None:
-                return None
-            return c.hil_state_quaternion_encode(
-                hs.time_usec, hs.attitude_quaternion, hs.rollspeed, hs.pitchspeed, hs.yawspeed,
-                hs.lat, hs.lon, hs.alt, hs.vx, hs.vy, hs.vz, hs.ind_airspeed, hs.true_airspeed,
-                hs.xacc, hs.yacc, hs.zacc)
-        home_alt = self.hil.home[2] if self.hil.home else 0.0
-        hdg = math.degrees(yaw) % 360.0
-        if msg_id == MSG["GLOBAL_POSITION_INT"]:
-            lat = hs.lat if hs is not None else 0
-            lon = hs.lon if hs is not None else 0
-            return c.global_position_int_encode(
-                ms, lat, lon, round((home_alt - p[2]) * 1e3), round(-p[2] * 1e3),
-                round(v[0] * 100), round(v[1] * 100), round(v[2] * 100),
-                round(hdg * 100) % 36000)
-        if msg_id == MSG["VFR_HUD"]:
-            n_motors = len(self.actuators.motors)
-            thr = float(np.clip(np.mean(self.commands[:n_motors]), 0, 1)) if n_motors else 0.0
-            return c.vfr_hud_encode(nav.airspeed_m_s, math.hypot(v[0], v[1]), round(hdg) % 360,
-                                    round(thr * 100), home_alt - p[2], -v[2])
-        return None
-
-    # ------------------------------------------------------------------ handlers (worker)
-    def _on_service(self, index: int, link: Link, msg: Any) -> None:
-        """Missions, TIMESYNC, PING (:mod:`.gcs_services`), answered in the worker."""
-        self.services.handle(link, msg)
-
-    def _on_heartbeat(self, index: int, link: Link, msg: Any) -> None:
-        if int(msg.type) == MAV_TYPE_GCS and (not self.signing_required or msg.get_signed()):
-            self.last_gcs_heartbeat = time.monotonic()
-
-    def _seen_gcs(self, msg: Any) -> None:
-        """A command from a ground station proves the link as its heartbeat does."""
-        if not self.signing_required or msg.get_signed():
-            self.last_gcs_heartbeat = time.monotonic()
-
-    def _on_command_long(self, index: int, link: Link, msg: Any) -> None:
-        if msg.target_system not in (0, 1) or msg.target_component not in (0, 1):
-            return
-        self._seen_gcs(msg)
-        params = [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
-                  msg.param7]
-        self._dispatch(index, link, msg, int(msg.command), [float(x) for x in params])
-
-    def _on_command_int(self, index: int, link: Link, msg: Any) -> None:
-        """COMMAND_INT, converted as PX4 does (:func:`.gcs_services.command_int_params`) and
-        answered like COMMAND_LONG."""
-        if msg.target_system not in (0, 1) or msg.target_component not in (0, 1):
-            return
-        self._seen_gcs(msg)
-        self._dispatch(index, link, msg, int(msg.command),
-                       command_int_params(msg, self.services.home_alt_m()))
-
-    def _ack(self, link: Link, msg: Any, cmd: int, result: int, reason: str) -> None:
-        """Worker: STATUSTEXT with the reason (if any) and the COMMAND_ACK on ``link``."""
-        if reason:
-            self.statustext(reason, SEVERITY_WARNING if result else SEVERITY_INFO, link)
-        link.send(link.codec.command_ack_encode(cmd, int(result), 0, 0, msg.get_srcSystem(),
-                                                msg.get_srcComponent()))
-        self.commands_answered += 1
-        self.on_event("ack", f"{_cmd_label(cmd)} -> {CommandResult(result).name}"
-                      + (f" ({reason})" if reason else ""))
-
-    def _dispatch(self, index: int, link: Link, msg: Any, cmd: int,
-                  params: list[float]) -> None:
-        if self.signing_required and cmd in (CMD_ARM_DISARM, *FAULT_COMMANDS) \
-                and not msg.get_signed():
-            self._ack(link, msg, cmd, CommandResult.DENIED, "signed command required")
-            return
-
-        def busy() -> None:
-            self._ack(link, msg, cmd, CommandResult.TEMPORARILY_REJECTED,
-                      "busy: too many requests")
-
-        if cmd == CMD_ARM_DISARM and params[0] not in (0.0, 1.0):
-            self._ack(link, msg, cmd, CommandResult.DENIED, "param1 must be 0 or 1")
-            return
-        if not self.ready and (cmd in FLIGHT_COMMANDS or cmd in FAULT_COMMANDS):
-            # booting: the control thread is compiling and polls nothing; answer now
-            self._ack(link, msg, cmd, CommandResult.TEMPORARILY_REJECTED,
-                      "autopilot still starting (compiling)")
-            return
-        if cmd in FLIGHT_COMMANDS:
-            self.submit(index, msg, lambda: self._flight_command(link, msg, cmd, params),
-                        busy)
-            return
-        if cmd in FAULT_COMMANDS:
-            res, reason = self._fault(cmd, params)
-            if res != CommandResult.ACCEPTED:
-                self._ack(link, msg, cmd, res, reason)
-                return
-            self.submit(index, msg, lambda: self._forward_fault(link, msg, cmd, params), busy)
-            return
-        if cmd == CMD_SET_MESSAGE_INTERVAL:
-            res, reason = self._set_interval(index, params)
-        elif cmd == CMD_GET_MESSAGE_INTERVAL:
-            res, reason = self._get_interval(index, link, params[0])
-        elif cmd in _REQUEST_ONE:
-            mid = params[0] if cmd == CMD_REQUEST_MESSAGE else _REQUEST_ONE[cmd]
-            if not math.isfinite(mid) or int(mid) not in MSG.values():
-                res, reason = CommandResult.UNSUPPORTED, ""
-            elif not self._send_stream(int(mid), link):
-                res, reason = CommandResult.TEMPORARILY_REJECTED, "no data yet"
-            else:
-                res, reason = CommandResult.ACCEPTED, ""
-        else:
-            res, reason = CommandResult.UNSUPPORTED, ""
-        self._ack(link, msg, cmd, res, reason)
-
-    def _set_interval(self, index: int, params: list[float]) -> tuple[int, str]:
-        mid, interval = params[0], params[1]
-        rates = self.rates_hz[index]
-        if not math.isfinite(mid) or int(mid) not in rates:
-            return CommandResult.DENIED, f"cannot stream message {mid:g}"
-        mid = int(mid)
-        if not math.isfinite(interval) or interval == 0:
-            rates[mid] = DEFAULT_RATES_HZ[mid]
-        elif interval < 0:
-            rates[mid] = 0.0
-        else:
-            rates[mid] = min(250.0, 1e6 / interval)
-        self._next_due[index][mid] = self.sim_usec
-        self._earliest_due[index] = 0
-        return CommandResult.ACCEPTED, ""
-
-    def _get_interval(self, index: int, link: Link, mid: float) -> tuple[int, str]:
-        """GET_MESSAGE_INTERVAL (510): MESSAGE_INTERVAL with this link's interval [us] (-1 =
-        not streamed, as PX4), then the ACK; UNSUPPORTED for a message not served here."""
-        rates = self.rates_hz[index]
-        if not math.isfinite(mid) or int(mid) not in rates:
-            return CommandResult.UNSUPPORTED, ""
-        hz = rates[int(mid)]
-        link.send(link.codec.message_interval_encode(int(mid), round(1e6 / hz) if hz > 0 else -1))
-        return CommandResult.ACCEPTED, ""
-
-    # ------------------------------------------------------------------ control-thread work
-    def _flight_command(self, link: Link, msg: Any, cmd: int, params: list[float]) -> None:
-        """Control thread: a flight command on the autopilot; the answer goes to the worker."""
-        before = self.ap.status().message
-        res = CommandResult(self.ap.command(cmd, params))
-        st = self.ap.status()
-        after = st.message
-        reason = after if (res != CommandResult.ACCEPTED and after and after != before) else ""
-        if res != CommandResult.ACCEPTED and not reason:
-            reason = _default_reason(cmd, res, st)
-        self.on_event("command", f"{_cmd_label(cmd)} {_fmt_params(params)}")
-
-        def answer() -> None:
-            if reason == after:
-                self._last_message = after  # reported with the ACK: not again
-            # else a new message (e.g. of an accepted command) goes out as a STATUSTEXT to
-            # every link when the worker sees the status
-            self._ack(link, msg, cmd, res, reason)
-
-        self._reply(answer)
-        self.publish_status(st)
-
-    def _forward_fault(self, link: Link, msg: Any, cmd: int, params: list[float]) -> None:
-        """Control thread: forward an accepted fault command to the vehicle (the HIL link is
-        the control thread's), so that in lockstep it acts at exactly this step."""
-        res, reason = self._fault(cmd, params)  # SYS_FAILURE_EN may have changed meanwhile
-        if res == CommandResult.ACCEPTED:
-            self.hil.forward_command(msg)
-            self.on_event("fault", f"{_cmd_label(cmd)} {_fmt_params(params)}")
-        self._reply(lambda: self._ack(link, msg, cmd, res, reason))
-
-    def _fault(self, cmd: int, p: list[float]) -> tuple[int, str]:
-        if int(self.ap.params.get("SYS_FAILURE_EN")) != 1:
-            return CommandResult.DENIED, "fault injection disabled: set SYS_FAILURE_EN to 1"
-        unit = p[0]
-        if not math.isfinite(unit) or int(unit) not in (FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO):
-            return CommandResult.UNSUPPORTED, "unit must be motor 101 or servo 102"
-        names = self.actuators.motors if int(unit) == FAILURE_UNIT_MOTOR \
-            else self.actuators.servos
-        if cmd == CMD_INJECT_FAILURE:
-            ftype, inst = p[1], p[2]
-            if not math.isfinite(ftype) or int(ftype) not in (
-                    mav.FAILURE_TYPE_OK, mav.FAILURE_TYPE_OFF, mav.FAILURE_TYPE_STUCK):
-                return CommandResult.UNSUPPORTED, "failure types: OK, OFF, STUCK"
-        else:
-            inst, loss = p[1], p[2]
-            if not (math.isfinite(loss) and 0.0 <= loss <= 1.0):
-                return CommandResult.DENIED, "loss must be in [0, 1]"
-        if not (math.isfinite(inst) and inst == int(inst) and 0 <= inst <= len(names)):
-            return CommandResult.DENIED, f"instance must be 0..{len(names)}"
-        if not self.hil.connected:
-            return CommandResult.TEMPORARILY_REJECTED, "no vehicle on the HIL link"
-        return CommandResult.ACCEPTED, ""
-
-    # ------------------------------------------------------------------ parameters
-    def _param_value(self, index: int, link: Link | None) -> None:
-        store = self.ap.params
-        prm = store.by_index(index)
-        codec = (link or self.links[0]).codec
-        msg = codec.param_value_encode(prm.name.encode(), encode_param_value(prm.value, prm.type),
-                                       int(prm.type), len(store), index)
-        if link is None:
-            self._send_all(msg)
-        else:
-            link.send(msg)
-
-    def _on_param_request_list(self, index: int, link: Link, msg: Any) -> None:
-        if msg.target_system in (0, 1):
-            for i in range(len(self.ap.params)):
-                self._param_value(i, link)
-
-    def _on_param_request_read(self, index: int, link: Link, msg: Any) -> None:
-        if msg.target_system not in (0, 1):
-            return
-        store = self.ap.params
-        try:
-            i = int(msg.param_index) if msg.param_index >= 0 \
-                else store.index(_text(msg.param_id))
-            self._param_value(i, link)
-        except ParamError:
-            return  # unknown parameter: no answer (MAVLink parameter protocol)
-
-    def _on_param_set(self, index: int, link: Link, msg: Any) -> None:
-        if msg.target_system not in (0, 1):
-            return
-        store = self.ap.params
-        name = _text(msg.param_id)
-        if name not in store:
-            self.statustext(f"unknown parameter {name}", SEVERITY_WARNING, link)
-            return
-        pindex = store.index(name)
-        prm = store.by_index(pindex)
-        value = decode_param_value(msg.param_value, prm.type)
-        problem = _param_problem(prm, value)
-        if problem:  # refused here: the control thread never sees it
-            self.statustext(problem, SEVERITY_WARNING, link)
-            self._param_value(pindex, link)
-            return
-
-        def apply() -> None:  # control thread
-            error = ""
-            try:
-                store.set(name, value)
-                self.on_event("param", f"{name} = {value:g}")
-            except ParamError as exc:
-                error = str(exc)
-
-            def answer() -> None:
-                if error:
-                    self.statustext(error, SEVERITY_WARNING, link)
-                self._param_value(pindex, None)  # echo on every link, as PX4 does
-
-            self._reply(answer)
-
-        self.submit(index, msg, apply, lambda: self._param_value(pindex, link))
-
-
-def _param_problem(prm: Any, value: float) -> str:
-    """Why ``value`` cannot be set on ``prm`` ("" if it can): the checks of
-    :meth:`ParameterStore.set`, made in the worker so that invalid requests cost the control
-    thread nothing."""
-    if not math.isfinite(value):
-        return f"{prm.name} = {value!r}: expected a finite number"
-    if prm.type == ParamType.INT32 and value != int(value):
-        return f"{prm.name} = {value!r}: expected an integer"
-    if not prm.minimum <= value <= prm.maximum:
-        return f"{prm.name} = {value!r}: expected {prm.minimum:g} .. {prm.maximum:g}"
-    return ""
-
-
-def _cmd_label(cmd: int) -> str:
-    names = {CMD_ARM_DISARM: "ARM_DISARM", CMD_NAV_TAKEOFF: "TAKEOFF",
-             CMD_DO_SET_MODE: "SET_MODE", CMD_DO_VTOL_TRANSITION: "VTOL_TRANSITION",
-             CMD_NAV_LAND: "LAND", CMD_INJECT_FAILURE: "INJECT_FAILURE",
-             CMD_INJECT_PARTIAL_LOSS: "INJECT_PARTIAL_LOSS",
-             CMD_SET_MESSAGE_INTERVAL: "SET_MESSAGE_INTERVAL",
-             CMD_REQUEST_MESSAGE: "REQUEST_MESSAGE", CMD_GET_HOME_POSITION: "GET_HOME_POSITION",
-             CMD_REQUEST_FLIGHT_INFORMATION: "REQUEST_FLIGHT_INFORMATION"}
-    return names.get(int(cmd), f"CMD {int(cmd)}")
-
-
-def _fmt_params(p: Sequence[float]) -> str:
-    return "(" + ", ".join("nan" if math.isnan(x) else f"{x:g}" for x in p) + ")"
-
-
-def _default_reason(cmd: int, res: CommandResult, st: AutopilotStatus | None) -> str:
-    if res == CommandResult.UNSUPPORTED:
-        return "not supported"
-    if st is not None and not st.armed and cmd in (CMD_NAV_TAKEOFF, CMD_DO_VTOL_TRANSITION):
-        return "vehicle is disarmed"
-    if st is not None:
-        return f"refused in mode {FlightMode(st.mode).name}"
-    return "refused"
+                self.streams.send(MSG[name])
+        ms = self.hold.due(now)
+        if ms is not None and self.links:
+            self.send_all(self.links[0].codec.named_value_int_encode(ms, b"SIM_HOLD", ms))

@@ -162,14 +162,14 @@ class Px4Services:
             if self.mission is not None:
                 out.append(self.mission.mission_current())
         if out:
-            ep._reply(lambda: [ep._send_all(m) for m in out])
+            ep.reply(lambda: [ep.send_all(m) for m in out])
         self._check_fence(pos)
 
     def tick(self) -> None:
         """Mission-protocol wall-clock duties (request retries); replies go to all links."""
         if self.mission is not None:
             for reply in self.mission.tick(time.monotonic()):
-                self.ep._send_all(reply)
+                self.ep.send_all(reply)
 
     # ------------------------------------------------------------------ streams
     def build(self, msg_id: int) -> Any:
