@@ -107,10 +107,17 @@ def _lqr_row(g: LQRAxisGains) -> NDArray[np.float64]:
     return np.array([float(g.k_int), float(g.k_angle), float(g.k_rate)])
 
 
+MEMO_ENTRIES = 256
+"""Airspeeds (and gain sets) a :class:`_GainMemo` holds at most (about 0.2 MB)."""
+
+
 class _GainMemo:
     """A gain table's gains at an airspeed (``table.gains_at``) and their (3, n) kernel array,
     memoised: the measured airspeed comes in 0.01 m/s steps, so values repeat, and the gains
-    of a value never change. Starts afresh when the table object is replaced."""
+    of a value never change. Starts afresh when the table object is replaced, and when it
+    holds :data:`MEMO_ENTRIES` airspeeds: the scheduling airspeed is low-passed, so in a
+    transition almost every step is a new value, and an unbounded (or 20 000-entry) memo grew
+    the autopilot by about 300 KB per simulated second (issue 24)."""
 
     def __init__(self, row: Callable[[Any], NDArray[np.float64]]) -> None:
         self._row = row  # a module-level function, so a controller still pickles
@@ -121,7 +128,7 @@ class _GainMemo:
     def at(self, table: GainSchedule | LQRGains, airspeed_m_s: float
            ) -> tuple[dict[str, Any], NDArray[np.float64]]:
         """``(gains by axis, kernel array)`` at ``airspeed_m_s`` [m/s]."""
-        if table is not self._table or len(self._by_speed) >= 20_000:
+        if table is not self._table or len(self._by_speed) >= MEMO_ENTRIES:
             self._by_speed = {}
             self._table = table
         g = self._by_speed.get(airspeed_m_s)
@@ -131,7 +138,7 @@ class _GainMemo:
                 self._by_speed[airspeed_m_s] = g
         ga = self._by_gains.get(id(g))
         if ga is None or ga[0] is not g:  # keyed on the dict, kept alive by the entry
-            if len(self._by_gains) >= 20_000:
+            if len(self._by_gains) >= MEMO_ENTRIES:
                 self._by_gains = {}
             ga = (g, np.array([self._row(g[ax]) for ax in ATTITUDE_AXES]))
             self._by_gains[id(g)] = ga

@@ -48,8 +48,6 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any, TextIO
 
-import numpy as np
-
 from vtolftc.firmware_sim.autopilot.failsafe import FailsafeEvent, FailsafeMonitor
 from vtolftc.firmware_sim.autopilot.gcs_endpoint import GcsEndpoint
 from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
@@ -68,6 +66,7 @@ from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.link import Link
 from vtolftc.telemetry import TelemetrySample
+from vtolftc.telemetry.streamstats import DurationStats
 
 __all__ = ["EXIT_VEHICLE_LOST", "AutopilotProcess"]
 
@@ -148,10 +147,11 @@ class AutopilotProcess:
         self.vehicle_lost = False
         self.t_wall0 = time.monotonic()
         self.wall_in_step = 0.0
-        self.step_wall_s: list[float] = []
-        """Wall time of each control step (autopilot step, status, answer), s."""
-        self.step_period_s: list[float] = []
-        """Wall time between the starts of consecutive control steps, s."""
+        self.step_wall_s = DurationStats()
+        """Wall time of the control steps (autopilot step, status, answer) [s] (bounded
+        memory: count, mean, max exact; quantiles to 0.5 %)."""
+        self.step_period_s = DurationStats()
+        """Wall time between the starts of consecutive control steps [s] (likewise)."""
         self.step_cpu_max_s = 0.0
         """Longest control step in CPU time of the control thread, s (unlike the wall time,
         blind to the scheduler's preemptions on a loaded machine; a compilation shows)."""
@@ -274,7 +274,7 @@ class AutopilotProcess:
                     t0 = pc()
                     c0 = thread_time()
                     if last_step_start is not None:
-                        self.step_period_s.append(t0 - last_step_start)
+                        self.step_period_s.add(t0 - last_step_start)
                     last_step_start = t0
                     u = ap.step(nav)
                     t1 = pc()
@@ -286,7 +286,7 @@ class AutopilotProcess:
                         self.step_cpu_max_s = cpu
                     dt = t2 - t0
                     self.wall_in_step += dt
-                    self.step_wall_s.append(dt)
+                    self.step_wall_s.add(dt)
                     self._sim_usec = int(nav.time_usec)
                     # the rest overlaps with the vehicle's physics step
                     sample = TelemetrySample(nav.time_usec, nav, st, None)
@@ -344,12 +344,10 @@ class AutopilotProcess:
             "hil_steps_superseded": self.hil.superseded,
             "failsafe_events": list(self.failsafe_events),
         }
-        if self.step_wall_s:
-            w = np.asarray(self.step_wall_s) * 1e6
-            out["step_wall_us"] = {"mean": float(w.mean()), "median": float(np.median(w)),
-                                   "p99": float(np.percentile(w, 99)), "max": float(w.max())}
+        if self.step_wall_s.n:
+            out["step_wall_us"] = self.step_wall_s.summary(1e6)
             out["step_cpu_max_ms"] = self.step_cpu_max_s * 1e3
-            out["part_mean_us"] = {k: 1e6 * v / len(self.step_wall_s)
+            out["part_mean_us"] = {k: 1e6 * v / self.step_wall_s.n
                                    for k, v in self.part_wall_s.items()}
         if self.compiled_at_ready is not None:
             now = compiled_specialisations()
@@ -357,11 +355,8 @@ class AutopilotProcess:
                 "specialisations_at_ready": sum(map(len, self.compiled_at_ready.values())),
                 "specialisations_at_end": sum(map(len, now.values())),
                 "compiled_after_ready": new_specialisations(self.compiled_at_ready, now)}
-        if self.step_period_s:
-            w = np.asarray(self.step_period_s) * 1e3
-            out["step_period_ms"] = {"median": float(np.median(w)),
-                                     "p99": float(np.percentile(w, 99)),
-                                     "max": float(w.max()), "n": int(w.size)}
+        if self.step_period_s.n:
+            out["step_period_ms"] = self.step_period_s.summary(1e3)
         return out
 
     def finish(self) -> dict[str, Any]:

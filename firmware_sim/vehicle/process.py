@@ -74,7 +74,6 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import json
 import math
 import os
 import sys
@@ -86,16 +85,17 @@ import numpy as np
 
 from vtolftc.airframe.loader import Airframe, load_airframe
 from vtolftc.base.jsonio import atomic_write_text, dumps
-from vtolftc.base.rotation import quat_to_euler as dyn_quat_to_euler
 from vtolftc.firmware_sim.vehicle.battery import BatteryModel, vehicle_power_w
-from vtolftc.firmware_sim.vehicle.dynamics import N_RIGID
-from vtolftc.firmware_sim.vehicle.faults import Fault, FaultKind
+from vtolftc.firmware_sim.vehicle.fault_service import FaultInjectionService
+from vtolftc.firmware_sim.vehicle.faults import Fault
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import SensorNoise
+from vtolftc.firmware_sim.vehicle.state_encoder import StateEncoder
+from vtolftc.firmware_sim.vehicle.truth_log import TruthLog
 from vtolftc.protocols import SigningConfig, open_link
-from vtolftc.protocols.failure_units import FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO, ActuatorTable
+from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.generated import constants as mav
-from vtolftc.protocols.hil import NavState, encode_hil_state
+from vtolftc.telemetry.streamstats import DurationStats
 
 __all__ = ["AUTOPILOT_COMPONENT_ID", "AUTOPILOT_SYSTEM_ID", "EXIT_PEER_LOST", "SAFE_OUTPUT",
            "VehicleProcess"]
@@ -104,25 +104,11 @@ CONTROL_PERIOD_USEC = 4000
 VEHICLE_SYSTEM_ID = 1
 VEHICLE_COMPONENT_ID = mav.MAV_COMP_ID_USER1  # the simulator, not the autopilot
 FIELDS_ALL = 0x1FFF
-CMD_INJECT_FAILURE = mav.MAV_CMD_INJECT_FAILURE
-CMD_INJECT_PARTIAL_LOSS = mav.MAV_CMD_INJECT_PARTIAL_LOSS
-FAILURE_TYPE_OK, FAILURE_TYPE_OFF = mav.FAILURE_TYPE_OK, mav.FAILURE_TYPE_OFF
-FAILURE_TYPE_STUCK = mav.FAILURE_TYPE_STUCK
-FAILURE_TYPE_PARTIAL_LOSS = mav.FAILURE_TYPE_PARTIAL_LOSS
-MAV_RESULT_ACCEPTED, MAV_RESULT_DENIED = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_DENIED
-MAV_RESULT_UNSUPPORTED, MAV_RESULT_FAILED = mav.MAV_RESULT_UNSUPPORTED, mav.MAV_RESULT_FAILED
 EXIT_PEER_LOST = 3
 _FLUSH_ROWS = 125
 AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID = 1, 1
 SAFE_OUTPUT = 0.0
 """Output-watchdog value of every actuator: rotors and pushers stopped, surfaces neutral."""
-
-
-def _decimal_of_float32(x: float) -> float:
-    """The shortest decimal that the float32 ``x`` stands for (0.2f -> 0.2, not
-    0.20000000298...): COMMAND_LONG params are float32, and a loss typed as 0.2 must act as
-    the 0.2 of an in-process run."""
-    return float(np.format_float_positional(np.float32(x), unique=True))
 
 
 class VehicleProcess:
@@ -146,16 +132,12 @@ class VehicleProcess:
                                noise=SensorNoise.typical() if noise else None)
         self.table = ActuatorTable.from_names(self.airframe.actuator_names)
         self.battery = BatteryModel(rho=self.airframe.air_density_kg_m3)
-        self._next_battery = 0
-        self.home = self.vehicle.sensor_model.home
         self.lockstep = lockstep
         self.duration_usec = None if duration_s is None else round(duration_s * 1e6)
         self.peer_timeout_s = peer_timeout_s
         self.connect_timeout_s = connect_timeout_s
-        self.gps_period_usec = round(1e6 / gps_rate_hz) if gps_rate_hz > 0 else 0
         self.log = log or sys.stderr
         self.signing = signing
-        self._state_msgs: list[Any] = []  # the messages of the last state datagram
         """MAVLink 2 signing of the HIL link (None: unsigned, the first autopilot wins)."""
         self.link = open_link(link_url, system_id=VEHICLE_SYSTEM_ID,
                               component_id=VEHICLE_COMPONENT_ID, allow_remote=allow_remote,
@@ -177,149 +159,61 @@ class VehicleProcess:
         n = self.airframe.n_actuators
         self.commands = np.zeros(n)
         self.armed = False
-        self.faults: dict[str, Fault] = {}
-        self.change_count = 0
         self.steps = 0
-        self.step_rtt_s: list[float] = []
-        """Lockstep: wall time from sending a step's state to receiving its controls (s)."""
+        self.step_rtt_s = DurationStats()
+        """Lockstep: wall time from sending a step's state to receiving its controls [s]
+        (bounded memory: count, mean, max exact; quantiles to 0.5 %)."""
         self.part_wall_s = {"record_and_physics": 0.0, "sensors_and_encode": 0.0, "send": 0.0}
         """Lockstep: wall time summed over the steps [s] of the vehicle's own part of the
         critical path (after the controls arrived, until the next state is sent)."""
         self.running = True
         self._last_peer = time.monotonic()
-        self._next_gps = 0
-        self._next_origin = 0
-        self._next_status = 0
         self.out_dir = out_dir
-        self._truth: TextIO | None = None
-        self._events: TextIO | None = None
-        self._rows: list[tuple[int, np.ndarray, float, np.ndarray, np.ndarray]] = []
-        if out_dir is not None:
-            out_dir.mkdir(parents=True, exist_ok=True)
-            self._truth = (out_dir / "vehicle_truth.csv").open("w")
-            cols = ["time_s", "pn_m", "pe_m", "pd_m", "vn_m_s", "ve_m_s", "vd_m_s",
-                    "roll_rad", "pitch_rad", "yaw_rad", "p_rad_s", "q_rad_s", "r_rad_s",
-                    "airspeed_m_s"]
-            for kind in ("pos", "eff", "cmd"):
-                cols += [f"{kind}_{a}" for a in self.airframe.actuator_names]
-            self._truth.write(",".join(cols) + "\n")
-            self._events = (out_dir / "vehicle_events.jsonl").open("w")
+        self.truth_log = (TruthLog(out_dir, self.airframe.actuator_names, _FLUSH_ROWS)
+                          if out_dir is not None else None)
+        """The run folder's truth and event files (None without ``out_dir``)."""
+        self.fault_injection = FaultInjectionService(
+            self.vehicle, self.table, self.codec, self.link.send, self._event, self.log)
+        self.encoder = StateEncoder(self.vehicle, self.battery, self.codec, gps_rate_hz,
+                                    self.fault_injection.status_msg,
+                                    resign=signing is not None)
+        """Encodes the state datagram sent to the autopilot each step."""
         self.t_wall0 = time.monotonic()
+
+    @property
+    def faults(self) -> dict[str, Fault]:
+        """Active faults by actuator name (set by the fault-injection commands)."""
+        return self.fault_injection.faults
+
+    @property
+    def change_count(self) -> int:
+        """Changes of the fault set so far."""
+        return self.fault_injection.change_count
 
     # ------------------------------------------------------------------ output
     def _event(self, event: str, text: str, **extra: Any) -> None:
-        rec = {"time_s": self.vehicle.time_usec * 1e-6, "event": event, "text": text, **extra}
-        if self._events is not None:
-            self._events.write(json.dumps(rec) + "\n")
-            self._events.flush()
+        if self.truth_log is not None:
+            self.truth_log.event(self.vehicle.time_usec * 1e-6, event, text, **extra)
 
     def _record(self, flush: bool = True) -> None:
-        """Snapshot the truth of the current step (a few copies, no formatting: the row is
-        built at the next flush, off the lockstep's critical path)."""
-        if self._truth is None:
-            return
-        v = self.vehicle
-        self._rows.append((v.time_usec, v.x.copy(), float(v.fm[6]), v.eff.copy(),
-                           self.commands.copy()))
-        if flush and len(self._rows) >= _FLUSH_ROWS:
-            self._flush()
-
-    def _flush(self) -> None:
-        """Write the snapshots as CSV rows (``%.9g``) and flush the file (every 125 steps =
-        0.5 s of simulated time, and at exit: a SIGKILL loses less than 0.5 s)."""
-        if self._truth is not None and self._rows:
-            rows = [np.concatenate(([t * 1e-6], x[0:6], dyn_quat_to_euler(x[6:10]),
-                                    x[10:13], [air], x[N_RIGID:], eff, cmd))
-                    for t, x, air, eff, cmd in self._rows]
-            np.savetxt(self._truth, np.vstack(rows), delimiter=",", fmt="%.9g")
-            self._truth.flush()
-            self._rows.clear()
-
-    def _pack(self, msg: Any) -> bytes:
-        data = msg.pack(self.codec)
-        self.codec.seq = (self.codec.seq + 1) & 0xFF
-        self._state_msgs.append(msg)
-        return data
+        """Snapshot the truth of the current step (formatted at the next flush, off the
+        lockstep's critical path)."""
+        if self.truth_log is not None:
+            v = self.vehicle
+            self.truth_log.record(v.time_usec, v.x, float(v.fm[6]), v.eff, self.commands,
+                                  flush)
 
     def again(self, datagram: bytes) -> bytes:
-        """The last state datagram, to send again: the same bytes; on a signed link the same
-        messages signed anew (the same bytes are a replay, which the autopilot drops)."""
-        if self.signing is None:
-            return datagram
-        msgs, self._state_msgs = self._state_msgs, []
-        return b"".join(self._pack(m) for m in msgs)
+        """The last state datagram, to send again (see :meth:`StateEncoder.again`)."""
+        return self.encoder.again(datagram)
 
     def state_datagram(self) -> bytes:
-        """HIL_SENSOR [+ HIL_GPS] [+ GPS_GLOBAL_ORIGIN] + HIL_STATE_QUATERNION at the current
-        time, packed back to back in one datagram (the link parses several frames per
-        datagram)."""
-        v = self.vehicle
-        t = v.time_usec
-        c = self.codec
-        parts: list[bytes] = []
-        self._state_msgs = []
-        if t >= self._next_origin:
-            self._next_origin = t + 1_000_000
-            h = self.home
-            parts.append(self._pack(c.gps_global_origin_encode(
-                round(h.lat_deg * 1e7), round(h.lon_deg * 1e7), round(h.alt_m * 1e3), t)))
-        s = v.sensors()
-        a, g, m = s.accel_m_s2, s.gyro_rad_s, s.mag_gauss
-        parts.append(self._pack(c.hil_sensor_encode(
-            t, a[0], a[1], a[2], g[0], g[1], g[2], m[0], m[1], m[2], s.abs_pressure_hpa,
-            s.diff_pressure_hpa, s.pressure_alt_m, s.temperature_c, FIELDS_ALL, 0)))
-        if self.gps_period_usec and t >= self._next_gps:
-            self._next_gps = t + self.gps_period_usec
-            vn, ve, vd = (float(x) for x in s.gps_vel_ned_m_s)
-            cog = round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100) % 36000
-            parts.append(self._pack(c.hil_gps_encode(
-                t, 3, round(s.gps_lat_deg * 1e7), round(s.gps_lon_deg * 1e7),
-                round(s.gps_alt_m * 1e3), 100, 100, min(65535, round(100 * math.hypot(vn, ve))),
-                round(100 * vn), round(100 * ve), round(100 * vd), cog, 12, 0, 0)))
-        x = v.x  # views: encode_hil_state only reads them
-        nav = NavState(t, x[6:10], x[10:13], x[0:3], x[3:6], float(v.fm[6]))
-        hs = encode_hil_state(nav, self.home.lat_deg, self.home.lon_deg, self.home.alt_m)
-        parts.append(self._pack(c.hil_state_quaternion_encode(
-            hs.time_usec, hs.attitude_quaternion, hs.rollspeed, hs.pitchspeed, hs.yawspeed,
-            hs.lat, hs.lon, hs.alt, hs.vx, hs.vy, hs.vz, hs.ind_airspeed, hs.true_airspeed,
-            hs.xacc, hs.yacc, hs.zacc)))
-        if t >= self._next_status:
-            self._next_status = t + 1_000_000
-            parts.append(self._pack(self._fault_status_msg()))
-        if t >= self._next_battery:  # the power module, 5 Hz
-            self._next_battery = t + 200_000
-            parts.append(self._pack(self._battery_msg()))
-        return b"".join(parts)
-
-    def _battery_msg(self) -> Any:
-        """BATTERY_STATUS of the power module: cell voltages (mV), current (cA), consumed
-        (mAh); no charge estimate (-1): the autopilot makes its own."""
-        b = self.battery
-        cells = [min(65534, round(1000 * b.voltage_v / b.spec.cells))] * b.spec.cells
-        cells += [65535] * (10 - len(cells))
-        return self.codec.battery_status_encode(
-            0, 1, 3, 32767, cells, round(100 * b.current_a), round(b.consumed_mah), -1, -1)
+        """The state datagram of the current time (see :meth:`StateEncoder.datagram`)."""
+        return self.encoder.datagram()
 
     def _step_battery(self) -> None:
         self.battery.step(CONTROL_PERIOD_USEC * 1e-6, vehicle_power_w(self.battery,
                                                                       self.vehicle))
-
-    def _fault_status_msg(self) -> Any:
-        motor_f, motor_l = [0] * 16, [0.0] * 16
-        servo_f, servo_l = [0] * 16, [0.0] * 16
-        for name, f in self.faults.items():
-            unit, inst = self.table.unit_instance(name)
-            ftype = {FaultKind.LOSS: FAILURE_TYPE_PARTIAL_LOSS, FaultKind.OFF: FAILURE_TYPE_OFF,
-                     FaultKind.STUCK: FAILURE_TYPE_STUCK}[f.kind]
-            loss = 1.0 if f.kind is FaultKind.OFF else (
-                float(f.loss) if f.kind is FaultKind.LOSS else 0.0)
-            if unit == FAILURE_UNIT_MOTOR:
-                motor_f[inst - 1], motor_l[inst - 1] = ftype, loss
-            else:
-                servo_f[inst - 1], servo_l[inst - 1] = ftype, loss
-        return self.codec.fault_injection_status_encode(
-            self.vehicle.time_usec, self.change_count & 0xFFFF, len(self.table.motors),
-            len(self.table.servos), motor_f, motor_l, servo_f, servo_l)
 
     # ------------------------------------------------------------------ input
     def handle(self, msg: Any) -> bool:
@@ -372,70 +266,8 @@ class VehicleProcess:
                     self.commands[:] = c
             return t == now_usec
         if kind == "COMMAND_LONG":
-            try:
-                self._command(msg)
-            except Exception as exc:  # never let one command stop the simulation
-                print(f"vehicle: command {msg.command} failed: {exc!r}", file=self.log)
-                self._ack(int(msg.command), MAV_RESULT_FAILED, msg)
+            self.fault_injection.handle_command(msg)
         return False
-
-    def _command(self, msg: Any) -> None:
-        cmd = int(msg.command)
-        if cmd == CMD_INJECT_FAILURE:
-            unit, ftype, inst = msg.param1, msg.param2, msg.param3
-            kinds = {FAILURE_TYPE_OK: None, FAILURE_TYPE_OFF: FaultKind.OFF,
-                     FAILURE_TYPE_STUCK: FaultKind.STUCK}
-            if not math.isfinite(ftype) or int(ftype) not in kinds:
-                return self._ack(cmd, MAV_RESULT_UNSUPPORTED, msg)
-            result = self._apply(unit, inst, kinds[int(ftype)], 0.0)
-        elif cmd == CMD_INJECT_PARTIAL_LOSS:
-            loss = msg.param3
-            if not (math.isfinite(loss) and 0.0 <= loss <= 1.0):
-                return self._ack(cmd, MAV_RESULT_DENIED, msg)
-            kind = None if loss == 0.0 else FaultKind.LOSS
-            result = self._apply(msg.param1, msg.param2, kind, _decimal_of_float32(loss))
-        else:
-            return self._ack(cmd, MAV_RESULT_UNSUPPORTED, msg)
-        self._ack(cmd, result, msg)
-        self.link.send(self._fault_status_msg())
-        return None
-
-    def _apply(self, unit: float, instance: float, kind: FaultKind | None,
-               loss: float) -> int:
-        if not math.isfinite(unit) or int(unit) not in (FAILURE_UNIT_MOTOR, FAILURE_UNIT_SERVO):
-            return MAV_RESULT_UNSUPPORTED
-        names = self.table.motors if int(unit) == FAILURE_UNIT_MOTOR else self.table.servos
-        inst = int(instance) if math.isfinite(instance) else -1
-        if inst == 0:
-            targets = list(names)
-        elif 1 <= inst <= len(names) and inst == instance:
-            targets = [names[inst - 1]]
-        else:
-            return MAV_RESULT_DENIED
-        t_s = self.vehicle.time_usec * 1e-6
-        for name in targets:
-            if kind is None:
-                self.faults.pop(name, None)
-            else:
-                self.faults[name] = Fault(name, kind, loss if kind is FaultKind.LOSS else 0.0,
-                                          t_s)
-        # rebuild the vehicle's fault set (a new fault replaces the actuator's previous one);
-        # the faults act from the next physics step (Vehicle.step applies due faults first)
-        self.vehicle.clear_faults()
-        for f in self.faults.values():
-            self.vehicle.inject(Fault(f.actuator, f.kind, f.loss, t_s))
-        self.change_count += 1
-        what = "cleared" if kind is None else (
-            f"{loss:.0%} loss" if kind is FaultKind.LOSS else kind.value)
-        self._event("fault", f"{', '.join(targets)}: {what}", actuators=targets,
-                    kind="ok" if kind is None else kind.value, loss=loss)
-        print(f"vehicle: t = {t_s:.3f} s: {', '.join(targets)}: {what}", file=self.log,
-              flush=True)
-        return MAV_RESULT_ACCEPTED
-
-    def _ack(self, cmd: int, result: int, msg: Any) -> None:
-        self.link.send(self.codec.command_ack_encode(
-            cmd, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()))
 
     # ------------------------------------------------------------------ loops
     def wait_for_peer(self) -> bool:
@@ -556,7 +388,7 @@ class VehicleProcess:
                 for m in msgs:
                     got = self.handle(m) or got
             t_got = pc()
-            self.step_rtt_s.append(t_got - t_sent)
+            self.step_rtt_s.add(t_got - t_sent)
             if self.delay_usec:
                 self._apply_due()
             self._record(flush=False)
@@ -574,8 +406,9 @@ class VehicleProcess:
             part["sensors_and_encode"] += t_sent - t_phys
             part["send"] += pc() - t_sent
             # bookkeeping while the autopilot computes
-            if len(self._rows) >= _FLUSH_ROWS:
-                self._flush()
+            tl = self.truth_log
+            if tl is not None and tl.pending >= _FLUSH_ROWS:
+                tl.flush()
         return 0
 
     def _run_realtime(self) -> int:
@@ -615,8 +448,6 @@ class VehicleProcess:
 
     def close(self) -> None:
         """Flush the run folder and close the link. Idempotent."""
-        with contextlib.suppress(Exception):
-            self._flush()
         wall = time.monotonic() - self.t_wall0
         summary = {
             "sim_time_s": self.vehicle.time_usec * 1e-6, "steps": self.steps,
@@ -629,21 +460,15 @@ class VehicleProcess:
             "rejected": dict(self.rejected), "watchdog_trips": self.watchdog_trips,
             "hil_delay_ms": self.delay_usec / 1000, "hil_loss": self.loss,
         }
-        if self.step_rtt_s:
-            rtt = np.asarray(self.step_rtt_s) * 1e6
-            summary["step_round_trip_us"] = {
-                "mean": float(np.mean(rtt)),
-                "median": float(np.median(rtt)), "p90": float(np.percentile(rtt, 90)),
-                "p99": float(np.percentile(rtt, 99)), "n": int(rtt.size)}
+        if self.step_rtt_s.n:
+            summary["step_round_trip_us"] = self.step_rtt_s.summary(1e6)
             summary["part_mean_us"] = {k: 1e6 * x / max(1, self.steps)
                                        for k, x in self.part_wall_s.items()}
-        if self._events is not None:
+        if self.truth_log is not None:
             self._event("stop", f"{self.steps} steps, t = {summary['sim_time_s']:.3f} s")
-            self._events.close()
-            self._events = None
-        if self._truth is not None:
-            self._truth.close()
-            self._truth = None
+            with contextlib.suppress(Exception):
+                self.truth_log.close()
+            self.truth_log = None
             assert self.out_dir is not None
             atomic_write_text(self.out_dir / "vehicle_summary.json", dumps(summary))
         self.link.close()

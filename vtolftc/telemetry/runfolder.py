@@ -30,11 +30,14 @@ import numpy as np
 
 from vtolftc.base.jsonio import json_safe
 from vtolftc.protocols.hil import N_ACTUATORS
+from vtolftc.telemetry.plotbuffer import DecimatingBuffer
 from vtolftc.telemetry.samples import TelemetrySample
 
 __all__ = ["RunFolderWriter", "default_run_dir"]
 
 _NEEDS_QUOTES = frozenset(',"\r\n')  # characters csv.writer would quote a field for
+_PLOT_COLS = ("t", "n", "alt", "alt_ref", "V", "roll", "pitch", "yaw", "roll_ref", "pitch_ref",
+              "yaw_ref", "mode")  # then one column per actuator command
 
 
 def default_run_dir(case: str, controller: str, root: str | Path = "runs") -> Path:
@@ -69,7 +72,9 @@ class RunFolderWriter:
         self._names: list[str] = []
         self._rows = 0
         self._last_flush_usec = 0
-        self._cols: dict[str, list[Any]] = {}
+        self._plot: DecimatingBuffer | None = None
+        """Rows for the end-of-run plots (``plots=True`` only): a fixed-size, evenly
+        decimated table, so that a run of any length holds a bounded amount of memory."""
         self._row_fmt = ""
         self._row_fmt_truth = ""
         self.info: dict[str, Any] = {}
@@ -105,10 +110,8 @@ class RunFolderWriter:
                   + "%.4f," * 6 + "%.3f," * 3 + "%.4f," * 5 + "%.5f," * n_u + "%s")
         self._row_fmt = common + "," * (1 + n_u) + "\r\n"
         self._row_fmt_truth = common + ",%.3f" + ",%.3f" * n_u + "\r\n"
-        for k in ("t", "n", "alt", "alt_ref", "V", "roll", "pitch", "yaw", "roll_ref",
-                  "pitch_ref", "yaw_ref", "mode"):
-            self._cols[k] = []
-        self._cols["u"] = []
+        if self.plots:
+            self._plot = DecimatingBuffer(len(_PLOT_COLS) + n_u)
 
     def on_sample(self, s: TelemetrySample) -> None:
         """Append one row to ``telemetry.csv`` (angles in deg at this edge), flushed every 0.5 s."""
@@ -141,20 +144,9 @@ class RunFolderWriter:
             line = self._row_fmt % vals
         self._csv_file.write(line)
         self._rows += 1
-        c = self._cols
-        c["t"].append(t)
-        c["n"].append(pos[0])
-        c["alt"].append(h)
-        c["alt_ref"].append(alt_ref)
-        c["V"].append(V)
-        c["roll"].append(att[0])
-        c["pitch"].append(att[1])
-        c["yaw"].append(att[2])
-        c["roll_ref"].append(ref[0])
-        c["pitch_ref"].append(ref[1])
-        c["yaw_ref"].append(ref[2])
-        c["mode"].append(float(int(st.mode)))
-        c["u"].append(np.array(u, dtype=float))
+        if self._plot is not None:
+            self._plot.add((t, pos[0], h, alt_ref, V, *att, *ref, float(int(st.mode)),
+                            *np.asarray(u, dtype=float).tolist()))
         if s.time_usec - self._last_flush_usec >= 500_000:  # a crash loses < 0.5 s
             self._csv_file.flush()
             self._last_flush_usec = s.time_usec
@@ -196,7 +188,10 @@ class RunFolderWriter:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        c = {k: np.asarray(v) for k, v in self._cols.items()}
+        if self._plot is None:
+            return
+        rows = self._plot.rows()
+        c = {k: rows[:, i] for i, k in enumerate(_PLOT_COLS)}
         t = c["t"]
         title = (f"{self.info.get('airframe', '')} case {self.info.get('case', '?')}, "
                  f"{self.info.get('controller', '?')}")
@@ -225,7 +220,7 @@ class RunFolderWriter:
         fig.savefig(self.run_dir / "attitude.png", dpi=110)
         plt.close(fig)
 
-        u = np.vstack(c["u"])
+        u = rows[:, len(_PLOT_COLS):]
         names = self._names
         n_rot = sum(1 for n in names if n.startswith("rotor_"))
         i_push = [i for i, n in enumerate(names) if n.startswith("pusher_")]
