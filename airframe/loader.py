@@ -712,12 +712,27 @@ def hover_authority_problem(af: Airframe) -> str:
     return ""
 
 
-def _with_airspeeds(af: Airframe, declared: Mapping[str, float], rd: _Reader) -> Airframe:
-    """The airframe with its stall / transition-end / cruise airspeeds, declared or derived."""
+def _speeds(af: Airframe, declared: Mapping[str, float]) -> tuple[float, float, float]:
     stall = declared.get("stall_m_s", af.stall_speed_m_s())
     end = declared.get("transition_end_m_s", round_up_speed(stall))
     cruise = declared.get("cruise_m_s", max(round_up_speed(CRUISE_OVER_STALL * stall),
                                             end + SPEED_GRID_M_S))
+    return stall, end, cruise
+
+
+def current_airspeeds(af: Airframe) -> Airspeeds:
+    """``af``'s airspeeds by the one rule, from its *current* mass and wing (the declared
+    ones kept): the same as :attr:`Airframe.airspeeds` for a loaded airframe, and still right
+    for one derived with :func:`dataclasses.replace` (a heavier copy stalls faster)."""
+    own = af.airspeeds
+    names = own.declared if own is not None else ()
+    declared = {k: getattr(own, k) for k in names}
+    return Airspeeds(*_speeds(af, declared), tuple(sorted(declared)))
+
+
+def _with_airspeeds(af: Airframe, declared: Mapping[str, float], rd: _Reader) -> Airframe:
+    """The airframe with its stall / transition-end / cruise airspeeds, declared or derived."""
+    stall, end, cruise = _speeds(af, declared)
     if not stall <= end <= cruise:
         bad = "transition_end_m_s" if end < stall else "cruise_m_s"
         raise rd.fail(f"airspeeds.{bad}", declared.get(bad, end if end < stall else cruise),

@@ -33,6 +33,7 @@ from vtolftc.airframe.loader import (
     SPEED_GRID_M_S,
     Airframe,
     AirframeError,
+    current_airspeeds,
     round_up_speed,
 )
 from vtolftc.synthesis.models import AXES, Axis
@@ -248,15 +249,12 @@ def transition_speeds(af: Airframe, transition_end_m_s: float | None = None,
     >>> round(sp.stall_m_s, 2), sp.transition_end_m_s, sp.cruise_m_s
     (12.73, 13.0, 18.0)
     """
-    own = af.airspeeds
-    vs = own.stall_m_s if own is not None else af.stall_speed_m_s()
-    if transition_end_m_s is not None:
-        vt = float(transition_end_m_s)
-    else:
-        vt = own.transition_end_m_s if own is not None else round_up_speed(vs)
+    own = current_airspeeds(af)
+    vs = own.stall_m_s
+    vt = own.transition_end_m_s if transition_end_m_s is None else float(transition_end_m_s)
     if cruise_m_s is not None:
         vc = float(cruise_m_s)
-    elif own is not None and transition_end_m_s is None:
+    elif transition_end_m_s is None:
         vc = own.cruise_m_s
     else:
         vc = max(round_up_speed(CRUISE_OVER_STALL * vs), vt + SPEED_GRID_M_S)

@@ -5,7 +5,12 @@ The navigator, the battery and the arming monitors register theirs on the same s
 
 from __future__ import annotations
 
-from vtolftc.airframe.loader import SPEED_GRID_M_S, Airframe, round_up_speed
+from vtolftc.airframe.loader import (
+    SPEED_GRID_M_S,
+    Airframe,
+    current_airspeeds,
+    round_up_speed,
+)
 from vtolftc.firmware_sim.autopilot.arming import ARMING_PARAMS
 from vtolftc.firmware_sim.autopilot.interface import ParameterStore, ParamType
 
@@ -86,9 +91,7 @@ def airframe_airspeed_defaults(af: Airframe) -> dict[str, float]:
     >>> airframe_airspeed_defaults(load_airframe())
     {'VT_ARSP_TRANS': 13.0, 'FW_AIRSPD_TRIM': 18.0, 'FW_AIRSPD_MIN': 14.0, 'FW_AIRSPD_MAX': 22.0}
     """
-    sp = af.airspeeds
-    if sp is None:
-        return {}
+    sp = current_airspeeds(af)
     return {"VT_ARSP_TRANS": sp.transition_end_m_s, "FW_AIRSPD_TRIM": sp.cruise_m_s,
             "FW_AIRSPD_MIN": SPEED_GRID_M_S * round(FW_AIRSPD_MIN_OVER_STALL * sp.stall_m_s
                                                     / SPEED_GRID_M_S),
