@@ -201,6 +201,7 @@ class Autopilot:
         """Auto-disarm on the ground (COM_DISARM_PRFLT, COM_DISARM_LAND) and the flight
         record of FLIGHT_INFORMATION (:mod:`.arming`)."""
         self.outer.navigator = self.commander.navigator = self.navigator
+        self.outer.output = self.output
         self.commander.arming = self.arming
 
     def battery_update(self, time_usec: int, voltage_v: float, current_a: float) -> None:

@@ -247,7 +247,8 @@ class Commander:
             landed = self._landed_timer > 1.0
         m.update(self.est.time_usec, altitude_m=h, takeoff_alt_m=self.sp.takeoff_alt,
                  airspeed_m_s=V, arsp_trans=pp["VT_ARSP_TRANS"].value,
-                 trans_timeout_s=pp["VT_TRANS_TMOUT"].value,
+                 trans_timeout_s=(pp["VT_TRANS_TMOUT"].value
+                                  if self.outer.degraded.hover_recoverable() else math.inf),
                  b_trans_arsp=pp["VT_B_TRANS_ARSP"].value,
                  b_trans_dur_s=pp["VT_B_TRANS_DUR"].value, landed=landed)
         mode = m.mode

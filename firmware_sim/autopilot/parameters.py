@@ -6,6 +6,7 @@ The navigator, the battery and the arming monitors register theirs on the same s
 from __future__ import annotations
 
 from vtolftc.firmware_sim.autopilot.arming import ARMING_PARAMS
+from vtolftc.firmware_sim.autopilot.degraded_lift import DEGRADED_LIFT_PARAMS
 from vtolftc.firmware_sim.autopilot.interface import ParameterStore, ParamType
 
 __all__ = ["AUTOPILOT_PARAMS", "default_parameters"]
@@ -63,4 +64,6 @@ def default_parameters() -> ParameterStore:
     ps = ParameterStore()
     for name, default, typ, lo, hi, desc in (*AUTOPILOT_PARAMS, *ARMING_PARAMS):
         ps.register(name, default, typ, lo, hi, desc)
+    for name, default, lo, hi, desc in DEGRADED_LIFT_PARAMS:
+        ps.register(name, default, ParamType.REAL32, lo, hi, desc)
     return ps
