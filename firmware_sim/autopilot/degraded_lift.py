@@ -5,27 +5,29 @@ In the front transition the paper flies pitch 0 and the lift rotors carry what t
 not. When the rotors have lost lift (a fault the autopilot never learns of), the altitude hold
 asks for more body z force than the allocation can give and the vehicle sinks; tight tracking
 of pitch 0 then keeps the wing at its zero-pitch lift while the vehicle falls. This monitor
-decides from what the autopilot measures only:
+decides from what the autopilot measures only (climb rate, airspeed, angle of attack from the
+velocity in body axes, the allocation's commanded and achieved body z force):
 
-- **lift saturation**: the allocation's achieved body z force (nominal model) falls short of
-  the commanded one by more than ``FTC_DL_SAT`` of the commanded force;
-- **sink**: the climb rate is below ``-FTC_DL_SINK`` [m/s];
-
-both for ``FTC_DL_TRIG_T`` seconds engage the degraded-lift guidance (latched until the
-transition ends):
-
-- the pitch reference slews at ``FTC_DL_P_RATE`` [deg/s] towards the pitch that puts the
-  measured angle of attack at the wing's stall angle ``(CL_max - CL0) / CL_alpha`` (nominal
-  airframe file) less the stall margin ``FTC_DL_AOA_MRG`` [deg], at most ``FTC_DL_P_MAX``
-  [deg] (the angle of attack is the measured one, from the airspeed vector in body axes,
-  so a sinking vehicle, whose flight path points down, gets the pitch that keeps the wing
-  below the stall, not more);
-- the pushers are asked for ``FTC_DL_PSH`` of their thrust (instead of ``VT_F_TRANS_THR``);
-- the transition timeout's quad-chute back to hover is held off while hover is not
-  recoverable: the measured lift of the rotors (vertical force from the filtered climb
-  acceleration, less the nominal wing lift) over what the allocation believed it commanded
-  gives their effectiveness; hover counts as recoverable when that effectiveness times the
-  rotors' nominal total thrust is at least ``FTC_DL_HOV_TW`` times the weight.
+- **engage** (latched until the next front transition) when, for ``FTC_DL_TRIG_T`` seconds,
+  the lift rotors saturate (the allocation's achieved body z force, nominal model, short of
+  the command by more than ``FTC_DL_SAT`` of it) while the climb rate is below
+  ``-FTC_DL_SINK`` [m/s], or the vehicle sinks faster than the altitude hold ever commands
+  (``MPC_Z_VEL_MAX_DN + FTC_DL_SINK``): lift lost that the nominal model does not see;
+- **pitch up**: the pitch reference slews at ``FTC_DL_P_RATE`` [deg/s] towards
+  ``FTC_DL_P_MAX`` [deg] scaled by the altitude error (full at ``FTC_DL_ALT_BND`` [m] below
+  the reference, 0 at it: no climb overshoot into fixed-wing); from ``FTC_DL_VS_RAT`` times
+  the airframe's stall speed on, at most the pitch that puts the measured angle of attack at
+  the wing's stall angle ``(CL_max - CL0) / CL_alpha`` less the margin ``FTC_DL_AOA_MRG``
+  [deg]; the outer loops' wing-lift feed-forward then also trusts no angle of attack beyond
+  that limit (a sinking vehicle's wing is past the stall, where the nominal clipped CL is far
+  too high);
+- **pushers** at ``FTC_DL_PSH`` of their thrust (instead of ``VT_F_TRANS_THR``);
+- **rotor demand** divided by the rotors' measured effectiveness (at least 0.3): their
+  measured lift (vertical force from the low-passed climb acceleration, less the nominal wing
+  lift) over what the allocation believed it achieved;
+- **no quad-chute while hover is not recoverable**: the transition timeout's return to hover
+  is held off unless the measured effectiveness times the rotors' nominal total thrust is at
+  least ``FTC_DL_HOV_TW`` times the weight.
 
 With the monitor never engaged (``FTC_DL_EN`` 0, or a nominal transition) the outer loops fly
 exactly as before.
@@ -145,14 +147,14 @@ class DegradedLift:
         if rotor_model > 1.0:
             eff = min(max(rotor_meas / rotor_model, 0.0), 1.5)
             self.rotor_effectiveness += (eff - self.rotor_effectiveness) * min(1.0, dt / 1.0)
-        # pitch target: FTC_DL_P_MAX while the airspeed is well below the stall speed (the
-        # tilted rotors and pushers lift, the wing little); from FTC_DL_VS_RAT x stall on, at
-        # most the pitch that puts the measured angle of attack at the stall margin
-        # scaled down as the altitude error closes (0 at the reference: no climb overshoot)
+        # pitch target: FTC_DL_P_MAX, scaled down as the altitude error closes (0 at the
+        # reference: no climb overshoot); from FTC_DL_VS_RAT x stall speed on, at most the
+        # pitch that puts the measured angle of attack at the stall margin
         band = pp["FTC_DL_ALT_BND"].value
         scale = min(max(alt_err / band, 0.0), 1.0) if band > 0.0 else 1.0
         target = math.radians(pp["FTC_DL_P_MAX"].value) * scale
-        if V >= pp["FTC_DL_VS_RAT"].value * self.v_stall:
+        v_margin = pp["FTC_DL_VS_RAT"].value * self.v_stall
+        if v_margin <= V:
             gamma = pitch - alpha  # flight-path angle [rad]
             target = min(max(gamma + self.alpha_limit(), 0.0), target)
         step = math.radians(pp["FTC_DL_P_RATE"].value) * dt
