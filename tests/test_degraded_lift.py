@@ -117,3 +117,44 @@ def test_four_lift_rotors_off_mid_transition_gs_shif_survives_recoverable() -> N
     rows = fly_subsets(list(rec), 22.0, 40.0, "gs-shif", jobs=2)
     survived = [r["rotors"] for r in rows if r["outcome"] == "survived"]
     assert len(survived) >= 0.9 * len(rec), rows
+
+
+def _fly_events(rotors: tuple[str, ...], timeout_s: float, duration_s: float) -> list[str]:
+    from vtolftc.firmware_sim.vehicle.faults import Fault
+    from vtolftc.scenario import paper_scenario, run_scenario
+
+    events: list[str] = []
+
+    class _Events:
+        def on_start(self, info: dict) -> None:
+            pass
+
+        def on_sample(self, sample: object) -> None:
+            pass
+
+        def on_event(self, time_usec: int, kind: str, text: str) -> None:
+            events.append(text)
+
+        def on_finish(self, metrics: dict) -> None:
+            events.append(f"crashed={metrics['crashed']}")
+
+    faults = [Fault(a, "off", 1.0, 22.0) for a in rotors]
+    run_scenario(paper_scenario(0, duration_s, extra_faults=faults), "gs-shif",
+                 autopilot_setup=lambda ap: ap.params.set("VT_TRANS_TMOUT", timeout_s),
+                 observers=[_Events()])
+    return events
+
+
+@pytest.mark.slow
+def test_quad_chute_held_off_only_while_hover_is_not_recoverable() -> None:
+    """Transition timeout 4 s: four inner lift rotors off at 22 s -> the guidance engages,
+    judges hover not recoverable from the measured lift and keeps flying the transition
+    (no quad-chute); a nominal transition still quad-chutes at the timeout."""
+    ev = _fly_events(("rotor_2a", "rotor_2b", "rotor_3a", "rotor_3b"), 4.0, 33.0)
+    assert any(e.startswith("degraded lift") for e in ev), ev
+    assert not any("quad-chute" in e for e in ev), ev
+    assert any("FRONT_TRANSITION -> FIXED_WING" in e for e in ev), ev
+    assert "crashed=False" in ev
+    ev = _fly_events((), 1.5, 22.5)
+    assert any("quad-chute" in e for e in ev), ev
+    assert not any(e.startswith("degraded lift") for e in ev), ev

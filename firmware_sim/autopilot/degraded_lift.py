@@ -26,8 +26,10 @@ velocity in body axes, the allocation's commanded and achieved body z force):
   measured lift (vertical force from the low-passed climb acceleration, less the nominal wing
   lift) over what the allocation believed it achieved;
 - **no quad-chute while hover is not recoverable**: the transition timeout's return to hover
-  is held off unless the measured effectiveness times the rotors' nominal total thrust is at
-  least ``FTC_DL_HOV_TW`` times the weight.
+  is held off for ``FTC_DL_EST_T`` seconds after engaging (the effectiveness is being
+  measured; low-pass 0.5 s), then unless the least measured effectiveness (the pushers'
+  upward thrust taken out) times the rotors' nominal
+  total thrust is at least ``FTC_DL_HOV_TW`` times the weight.
 
 With the monitor never engaged (``FTC_DL_EN`` 0, or a nominal transition) the outer loops fly
 exactly as before.
@@ -60,7 +62,9 @@ DEGRADED_LIFT_PARAMS: tuple[tuple[str, float, float, float, str], ...] = (
     ("FTC_DL_VS_RAT", 0.9, 0.0, 2.0,
      "airspeed over the stall speed from which the stall margin limits the pitch up"),
     ("FTC_DL_PSH", 1.0, 0.0, 1.0, "pusher thrust fraction when degraded"),
-    ("FTC_DL_HOV_TW", 1.15, 1.0, 3.0,
+    ("FTC_DL_EST_T", 2.0, 0.0, 30.0,
+     "time engaged before the measured rotor effectiveness may allow the quad-chute, s"),
+    ("FTC_DL_HOV_TW", 1.8, 1.0, 3.0,
      "rotor thrust over weight needed to count hover as recoverable (quad-chute allowed)"),
 )
 
@@ -85,7 +89,9 @@ class DegradedLift:
         its pitch reference [rad] (0 until engaged).
     rotor_effectiveness : float
         measured lift of the rotors over the nominal-model lift the allocation achieved
-        (1 until measured).
+        (1 until measured; low-passed, 0.5 s).
+    rotor_effectiveness_min : float
+        its least value since engaged (a lost rotor does not come back): what judges hover.
     """
 
     def __init__(self, airframe: Airframe, pp: dict[str, Any], dt: float) -> None:
@@ -104,20 +110,23 @@ class DegradedLift:
         self.active = False
         self.pitch_ref = 0.0
         self.rotor_effectiveness = 1.0
+        self.rotor_effectiveness_min = 1.0
         self._trig_s = 0.0
+        self._active_s = 0.0
         self._v_up_prev = math.nan
         self._a_up = 0.0
 
     def update(self, v_up: float, V: float, pitch: float, alpha: float, cos_tilt: float,
                fz_cmd: float, fz_achieved: float, wing_up_N: float,
-               alt_err: float = math.inf) -> bool:
+               alt_err: float = math.inf, pusher_up_N: float = 0.0) -> bool:
         """One step in the front transition; returns :attr:`active`.
 
         ``v_up`` climb rate [m/s], ``V`` airspeed [m/s], ``pitch`` and ``alpha`` (measured
         angle of attack) [rad], ``cos_tilt`` cos(roll) cos(pitch), ``fz_cmd`` and
         ``fz_achieved`` the last allocation's commanded and achieved body z force [N]
         (negative up, nominal model), ``wing_up_N`` the nominal wing force upwards [N],
-        ``alt_err`` the altitude reference less the altitude [m].
+        ``alt_err`` the altitude reference less the altitude [m], ``pusher_up_N`` the
+        pushers' commanded thrust's upward component [N].
         """
         pp = self._p
         dt = self.dt
@@ -141,12 +150,15 @@ class DegradedLift:
                 self._trig_s = 0.0
             if not self.active:
                 return False
+        self._active_s += dt
         # rotor effectiveness: measured rotor lift over the lift the allocation believed
-        rotor_meas = self.mass * (self.g + self._a_up) - wing_up_N
+        rotor_meas = self.mass * (self.g + self._a_up) - wing_up_N - pusher_up_N
         rotor_model = -fz_achieved * cos_tilt
         if rotor_model > 1.0:
             eff = min(max(rotor_meas / rotor_model, 0.0), 1.5)
-            self.rotor_effectiveness += (eff - self.rotor_effectiveness) * min(1.0, dt / 1.0)
+            self.rotor_effectiveness += (eff - self.rotor_effectiveness) * min(1.0, dt / 0.5)
+            self.rotor_effectiveness_min = min(self.rotor_effectiveness_min,
+                                               self.rotor_effectiveness)
         # pitch target: FTC_DL_P_MAX, scaled down as the altitude error closes (0 at the
         # reference: no climb overshoot); from FTC_DL_VS_RAT x stall speed on, at most the
         # pitch that puts the measured angle of attack at the stall margin
@@ -168,8 +180,11 @@ class DegradedLift:
 
     def hover_recoverable(self) -> bool:
         """Hover judged recoverable from the measured rotor effectiveness (always True while
-        not engaged)."""
+        not engaged; False for the first ``FTC_DL_EST_T`` seconds engaged, while the
+        effectiveness is being measured)."""
         if not self.active:
             return True
-        return (self.rotor_effectiveness * self.rotor_thrust_N
+        if self._active_s < self._p["FTC_DL_EST_T"].value:
+            return False
+        return (self.rotor_effectiveness_min * self.rotor_thrust_N
                 >= self._p["FTC_DL_HOV_TW"].value * self.mass * self.g)

@@ -189,7 +189,8 @@ class OuterLoops:
             return
         wing_up = lift * math.cos(pitch - alpha) - drag * math.sin(pitch - alpha)
         if self.degraded.update(v_up, V, pitch, alpha, cos_tilt, out.fz_cmd, out.fz_achieved,
-                                wing_up, self.sp.alt_ref - h):
+                                wing_up, self.sp.alt_ref - h,
+                                self.sp.v[1] * math.sin(pitch)):
             self.sp.ref[1] = self.degraded.pitch_ref
             # the rotors' share of the z force, corrected by their measured effectiveness
             self.sp.v[0] /= max(self.degraded.rotor_effectiveness, 0.3)
