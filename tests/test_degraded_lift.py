@@ -91,6 +91,17 @@ def test_fast_sink_alone_engages_and_effectiveness_judges_hover() -> None:
         dl2.update(v_up, 6.0, 0.0, 0.0, 1.0, -180.0, -180.0, 20.0, 10.0)
     assert dl2.rotor_effectiveness == pytest.approx(41.0 / 180.0, abs=0.06)
     assert not dl2.hover_recoverable()
+    # a mild loss (measured effectiveness 0.95): hover recoverable, once measured long enough
+    dl3, pp3 = _monitor()
+    wing = 20.0
+    achieved = -(12.5 * 9.81 - wing) / 0.95
+    _run(dl3, pp3["FTC_DL_TRIG_T"].value + 0.1, v_up=-1.5, fz_cmd=1.2 * achieved,
+         fz_achieved=achieved, wing_up=wing)
+    assert dl3.active and not dl3.hover_recoverable()  # still measuring
+    _run(dl3, pp3["FTC_DL_EST_T"].value, v_up=-1.5, fz_cmd=1.2 * achieved,
+         fz_achieved=achieved, wing_up=wing)
+    assert dl3.rotor_effectiveness_min == pytest.approx(0.95, abs=0.01)
+    assert dl3.hover_recoverable()
     # disabled: never engages
     off, _ = _monitor(FTC_DL_EN=0.0)
     assert not any(_run(off, 2.0, v_up=-5.0, fz_achieved=-100.0))
