@@ -33,7 +33,8 @@ direction at the next step.
 
 Attitude references: hover/takeoff/land: position hold through small tilt references (at most
 ``MPC_TILTMAX_AIR``), heading held; front transition: roll 0, pitch 0, heading held (the
-paper; pitch up when the lift rotors cannot hold the altitude, :mod:`.degraded_lift`); fixed-wing: roll 0, heading held, pitch from the altitude hold; back transition:
+paper; pitch up when the lift rotors cannot hold the altitude, :mod:`.degraded_lift`);
+fixed-wing: roll 0, heading held, pitch from the altitude hold; back transition:
 roll 0, pitch 0.
 
 The collaborators, one job each: :mod:`.estimate` (state intake), :mod:`.commander` (commands,
