@@ -33,7 +33,8 @@ direction at the next step.
 
 Attitude references: hover/takeoff/land: position hold through small tilt references (at most
 ``MPC_TILTMAX_AIR``), heading held; front transition: roll 0, pitch 0, heading held (the
-paper); fixed-wing: roll 0, heading held, pitch from the altitude hold; back transition:
+paper; pitch up when the lift rotors cannot hold the altitude, :mod:`.degraded_lift`);
+fixed-wing: roll 0, heading held, pitch from the altitude hold; back transition:
 roll 0, pitch 0.
 
 The collaborators, one job each: :mod:`.estimate` (state intake), :mod:`.commander` (commands,
@@ -201,6 +202,7 @@ class Autopilot:
         """Auto-disarm on the ground (COM_DISARM_PRFLT, COM_DISARM_LAND) and the flight
         record of FLIGHT_INFORMATION (:mod:`.arming`)."""
         self.outer.navigator = self.commander.navigator = self.navigator
+        self.outer.output = self.output
         self.commander.arming = self.arming
         for name, value in airframe_airspeed_defaults(af).items():  # the airframe's own
             self.params.set_default(name, value)

@@ -4,7 +4,9 @@ MAVLink commands (arm, takeoff, transitions, land, set mode; the navigator's own
 to it first), the mode machine's automatic transitions each step (with landing detection in
 LAND), what entering a mode sets (position hold, altitude reference, loop resets), the
 auto-disarm on the ground, the low-battery failsafe and the event log (mode changes, arming,
-quad-chute ... as ``(time_usec, text)``).
+quad-chute, degraded lift ... as ``(time_usec, text)``). The transition timeout's quad-chute
+is held off while the degraded-lift guidance judges hover not recoverable
+(:mod:`.degraded_lift`).
 """
 
 from __future__ import annotations
@@ -97,6 +99,7 @@ class Commander:
         self.message = ""
         self.last_mode = modes.mode
         self._landed_timer = 0.0
+        self._dl_noted = False  # the degraded-lift guidance's engagement was logged
 
     # ---- commands ------------------------------------------------------------------------
     def command(self, command_id: int, params: Sequence[float]) -> CommandResult:
@@ -247,13 +250,19 @@ class Commander:
             landed = self._landed_timer > 1.0
         m.update(self.est.time_usec, altitude_m=h, takeoff_alt_m=self.sp.takeoff_alt,
                  airspeed_m_s=V, arsp_trans=pp["VT_ARSP_TRANS"].value,
-                 trans_timeout_s=pp["VT_TRANS_TMOUT"].value,
+                 trans_timeout_s=(pp["VT_TRANS_TMOUT"].value
+                                  if self.outer.degraded.hover_recoverable() else math.inf),
                  b_trans_arsp=pp["VT_B_TRANS_ARSP"].value,
                  b_trans_dur_s=pp["VT_B_TRANS_DUR"].value, landed=landed)
         mode = m.mode
         if mode != self.last_mode:
             self._enter_mode(mode, self.last_mode, nav, pitch)
             self.last_mode = mode
+        if self.outer.degraded.active is not self._dl_noted:
+            self._dl_noted = self.outer.degraded.active
+            if self._dl_noted:
+                self.note(f"degraded lift: lift rotors short and sinking at {-v_up:.1f} m/s "
+                          f"in the transition, pitching up (airspeed {V:.1f} m/s)")
         self.drain_events()
         self.navigator.update(nav, yaw)
         if m.armed or self.arming.armed:

@@ -4,8 +4,10 @@ Multicopter modes (TAKEOFF, HOVER, LAND, front and back transition): the constan
 altitude hold of :mod:`.altitude` gives the body z force ``Fz`` [N] (with a nominal-aerodynamics
 feed-forward of the wing's lift); hover, takeoff and land hold the horizontal position through
 small tilt references (at most ``MPC_TILTMAX_AIR``); the front transition flies roll 0,
-pitch 0 and ramps the pushers (``Fx``) at ``VT_PSHER_SLEW`` up to ``VT_F_TRANS_THR``; the back
-transition flies roll 0, pitch 0 with the pushers off.
+pitch 0 and ramps the pushers (``Fx``) at ``VT_PSHER_SLEW`` up to ``VT_F_TRANS_THR``, unless
+the lift rotors saturate while the vehicle sinks: then the degraded-lift guidance
+(:mod:`.degraded_lift`) pitches up within a stall margin and asks the pushers for more; the
+back transition flies roll 0, pitch 0 with the pushers off.
 
 Fixed-wing: lateral guidance of the navigator (roll, heading), a TECS-like pitch from the
 altitude hold and an airspeed hold on the pushers; the lift rotors' upper bound ramps to 0
@@ -19,6 +21,7 @@ from typing import Any
 
 from vtolftc.airframe.loader import Airframe
 from vtolftc.firmware_sim.autopilot.altitude import FixedWingAltitudeHold, MulticopterAltitudeHold
+from vtolftc.firmware_sim.autopilot.degraded_lift import DegradedLift
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
 from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
 from vtolftc.firmware_sim.autopilot.interface import FlightMode, NavState
@@ -65,6 +68,9 @@ class OuterLoops:
         self.mc_alt = MulticopterAltitudeHold(self.dt)
         self.fw_alt = FixedWingAltitudeHold(self.dt)
         self.navigator: Any = None  # set by the autopilot once its navigator exists
+        self.output: Any = None  # the output stage (last allocation's Fz), set by the autopilot
+        self.degraded = DegradedLift(airframe, pp, dt)
+        """Degraded-lift guidance of the front transition (:mod:`.degraded_lift`)."""
         self._wing: tuple = (None,)  # (airframe, rho, wing constants) of aero_estimate
         self._pushers_nominal = [(r.max_thrust_N, r.zero_thrust_axial_speed_m_s)
                                  for r in airframe.pushers]
@@ -76,6 +82,7 @@ class OuterLoops:
         """The loops' part of entering ``mode`` (``pitch`` the current pitch [rad])."""
         if mode == FlightMode.FRONT_TRANSITION:
             self.pusher_ramp = 0.0
+            self.degraded.reset()
         elif mode == FlightMode.FIXED_WING:
             self.fw_entry_usec = self.est.time_usec
             self.fw_alt.reset(pitch)
@@ -104,11 +111,19 @@ class OuterLoops:
         wb = (2 * (x_ * z_ + w_ * y_) * vn_ + 2 * (y_ * z_ - w_ * x_) * ve_
               + (1 - 2 * (x_ * x_ + y_ * y_)) * vd_)
         alpha = math.atan2(wb, ub) if ub > 1.0 else 0.0
-        lift, drag = self.aero_estimate(V, alpha)
+        dl = self.degraded
+        if dl.active and mode is _M_FRONT_TRANSITION:
+            # degraded lift: trust no wing lift beyond the stall margin (a sinking vehicle's
+            # wing is past the stall, where the nominal model's clipped CL is far too high)
+            lift, drag = self.aero_estimate(V, min(alpha, dl.alpha_limit()))
+        else:
+            lift, drag = self.aero_estimate(V, alpha)
         fz_aero = -lift * math.cos(alpha) - drag * math.sin(alpha)  # body z, N
 
         if mode is not _M_FIXED_WING:  # TAKEOFF, HOVER, LAND, FRONT/BACK_TRANSITION
             pusher_hi = self._outer_mc(mode, nav, yaw, h, v_up, V, cos_tilt, fz_aero)
+            if mode is _M_FRONT_TRANSITION:
+                self._degraded_lift(h, v_up, V, pitch, alpha, cos_tilt, lift, drag)
             return False, 1.0, pusher_hi
         t_fw = (self.est.time_usec - self.fw_entry_usec) * 1e-6
         ramp = self._p["VT_TRANS_P2_DUR"].value
@@ -163,6 +178,24 @@ class OuterLoops:
             pusher_hi = 0.0
         sp.v[1] = fx_cmd
         return pusher_hi
+
+    def _degraded_lift(self, h: float, v_up: float, V: float, pitch: float, alpha: float,
+                       cos_tilt: float, lift: float, drag: float) -> None:
+        """The degraded-lift guidance's part of a front-transition step: when engaged
+        (:mod:`.degraded_lift`), its pitch reference [rad] and ``FTC_DL_PSH`` of the pushers'
+        thrust [N] replace the transition's pitch 0 and pusher ramp."""
+        out = self.output
+        if out is None:
+            return
+        wing_up = lift * math.cos(pitch - alpha) - drag * math.sin(pitch - alpha)
+        if self.degraded.update(v_up, V, pitch, alpha, cos_tilt, out.fz_cmd, out.fz_achieved,
+                                wing_up, self.sp.alt_ref - h,
+                                self.sp.v[1] * math.sin(pitch)):
+            self.sp.ref[1] = self.degraded.pitch_ref
+            # the rotors' share of the z force, corrected by their measured effectiveness
+            self.sp.v[0] /= max(self.degraded.rotor_effectiveness, 0.3)
+            self.sp.v[1] = max(self.sp.v[1],
+                               self._p["FTC_DL_PSH"].value * self.pusher_max_force(V))
 
     def _outer_fw(self, nav: NavState, roll: float, pitch: float, yaw: float, h: float,
                   v_up: float, V: float, cos_tilt: float, alpha: float, lift: float,

@@ -61,6 +61,9 @@ class OutputStage:
         ``AutopilotStatus.allocation_status`` of the last step.
     saturated_steps : int
         control steps whose allocation fell short of a commanded moment (any axis).
+    fz_cmd, fz_achieved : float
+        body z force [N] the last allocation was asked for and achieved (nominal model;
+        negative up), read by the degraded-lift monitor (:mod:`.degraded_lift`).
     """
 
     def __init__(self, airframe: Airframe, effectiveness: EffectivenessModel,
@@ -112,6 +115,8 @@ class OutputStage:
         self.sat_hi = [False, False, False]
         self.sat_lo = [False, False, False]
         self.saturated_steps = 0
+        self.fz_cmd = 0.0
+        self.fz_achieved = 0.0
         self.status_text = "idle"
 
     def idle(self, armed: bool) -> None:
@@ -170,8 +175,8 @@ class OutputStage:
 
     def _track_saturation(self, v: NDArray[np.float64], achieved: NDArray[np.float64]) -> None:
         """Which moment axes the allocation could not achieve, and in which direction."""
-        _, _, w0, w1, w2 = v.tolist()
-        _, _, g0, g1, g2 = achieved.tolist()
+        self.fz_cmd, _, w0, w1, w2 = v.tolist()
+        self.fz_achieved, _, g0, g1, g2 = achieved.tolist()
         tol = 0.02 + 0.02 * abs(w0)
         h0 = w0 > g0 + tol
         l0 = w0 < g0 - tol

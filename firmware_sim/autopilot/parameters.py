@@ -12,6 +12,7 @@ from vtolftc.airframe.loader import (
     round_up_speed,
 )
 from vtolftc.firmware_sim.autopilot.arming import ARMING_PARAMS
+from vtolftc.firmware_sim.autopilot.degraded_lift import DEGRADED_LIFT_PARAMS
 from vtolftc.firmware_sim.autopilot.interface import ParameterStore, ParamType
 
 __all__ = ["AUTOPILOT_PARAMS", "airframe_airspeed_defaults", "default_parameters"]
@@ -69,6 +70,8 @@ def default_parameters() -> ParameterStore:
     ps = ParameterStore()
     for name, default, typ, lo, hi, desc in (*AUTOPILOT_PARAMS, *ARMING_PARAMS):
         ps.register(name, default, typ, lo, hi, desc)
+    for name, default, lo, hi, desc in DEGRADED_LIFT_PARAMS:
+        ps.register(name, default, ParamType.REAL32, lo, hi, desc)
     return ps
 
 
