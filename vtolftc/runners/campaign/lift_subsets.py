@@ -6,8 +6,8 @@ and which of them a controller survives.
 one nominal reference flight, calm air); :func:`fly_subsets` flies the paper's timeline
 (:func:`vtolftc.runners.scenario.paper_scenario`, case 0) with those rotors off from
 ``fault_time_s`` and judges each flight by the campaign's outcome
-(:mod:`vtolftc.runners.campaign.outcome`), on ``jobs`` processes. Used by the degraded-lift transition test and
-``benchmarks/lift_subsets.py``.
+(:mod:`vtolftc.runners.campaign.outcome`), on ``jobs`` processes. Used by the degraded-lift
+transition test and ``benchmarks/lift_subsets.py``.
 """
 
 from __future__ import annotations
