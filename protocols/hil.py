@@ -34,7 +34,6 @@ from vtolftc.base.geodesy import EARTH_RADIUS_M, FlatEarth
 __all__ = [
     "EARTH_RADIUS_M",
     "HIL_OUTPUTS",
-    "N_ACTUATORS",
     "HilRoundTrip",
     "HilState",
     "NavState",
@@ -42,10 +41,6 @@ __all__ = [
     "encode_hil_state",
     "wire_commands",
 ]
-
-N_ACTUATORS = 15
-"""Actuators of the reference airframe DS-1 (8 lift rotors, 2 pushers, 5 surfaces): the
-default size before an airframe is known. Other airframes carry ``airframe.n_actuators``."""
 
 HIL_OUTPUTS = 16
 """Outputs of HIL_ACTUATOR_CONTROLS: the most actuators an airframe can have."""

@@ -12,9 +12,9 @@
    moments ``[L, M, N]`` (N m), its gains scheduled on the measured airspeed through a
    first-order low-pass of time constant ``FTC_SCHED_TAU`` (0.5 s; the modes, the
    allocation and the outer loops use the raw value);
-4. ``ActiveSetAllocator`` maps ``v = [Fz, Fx, L, M, N]`` onto all 15 actuators at once with
-   the nominal ``B(V)`` at the measured airspeed (:mod:`.effectiveness`), actuator position
-   limits, rate limits as per-step bounds and a warm-started active-set solve (the paper's
+4. ``ActiveSetAllocator`` maps ``v = [Fz, Fx, L, M, N]`` onto all the airframe's actuators at
+   once with the nominal ``B(V)`` at the measured airspeed (:mod:`.effectiveness`), actuator
+   position limits, rate limits as per-step bounds and a warm-started active-set solve (the paper's
    redundancy management; ``B`` is evaluated on a 0.1 m/s airspeed grid). In fixed-wing the
    lift rotors' upper bound is ramped to 0 over ``VT_TRANS_P2_DUR`` after the transition (they
    stop carrying the weight); after the ramp the ``Fz`` row is dropped and the lift rotors

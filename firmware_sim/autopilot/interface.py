@@ -41,7 +41,6 @@ from numpy.typing import NDArray
 from vtolftc.protocols.hil import (
     EARTH_RADIUS_M,
     HIL_OUTPUTS,
-    N_ACTUATORS,
     HilState,
     NavState,
     decode_hil_state,
@@ -53,7 +52,6 @@ from vtolftc.telemetry.autopilot_status import AutopilotStatus, FlightMode, Land
 __all__ = [
     "EARTH_RADIUS_M",
     "HIL_OUTPUTS",
-    "N_ACTUATORS",
     "AutopilotAPI",
     "AutopilotStatus",
     "CommandResult",

@@ -66,22 +66,16 @@ from typing import Any
 
 import numpy as np
 
-from vtolftc.protocols.hil import N_ACTUATORS
 from vtolftc.telemetry.autopilot_status import FlightMode
 from vtolftc.telemetry.rerun_reader import read_recording
 from vtolftc.telemetry.rerun_rows import RowBuffer
 from vtolftc.telemetry.rerun_scene import TIMELINE, actuator_entity, blueprint, log_static_scene
 from vtolftc.telemetry.rerun_send import BackgroundFlusher, ColumnSender, flush_takes_timeout
 from vtolftc.telemetry.rerun_viewer import LiveViewer
+from vtolftc.telemetry.runfolder import actuator_names_of
 from vtolftc.telemetry.samples import TelemetrySample
 
-__all__ = ["DEFAULT_ACTUATOR_NAMES", "RerunRecorder", "actuator_entity", "read_recording"]
-
-DEFAULT_ACTUATOR_NAMES: tuple[str, ...] = (
-    "rotor_1a", "rotor_1b", "rotor_2a", "rotor_2b", "rotor_3a", "rotor_3b", "rotor_4a",
-    "rotor_4b", "pusher_left", "pusher_right", "aileron_left", "aileron_right", "elevator",
-    "rudder_left", "rudder_right",
-)
+__all__ = ["RerunRecorder", "actuator_entity", "read_recording"]
 class RerunRecorder:
     """A :class:`~vtolftc.telemetry.RunObserver` writing a rerun recording (see module doc).
 
@@ -148,14 +142,16 @@ class RerunRecorder:
         self._rec.set_sinks(*sinks, default_blueprint=blueprint())
         if self._viewer.server is not None:
             atexit.register(self._viewer.stop)     # never leave the server behind
-        self._names: tuple[str, ...] = DEFAULT_ACTUATOR_NAMES
+        self._names: tuple[str, ...] = (tuple(airframe.actuator_names)
+                                        if airframe is not None else ())
+        """Actuator names: the airframe's, or the run's (:meth:`on_start`)."""
         self._started = False
         self._finished = False
         self._next_usec: int | None = None
         self._last_mode: int | None = None
         self._n_faults = 0
         self._last_flush_wall = time.monotonic()
-        self._alloc(N_ACTUATORS)
+        self._alloc(len(self._names))
         self._sender = ColumnSender(rr, self._rec, max(0, round(path_period_s * 1e6)))
         # rerun writes the file from its own threads; this one asks it to every 0.25 s, so a
         # killed process loses at most about file_flush_s + 0.25 s of the recording
@@ -181,14 +177,15 @@ class RerunRecorder:
         if self._started:
             return
         self._started = True
-        names = info.get("actuator_names")
-        if names:
-            self._names = tuple(str(n) for n in names)
-            if len(self._names) != self._rows.n_act:
-                self._alloc(len(self._names))
         af = info.get("airframe_obj")
         if af is not None:
             self._airframe = af
+        names = info.get("actuator_names") or (
+            self._airframe.actuator_names if self._airframe is not None
+            else actuator_names_of(info))
+        self._names = tuple(str(n) for n in names)
+        if len(self._names) != self._rows.n_act:
+            self._alloc(len(self._names))
         try:
             log_static_scene(self._rr, self._rec, self._airframe, self._names)
             text = "\n".join(f"- **{k}**: {v}" for k, v in info.items() if k != "airframe_obj")

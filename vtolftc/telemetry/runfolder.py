@@ -29,7 +29,6 @@ from typing import Any
 import numpy as np
 
 from vtolftc.base.jsonio import json_safe
-from vtolftc.protocols.hil import N_ACTUATORS
 from vtolftc.telemetry.plotbuffer import DecimatingBuffer
 from vtolftc.telemetry.samples import TelemetrySample
 
@@ -38,6 +37,17 @@ __all__ = ["RunFolderWriter", "default_run_dir"]
 _NEEDS_QUOTES = frozenset(',"\r\n')  # characters csv.writer would quote a field for
 _PLOT_COLS = ("t", "n", "alt", "alt_ref", "V", "roll", "pitch", "yaw", "roll_ref", "pitch_ref",
               "yaw_ref", "mode")  # then one column per actuator command
+
+
+def actuator_names_of(info: dict[str, Any]) -> tuple[str, ...]:
+    """The actuator names of a run whose ``info`` names none: those of its airframe
+    (``airframe_obj``, else the file ``airframe_path``, else the shipped default airframe)."""
+    af = info.get("airframe_obj")
+    if af is None:
+        from vtolftc.airframe.loader import load_airframe
+
+        af = load_airframe(info.get("airframe_path"))
+    return tuple(af.actuator_names)
 
 
 def default_run_dir(case: str, controller: str, root: str | Path = "runs") -> Path:
@@ -85,7 +95,7 @@ class RunFolderWriter:
         """Create the run folder, write ``run.json``, open ``telemetry.csv`` and ``events.log``."""
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.info = dict(info)
-        self._names = list(info.get("actuator_names", [f"u{i}" for i in range(N_ACTUATORS)]))
+        self._names = list(info.get("actuator_names") or actuator_names_of(info))
         cfg = {**info, **self.extra_config, "seed": info.get("seed", 0),
                "versions": _versions(), "run_dir": str(self.run_dir),
                "started_utc": _dt.datetime.now(_dt.UTC).isoformat()}
