@@ -103,15 +103,19 @@ def test_an_assigned_allocator_is_the_one_flown(ap):
 
 
 def test_navigator_view_is_the_stages_state(ap):
-    """The navigator steers through the autopilot's names; they are the stages' state."""
-    ap._alt_ref = 12.5
+    """The navigator steers through its public view of the autopilot (no private names of
+    the Autopilot cross a module); what it reads and sets is the stages' state."""
+    nv = ap.navigator
+    nv.set_alt_ref(12.5)
     assert ap.setpoints.alt_ref == 12.5
-    ap._hold_ne[:] = (3.0, -4.0)
-    assert ap.setpoints.hold_ne.tolist() == [3.0, -4.0]
-    ap._yaw_hold = 0.25
+    nv.set_takeoff_alt(20.0)
+    assert (ap.setpoints.takeoff_alt, ap.setpoints.alt_ref) == (20.0, 20.0)
+    nv.yaw_hold = 0.25
+    assert ap.setpoints.yaw_hold == 0.25
     ap.step(_nav(0.0, alt=7.0))
-    assert ap._alt == pytest.approx(7.0) and ap.estimate.alt == ap._alt
-    assert ap._last_nav is ap.estimate.last_nav
+    assert nv.altitude_m == pytest.approx(7.0) and nv.altitude_m == ap.estimate.alt
+    assert nv.last_nav is ap.estimate.last_nav
+    assert nv.airspeed_m_s == ap.estimate.airspeed
     assert ap.status().attitude_ref_rad[2] == 0.25        # idle: heading reference held
 
 

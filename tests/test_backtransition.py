@@ -199,7 +199,7 @@ def test_multicopter_carrot_is_no_faster_than_it_can_stop():
     nav = NavState(0, np.array([1.0, 0, 0, 0]), np.zeros(3), np.array([0.0, 0.0, -30.0]),
                    np.zeros(3), 0.0)
     ap.navigator.mc_goto((100.0, 0.0), nav)
-    assert ap._hold_ne[0] == pytest.approx(ap.params.get("MPC_XY_CRUISE") / kp)
+    assert ap.setpoints.hold_ne[0] == pytest.approx(ap.params.get("MPC_XY_CRUISE") / kp)
     ap.navigator.mc_goto((4.0, 0.0), nav)
-    assert ap._hold_ne[0] == pytest.approx(math.sqrt(2 * a * 4.0) / kp)
-    assert ap._hold_ne[0] < 4.0 and ap._hold_locked
+    assert ap.setpoints.hold_ne[0] == pytest.approx(math.sqrt(2 * a * 4.0) / kp)
+    assert ap.setpoints.hold_ne[0] < 4.0 and ap.setpoints.hold_locked

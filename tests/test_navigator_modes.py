@@ -140,7 +140,7 @@ def test_rtl_returns_to_the_nearest_of_home_and_the_rally_points():
     assert nv.store.replace(RALLY, [rally(0, 400.0, 0.0), rally(1, 0.0, -300.0)])[0] == 0
 
     def at(north: float, east: float) -> tuple[float, float]:
-        ap._last_nav = interface.NavState(0, np.array([1.0, 0, 0, 0]), np.zeros(3),
+        ap.estimate.last_nav = interface.NavState(0, np.array([1.0, 0, 0, 0]), np.zeros(3),
                                           np.array([north, east, -30.0]), np.zeros(3), 0.0)
         return nv.rtl.destination()
 

@@ -151,15 +151,6 @@ class Autopilot:
     mc_alt = Delegated("outer", "mc_alt")
     fw_alt = Delegated("outer", "fw_alt")
     event_log = Delegated("commander", "event_log")
-    # what the navigator reads and steers (it holds the autopilot, :mod:`.navigator`)
-    _alt_ref = Delegated("setpoints", "alt_ref")
-    _takeoff_alt = Delegated("setpoints", "takeoff_alt")
-    _hold_ne = Delegated("setpoints", "hold_ne")
-    _hold_locked = Delegated("setpoints", "hold_locked")
-    _yaw_hold = Delegated("setpoints", "yaw_hold")
-    _last_nav = Delegated("estimate", "last_nav")
-    _alt = Delegated("estimate", "alt")
-    _airspeed = Delegated("estimate", "airspeed")
 
     def __init__(self, airframe: Airframe | None = None, controller: str = "gs-shif",
                  gains_dir: str | Path | None = None, dt_s: float = 0.004) -> None:
@@ -175,7 +166,7 @@ class Autopilot:
         self.params = default_parameters()
         # the Parameter objects themselves (mutated in place by ParameterStore.set), read as
         # ``pp[name].value`` on the hot path without a call per read
-        pp = dict(self.params._params)
+        pp = dict(self.params.view())
         self.effectiveness = EffectivenessModel(af)
         self.setpoints = Setpoints()
         """References shared by the stages (:mod:`.setpoints`)."""
@@ -192,8 +183,6 @@ class Autopilot:
         self.commander = Commander(self.modes, self.params, pp, self.setpoints, self.estimate,
                                    self.outer, self._reset_loops, self.dt)
         """Commands, mode logic and events (:mod:`.commander`)."""
-        self._note = self.commander.note
-        self._drain_events = self.commander.drain_events
         self.navigator = Navigator(self)
         """Missions, RTL, loiter, reposition (:mod:`.navigator`)."""
         self.battery = BatteryMonitor(self.params, self.commander.battery_failsafe)

@@ -26,8 +26,9 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -157,6 +158,11 @@ class ParameterStore:
     def get(self, name: str) -> float:
         """Current value of parameter ``name`` (ParamError if unknown)."""
         return self._lookup(name).value
+
+    def view(self) -> Mapping[str, Parameter]:
+        """A live, read-only mapping name -> :class:`Parameter` (the hot paths read
+        ``view[name].value`` without a call per read; later registrations and sets show)."""
+        return MappingProxyType(self._params)
 
     def set_default(self, name: str, value: float) -> Parameter:
         """Make ``value`` both the default and the current value of ``name`` (an airframe's

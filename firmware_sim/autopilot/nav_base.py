@@ -140,7 +140,7 @@ class NavigatorBase:
         for name, default, typ, lo, hi, desc in NAV_PARAMS:
             if name not in ap.params:
                 ap.params.register(name, default, typ, lo, hi, desc)
-        self.param: dict[str, Parameter] = ap.params._params  # live: later PARAM_SETs act
+        self.param: dict[str, Parameter] = ap.params.view()  # live: later PARAM_SETs act
         self.store = MissionStore(on_change=self.on_plan_change,
                                   on_set_current=self.on_set_current)
         self.home: tuple[float, float, float] | None = None
@@ -219,45 +219,45 @@ class NavigatorBase:
     @property
     def last_nav(self) -> NavState | None:
         """The autopilot's latest navigation solution (None before the first)."""
-        return self.ap._last_nav
+        return self.ap.estimate.last_nav
 
     @property
     def altitude_m(self) -> float:
         """The autopilot's measured height above home [m]."""
-        return self.ap._alt
+        return self.ap.estimate.alt
 
     @property
     def airspeed_m_s(self) -> float:
         """The autopilot's measured airspeed [m/s]."""
-        return self.ap._airspeed
+        return self.ap.estimate.airspeed
 
     @property
     def yaw_hold(self) -> float:
         """The autopilot's heading reference in multicopter and fixed-wing hold [rad]."""
-        return self.ap._yaw_hold
+        return self.ap.setpoints.yaw_hold
 
     @yaw_hold.setter
     def yaw_hold(self, yaw: float) -> None:
-        self.ap._yaw_hold = yaw
+        self.ap.setpoints.yaw_hold = yaw
 
     def set_alt_ref(self, alt: float) -> None:
         """The autopilot's altitude reference [m above home]."""
-        self.ap._alt_ref = alt
+        self.ap.setpoints.alt_ref = alt
 
     def set_takeoff_alt(self, alt: float) -> None:
         """The altitude [m above home] the mode machine's next takeoff climbs to (and the
         altitude reference)."""
-        self.ap._takeoff_alt = alt
-        self.ap._alt_ref = alt
+        self.ap.setpoints.takeoff_alt = alt
+        self.ap.setpoints.alt_ref = alt
 
     def drain_events(self) -> None:
         """Let the autopilot log and act on the mode machine's events now (after a command
         to it: takeoff, transition, land)."""
-        self.ap._drain_events()
+        self.ap.commander.drain_events()
 
     def say(self, text: str) -> None:
         """An event worth a STATUSTEXT (the autopilot's event log)."""
-        self.ap._note(text)
+        self.ap.commander.note(text)
 
     # ------------------------------------------------------------------ shared actions
 
@@ -312,18 +312,18 @@ class NavigatorBase:
         v = min(v, math.sqrt(2.0 * a_stop * d))
         lead = v / max(self.param["MPC_XY_P"].value, 1e-3)
         if d > lead:
-            ap._hold_ne[0] = pos[0] + dx / d * lead
-            ap._hold_ne[1] = pos[1] + dy / d * lead
+            ap.setpoints.hold_ne[0] = pos[0] + dx / d * lead
+            ap.setpoints.hold_ne[1] = pos[1] + dy / d * lead
         else:
-            ap._hold_ne[0], ap._hold_ne[1] = tgt
-        ap._hold_locked = True
+            ap.setpoints.hold_ne[0], ap.setpoints.hold_ne[1] = tgt
+        ap.setpoints.hold_locked = True
 
     def hold_at(self, tgt: tuple[float, float], lock: bool = True) -> None:
         """Multicopter: hold position over ``tgt`` (north, east m) from now; ``lock`` False
         leaves the autopilot free to re-centre the hold when it stops (AUTO.LOITER)."""
-        self.ap._hold_ne[0], self.ap._hold_ne[1] = tgt
+        self.ap.setpoints.hold_ne[0], self.ap.setpoints.hold_ne[1] = tgt
         if lock:
-            self.ap._hold_locked = True
+            self.ap.setpoints.hold_locked = True
 
 
 class NavigatorMode:

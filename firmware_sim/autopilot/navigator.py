@@ -8,8 +8,8 @@ control underneath stays the scheduled FTC of :mod:`.attitude`, untouched. One
 autopilot calls :meth:`Navigator.update` once per control step (after its mode machine) and
 reads the references it leaves:
 
-- multicopter (TAKEOFF, HOVER, LAND): the position-hold target ``Autopilot._hold_ne`` (moved
-  as a carrot at the cruise speed ``MPC_XY_CRUISE``, or a DO_CHANGE_SPEED ground speed) and
+- multicopter (TAKEOFF, HOVER, LAND): the position-hold target ``setpoints.hold_ne`` (moved as
+  a carrot at the cruise speed ``MPC_XY_CRUISE``, or a DO_CHANGE_SPEED ground speed) and
   the altitude reference; the heading is slewed (30 deg/s) to face the next waypoint before a
   front transition, as PX4's mission "align" work item does;
 - fixed-wing: :meth:`Navigator.fw_lateral` gives the roll reference of PX4's L1 guidance
