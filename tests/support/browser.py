@@ -180,14 +180,29 @@ class DashboardPage:
         finding it is retried while the renderer is slow to answer; a click whose
         acknowledgement times out has been dispatched and is not repeated (the caller waits
         for its result)."""
-        el = self._call(lambda: self.driver.execute_script(
-            "return Array.from(document.querySelectorAll('button'))"
-            ".find(b => b.innerText.trim() === arguments[0]) || null;", text),
-            timeout_s, f"finding the button {text!r}")
-        if el is None:
-            raise AssertionError(f"page: no button {text!r}")
-        with contextlib.suppress(*_slow()):
-            el.click()
+        from selenium.common.exceptions import (
+            ElementClickInterceptedException,
+            StaleElementReferenceException,
+        )
+
+        # the panel's layout moves while the status and command texts update (a line more
+        # or less above the button): a click that lands on the text that just slid over the
+        # button is not dispatched to it, and a user clicks again; bounded by a count
+        for _ in range(50):
+            el = self._call(lambda: self.driver.execute_script(
+                "const b = Array.from(document.querySelectorAll('button'))"
+                ".find(b => b.innerText.trim() === arguments[0]) || null;"
+                "if (b) { b.scrollIntoView({block: 'center'}); } return b;", text),
+                timeout_s, f"finding the button {text!r}")
+            if el is None:
+                raise AssertionError(f"page: no button {text!r}")
+            try:
+                with contextlib.suppress(*_slow()):
+                    el.click()
+                return
+            except (ElementClickInterceptedException, StaleElementReferenceException):
+                time.sleep(0.2)
+        raise AssertionError(f"page: the button {text!r} stayed covered by another element")
 
     def press(self, button: str, timeout_s: float = 60.0) -> tuple[str, str, int]:
         """Click ``button`` and wait (at most ``timeout_s`` after the click) for the page to
