@@ -13,12 +13,18 @@ Runs (2 worker processes by default):
   runs, per controller. A run *survives* when it did not crash (metrics: attitude beyond
   60 deg, ground contact, non-finite state) and ended within 5 m of the commanded altitude.
 
+Every record also carries ``commands_sha256``: the sha256 over every control step's actuator
+commands as the wire carries them (``benchmarks/command_digest.py``'s digest), so a record
+names the exact flight it measured. ``benchmarks/regen_docs.py`` runs these flights for every
+results file of this folder and stamps them (``PROVENANCE.json``).
+
 Writes ``<out>/<label>.json`` (all metrics) and prints markdown tables.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import sys
@@ -69,6 +75,28 @@ class PeakAttitude:
         pass
 
 
+class CommandDigest:
+    """Observer: sha256 over the float64 bytes of every control step's actuator commands after
+    the float32 wire rounding (the digest of ``benchmarks/command_digest.py``)."""
+
+    def __init__(self) -> None:
+        self.h = hashlib.sha256()
+
+    def on_start(self, info: dict[str, Any]) -> None:
+        pass
+
+    def on_sample(self, sample: Any) -> None:
+        from vtolftc.protocols.hil import wire_commands
+
+        self.h.update(wire_commands(sample.status.actuator_commands).tobytes())
+
+    def on_event(self, time_usec: int, kind: str, text: str) -> None:
+        pass
+
+    def on_finish(self, metrics: dict[str, Any]) -> None:
+        pass
+
+
 def fly(job: tuple[str, str, list[str], str, str | None, float, float]) -> dict[str, Any]:
     label, case, specs, ctrl, gains, duration, delay = job
     from vtolftc.airframe.loader import load_airframe
@@ -81,12 +109,14 @@ def fly(job: tuple[str, str, list[str], str, str | None, float, float]) -> dict[
     # peak attitude from the fault on, or (no fault: delay runs) from just after the arm
     t0 = min((f.start_s for f in faults), default=1.5)
     peak = PeakAttitude(t0)
+    digest = CommandDigest()
     m = run_scenario(sc, ctrl, airframe=af, gains_dir=gains, hil_delay_s=delay,
-                     observers=[peak]).metrics
+                     observers=[peak, digest]).metrics
     out = {k: m.get(k) for k in KEYS}
     out["peak_roll_deg"], out["peak_pitch_deg"] = peak.roll, peak.pitch
     err = out["final_altitude_error_m"]
     out["survived"] = bool(not out["crashed"] and err is not None and abs(err) <= 5.0)
+    out["commands_sha256"] = digest.h.hexdigest()
     return {"label": label, "controller": ctrl, **out}
 
 

@@ -2,7 +2,8 @@
 
     python docs/ds1-claims/tables.py     # prints markdown, writes rmse.png and survival.png
 
-Inputs in this folder: ``robust.json``, ``paper.json`` (``measure.py --label ...``),
+Inputs in this folder: ``table3.json`` (mu and delay margins from the gain files),
+``robust.json``, ``paper.json`` (``measure.py --label ...``),
 optionally ``robust-gs-shif.json`` (GS-SHIF survival of the robust design) and
 ``*-delay.json``.
 """
@@ -20,6 +21,27 @@ HERE = Path(__file__).resolve().parent
 def load(name: str) -> list[dict[str, Any]]:
     p = HERE / f"{name}.json"
     return json.loads(p.read_text()) if p.is_file() else []
+
+
+def table3(recs: list[dict[str, Any]]) -> str:
+    """Table 3 of both designs side by side (``table3.json``)."""
+    cell = {(r["design"], r["axis"], r["point"]): r for r in recs}
+    out = ["| axis | No. | paper mu_Delta | paper mu_Delta-hat | robust mu_Delta | "
+           "robust mu_Delta-hat | robust delay margin [ms] | paper delay margin [ms] |",
+           "|---|---|---:|---:|---:|---:|---:|---:|"]
+    points = sorted({(r["axis"], r["point"], r["airspeed_m_s"]) for r in recs},
+                    key=lambda k: (("roll", "pitch", "yaw").index(k[0]), k[1]))
+    for ax, n, v in points:
+        p, r = cell.get(("paper", ax, n)), cell.get(("robust", ax, n))
+
+        def f(x: dict[str, Any] | None, k: str, fmt: str = ".3f") -> str:
+            return "-" if x is None else format(x[k], fmt)
+
+        no = f"{n} ({v:g} m/s)" if p is None else str(n)
+        out.append(f"| {ax} | {no} | {f(p, 'mu_rs')} | {f(p, 'mu_rp')} | {f(r, 'mu_rs')} | "
+                   f"{f(r, 'mu_rp')} | {f(r, 'delay_margin_ms', '.0f')} | "
+                   f"{f(p, 'delay_margin_ms', '.0f')} |")
+    return "\n".join(out)
 
 
 def table4(rows: dict[str, list[dict[str, Any]]]) -> str:
@@ -126,6 +148,9 @@ def main() -> int:
     sv = {"paper": load("paper"), "robust": load("robust") + load("robust-gs-shif")}
     dl = {"paper": load("paper-delay") + load("paper-delay-long"),
           "robust": load("robust-delay") + load("robust-delay-long")}
+    t3 = load("table3")
+    if t3:
+        print("## Table 3\n\n" + table3(t3) + "\n")
     print("## Table 4\n\n" + table4(t4) + "\n")
     print("## Single-fault survival\n\n" + survival(sv) + "\n")
     if any(dl.values()):
