@@ -14,6 +14,11 @@ for flights, the digest of every flight's actuator commands. After the files,
 results file is edited without its stamp, and (slow) when the code no longer flies the
 stamped numbers.
 
+The synthesis reports (``docs/ds1-synthesis/``, ``docs/ds1-synthesis-robust/``) are written
+by ``vtolftc synth`` together with the gain files (``firmware_sim/autopilot/gains/README.md``);
+``--stamp-synthesis`` stamps them as they are, with the gain files written beside them, right
+after they were copied in (the test checks that their mu tables agree with the gain files).
+
 The certificate (``certificate.json``, ``CERTIFICATE.md``) is written by
 ``docs/ds1-claims/certificate.py`` (5-10 min); ``--files certificate.json`` runs it and
 stamps its output.
@@ -34,7 +39,7 @@ from types import ModuleType
 from typing import Any
 
 from vtolftc.base.jsonio import atomic_write_text
-from vtolftc.base.provenance import FORMAT, SIDECAR, make_stamp
+from vtolftc.base.provenance import FORMAT, SIDECAR, make_file_stamp, make_stamp
 
 ROOT = Path(__file__).resolve().parents[1]
 CLAIMS = ROOT / "docs" / "ds1-claims"
@@ -162,6 +167,28 @@ def targets() -> dict[str, Target]:
     )}
 
 
+#: synthesis report folder -> (design, the command that wrote it and its gain files)
+SYNTH_REPORTS = {
+    "docs/ds1-synthesis": ("paper", "vtolftc synth --method paper --airframe airframe/ds1.toml "
+                           "--out synth_paper --jobs 2 --seed 0 (report/ copied here, gains to "
+                           "firmware_sim/autopilot/gains/paper/)"),
+    "docs/ds1-synthesis-robust": ("robust", "vtolftc synth --airframe airframe/ds1.toml "
+                                  "--out synth_out --jobs 2 --seed 0 (report/ copied here, "
+                                  "gains to firmware_sim/autopilot/gains/)"),
+}
+
+
+def stamp_synthesis() -> None:
+    """Stamp every file of the synthesis report folders with their design's gain files."""
+    for rel, (design, command) in SYNTH_REPORTS.items():
+        folder = ROOT / rel
+        for path in sorted(p for p in folder.iterdir() if p.is_file() and p.name != SIDECAR):
+            st = make_file_stamp(path, command=command,
+                                 inputs=_gains(design, ("gs-shif", "shif", "lqr")), root=ROOT)
+            write_stamp(folder, path.name, st)
+        print(f"stamped {rel}", flush=True)
+
+
 def _certificate() -> Any:
     subprocess.run([sys.executable, str(CLAIMS / "certificate.py")], check=True, cwd=ROOT)
     return json.loads((CLAIMS / "certificate.json").read_text())
@@ -184,8 +211,8 @@ def write_stamp(folder: Path, name: str, stamp: dict[str, Any]) -> None:
     prov = {"format": FORMAT,
             "about": "one stamp per results file of this folder: the command that made it, "
                      "the sha256 of its inputs (gain files, airframe), the digest of its "
-                     "records and of its flights' actuator commands; checked by "
-                     "tests/test_docs_provenance.py (vtolftc.base.provenance)",
+                     "records (JSON) or bytes, and of its flights' actuator commands; "
+                     "checked by tests/test_docs_provenance.py (vtolftc.base.provenance)",
             "files": dict(prov.get("files", {}))}
     prov["files"][name] = stamp
     prov["files"] = dict(sorted(prov["files"].items()))
@@ -221,6 +248,8 @@ def main(argv: list[str] | None = None) -> int:
                          f"one of {', '.join(ts)}")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes for the flights")
     ap.add_argument("--list", action="store_true", help="print the files and their runs")
+    ap.add_argument("--stamp-synthesis", action="store_true",
+                    help="only stamp the synthesis report folders (after vtolftc synth)")
     ap.add_argument("--no-tables", action="store_true",
                     help="do not rewrite TABLES.md and rmse.png afterwards")
     a = ap.parse_args(argv)
@@ -233,6 +262,9 @@ def main(argv: list[str] | None = None) -> int:
     if a.jobs < 1:
         print(f"regen_docs: --jobs {a.jobs}: expected at least 1", file=sys.stderr)
         return 2
+    if a.stamp_synthesis:
+        stamp_synthesis()
+        return 0
     chosen = [ts[n] for n in names]
     if a.list:
         for t in chosen:

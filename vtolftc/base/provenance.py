@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["FORMAT", "SIDECAR", "canonical_sha256", "check_folder", "compare_records",
-           "file_sha256", "flights_sha256", "make_stamp"]
+           "file_sha256", "flights_sha256", "make_file_stamp", "make_stamp", "results_sha256"]
 
 #: Format tag of the sidecar.
 FORMAT = "vtolftc-provenance/1"
@@ -55,6 +55,15 @@ def canonical_sha256(doc: Any) -> str:
     """
     text = json.dumps(doc, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def results_sha256(path: str | Path) -> str:
+    """The results digest of a file: :func:`canonical_sha256` of a ``.json`` file's document,
+    the sha256 of the bytes of any other file (a report, a figure)."""
+    path = Path(path)
+    if path.suffix == ".json":
+        return canonical_sha256(json.loads(path.read_text()))
+    return file_sha256(path)
 
 
 def flights_sha256(records: Iterable[Mapping[str, Any]]) -> str | None:
@@ -107,6 +116,19 @@ def make_stamp(doc: Any, *, command: str, inputs: Sequence[str | Path], root: st
     return stamp
 
 
+def make_file_stamp(path: str | Path, *, command: str, inputs: Sequence[str | Path],
+                    root: str | Path, **extra: Any) -> dict[str, Any]:
+    """The stamp of a results file as it is on disk (see :func:`make_stamp`); for a file
+    that is not JSON (a report, a figure) the digest is that of its bytes."""
+    path = Path(path)
+    if path.suffix == ".json":
+        return make_stamp(json.loads(path.read_text()), command=command, inputs=inputs,
+                          root=root, **extra)
+    stamp = make_stamp(None, command=command, inputs=inputs, root=root, **extra)
+    stamp["results_sha256"] = file_sha256(path)
+    return stamp
+
+
 def check_folder(folder: str | Path, root: str | Path, *,
                  pattern: str = "*.json") -> list[str]:
     """Every way the results files of ``folder`` disagree with their stamps.
@@ -118,7 +140,8 @@ def check_folder(folder: str | Path, root: str | Path, *,
     root : path
         The repository root the stamps' input paths are relative to.
     pattern : str
-        Glob of the results files that must each carry a stamp.
+        Glob of the results files that must each carry a stamp (JSON files are compared by
+        their records, other files by their bytes).
 
     Returns
     -------
@@ -152,11 +175,11 @@ def check_folder(folder: str | Path, root: str | Path, *,
                 problems.append(f"{name}: input {rel} changed since the results were made "
                                 f"(sha256 {file_sha256(ip)[:12]}, made from {sha[:12]}); "
                                 f"regenerate: {st.get('command')}")
-        doc = json.loads(path.read_text())
-        if canonical_sha256(doc) != st.get("results_sha256"):
+        if results_sha256(path) != st.get("results_sha256"):
             problems.append(f"{name}: records differ from the stamped results "
                             f"(edited, or regenerated without its stamp): {st.get('command')}")
-        if "flights_sha256" in st and flights_sha256(doc) != st["flights_sha256"]:
+        if "flights_sha256" in st and flights_sha256(
+                json.loads(path.read_text())) != st["flights_sha256"]:
             problems.append(f"{name}: flight digests differ from the stamped flights")
     return problems
 
