@@ -38,7 +38,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from vtolftc.base.jsonio import atomic_write_text
+from vtolftc.base.jsonio import atomic_write_text, json_safe
 from vtolftc.base.provenance import FORMAT, SIDECAR, make_file_stamp, make_stamp
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,8 +66,9 @@ def measure() -> ModuleType:
 
 
 def fly(job: tuple[Any, ...]) -> dict[str, Any]:
-    """One flight record of ``measure.fly`` (picklable entry point for the pool)."""
-    return measure().fly(job)
+    """One flight record of ``measure.fly`` as it is written (NaN and infinities as None, the
+    project's JSON convention; picklable entry point for the pool)."""
+    return json_safe(measure().fly(job))
 
 
 # ------------------------------------------------------------------------------ the files
@@ -222,8 +223,9 @@ def write_stamp(folder: Path, name: str, stamp: dict[str, Any]) -> None:
 def finish(t: Target, doc: Any, folder: Path = CLAIMS) -> None:
     """Write one results file and its stamp."""
     path = folder / t.name
+    doc = json_safe(doc)
     if t.name != "certificate.json":       # certificate.py writes its own file
-        atomic_write_text(path, json.dumps(doc, indent=1) + "\n")
+        atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
     stamp = make_stamp(doc, command=f"python benchmarks/regen_docs.py --files {t.name}",
                        inputs=t.inputs, root=ROOT, code_commit=_git_commit())
     write_stamp(folder, t.name, stamp)

@@ -156,7 +156,9 @@ def main(argv: list[str] | None = None) -> int:
                   f"{'survived' if r['survived'] else 'LOST'} "
                   f"crash={r['crashed']} altE={r['final_altitude_error_m']}", flush=True)
     path = Path(a.out) / f"{a.label}.json"
-    path.write_text(json.dumps(results, indent=1) + "\n")
+    from vtolftc.base.jsonio import json_safe
+
+    path.write_text(json.dumps(json_safe(results), indent=1, allow_nan=False) + "\n")
     print(f"wrote {path}")
     return 0
 

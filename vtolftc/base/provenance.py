@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -184,12 +185,20 @@ def check_folder(folder: str | Path, root: str | Path, *,
     return problems
 
 
+def _same(a: Any, b: Any) -> bool:
+    """Equal, with NaN equal to NaN (a crashed flight's metrics)."""
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return bool(a == b)
+
+
 def compare_records(stored: Sequence[Mapping[str, Any]], fresh: Sequence[Mapping[str, Any]],
                     key: Sequence[str] = ("label", "controller")) -> list[str]:
     """Differences between stored records and freshly computed ones, exactly (no tolerance).
 
     Each fresh record is matched to the stored record with the same ``key`` fields; every
-    field of the fresh record must be present and equal (floats to the last digit).
+    field of the fresh record must be present and equal (floats to the last digit; NaN
+    equals NaN).
 
     Returns
     -------
@@ -207,6 +216,6 @@ def compare_records(stored: Sequence[Mapping[str, Any]], fresh: Sequence[Mapping
         for field, v in f.items():
             if field not in s:
                 out.append(f"{k}: {field} not stored")
-            elif s[field] != v:
+            elif not _same(s[field], v):
                 out.append(f"{k}: {field} stored {s[field]!r}, computed {v!r}")
     return out
