@@ -109,19 +109,17 @@ def delay_jobs(design: str, delays_ms: tuple[float, ...]) -> list[Job]:
     return [(f"delay {d:g} ms", "0", [], "gs-shif", g, 45.0, d * 1e-3) for d in delays_ms]
 
 
-def table3_records() -> list[dict[str, Any]]:
+def table3_records(paper_margins: bool = True) -> list[dict[str, Any]]:
     """Table 3 of both designs from their GS-SHIF gain files.
 
     mu_Delta (robust stability) and mu_Delta-hat (robust performance) are the upper bounds
     the synthesis recorded in the gain file (``axes.<axis>.metadata.mu``). The delay margin
     [ms] is the extra loop delay that destabilises: for the robust design the gain file's
     (design plant at the centred nominal), for the paper design computed here on the robust
-    method's design plant at the healthy nominal (``docs/ds1-claims/margins.py``).
+    method's design plant at the healthy nominal (``docs/ds1-claims/margins.py``); with
+    ``paper_margins`` False those are left out (the rest is read from the files, no
+    computation).
     """
-    from vtolftc.airframe.loader import load_airframe
-    from vtolftc.synthesis.robust import design_plant, loop_margins
-
-    af = load_airframe(AIRFRAME)
     out = []
     for design, folder in DESIGNS.items():
         doc = json.loads((folder / "gs-shif.json").read_text())
@@ -130,16 +128,26 @@ def table3_records() -> list[dict[str, Any]]:
             t = doc["axes"][ax]
             mus = t["metadata"]["mu"]
             for i, v in enumerate(bp):
+                rec = {"design": design, "axis": ax, "point": i + 1, "airspeed_m_s": v,
+                       "mu_rs": mus[i]["mu_rs"], "mu_rp": mus[i]["mu_rp"]}
                 if design == "robust":
-                    dm = t["metadata"]["loop_margins"][i]["delay_margin_s"]
-                else:
+                    lm = t["metadata"]["loop_margins"][i]
+                    rec["delay_margin_ms"] = lm["delay_margin_s"] * 1e3
+                elif paper_margins:
                     g = {k: t[k][i] for k in ("kp_angle", "kp_rate", "ki_rate", "kd_rate",
                                               "tf_rate_s")}
-                    dm = loop_margins(design_plant(af, ax, v, 0.0), g).delay_margin_s
-                out.append({"design": design, "axis": ax, "point": i + 1, "airspeed_m_s": v,
-                            "mu_rs": mus[i]["mu_rs"], "mu_rp": mus[i]["mu_rp"],
-                            "delay_margin_ms": dm * 1e3})
+                    rec["delay_margin_ms"] = _paper_delay_margin_s(ax, v, g) * 1e3
+                out.append(rec)
     return out
+
+
+def _paper_delay_margin_s(axis: str, airspeed_m_s: float, gains: dict[str, float]) -> float:
+    """Delay margin [s] of one P-PID on the robust design plant, healthy, at ``airspeed``."""
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.synthesis.robust import design_plant, loop_margins
+
+    af = load_airframe(AIRFRAME)
+    return float(loop_margins(design_plant(af, axis, airspeed_m_s, 0.0), gains).delay_margin_s)
 
 
 def targets() -> dict[str, Target]:
