@@ -15,9 +15,11 @@ results file is edited without its stamp, and (slow) when the code no longer fli
 stamped numbers.
 
 The synthesis reports (``docs/ds1-synthesis/``, ``docs/ds1-synthesis-robust/``) are written
-by ``vtolftc synth`` together with the gain files (``firmware_sim/autopilot/gains/README.md``);
-``--stamp-synthesis`` stamps them as they are, with the gain files written beside them, right
-after they were copied in (the test checks that their mu tables agree with the gain files).
+by ``vtolftc synth`` together with the gain files (``firmware_sim/autopilot/gains/README.md``),
+the single-rotor campaign figures (``docs/campaigns/single-rotor/``) by ``vtolftc campaign``;
+``--stamp FOLDER`` stamps such a folder's files as they are, with the inputs they were made
+from, right after they were copied in (the test checks that the synthesis reports' mu tables
+agree with the gain files).
 
 The certificate (``certificate.json``, ``CERTIFICATE.md``) is written by
 ``docs/ds1-claims/certificate.py`` (5-10 min); ``--files certificate.json`` runs it and
@@ -176,25 +178,31 @@ def targets() -> dict[str, Target]:
     )}
 
 
-#: synthesis report folder -> (design, the command that wrote it and its gain files)
-SYNTH_REPORTS = {
-    "docs/ds1-synthesis": ("paper", "vtolftc synth --method paper --airframe airframe/ds1.toml "
-                           "--out synth_paper --jobs 2 --seed 0 (report/ copied here, gains to "
-                           "firmware_sim/autopilot/gains/paper/)"),
-    "docs/ds1-synthesis-robust": ("robust", "vtolftc synth --airframe airframe/ds1.toml "
-                                  "--out synth_out --jobs 2 --seed 0 (report/ copied here, "
-                                  "gains to firmware_sim/autopilot/gains/)"),
+#: report folder copied in from a CLI command -> (the command, the gains design it used, any
+#: further input files)
+REPORTS: dict[str, tuple[str, str, tuple[Path, ...]]] = {
+    "docs/ds1-synthesis": (
+        "vtolftc synth --method paper --airframe airframe/ds1.toml --out synth_paper --jobs 2 "
+        "--seed 0 (report/ copied here, gains to firmware_sim/autopilot/gains/paper/)",
+        "paper", ()),
+    "docs/ds1-synthesis-robust": (
+        "vtolftc synth --airframe airframe/ds1.toml --out synth_out --jobs 2 --seed 0 "
+        "(report/ copied here, gains to firmware_sim/autopilot/gains/)", "robust", ()),
+    "docs/campaigns/single-rotor": (
+        "vtolftc campaign campaigns/single-rotor.toml --out runs/single-rotor --jobs 2 "
+        "(the figures copied here)", "robust", (ROOT / "campaigns" / "single-rotor.toml",)),
 }
 
 
-def stamp_synthesis() -> None:
-    """Stamp every file of the synthesis report folders with their design's gain files."""
-    for rel, (design, command) in SYNTH_REPORTS.items():
+def stamp_reports(folders: list[str]) -> None:
+    """Stamp every file of the report ``folders`` (keys of :data:`REPORTS`) with its inputs."""
+    for rel in folders:
+        command, design, extra = REPORTS[rel]
         folder = ROOT / rel
+        inputs = [*_gains(design, ("gs-shif", "shif", "lqr")), *extra]
         for path in sorted(p for p in folder.iterdir() if p.is_file() and p.name != SIDECAR):
-            st = make_file_stamp(path, command=command,
-                                 inputs=_gains(design, ("gs-shif", "shif", "lqr")), root=ROOT)
-            write_stamp(folder, path.name, st)
+            write_stamp(folder, path.name,
+                        make_file_stamp(path, command=command, inputs=inputs, root=ROOT))
         print(f"stamped {rel}", flush=True)
 
 
@@ -258,8 +266,9 @@ def main(argv: list[str] | None = None) -> int:
                          f"one of {', '.join(ts)}")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes for the flights")
     ap.add_argument("--list", action="store_true", help="print the files and their runs")
-    ap.add_argument("--stamp-synthesis", action="store_true",
-                    help="only stamp the synthesis report folders (after vtolftc synth)")
+    ap.add_argument("--stamp", nargs="*", metavar="FOLDER", default=None,
+                    help="only stamp report folders copied in from vtolftc synth / campaign "
+                         f"(default: all of {', '.join(REPORTS)})")
     ap.add_argument("--no-tables", action="store_true",
                     help="do not rewrite TABLES.md and rmse.png afterwards")
     a = ap.parse_args(argv)
@@ -272,8 +281,14 @@ def main(argv: list[str] | None = None) -> int:
     if a.jobs < 1:
         print(f"regen_docs: --jobs {a.jobs}: expected at least 1", file=sys.stderr)
         return 2
-    if a.stamp_synthesis:
-        stamp_synthesis()
+    if a.stamp is not None:
+        folders = [f.rstrip("/") for f in a.stamp] or list(REPORTS)
+        unknown = [f for f in folders if f not in REPORTS]
+        if unknown:
+            print(f"regen_docs: --stamp {unknown[0]!r}: expected one of {', '.join(REPORTS)}",
+                  file=sys.stderr)
+            return 2
+        stamp_reports(folders)
         return 0
     chosen = [ts[n] for n in names]
     if a.list:

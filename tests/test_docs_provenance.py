@@ -64,8 +64,9 @@ def test_every_shipped_results_file_matches_its_stamp():
     assert not problems, "\n".join(problems)
 
 
-@pytest.mark.parametrize("folder", ["docs/ds1-synthesis", "docs/ds1-synthesis-robust"])
-def test_every_synthesis_report_file_matches_its_stamp(folder):
+@pytest.mark.parametrize("folder", ["docs/ds1-synthesis", "docs/ds1-synthesis-robust",
+                                    "docs/campaigns/single-rotor"])
+def test_every_report_file_matches_its_stamp(folder):
     problems = check_folder(ROOT / folder, ROOT, pattern="*")
     assert not problems, "\n".join(problems)
 
