@@ -129,7 +129,7 @@ class Vehicle:
         self._estimate_noise = (StateEstimateNoise(state_noise, seed)
                                 if state_noise is not None else None)
         self.fm = np.zeros(9)
-        self._packed_args: tuple = (None, ())  # (packed, its arrays in step_n's order)
+        self._packed_args: tuple = (None,)  # (packed, flatten_packed(packed)...)
         self._pending: list[ActiveFault] = []
         self.active_faults: list[ActiveFault] = []
         self.sensor_model = SensorModel(home, noise, seed, self.airframe.air_density_kg_m3)
@@ -293,15 +293,12 @@ class Vehicle:
             return
         if not self._pending and remaining > 0:
             # common case: no fault due, one compiled call for the whole batch (the packed
-            # airframe's 15 arrays gathered once per ``packed`` object, not every step)
+            # airframe's 15 arrays flattened into one buffer once per ``packed`` object)
             pa = self._packed_args
             if pa[0] is not pk:
-                pa = self._packed_args = (pk, (
-                    pk.P, pk.J, pk.Jinv, pk.rotor_pos, pk.rotor_axis, pk.rotor_torque,
-                    pk.rotor_tmax, pk.rotor_inv_v0, pk.act_tau, pk.act_rate, pk.act_min,
-                    pk.act_max, pk.tab_v, pk.tab, pk.gear))
-            dyn.step_n(self.x, self.u, self.eff, self.stuck, remaining, dt, *pa[1], self.wind,
-                       self.physics, self.fm)
+                pa = self._packed_args = (pk, *dyn.flatten_packed(pk))
+            dyn.step_n_flat(self.x, self.u, self.eff, self.stuck, remaining, dt, pa[1], pa[2],
+                            self.wind, self.physics, self.fm)
             self.time_usec += remaining * self.dt_usec
             return
         while remaining > 0:
