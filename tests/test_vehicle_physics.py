@@ -235,7 +235,8 @@ def test_step_n_flat_is_step_n_bit_for_bit(ds1):
     """The flattened-airframe step (one buffer instead of 15 arrays) gives the very bits of
     ``step_n``, for DS-1 and a perturbed copy, in flight with faults and on the ground."""
     rng = np.random.default_rng(11)
-    for pk in (dyn.pack(ds1), dyn.perturb(dyn.pack(ds1), 1.1, (0.95, 1.05, 1.0), (0.02, -0.01, 0.0))):
+    perturbed = dyn.perturb(dyn.pack(ds1), 1.1, (0.95, 1.05, 1.0), (0.02, -0.01, 0.0))
+    for pk in (dyn.pack(ds1), perturbed):
         buf, lay = dyn.flatten_packed(pk)
         for trial in range(20):
             x = _state(ds1, pos=(1.0, 2.0, -30.0 if trial % 4 else 0.05),
