@@ -192,8 +192,9 @@ class HilRoundTrip:
         """
         if type(state) is np.ndarray and state.dtype == _F64 and state.ndim == 1 \
                 and state.shape[0] >= 13:
-            a, air = _round_trip_kernel(state, float(airspeed_m_s), self._lat0, self._lon0,
-                                        self._alt0, self._r_cos, self._cos)
+            a = np.empty(13)
+            air = _round_trip_kernel(state, float(airspeed_m_s), self._lat0, self._lon0,
+                                     self._alt0, self._r_cos, self._cos, a)
             if air >= 0:  # else a value the codec refuses: the Python path raises its error
                 return NavState(int(time_usec), a[0:4], a[4:7], a[7:10], a[10:13], air * 0.01)
         return self._python(time_usec, state, airspeed_m_s)
@@ -255,21 +256,21 @@ def _clip(x, lo, hi):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _round_trip_kernel(state, airspeed, lat0, lon0, alt0, r_cos, cos_lat0):  # pragma: no cover
+def _round_trip_kernel(state, airspeed, lat0, lon0, alt0, r_cos, cos_lat0,
+                       a):  # pragma: no cover - compiled
     """:meth:`HilRoundTrip._python` compiled (the same operations in the same order).
 
-    Returns ``(a, air)``: ``a`` (13,) the decoded quaternion, rates, position and velocity;
-    ``air`` the airspeed in cm/s, or -1 (``a`` then meaningless) when a value is one the
-    codec refuses (non-finite before rounding, a float32 overflow, a zero quaternion).
+    Writes the decoded quaternion, rates, position and velocity into ``a`` (13,); returns the
+    airspeed in cm/s, or -1 (``a`` then meaningless) when a value is one the codec refuses
+    (non-finite before rounding, a float32 overflow, a zero quaternion).
     """
-    a = np.empty(13)
     f32 = np.empty(7)
     for i in range(7):
         x = state[6 + i]
         if math.isfinite(x) and abs(x) > _F32_MAX:
             y = np.float32(x)
             if math.isinf(y):
-                return a, -1
+                return -1
         f32[i] = np.float64(np.float32(x))
     lat = lat0 + (state[0] / EARTH_RADIUS_M) * _RAD_TO_DEG
     lon = lon0 + (state[1] / r_cos) * _RAD_TO_DEG
@@ -277,7 +278,7 @@ def _round_trip_kernel(state, airspeed, lat0, lon0, alt0, r_cos, cos_lat0):  # p
          100.0 * state[4], 100.0 * state[5], 100.0 * airspeed)
     for x in v:
         if not math.isfinite(x):
-            return a, -1
+            return -1
     ilat = _clip(_round_half_even(v[0]), -2147483648.0, 2147483647.0)
     ilon = _clip(_round_half_even(v[1]), -2147483648.0, 2147483647.0)
     ialt = _clip(_round_half_even(v[2]), -2147483648.0, 2147483647.0)
@@ -288,7 +289,7 @@ def _round_trip_kernel(state, airspeed, lat0, lon0, alt0, r_cos, cos_lat0):  # p
     qw, qx, qy, qz = f32[0], f32[1], f32[2], f32[3]
     n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
     if not (n > 0.0 and math.isfinite(n)):
-        return a, -1
+        return -1
     a[0] = qw / n
     a[1] = qx / n
     a[2] = qy / n
@@ -302,7 +303,7 @@ def _round_trip_kernel(state, airspeed, lat0, lon0, alt0, r_cos, cos_lat0):  # p
     a[10] = ivx * 0.01
     a[11] = ivy * 0.01
     a[12] = ivz * 0.01
-    return a, int(air)
+    return int(air)
 
 
 def wire_commands(u: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:
