@@ -252,3 +252,21 @@ def test_step_n_flat_is_step_n_bit_for_bit(ds1):
             dyn.step_n(xa, u, eff, stuck, 4, 1e-3, *pk, wind, dyn.ALL_PHYSICS, fa)
             dyn.step_n_flat(xb, u, eff, stuck, 4, 1e-3, buf, lay, wind, dyn.ALL_PHYSICS, fb)
             assert xa.tobytes() == xb.tobytes() and fa.tobytes() == fb.tobytes()
+
+
+def test_step_refuses_non_finite_commands_and_keeps_the_previous_ones(ds1):
+    v = Vehicle(ds1, state=_state(ds1))
+    u = np.full(ds1.n_actuators, 0.25)
+    v.step(u, 1)
+    assert v.u.tolist() == u.tolist()
+    x, t = v.x.copy(), v.time_usec
+    for bad in (math.nan, math.inf, -math.inf):
+        b = u.copy()
+        b[3] = bad
+        b[0] = 0.75  # a finite entry before the bad one: not taken either
+        with pytest.raises(ValueError, match="NaN or inf"):
+            v.step(b, 1)
+        assert v.u.tolist() == u.tolist()
+        assert v.x.tobytes() == x.tobytes() and v.time_usec == t
+    v.step(np.asfortranarray(u[::-1].copy())[::-1], 1)  # a strided view is taken as well
+    assert v.u.tolist() == u.tolist()
