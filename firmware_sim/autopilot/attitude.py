@@ -107,6 +107,16 @@ def _lqr_row(g: LQRAxisGains) -> NDArray[np.float64]:
     return np.array([float(g.k_int), float(g.k_angle), float(g.k_rate)])
 
 
+_F64 = np.dtype(np.float64)
+
+
+def _f64(a: Any) -> NDArray[np.float64]:
+    """``np.asarray(a, dtype=np.float64)``, with a fast exit for a float64 array."""
+    if type(a) is np.ndarray and a.dtype is _F64:
+        return a
+    return np.asarray(a, dtype=np.float64)
+
+
 MEMO_ENTRIES = 256
 """Airspeeds (and gain sets) a :class:`_GainMemo` holds at most (about 0.2 MB)."""
 
@@ -232,14 +242,12 @@ class ScheduledPPIDController(_GainFileController):
                sat_hi: Sequence[bool], sat_lo: Sequence[bool]) -> NDArray[np.float64]:
         """Moment demand for one control step [N m]; parameters and result as
         :meth:`AttitudeController.update`."""
-        garr = self._gains
         bp, rows, slopes = self.schedule.kernel_tables
-        ck.scheduled_gains(bp, rows, slopes, float(airspeed_m_s), garr)
         out = self._out
-        ck.ppid3_step(np.asarray(ref, dtype=np.float64), np.asarray(att, dtype=np.float64),
-                      np.asarray(rates, dtype=np.float64), garr, self._state, self._const,
-                      bool(sat_hi[0]), bool(sat_hi[1]), bool(sat_hi[2]),
-                      bool(sat_lo[0]), bool(sat_lo[1]), bool(sat_lo[2]), out)
+        ck.scheduled_ppid3_step(bp, rows, slopes, float(airspeed_m_s), _f64(ref), _f64(att),
+                                _f64(rates), self._gains, self._state, self._const,
+                                bool(sat_hi[0]), bool(sat_hi[1]), bool(sat_hi[2]),
+                                bool(sat_lo[0]), bool(sat_lo[1]), bool(sat_lo[2]), out)
         return out.copy()
 
 

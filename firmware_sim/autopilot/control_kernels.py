@@ -35,7 +35,8 @@ __all__ = [
     "G_KI_RATE", "G_KP_ANGLE", "G_KP_RATE", "G_TF_RATE", "N_CONST", "N_GAINS", "N_STATE",
     "S_A", "S_B", "S_DERIVATIVE", "S_E_PREV", "S_INTEGRAL", "S_OUTPUT", "S_OUTPUT_UNSAT",
     "S_RATE_REF", "S_SATURATED", "S_TF", "filter_coefficients", "lqr3_step", "ppid3_step",
-    "ppid_rate_reference", "ppid_rate_step", "ppid_step", "scheduled_gains", "wrap_angle",
+    "ppid_rate_reference", "ppid_rate_step", "ppid_step", "scheduled_gains",
+    "scheduled_ppid3_step", "wrap_angle",
 ]
 
 #: columns of the P-PID gains row
@@ -328,3 +329,13 @@ def scheduled_gains(bp, rows, slopes, V, out):  # pragma: no cover - compiled
     for a in range(3):
         for c in range(5):
             out[a, c] = rows[i, a, c] + w * slopes[i, a, c]
+
+
+@numba.njit(cache=True)
+def scheduled_ppid3_step(bp, rows, slopes, V, ref, att, rates, G, S, C, sat_hi0, sat_hi1,
+                         sat_hi2, sat_lo0, sat_lo1, sat_lo2, out):  # pragma: no cover
+    """:func:`scheduled_gains` at ``V`` into ``G``, then :func:`ppid3_step` with them: the
+    scheduled controller's step in one call (parameters as those two functions')."""
+    scheduled_gains(bp, rows, slopes, V, G)
+    ppid3_step(ref, att, rates, G, S, C, sat_hi0, sat_hi1, sat_hi2, sat_lo0, sat_lo1,
+               sat_lo2, out)
