@@ -290,16 +290,17 @@ class Vehicle:
         remaining = int(n)
         pk = self.packed
         dt = self.dt_usec * 1e-6
+        # the packed airframe's 15 arrays flattened into one buffer once per ``packed`` object
+        pa = self._packed_args
+        if pa[0] is not pk:
+            pa = self._packed_args = (pk, *dyn.flatten_packed(pk))
+        buf, lay = pa[1], pa[2]
         if self._gusty:
-            self._step_gusty(remaining, dt)
+            self._step_gusty(remaining, dt, buf, lay)
             return
         if not self._pending and remaining > 0:
-            # common case: no fault due, one compiled call for the whole batch (the packed
-            # airframe's 15 arrays flattened into one buffer once per ``packed`` object)
-            pa = self._packed_args
-            if pa[0] is not pk:
-                pa = self._packed_args = (pk, *dyn.flatten_packed(pk))
-            dyn.step_n_flat(self.x, self.u, self.eff, self.stuck, remaining, dt, pa[1], pa[2],
+            # common case: no fault due, one compiled call for the whole batch
+            dyn.step_n_flat(self.x, self.u, self.eff, self.stuck, remaining, dt, buf, lay,
                             self.wind, self.physics, self.fm)
             self.time_usec += remaining * self.dt_usec
             return
@@ -309,26 +310,22 @@ class Vehicle:
             if self._pending:
                 due = self._pending[0].fault.start_usec - self.time_usec
                 batch = max(1, min(batch, -(-due // self.dt_usec)))
-            dyn.step_n(self.x, self.u, self.eff, self.stuck, batch, dt, pk.P, pk.J, pk.Jinv,
-                       pk.rotor_pos, pk.rotor_axis, pk.rotor_torque, pk.rotor_tmax,
-                       pk.rotor_inv_v0, pk.act_tau, pk.act_rate, pk.act_min, pk.act_max,
-                       pk.tab_v, pk.tab, pk.gear, self.wind, self.physics, self.fm)
+            dyn.step_n_flat(self.x, self.u, self.eff, self.stuck, batch, dt, buf, lay,
+                            self.wind, self.physics, self.fm)
             self.time_usec += batch * self.dt_usec
             remaining -= batch
         self._apply_due_faults()
 
-    def _step_gusty(self, n: int, dt: float) -> None:
-        """``n`` physics steps one at a time, the wind field evaluated at the start of each."""
-        pk = self.packed
+    def _step_gusty(self, n: int, dt: float, buf: np.ndarray, lay: np.ndarray) -> None:
+        """``n`` physics steps one at a time, the wind field evaluated at the start of each
+        (``buf``, ``lay``: the airframe as ``dynamics.flatten_packed``)."""
         wf = self.wind_field
         assert wf is not None
         for _ in range(n):
             self._apply_due_faults()
             wf.at(self.time_usec * 1e-6, self.wind)
-            dyn.step_n(self.x, self.u, self.eff, self.stuck, 1, dt, pk.P, pk.J, pk.Jinv,
-                       pk.rotor_pos, pk.rotor_axis, pk.rotor_torque, pk.rotor_tmax,
-                       pk.rotor_inv_v0, pk.act_tau, pk.act_rate, pk.act_min, pk.act_max,
-                       pk.tab_v, pk.tab, pk.gear, self.wind, self.physics, self.fm)
+            dyn.step_n_flat(self.x, self.u, self.eff, self.stuck, 1, dt, buf, lay, self.wind,
+                            self.physics, self.fm)
             self.time_usec += self.dt_usec
         self._apply_due_faults()
         wf.at(self.time_usec * 1e-6, self.wind)
