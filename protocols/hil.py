@@ -26,6 +26,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -189,6 +190,19 @@ class HilRoundTrip:
             state[6:10], state[10:13], state[0:3], state[3:6], airspeed_m_s), *home), *home)``
             (its four arrays are views of one 13-entry array).
         """
+        if type(state) is np.ndarray and state.dtype == _F64 and state.ndim == 1 \
+                and state.shape[0] >= 13:
+            a = np.empty(13)
+            air = _round_trip_kernel(state, float(airspeed_m_s), self._lat0, self._lon0,
+                                     self._alt0, self._r_cos, self._cos, a)
+            if air >= 0:  # else a value the codec refuses: the Python path raises its error
+                return NavState(int(time_usec), a[0:4], a[4:7], a[7:10], a[10:13], air * 0.01)
+        return self._python(time_usec, state, airspeed_m_s)
+
+    def _python(self, time_usec: int, state: NDArray[np.float64],
+                airspeed_m_s: float) -> NavState:
+        """:meth:`__call__` in Python (the kernel's reference; raises on what the codec
+        refuses)."""
         pn, pe, pd, vn, ve, vd, q0, q1, q2, q3, w0, w1, w2 = state[:13].tolist()
         lat0, lon0, alt0 = self._lat0, self._lon0, self._alt0
         # encode (as encode_hil_state)
@@ -221,6 +235,75 @@ class HilRoundTrip:
             alt0 - ialt * 1e-3,
             ivx * 0.01, ivy * 0.01, ivz * 0.01))
         return NavState(int(time_usec), a[0:4], a[4:7], a[7:10], a[10:13], air * 0.01)
+
+
+_F64 = np.dtype(np.float64)
+_RAD_TO_DEG = math.degrees(1.0)  # CPython's math.degrees: x * (180 / pi)
+_DEG_TO_RAD = math.radians(1.0)  # math.radians: x * (pi / 180)
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
+@numba.njit(cache=True)
+def _round_half_even(x):  # pragma: no cover - compiled
+    """Python's ``round(x)`` of a finite float, as a float (ties to even; + 0.0: an int
+    has no negative zero)."""
+    return np.rint(x) + 0.0
+
+
+@numba.njit(cache=True)
+def _clip(x, lo, hi):  # pragma: no cover - compiled
+    return lo if x < lo else hi if x > hi else x
+
+
+@numba.njit(cache=True)
+def _round_trip_kernel(state, airspeed, lat0, lon0, alt0, r_cos, cos_lat0,
+                       a):  # pragma: no cover - compiled
+    """:meth:`HilRoundTrip._python` compiled (the same operations in the same order).
+
+    Writes the decoded quaternion, rates, position and velocity into ``a`` (13,); returns the
+    airspeed in cm/s, or -1 (``a`` then meaningless) when a value is one the codec refuses
+    (non-finite before rounding, a float32 overflow, a zero quaternion).
+    """
+    f32 = np.empty(7)
+    for i in range(7):
+        x = state[6 + i]
+        if math.isfinite(x) and abs(x) > _F32_MAX:
+            y = np.float32(x)
+            if math.isinf(y):
+                return -1
+        f32[i] = np.float64(np.float32(x))
+    lat = lat0 + (state[0] / EARTH_RADIUS_M) * _RAD_TO_DEG
+    lon = lon0 + (state[1] / r_cos) * _RAD_TO_DEG
+    v = (lat * 1e7, lon * 1e7, 1000.0 * (alt0 - state[2]), 100.0 * state[3],
+         100.0 * state[4], 100.0 * state[5], 100.0 * airspeed)
+    for x in v:
+        if not math.isfinite(x):
+            return -1
+    ilat = _clip(_round_half_even(v[0]), -2147483648.0, 2147483647.0)
+    ilon = _clip(_round_half_even(v[1]), -2147483648.0, 2147483647.0)
+    ialt = _clip(_round_half_even(v[2]), -2147483648.0, 2147483647.0)
+    ivx = _clip(_round_half_even(v[3]), -32768.0, 32767.0)
+    ivy = _clip(_round_half_even(v[4]), -32768.0, 32767.0)
+    ivz = _clip(_round_half_even(v[5]), -32768.0, 32767.0)
+    air = _clip(_round_half_even(v[6]), 0.0, 65535.0)
+    qw, qx, qy, qz = f32[0], f32[1], f32[2], f32[3]
+    n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    if not (n > 0.0 and math.isfinite(n)):
+        return -1
+    a[0] = qw / n
+    a[1] = qx / n
+    a[2] = qy / n
+    a[3] = qz / n
+    a[4] = f32[4]
+    a[5] = f32[5]
+    a[6] = f32[6]
+    a[7] = ((ilat * 1e-7 - lat0) * _DEG_TO_RAD) * EARTH_RADIUS_M
+    a[8] = ((ilon * 1e-7 - lon0) * _DEG_TO_RAD) * EARTH_RADIUS_M * cos_lat0
+    a[9] = alt0 - ialt * 1e-3
+    a[10] = ivx * 0.01
+    a[11] = ivy * 0.01
+    a[12] = ivz * 0.01
+    return int(air)
 
 
 def wire_commands(u: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:

@@ -226,3 +226,38 @@ def test_make_controller_selects_by_name_and_checks_files(tmp_path, ds1):
         make_controller("lqr", tmp_path, airframe_sha256="cd" * 32)
     with pytest.raises(ControllerError, match="not found"):
         make_controller("lqr", tmp_path / "nowhere")
+
+
+@pytest.mark.parametrize("bp", [(0.0,), (0.0, 10.0), (0.0, 1.0, 4.5, 13.0, 18.0)])
+def test_scheduled_gains_kernel_is_gains_at_bit_for_bit(bp):
+    """The compiled interpolation gives the very bits of ``GainSchedule.gains_at`` at and
+    between the breakpoints, below and above them, and for NaN and infinities."""
+    from vtolftc.firmware_sim.autopilot import control_kernels as ck
+    from vtolftc.firmware_sim.autopilot.pid import gains_row
+
+    d = sched_dict(bp)
+    d["axes"]["pitch"]["kd_rate"] = [0.1 + 0.037 * i for i in range(len(bp))]
+    s = GainSchedule.from_dict(d)
+    rng = np.random.default_rng(3)
+    speeds = [*bp, -1.0, 0.0, 25.0, math.nan, math.inf, -math.inf, 1e-300, 17.99999999,
+              *rng.uniform(-1.0, 20.0, 500).tolist(),
+              *np.round(rng.uniform(0.0, 20.0, 500), 2).tolist()]
+    out = np.zeros((3, 5))
+    for V in speeds:
+        ck.scheduled_gains(*s.kernel_tables, V, out)
+        g = s.gains_at(V)
+        want = np.array([gains_row(g[ax]) for ax in ("roll", "pitch", "yaw")])
+        assert out.tobytes() == want.tobytes(), V
+
+
+def test_scheduled_axes_gains_are_the_last_step_s():
+    """A scheduled controller's axes show the gains of the airspeed of its last step, and a
+    write to an axis' gains is the compiled step's."""
+    sched = GainSchedule.from_dict(sched_dict((0.0, 10.0)))
+    c = ScheduledPPIDController(sched, dt=0.004)
+    assert c.pids[1].gains == sched.gains_at(0.0)["pitch"]
+    c.update(np.zeros(3), np.zeros(3), np.zeros(3), 4.0, NO, NO)
+    assert [p.gains for p in c.pids] == [sched.gains_at(4.0)[ax]
+                                         for ax in ("roll", "pitch", "yaw")]
+    c.pids[0].gains = sched.gains_at(7.0)["roll"]
+    assert c.pids[0].gains == sched.gains_at(7.0)["roll"]

@@ -141,3 +141,27 @@ def test_parameter_store():
         ps.register("A_NAME_LONGER_THAN_16", 0)
     with pytest.raises(ParamError, match="twice"):
         ps.register("SYS_FAILURE_EN", 0)
+
+
+def test_compiled_round_trip_equals_its_python_and_refuses_alike():
+    """HilRoundTrip's compiled path gives the bits of its Python path on states quantised so
+    that many fields round on a tie, and what the codec refuses (NaN position, a float32
+    overflow, a zero quaternion) raises the Python path's error."""
+    rng = np.random.default_rng(8)
+    rt = HilRoundTrip(*HOME)
+    for _ in range(2000):
+        x = np.concatenate([rng.integers(-4000, 4000, 3) / 2000.0,
+                            rng.integers(-4000, 4000, 3) / 200.0,
+                            rng.normal(size=4), rng.normal(size=3), rng.normal(size=15)])
+        x[6:10] /= np.linalg.norm(x[6:10])
+        air = float(rng.integers(0, 6000)) / 200.0
+        assert _bits(rt(5, x, air)) == _bits(rt._python(5, x, air))
+    for bad, err in (((0, math.nan), ValueError), ((6, 1e39), OverflowError),
+                     ((6, 0.0), ValueError), ((4, math.inf), OverflowError)):
+        x = np.zeros(13)
+        x[6] = 1.0
+        x[bad[0]] = bad[1]
+        with pytest.raises(err):
+            rt(0, x, 0.0)
+        with pytest.raises(err):
+            rt._python(0, x, 0.0)

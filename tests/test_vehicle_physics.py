@@ -229,3 +229,44 @@ def test_actuator_first_order_lag_and_rate_limit(ds1):
     u[j] = 3.0  # beyond the limit: clipped
     v2.step(u, 2000)
     assert v2.actuator_positions[j] == pytest.approx(1.0)
+
+
+def test_step_n_flat_is_step_n_bit_for_bit(ds1):
+    """The flattened-airframe step (one buffer instead of 15 arrays) gives the very bits of
+    ``step_n``, for DS-1 and a perturbed copy, in flight with faults and on the ground."""
+    rng = np.random.default_rng(11)
+    perturbed = dyn.perturb(dyn.pack(ds1), 1.1, (0.95, 1.05, 1.0), (0.02, -0.01, 0.0))
+    for pk in (dyn.pack(ds1), perturbed):
+        buf, lay = dyn.flatten_packed(pk)
+        for trial in range(20):
+            x = _state(ds1, pos=(1.0, 2.0, -30.0 if trial % 4 else 0.05),
+                       vel=tuple(rng.normal(scale=6.0, size=3)),
+                       euler=tuple(rng.normal(scale=0.3, size=3)),
+                       omega=tuple(rng.normal(scale=0.5, size=3)))
+            x[dyn.N_RIGID:] = rng.uniform(0.0, 1.0, ds1.n_actuators)
+            u = rng.uniform(-1.0, 1.0, ds1.n_actuators)
+            eff = np.where(rng.random(ds1.n_actuators) < 0.3, 0.5, 1.0)
+            stuck = rng.random(ds1.n_actuators) < 0.1
+            wind = rng.normal(size=3)
+            xa, xb, fa, fb = x.copy(), x.copy(), np.zeros(9), np.zeros(9)
+            dyn.step_n(xa, u, eff, stuck, 4, 1e-3, *pk, wind, dyn.ALL_PHYSICS, fa)
+            dyn.step_n_flat(xb, u, eff, stuck, 4, 1e-3, buf, lay, wind, dyn.ALL_PHYSICS, fb)
+            assert xa.tobytes() == xb.tobytes() and fa.tobytes() == fb.tobytes()
+
+
+def test_step_refuses_non_finite_commands_and_keeps_the_previous_ones(ds1):
+    v = Vehicle(ds1, state=_state(ds1))
+    u = np.full(ds1.n_actuators, 0.25)
+    v.step(u, 1)
+    assert v.u.tolist() == u.tolist()
+    x, t = v.x.copy(), v.time_usec
+    for bad in (math.nan, math.inf, -math.inf):
+        b = u.copy()
+        b[3] = bad
+        b[0] = 0.75  # a finite entry before the bad one: not taken either
+        with pytest.raises(ValueError, match="NaN or inf"):
+            v.step(b, 1)
+        assert v.u.tolist() == u.tolist()
+        assert v.x.tobytes() == x.tobytes() and v.time_usec == t
+    v.step(np.asfortranarray(u[::-1].copy())[::-1], 1)  # a strided view is taken as well
+    assert v.u.tolist() == u.tolist()

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from vtolftc.base.rotation import ATTITUDE_AXES
 from vtolftc.firmware_sim.autopilot import control_kernels as ck
 from vtolftc.firmware_sim.autopilot.lqr import LQRAxisGains, LQRGains, LQRGainsError
-from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, gains_row
+from vtolftc.firmware_sim.autopilot.pid import CascadedPPID, PPIDGains, gains_row
 from vtolftc.firmware_sim.autopilot.schedule import GainSchedule, GainScheduleError
 
 __all__ = [
@@ -107,12 +107,23 @@ def _lqr_row(g: LQRAxisGains) -> NDArray[np.float64]:
     return np.array([float(g.k_int), float(g.k_angle), float(g.k_rate)])
 
 
+_F64 = np.dtype(np.float64)
+
+
+def _f64(a: Any) -> NDArray[np.float64]:
+    """``np.asarray(a, dtype=np.float64)``, with a fast exit for a float64 array."""
+    if type(a) is np.ndarray and a.dtype is _F64:
+        return a
+    return np.asarray(a, dtype=np.float64)
+
+
 MEMO_ENTRIES = 256
 """Airspeeds (and gain sets) a :class:`_GainMemo` holds at most (about 0.2 MB)."""
 
 
 class _GainMemo:
-    """A gain table's gains at an airspeed (``table.gains_at``) and their (3, n) kernel array,
+    """A gain table's gains at an airspeed (``table.gains_at``) and their (3, n) kernel array
+    (the LQR's; the P-PID schedule is interpolated by ``control_kernels.scheduled_gains``),
     memoised: the measured airspeed comes in 0.01 m/s steps, so values repeat, and the gains
     of a value never change. Starts afresh when the table object is replaced, and when it
     holds :data:`MEMO_ENTRIES` airspeeds: the scheduling airspeed is low-passed, so in a
@@ -143,6 +154,38 @@ class _GainMemo:
             ga = (g, np.array([self._row(g[ax]) for ax in ATTITUDE_AXES]))
             self._by_gains[id(g)] = ga
         return ga
+
+
+class ScheduledAxis(CascadedPPID):
+    """One axis of a :class:`ScheduledPPIDController`: a :class:`CascadedPPID` whose ``gains``
+    are also a view, of row ``row`` of the controller's gains array (the gains the compiled
+    step used last, scheduled at its airspeed; written there by
+    ``control_kernels.scheduled_gains``, not rebuilt as Python objects every step).
+
+    Parameters
+    ----------
+    gains, dt
+        As :class:`CascadedPPID` (``gains`` written into the row).
+    gains_array
+        The controller's gains array, shape (n, 5) (``control_kernels.G_*`` columns).
+    **kwargs
+        :class:`CascadedPPID`'s keyword arguments (``wrap``, ``rate_limit``, ``state``,
+        ``const``, ``row``, ...).
+    """
+
+    def __init__(self, gains: PPIDGains, dt: float, *, gains_array: NDArray[np.float64],
+                 **kwargs: Any) -> None:
+        self._gains_array = gains_array
+        super().__init__(gains, dt, **kwargs)
+
+    @property  # type: ignore[override]
+    def gains(self) -> PPIDGains:
+        """The gains of this axis' row (a fresh :class:`PPIDGains` on each read)."""
+        return PPIDGains(*self._gains_array[self._row].tolist())
+
+    @gains.setter
+    def gains(self, g: PPIDGains) -> None:
+        self._gains_array[self._row] = gains_row(g)
 
 
 class _GainFileController:
@@ -179,13 +222,14 @@ class ScheduledPPIDController(_GainFileController):
         g0 = schedule.gains_at(0.0)
         self._state = np.zeros((3, ck.N_STATE))
         self._const = np.zeros((3, ck.N_CONST))
+        self._gains = np.zeros((3, ck.N_GAINS))  # this step's gains, written by the kernel
         #: the three axes (roll, pitch, yaw), views of the arrays the compiled step updates
         self.pids: tuple[CascadedPPID, ...] = tuple(
-            CascadedPPID(g0[ax], dt, wrap=(ax == "yaw"), rate_limit=rl, output_limit=1e6,
-                         state=self._state, const=self._const, row=k)
+            ScheduledAxis(g0[ax], dt, wrap=(ax == "yaw"), rate_limit=rl, output_limit=1e6,
+                          state=self._state, const=self._const, gains_array=self._gains,
+                          row=k)
             for k, (ax, rl) in enumerate(zip(ATTITUDE_AXES, rate_limits, strict=True)))
         self._out = np.zeros(3)
-        self._memo = _GainMemo(gains_row)
 
     def reset(self) -> None:
         """Clear the integrators of the three axes' P-PID loops (``CascadedPPID.reset``)."""
@@ -198,16 +242,12 @@ class ScheduledPPIDController(_GainFileController):
                sat_hi: Sequence[bool], sat_lo: Sequence[bool]) -> NDArray[np.float64]:
         """Moment demand for one control step [N m]; parameters and result as
         :meth:`AttitudeController.update`."""
-        g, garr = self._memo.at(self.schedule, airspeed_m_s)
-        own = self.pids
-        own[0].gains = g[ATTITUDE_AXES[0]]
-        own[1].gains = g[ATTITUDE_AXES[1]]
-        own[2].gains = g[ATTITUDE_AXES[2]]
+        bp, rows, slopes = self.schedule.kernel_tables
         out = self._out
-        ck.ppid3_step(np.asarray(ref, dtype=np.float64), np.asarray(att, dtype=np.float64),
-                      np.asarray(rates, dtype=np.float64), garr, self._state, self._const,
-                      bool(sat_hi[0]), bool(sat_hi[1]), bool(sat_hi[2]),
-                      bool(sat_lo[0]), bool(sat_lo[1]), bool(sat_lo[2]), out)
+        ck.scheduled_ppid3_step(bp, rows, slopes, float(airspeed_m_s), _f64(ref), _f64(att),
+                                _f64(rates), self._gains, self._state, self._const,
+                                bool(sat_hi[0]), bool(sat_hi[1]), bool(sat_hi[2]),
+                                bool(sat_lo[0]), bool(sat_lo[1]), bool(sat_lo[2]), out)
         return out.copy()
 
 

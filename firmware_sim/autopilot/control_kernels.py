@@ -35,7 +35,8 @@ __all__ = [
     "G_KI_RATE", "G_KP_ANGLE", "G_KP_RATE", "G_TF_RATE", "N_CONST", "N_GAINS", "N_STATE",
     "S_A", "S_B", "S_DERIVATIVE", "S_E_PREV", "S_INTEGRAL", "S_OUTPUT", "S_OUTPUT_UNSAT",
     "S_RATE_REF", "S_SATURATED", "S_TF", "filter_coefficients", "lqr3_step", "ppid3_step",
-    "ppid_rate_reference", "ppid_rate_step", "ppid_step", "wrap_angle",
+    "ppid_rate_reference", "ppid_rate_step", "ppid_step", "scheduled_gains",
+    "scheduled_ppid3_step", "wrap_angle",
 ]
 
 #: columns of the P-PID gains row
@@ -290,3 +291,51 @@ def lqr3_step(ref, att, rates, K, dt, it, sat_hi0, sat_hi1, sat_hi2, sat_lo0, sa
         if not ((dI > 0.0 and sh) or (dI < 0.0 and sl)):
             it[k] += dI
         out[k] = K[k, 1] * e - K[k, 2] * rates[k] + it[k]
+
+
+@numba.njit(cache=True)
+def scheduled_gains(bp, rows, slopes, V, out):  # pragma: no cover - compiled
+    """Gains of a schedule at airspeed ``V`` [m/s], piecewise-linear between breakpoints and
+    clamped outside: ``GainSchedule.gains_at`` (same arithmetic, same bits) as the kernel's
+    array.
+
+    Parameters
+    ----------
+    bp : numpy.ndarray, shape (n,)
+        Breakpoint airspeeds [m/s], increasing.
+    rows : numpy.ndarray, shape (n, 3, 5)
+        The gains at each breakpoint (axis, ``G_*`` column).
+    slopes : numpy.ndarray, shape (max(n - 1, 1), 3, 5)
+        ``rows[i + 1] - rows[i]`` per interval.
+    V : float
+        Airspeed [m/s]; NaN gives the first breakpoint's gains, as below the first.
+    out : numpy.ndarray, shape (3, 5)
+        Receives the gains.
+    """
+    n = bp.shape[0]
+    if not bp[0] < V:  # also NaN
+        out[:, :] = rows[0]
+        return
+    if bp[n - 1] <= V:
+        out[:, :] = rows[n - 1]
+        return
+    i = 0
+    while bp[i + 1] <= V:  # bisect_right(bp, V) - 1
+        i += 1
+    w = (V - bp[i]) / (bp[i + 1] - bp[i])
+    if w == 0.0:
+        out[:, :] = rows[i]
+        return
+    for a in range(3):
+        for c in range(5):
+            out[a, c] = rows[i, a, c] + w * slopes[i, a, c]
+
+
+@numba.njit(cache=True)
+def scheduled_ppid3_step(bp, rows, slopes, V, ref, att, rates, G, S, C, sat_hi0, sat_hi1,
+                         sat_hi2, sat_lo0, sat_lo1, sat_lo2, out):  # pragma: no cover
+    """:func:`scheduled_gains` at ``V`` into ``G``, then :func:`ppid3_step` with them: the
+    scheduled controller's step in one call (parameters as those two functions')."""
+    scheduled_gains(bp, rows, slopes, V, G)
+    ppid3_step(ref, att, rates, G, S, C, sat_hi0, sat_hi1, sat_hi2, sat_lo0, sat_lo1,
+               sat_lo2, out)

@@ -65,6 +65,8 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
+
 from vtolftc.base.rotation import ATTITUDE_AXES as AXES
 from vtolftc.firmware_sim.autopilot.pid import PPIDGains
 
@@ -168,6 +170,9 @@ class GainSchedule:
         ]
         self._at_bp = [self._row_to_gains(r) for r in self._rows]
         self._bp = list(self.breakpoints_m_s)
+        # the same rows and slopes as float arrays, for control_kernels.scheduled_gains
+        self.kernel_tables: tuple[np.ndarray, np.ndarray, np.ndarray] = _kernel_tables(
+            self._bp, self._rows, self._slopes)
 
     # -------------------------------------------------------------------------------------
     @classmethod
@@ -272,6 +277,18 @@ class GainSchedule:
             f"GainSchedule(controller={self.controller!r}, airframe={self.airframe_name!r}, "
             f"breakpoints_m_s={list(self.breakpoints_m_s)})"
         )
+
+
+def _kernel_tables(bp: list[float], rows: list[tuple[float, ...]],
+                   slopes: list[tuple[float, ...]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(breakpoints (n,), rows (n, 3, 5), slopes (max(n - 1, 1), 3, 5))`` as read-only
+    float arrays (axis-major rows, ``GAIN_FIELDS`` columns: the P-PID kernel's layout)."""
+    n = len(rows)
+    out = (np.array(bp, dtype=float), np.array(rows, dtype=float).reshape(n, 3, 5),
+           np.array(slopes if slopes else [rows[0]], dtype=float).reshape(-1, 3, 5))
+    for a in out:
+        a.setflags(write=False)
+    return out
 
 
 # ---------------------------------------------------------------------------------------------

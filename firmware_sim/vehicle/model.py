@@ -38,11 +38,14 @@ _F64 = np.dtype(np.float64)
 
 
 @numba.njit(cache=True)
-def _all_finite(a: np.ndarray) -> bool:
-    """True when every entry of the 1-D array ``a`` is finite (compiled: ~0.2 us)."""
-    for i in range(a.size):  # noqa: SIM110 (a loop compiles; all(generator) does not)
-        if not np.isfinite(a[i]):
+def _take_commands(src: np.ndarray, dst: np.ndarray) -> bool:
+    """Copy the 1-D array ``src`` into ``dst`` when every entry is finite and return True;
+    else leave ``dst`` as it is and return False (compiled: one call per control step)."""
+    for i in range(src.size):
+        if not np.isfinite(src[i]):
             return False
+    for i in range(src.size):
+        dst[i] = src[i]
     return True
 
 
@@ -129,7 +132,7 @@ class Vehicle:
         self._estimate_noise = (StateEstimateNoise(state_noise, seed)
                                 if state_noise is not None else None)
         self.fm = np.zeros(9)
-        self._packed_args: tuple = (None, ())  # (packed, its arrays in step_n's order)
+        self._packed_args: tuple = (None,)  # (packed, flatten_packed(packed)...)
         self._pending: list[ActiveFault] = []
         self.active_faults: list[ActiveFault] = []
         self.sensor_model = SensorModel(home, noise, seed, self.airframe.air_density_kg_m3)
@@ -282,26 +285,23 @@ class Vehicle:
             if u.shape != (self.n_actuators,):
                 raise ValueError(f"commands of shape {u.shape}: expected ({self.n_actuators},) "
                                  f"in the order {', '.join(self.airframe.actuator_names)}")
-            if not _all_finite(u):
+            if not _take_commands(u, self.u):
                 raise ValueError("commands contain NaN or inf: expected finite values")
-            self.u[:] = u
         remaining = int(n)
         pk = self.packed
         dt = self.dt_usec * 1e-6
+        # the packed airframe's 15 arrays flattened into one buffer once per ``packed`` object
+        pa = self._packed_args
+        if pa[0] is not pk:
+            pa = self._packed_args = (pk, *dyn.flatten_packed(pk))
+        buf, lay = pa[1], pa[2]
         if self._gusty:
-            self._step_gusty(remaining, dt)
+            self._step_gusty(remaining, dt, buf, lay)
             return
         if not self._pending and remaining > 0:
-            # common case: no fault due, one compiled call for the whole batch (the packed
-            # airframe's 15 arrays gathered once per ``packed`` object, not every step)
-            pa = self._packed_args
-            if pa[0] is not pk:
-                pa = self._packed_args = (pk, (
-                    pk.P, pk.J, pk.Jinv, pk.rotor_pos, pk.rotor_axis, pk.rotor_torque,
-                    pk.rotor_tmax, pk.rotor_inv_v0, pk.act_tau, pk.act_rate, pk.act_min,
-                    pk.act_max, pk.tab_v, pk.tab, pk.gear))
-            dyn.step_n(self.x, self.u, self.eff, self.stuck, remaining, dt, *pa[1], self.wind,
-                       self.physics, self.fm)
+            # common case: no fault due, one compiled call for the whole batch
+            dyn.step_n_flat(self.x, self.u, self.eff, self.stuck, remaining, dt, buf, lay,
+                            self.wind, self.physics, self.fm)
             self.time_usec += remaining * self.dt_usec
             return
         while remaining > 0:
@@ -310,26 +310,22 @@ class Vehicle:
             if self._pending:
                 due = self._pending[0].fault.start_usec - self.time_usec
                 batch = max(1, min(batch, -(-due // self.dt_usec)))
-            dyn.step_n(self.x, self.u, self.eff, self.stuck, batch, dt, pk.P, pk.J, pk.Jinv,
-                       pk.rotor_pos, pk.rotor_axis, pk.rotor_torque, pk.rotor_tmax,
-                       pk.rotor_inv_v0, pk.act_tau, pk.act_rate, pk.act_min, pk.act_max,
-                       pk.tab_v, pk.tab, pk.gear, self.wind, self.physics, self.fm)
+            dyn.step_n_flat(self.x, self.u, self.eff, self.stuck, batch, dt, buf, lay,
+                            self.wind, self.physics, self.fm)
             self.time_usec += batch * self.dt_usec
             remaining -= batch
         self._apply_due_faults()
 
-    def _step_gusty(self, n: int, dt: float) -> None:
-        """``n`` physics steps one at a time, the wind field evaluated at the start of each."""
-        pk = self.packed
+    def _step_gusty(self, n: int, dt: float, buf: np.ndarray, lay: np.ndarray) -> None:
+        """``n`` physics steps one at a time, the wind field evaluated at the start of each
+        (``buf``, ``lay``: the airframe as ``dynamics.flatten_packed``)."""
         wf = self.wind_field
         assert wf is not None
         for _ in range(n):
             self._apply_due_faults()
             wf.at(self.time_usec * 1e-6, self.wind)
-            dyn.step_n(self.x, self.u, self.eff, self.stuck, 1, dt, pk.P, pk.J, pk.Jinv,
-                       pk.rotor_pos, pk.rotor_axis, pk.rotor_torque, pk.rotor_tmax,
-                       pk.rotor_inv_v0, pk.act_tau, pk.act_rate, pk.act_min, pk.act_max,
-                       pk.tab_v, pk.tab, pk.gear, self.wind, self.physics, self.fm)
+            dyn.step_n_flat(self.x, self.u, self.eff, self.stuck, 1, dt, buf, lay, self.wind,
+                            self.physics, self.fm)
             self.time_usec += self.dt_usec
         self._apply_due_faults()
         wf.at(self.time_usec * 1e-6, self.wind)

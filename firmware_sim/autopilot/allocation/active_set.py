@@ -220,23 +220,25 @@ def box_qp_active_set(H, q, lo, hi, u0, max_iter, tol):  # noqa: C901
 @numba.njit(cache=True)
 def _allocate_step(v, B, pref, umin_def, umax_def, umin_in, umax_in, prev, has_prev, rate,
                    has_rate, dt, lo, hi, B_last, w_v2, reg, tri_r, tri_c, Hn, Px, BtW2s, scale,
-                   qn, u0, max_iter, tol):
+                   qn, u0, max_iter, tol, u_out):
     """``step_bounds``, ``prepare_wls`` and ``box_qp_active_set`` of one allocation step in one
     compiled call (the same functions, so the same bits, without two Python round trips).
 
-    Returns ``(code, u, ok, iterations)``: ``code`` -1 for non-finite input (``u`` is then
-    ``u0`` untouched and nothing was solved), else ``prepare_wls``'s 0 / 1 (``B`` unchanged /
-    changed); ``lo``/``hi`` are written in every case.
+    Returns ``(code, ok, iterations)``: ``code`` -1 for non-finite input (nothing was solved,
+    ``u_out`` untouched), else ``prepare_wls``'s 0 / 1 (``B`` unchanged / changed) and the
+    solution in ``u_out`` (a fresh array of the caller's: no array is boxed on return);
+    ``lo``/``hi`` are written in every case.
     """
     prev_ok = step_bounds(umin_def, umax_def, umin_in, umax_in, prev, has_prev, rate,
                           has_rate, dt, lo, hi)
     if not prev_ok:
-        return -1, u0, False, 0
+        return -1, False, 0
     code = prepare_wls(v, B, pref, B_last, w_v2, reg, tri_r, tri_c, Hn, Px, BtW2s, scale, qn)
     if code < 0:
-        return -1, u0, False, 0
+        return -1, False, 0
     u, ok, it = box_qp_active_set(Hn, qn, lo, hi, u0, max_iter, tol)
-    return code, u, ok, it
+    u_out[:] = u
+    return code, ok, it
 
 
 
@@ -315,6 +317,8 @@ class ActiveSetAllocator(WLSAllocator):
             raise ValueError(f"max_iter must be >= 1, got {max_iter}")
         self.tol = float(tol)
         self.max_iter = int(max_iter)
+        self._bk_of: np.ndarray | None = None  # the last C-contiguous B and its kernel view
+        self._bk: np.ndarray | None = None
 
     def allocate(
         self,
@@ -339,8 +343,15 @@ class ActiveSetAllocator(WLSAllocator):
             raise ValueError(f"v: expected shape ({self.n_v},), got {v.shape}")
         if B.shape != (self.n_v, n_u):
             raise ValueError(f"B: expected shape ({self.n_v}, {n_u}), got {B.shape}")
-        # one argument type for the kernel (warmup.py compiles it); B itself stays for B @ u
-        Bk = _readonly_c(B) if B.flags.writeable or not B.flags.c_contiguous else B
+        # one argument type for the kernel (warmup.py compiles it); B itself stays for B @ u.
+        # The read-only view of a C-contiguous B shares its memory: kept while B is the same
+        # object (the output stage passes the same few matrices step after step)
+        if B is self._bk_of:
+            Bk = self._bk
+        else:
+            Bk = _readonly_c(B) if B.flags.writeable or not B.flags.c_contiguous else B
+            if B.flags.c_contiguous:
+                self._bk_of, self._bk = B, Bk
         if not v.flags.c_contiguous:
             v = np.ascontiguousarray(v)
         umin_in = self.u_min if u_min is None else vec_arg(u_min, n_u, "u_min")
@@ -352,13 +363,14 @@ class ActiveSetAllocator(WLSAllocator):
         lo = np.empty(n_u)
         hi = np.empty(n_u)
         u0 = last if last is not None else pref
+        u = np.empty(n_u)
         t1 = _perf_counter()
-        code, u, ok, it = _allocate_step(
+        code, ok, it = _allocate_step(
             v, Bk, pref, self.u_min, self.u_max, umin_in, umax_in,
             self._zeros_u if prev is None else prev, prev is not None,
             self._zeros_u if rate is None else rate, rate is not None, self.dt, lo, hi,
             self._B_last, self._w_v2, self._reg, self._tri_r, self._tri_c, self._Hn, self._Px,
-            self._BtW2s, self._scale, self._qn, u0, self.max_iter, self.tol)
+            self._BtW2s, self._scale, self._qn, u0, self.max_iter, self.tol, u)
         t_solve = _perf_counter() - t1
         if code < 0:
             hold = last if last is not None else self.u_pref
