@@ -393,10 +393,16 @@ class VehicleProcess:
                 self._apply_due()
             self._record(flush=False)
             v.step(self.commands, CONTROL_PERIOD_USEC // v.dt_usec)
-            self._step_battery()
             self.steps += 1
             if self._done():
+                self._step_battery()
                 break
+            # the power module's integration only feeds BATTERY_STATUS (5 Hz): before the
+            # state datagram when that carries it, else after the send, while the autopilot
+            # computes (the same values in the same order either way)
+            battery_now = self.encoder.battery_due()
+            if battery_now:
+                self._step_battery()
             t_phys = pc()
             datagram = self.state_datagram()
             t_sent = pc()
@@ -406,6 +412,8 @@ class VehicleProcess:
             part["sensors_and_encode"] += t_sent - t_phys
             part["send"] += pc() - t_sent
             # bookkeeping while the autopilot computes
+            if not battery_now:
+                self._step_battery()
             tl = self.truth_log
             if tl is not None and tl.pending >= _FLUSH_ROWS:
                 tl.flush()
