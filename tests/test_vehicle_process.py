@@ -166,6 +166,7 @@ def test_run_folder_written_on_stop(harness, tmp_path):
     assert any(e["event"] == "fault" and len(e["actuators"]) == 10 for e in events)
     summary = json.loads((tmp_path / "vehicle_summary.json").read_text())
     assert summary["steps"] == 5 and summary["link"]["dropped"] == 0
+    assert summary["cpu_per_step_us"] > 0  # the load-independent cost of a step
 
 
 def _wait(pred, timeout_s: float = 10.0) -> bool:

@@ -179,6 +179,7 @@ class VehicleProcess:
                                     resign=signing is not None)
         """Encodes the state datagram sent to the autopilot each step."""
         self.t_wall0 = time.monotonic()
+        self._cpu0: float | None = None
 
     @property
     def faults(self) -> dict[str, Fault]:
@@ -357,6 +358,7 @@ class VehicleProcess:
             self.close()
 
     def _run_lockstep(self) -> int:
+        self._cpu0 = time.process_time()
         link = self.link
         v = self.vehicle
         pc = time.perf_counter
@@ -468,6 +470,9 @@ class VehicleProcess:
             "rejected": dict(self.rejected), "watchdog_trips": self.watchdog_trips,
             "hil_delay_ms": self.delay_usec / 1000, "hil_loss": self.loss,
         }
+        if self._cpu0 is not None and self.steps:
+            # CPU time of the process in the lockstep loop per step (load-independent)
+            summary["cpu_per_step_us"] = 1e6 * (time.process_time() - self._cpu0) / self.steps
         if self.step_rtt_s.n:
             summary["step_round_trip_us"] = self.step_rtt_s.summary(1e6)
             summary["part_mean_us"] = {k: 1e6 * x / max(1, self.steps)
