@@ -328,3 +328,30 @@ def test_battery_integrated_off_the_critical_path_gives_the_same_values(tmp_path
         h.close()
     assert built == [(0, 0), (200_000, 50), (400_000, 100)]
     assert calls == [4000 * (k + 1) for k in range(120)]
+
+
+def test_truth_log_writes_what_savetxt_writes(tmp_path):
+    """The truth rows, formatted in one call per flush, are byte for byte ``np.savetxt``'s
+    (``%.9g``), negative zero, NaN and infinities included."""
+    from vtolftc.base.rotation import quat_to_euler
+    from vtolftc.firmware_sim.vehicle.dynamics import N_RIGID
+    from vtolftc.firmware_sim.vehicle.truth_log import TruthLog
+
+    rng = np.random.default_rng(3)
+    names = ["a", "b", "c"]
+    log = TruthLog(tmp_path, names, flush_rows=1000)
+    rows = []
+    for k in range(7):
+        x = rng.normal(size=N_RIGID + 3) * 10.0 ** rng.integers(-8, 8)
+        x[6:10] /= np.linalg.norm(x[6:10])
+        eff, cmd = rng.random(3), np.array([-0.0, np.nan, np.inf if k % 2 else -np.inf])
+        log.record(4000 * k, x, 12.345678901 * k, eff, cmd)
+        rows.append(np.concatenate(([4000 * k * 1e-6], x[0:6], quat_to_euler(x[6:10]),
+                                    x[10:13], [12.345678901 * k], x[N_RIGID:], eff, cmd)))
+    log.close()
+    import io
+
+    want = io.StringIO()
+    np.savetxt(want, np.vstack(rows), delimiter=",", fmt="%.9g")
+    lines = (tmp_path / "vehicle_truth.csv").read_text().splitlines(keepends=True)
+    assert "".join(lines[1:]) == want.getvalue()

@@ -63,12 +63,17 @@ class TruthLog:
         return len(self._rows)
 
     def flush(self) -> None:
-        """Write the snapshots as CSV rows (``%.9g``) and flush the file."""
+        """Write the snapshots as CSV rows (``%.9g``, as ``np.savetxt`` writes them) and flush
+        the file."""
         if self._truth is not None and self._rows:
             rows = [np.concatenate(([t * 1e-6], x[0:6], quat_to_euler(x[6:10]), x[10:13],
                                     [air], x[N_RIGID:], eff, cmd))
                     for t, x, air, eff, cmd in self._rows]
-            np.savetxt(self._truth, np.vstack(rows), delimiter=",", fmt="%.9g")
+            block = np.vstack(rows)
+            # np.savetxt's very text (each row "%.9g,%.9g,...\n"), in one formatting call
+            # for the whole block instead of one per row
+            row_fmt = ",".join(["%.9g"] * block.shape[1]) + "\n"
+            self._truth.write((row_fmt * block.shape[0]) % tuple(block.ravel().tolist()))
             self._truth.flush()
             self._rows.clear()
 
