@@ -331,8 +331,8 @@ def test_battery_integrated_off_the_critical_path_gives_the_same_values(tmp_path
 
 
 def test_truth_log_writes_what_savetxt_writes(tmp_path):
-    """The truth rows, formatted in one call per flush, are byte for byte ``np.savetxt``'s
-    (``%.9g``), negative zero, NaN and infinities included."""
+    """The truth rows, formatted after the sends and written at the flush, are byte for byte
+    ``np.savetxt``'s (``%.9g``), negative zero, NaN and infinities included."""
     from vtolftc.base.rotation import quat_to_euler
     from vtolftc.firmware_sim.vehicle.dynamics import N_RIGID
     from vtolftc.firmware_sim.vehicle.truth_log import TruthLog
@@ -346,6 +346,8 @@ def test_truth_log_writes_what_savetxt_writes(tmp_path):
         x[6:10] /= np.linalg.norm(x[6:10])
         eff, cmd = rng.random(3), np.array([-0.0, np.nan, np.inf if k % 2 else -np.inf])
         log.record(4000 * k, x, 12.345678901 * k, eff, cmd)
+        if k % 3 == 1:
+            log.format_pending()  # as the process does after each send
         rows.append(np.concatenate(([4000 * k * 1e-6], x[0:6], quat_to_euler(x[6:10]),
                                     x[10:13], [12.345678901 * k], x[N_RIGID:], eff, cmd)))
     log.close()

@@ -417,8 +417,10 @@ class VehicleProcess:
             if not battery_now:
                 self._step_battery()
             tl = self.truth_log
-            if tl is not None and tl.pending >= _FLUSH_ROWS:
-                tl.flush()
+            if tl is not None:
+                tl.format_pending()
+                if tl.pending >= _FLUSH_ROWS:
+                    tl.flush()
         return 0
 
     def _run_realtime(self) -> int:
