@@ -347,8 +347,8 @@ class AutopilotProcess:
             "failsafe_events": list(self.failsafe_events),
         }
         if self._cpu0 is not None and self.steps:
-            # CPU time of the whole process (every thread) in the loop, per control step:
-            # unlike the wall times, blind to the other processes of a loaded machine
+            # CPU time of the whole process (every thread) in the loop, per control step: far
+            # less sensitive than the wall times to the other processes of a loaded machine
             out["cpu_per_step_us"] = 1e6 * (time.process_time() - self._cpu0) / self.steps
         if self.step_wall_s.n:
             out["step_wall_us"] = self.step_wall_s.summary(1e6)

@@ -473,7 +473,8 @@ class VehicleProcess:
             "hil_delay_ms": self.delay_usec / 1000, "hil_loss": self.loss,
         }
         if self._cpu0 is not None and self.steps:
-            # CPU time of the process in the lockstep loop per step (load-independent)
+            # CPU time of the process in the lockstep loop per step (far less sensitive to the
+            # machine's load than the wall times)
             summary["cpu_per_step_us"] = 1e6 * (time.process_time() - self._cpu0) / self.steps
         if self.step_rtt_s.n:
             summary["step_round_trip_us"] = self.step_rtt_s.summary(1e6)
