@@ -108,6 +108,8 @@ class FastParser:
         key = signing.secret_key
         if key is not None and getattr(codec, "stream_table", None) is None:
             return None  # signing not set up by mavlink.apply_signing: its own check decides
+        if type(data) is not bytes:
+            data = bytes(data)  # a bytearray or memoryview from some transport
         n = len(data)
         pos = 0
         frames: list[tuple[int, int, tuple[int, ...], _Layout, int]] = []

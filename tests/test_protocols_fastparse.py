@@ -126,6 +126,7 @@ def test_declines_bad_data_without_side_effects(bad: str) -> None:
     assert fast.parse(a + tail) is None
     assert codec.total_packets_received == 0
     assert [m.get_type() for m in fast.parse(a + b)] == ["HIL_SENSOR", "HEARTBEAT"]
+    assert [m.get_type() for m in fast.parse(memoryview(bytearray(b)))] == ["HEARTBEAT"]
 
 
 def test_signing_unsigned_bad_hash_and_replay() -> None:
