@@ -12,6 +12,9 @@ separate processes, ground-station commands, no plots) and reports:
   HIL_SENSOR + HIL_STATE_QUATERNION datagram to receiving its HIL_ACTUATOR_CONTROLS (median,
   p90, p99), and the part of it spent in the autopilot's control step (step, status and the
   answer), the rest being the two link hops, parsing and the wake-ups;
+- the CPU time per step of each process (all its threads), far less sensitive than the wall
+  times to what else the machine runs (a heavily loaded machine still inflates it), and the
+  load average;
 - the per-part breakdown of a step: in the autopilot process ``Autopilot.step``, status +
   HIL_ACTUATOR_CONTROLS, and the work after the answer (metrics, run-folder writer, ground-
   station streams; overlaps with the vehicle); in the vehicle process the truth snapshot +
@@ -24,6 +27,7 @@ Target of the issue: >= 20x real time over either transport.
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -74,6 +78,10 @@ def main() -> None:
                     for k in ("rmse_altitude_m", "rmse_roll_deg")}
             print(f"    autopilot control step in the process: median {sw.get('median', nan):.0f}"
                   f" us, p99 {sw.get('p99', nan):.0f} us; metrics (in-process, SITL): {same}")
+            print(f"    CPU per step (every thread): autopilot process "
+                  f"{res.autopilot_summary.get('cpu_per_step_us', nan):.0f} us, vehicle "
+                  f"process {res.vehicle_summary.get('cpu_per_step_us', nan):.0f} us; load "
+                  f"average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
             ap_parts = res.autopilot_summary.get("part_mean_us", {})
             veh_parts = res.vehicle_summary.get("part_mean_us", {})
             step_wall = 1e6 * res.flight_wall_s / steps

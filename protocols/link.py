@@ -44,6 +44,7 @@ from types import TracebackType
 from typing import Any
 from urllib.parse import urlsplit
 
+from vtolftc.protocols.fastparse import FastParser
 from vtolftc.protocols.mavlink import SigningConfig, StreamTimestamps, dialect, make_codec
 from vtolftc.protocols.transport import LinkUrl, Transport
 
@@ -169,6 +170,7 @@ class Link:
             system_id, component_id, signing=signing, stream_table=stream_table
         )
         self._codec.robust_parsing = True
+        self._fast = FastParser(self._codec, mod)
         self._bad_data_cls = mod.MAVLink_bad_data
         self._unknown_cls = mod.MAVLink_unknown
         self._keep_unknown = keep_unknown
@@ -341,12 +343,21 @@ class Link:
         return True
 
     def _parse_datagram(self, data: bytes, out: list[Any]) -> None:
-        """Parse one datagram with the generated robust parser; drop and count bad data."""
+        """Parse one datagram: valid frames through :class:`FastParser`, anything else with
+        the generated robust parser, which drops and counts bad data."""
         if not data:  # also the wake-up sentinel of a closing transport
             return
         st = self._stats
         st.datagrams_received += 1
         st.bytes_received += len(data)
+        fast = self._fast
+        rejected = fast.rejected
+        msgs = fast.parse(data)
+        if msgs is not None:
+            st.dropped_signature += fast.rejected - rejected
+            st.frames_received += len(msgs)
+            out.extend(msgs)
+            return
         mav = self._codec
         buf = bytearray(data)
         mav.buf = buf

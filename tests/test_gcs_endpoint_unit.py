@@ -90,3 +90,35 @@ def test_control_queue_bounded_drop_oldest_answered(ep):
     acks = [m for m in _msgs(ep.links[0].transport) if m.get_type() == "COMMAND_ACK"]
     assert [a.result for a in acks] == [1] * 5  # TEMPORARILY_REJECTED for the dropped ones
     assert ep.poll(max_items=4) == 4           # the control thread takes a few per cycle
+
+
+def _nav(t_usec: int):
+    import numpy as np
+
+    from vtolftc.protocols.hil import NavState
+
+    return NavState(t_usec, np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), np.zeros(3),
+                    np.zeros(3), 0.0)
+
+
+def test_worker_woken_only_when_a_stream_is_due_or_the_status_changed(ep):
+    """One simulated second of steps (250): the worker is woken at the steps where a stream
+    is due (10 Hz at most by default) or the mode changed, not at every step; each woken
+    cycle still sends ATTITUDE at its 10 Hz of simulated time."""
+    import dataclasses
+
+    from vtolftc.firmware_sim.autopilot.interface import FlightMode
+
+    st = ep.ap.status()
+    wakes = []
+    for k in range(250):
+        s = st if k < 110 else dataclasses.replace(st, mode=FlightMode.HOVER)
+        ep._wake.clear()
+        ep.on_step(_nav(4000 * k), s)
+        if ep._wake.is_set():
+            wakes.append(k)
+            ep.serve_once()
+    assert 110 in wakes                     # the mode change, though no stream was due
+    assert 10 <= len(wakes) <= 25, wakes    # not 250
+    att = [m for m in _msgs(ep.links[0].transport) if m.get_type() == "ATTITUDE"]
+    assert len(att) == 10

@@ -28,7 +28,7 @@ from vtolftc.protocols.netutil import free_udp_port
 class _Harness:
     """A VehicleProcess on a free UDP port, run in a thread; ``ap`` is the test's link."""
 
-    def __init__(self, tmp_path, **kw) -> None:
+    def __init__(self, tmp_path, start: bool = True, **kw) -> None:
         port = free_udp_port()
         self.port = port
         self.proc = VehicleProcess(f"udp-server://127.0.0.1:{port}", out_dir=tmp_path,
@@ -37,6 +37,10 @@ class _Harness:
         self.rc: list[int] = []
         self.thread = threading.Thread(target=lambda: self.rc.append(self.proc.run()),
                                        daemon=True)
+        if start:
+            self.start()
+
+    def start(self) -> None:
         self.thread.start()
         self.ap.send(self.ap.codec.heartbeat_encode(22, 12, 0, 0, 3))
 
@@ -162,6 +166,7 @@ def test_run_folder_written_on_stop(harness, tmp_path):
     assert any(e["event"] == "fault" and len(e["actuators"]) == 10 for e in events)
     summary = json.loads((tmp_path / "vehicle_summary.json").read_text())
     assert summary["steps"] == 5 and summary["link"]["dropped"] == 0
+    assert summary["cpu_per_step_us"] > 0  # the load-independent cost of a step
 
 
 def _wait(pred, timeout_s: float = 10.0) -> bool:
@@ -298,3 +303,57 @@ def test_bad_arguments_exit_2():
                         "udp-server://8.8.8.8:4560"], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 2 and "loopback" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_battery_integrated_off_the_critical_path_gives_the_same_values(tmp_path):
+    """The power module is integrated after the send at steps whose datagram has no
+    BATTERY_STATUS, before it when it has: every step is integrated once, in order, right
+    after its physics (so from the same state as before), and every BATTERY_STATUS is built
+    from the pack integrated over every step so far."""
+    h = _Harness(tmp_path, start=False)
+    calls: list[int] = []  # vehicle time at each integration
+    built: list[tuple[int, int]] = []  # (vehicle time, integrations) at each BATTERY_STATUS
+    step, msg = h.proc._step_battery, h.proc.encoder._battery_msg
+    h.proc._step_battery = lambda: (calls.append(h.proc.vehicle.time_usec), step())[1]
+    h.proc.encoder._battery_msg = lambda: (
+        built.append((h.proc.vehicle.time_usec, len(calls))), msg())[1]
+    h.start()
+    try:
+        for k in range(120):
+            got = h.step_msgs()
+            assert got["HIL_SENSOR"].time_usec == 4000 * k
+            h.controls(4000 * k, [0.55] * 8 + [0.3, 0.3])
+        h.step_msgs()
+    finally:
+        h.close()
+    assert built == [(0, 0), (200_000, 50), (400_000, 100)]
+    assert calls == [4000 * (k + 1) for k in range(120)]
+
+
+def test_truth_log_writes_what_savetxt_writes(tmp_path):
+    """The truth rows, formatted after the sends and written at the flush, are byte for byte
+    ``np.savetxt``'s (``%.9g``), negative zero, NaN and infinities included."""
+    from vtolftc.base.rotation import quat_to_euler
+    from vtolftc.firmware_sim.vehicle.dynamics import N_RIGID
+    from vtolftc.firmware_sim.vehicle.truth_log import TruthLog
+
+    rng = np.random.default_rng(3)
+    names = ["a", "b", "c"]
+    log = TruthLog(tmp_path, names, flush_rows=1000)
+    rows = []
+    for k in range(7):
+        x = rng.normal(size=N_RIGID + 3) * 10.0 ** rng.integers(-8, 8)
+        x[6:10] /= np.linalg.norm(x[6:10])
+        eff, cmd = rng.random(3), np.array([-0.0, np.nan, np.inf if k % 2 else -np.inf])
+        log.record(4000 * k, x, 12.345678901 * k, eff, cmd)
+        if k % 3 == 1:
+            log.format_pending()  # as the process does after each send
+        rows.append(np.concatenate(([4000 * k * 1e-6], x[0:6], quat_to_euler(x[6:10]),
+                                    x[10:13], [12.345678901 * k], x[N_RIGID:], eff, cmd)))
+    log.close()
+    import io
+
+    want = io.StringIO()
+    np.savetxt(want, np.vstack(rows), delimiter=",", fmt="%.9g")
+    lines = (tmp_path / "vehicle_truth.csv").read_text().splitlines(keepends=True)
+    assert "".join(lines[1:]) == want.getvalue()

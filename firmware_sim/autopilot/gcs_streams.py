@@ -93,7 +93,11 @@ class StreamService:
         """Stream rates of each link (SET_MESSAGE_INTERVAL changes its own link only)."""
         self._next_due: list[dict[int, int]] = [{} for _ in range(n_links)]
         self._earliest_due = [0] * n_links
-        self._last_fault_status: Any = None
+        self.earliest_due_usec = 0
+        """Simulated time [us] of the next stream message due on any link (read by the
+        control thread to decide whether to wake the worker)."""
+        self.last_fault_status: Any = None
+        """The vehicle's last FAULT_INJECTION_STATUS sent on (its identity marks a change)."""
 
     # ------------------------------------------------------------------ rates
     def set_interval(self, index: int, params: list[float]) -> tuple[int, str]:
@@ -112,6 +116,7 @@ class StreamService:
             rates[mid] = min(250.0, 1e6 / interval)
         self._next_due[index][mid] = self.ep.sim_usec
         self._earliest_due[index] = 0
+        self.earliest_due_usec = 0
         return CommandResult.ACCEPTED, ""
 
     def get_interval(self, index: int, link: Link, mid: float) -> tuple[int, str]:
@@ -133,8 +138,8 @@ class StreamService:
             return
         fs = ep.hil.fault_status
         fid = MSG["FAULT_INJECTION_STATUS"]
-        if fs is not None and fs is not self._last_fault_status:
-            self._last_fault_status = fs
+        if fs is not None and fs is not self.last_fault_status:
+            self.last_fault_status = fs
             self.send(fid)
             for i, due in enumerate(self._next_due):
                 due[fid] = ep.sim_usec + 1_000_000
@@ -155,6 +160,7 @@ class StreamService:
                     self.send(msg_id, link)
                 earliest = min(earliest, due)
             self._earliest_due[i] = earliest
+        self.earliest_due_usec = min(self._earliest_due, default=2**63)
 
     def send(self, msg_id: int, link: Link | None = None) -> bool:
         """Worker: message ``msg_id`` now on ``link`` (None: every link); False without data."""

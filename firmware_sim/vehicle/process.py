@@ -179,6 +179,7 @@ class VehicleProcess:
                                     resign=signing is not None)
         """Encodes the state datagram sent to the autopilot each step."""
         self.t_wall0 = time.monotonic()
+        self._cpu0: float | None = None
 
     @property
     def faults(self) -> dict[str, Fault]:
@@ -357,6 +358,7 @@ class VehicleProcess:
             self.close()
 
     def _run_lockstep(self) -> int:
+        self._cpu0 = time.process_time()
         link = self.link
         v = self.vehicle
         pc = time.perf_counter
@@ -393,10 +395,16 @@ class VehicleProcess:
                 self._apply_due()
             self._record(flush=False)
             v.step(self.commands, CONTROL_PERIOD_USEC // v.dt_usec)
-            self._step_battery()
             self.steps += 1
             if self._done():
+                self._step_battery()
                 break
+            # the power module's integration only feeds BATTERY_STATUS (5 Hz): before the
+            # state datagram when that carries it, else after the send, while the autopilot
+            # computes (the same values in the same order either way)
+            battery_now = self.encoder.battery_due()
+            if battery_now:
+                self._step_battery()
             t_phys = pc()
             datagram = self.state_datagram()
             t_sent = pc()
@@ -406,9 +414,13 @@ class VehicleProcess:
             part["sensors_and_encode"] += t_sent - t_phys
             part["send"] += pc() - t_sent
             # bookkeeping while the autopilot computes
+            if not battery_now:
+                self._step_battery()
             tl = self.truth_log
-            if tl is not None and tl.pending >= _FLUSH_ROWS:
-                tl.flush()
+            if tl is not None:
+                tl.format_pending()
+                if tl.pending >= _FLUSH_ROWS:
+                    tl.flush()
         return 0
 
     def _run_realtime(self) -> int:
@@ -460,6 +472,10 @@ class VehicleProcess:
             "rejected": dict(self.rejected), "watchdog_trips": self.watchdog_trips,
             "hil_delay_ms": self.delay_usec / 1000, "hil_loss": self.loss,
         }
+        if self._cpu0 is not None and self.steps:
+            # CPU time of the process in the lockstep loop per step (far less sensitive to the
+            # machine's load than the wall times)
+            summary["cpu_per_step_us"] = 1e6 * (time.process_time() - self._cpu0) / self.steps
         if self.step_rtt_s.n:
             summary["step_round_trip_us"] = self.step_rtt_s.summary(1e6)
             summary["part_mean_us"] = {k: 1e6 * x / max(1, self.steps)

@@ -69,6 +69,11 @@ class StateEncoder:
         msgs, self._msgs = self._msgs, []
         return b"".join(self._pack(m) for m in msgs)
 
+    def battery_due(self) -> bool:
+        """True if the next :meth:`datagram` (at the vehicle's current time) carries
+        BATTERY_STATUS."""
+        return self.vehicle.time_usec >= self._next_battery
+
     def datagram(self) -> bytes:
         """HIL_SENSOR [+ HIL_GPS] [+ GPS_GLOBAL_ORIGIN] + HIL_STATE_QUATERNION [+ status,
         battery] at the vehicle's current time."""

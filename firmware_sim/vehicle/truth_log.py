@@ -2,9 +2,10 @@
 
 ``vehicle_truth.csv``: simulated time, NED position and velocity, roll/pitch/yaw, body rates,
 airspeed, then per actuator its position, effectiveness and command; one row per control step.
-A step is snapshotted (a few array copies) on the lockstep's critical path and formatted at the
-next flush, every ``flush_rows`` steps (125 = 0.5 s of simulated time) and at close, so a
-SIGKILL loses less than 0.5 s. ``vehicle_events.jsonl``: one JSON object per event, flushed.
+A step is snapshotted (a few array copies) on the lockstep's critical path, formatted off it
+(:meth:`TruthLog.format_pending`, while the autopilot computes) and written at the next flush,
+every ``flush_rows`` steps (125 = 0.5 s of simulated time) and at close, so a SIGKILL loses less
+than 0.5 s. ``vehicle_events.jsonl``: one JSON object per event, flushed.
 """
 
 from __future__ import annotations
@@ -39,6 +40,8 @@ class TruthLog:
         out_dir.mkdir(parents=True, exist_ok=True)
         self.flush_rows = flush_rows
         self._rows: list[tuple[int, np.ndarray, float, np.ndarray, np.ndarray]] = []
+        self._lines: list[str] = []
+        self._row_fmt: str | None = None
         self._truth: TextIO | None = (out_dir / "vehicle_truth.csv").open("w")
         cols = ["time_s", "pn_m", "pe_m", "pd_m", "vn_m_s", "ve_m_s", "vd_m_s", "roll_rad",
                 "pitch_rad", "yaw_rad", "p_rad_s", "q_rad_s", "r_rad_s", "airspeed_m_s"]
@@ -50,27 +53,40 @@ class TruthLog:
     def record(self, time_usec: int, x: np.ndarray, airspeed_m_s: float, eff: np.ndarray,
                commands: np.ndarray, flush: bool = True) -> None:
         """Snapshot one step: state vector ``x``, airspeed [m/s], effectiveness and commands
-        (copied; formatted at the next flush)."""
+        (copied; formatted by :meth:`format_pending` or at the next flush)."""
         if self._truth is None:
             return
         self._rows.append((time_usec, x.copy(), airspeed_m_s, eff.copy(), commands.copy()))
-        if flush and len(self._rows) >= self.flush_rows:
+        if flush and self.pending >= self.flush_rows:
             self.flush()
 
     @property
     def pending(self) -> int:
-        """Snapshots not yet written."""
-        return len(self._rows)
+        """Steps not yet written (snapshotted or formatted)."""
+        return len(self._rows) + len(self._lines)
+
+    def format_pending(self) -> None:
+        """Format the snapshots into CSV rows (``%.9g``, as ``np.savetxt`` writes them), kept
+        until the next flush: the vehicle process calls this after each send, while the
+        autopilot computes, so that a flush is only a write."""
+        if not self._rows:
+            return
+        fmt = self._row_fmt
+        for t, x, air, eff, cmd in self._rows:
+            row = np.concatenate(([t * 1e-6], x[0:6], quat_to_euler(x[6:10]), x[10:13], [air],
+                                  x[N_RIGID:], eff, cmd))
+            if fmt is None:
+                fmt = self._row_fmt = ",".join(["%.9g"] * row.size) + "\n"
+            self._lines.append(fmt % tuple(row.tolist()))
+        self._rows.clear()
 
     def flush(self) -> None:
-        """Write the snapshots as CSV rows (``%.9g``) and flush the file."""
-        if self._truth is not None and self._rows:
-            rows = [np.concatenate(([t * 1e-6], x[0:6], quat_to_euler(x[6:10]), x[10:13],
-                                    [air], x[N_RIGID:], eff, cmd))
-                    for t, x, air, eff, cmd in self._rows]
-            np.savetxt(self._truth, np.vstack(rows), delimiter=",", fmt="%.9g")
+        """Write the rows (formatting what is not yet) and flush the file."""
+        if self._truth is not None and self.pending:
+            self.format_pending()
+            self._truth.write("".join(self._lines))
             self._truth.flush()
-            self._rows.clear()
+            self._lines.clear()
 
     def event(self, time_s: float, event: str, text: str, **extra: Any) -> None:
         """Append one event (simulated time [s], kind, text, extra fields) and flush."""
