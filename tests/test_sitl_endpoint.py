@@ -127,7 +127,9 @@ def test_plain_pymavlink_client_flies_the_vehicle(sitl):
 
         assert command(400, 1.0) == 0                             # arm
         assert command(512, 242.0) == 0                           # HOME_POSITION, please
-        home = conn.recv_match(type="HOME_POSITION", blocking=True, timeout=5)
+        # the answer may have gone by while we waited for the ACK; the 0.2 Hz stream then
+        # brings the next one within 5 simulated seconds (a wall deadline, not a pace)
+        home = conn.recv_match(type="HOME_POSITION", blocking=True, timeout=60)
         assert home is not None
         # takeoff to 8 m above home: param7 is AMSL, as PX4 reads it
         assert command(22, math.nan, 0, 0, math.nan, math.nan, math.nan,
@@ -197,6 +199,22 @@ def test_garbage_on_every_port_dropped_counted_nothing_crashes(sitl):
     # the ground-station port of the autopilot: from the ground station's own socket
     gs.link.send(b"\xfd\x21\x00\x00junk-and-truncated")
     gs.link.send(bytes(range(256)))
+    # the udp-client link to the plain-pymavlink port: answer its traffic with garbage (so
+    # this test does not depend on the pymavlink test having run first)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", sitl.pym_port))
+        s.settimeout(30.0)
+        _, autopilot_addr = s.recvfrom(65535)
+        s.sendto(b"\x00garbage\xff" * 3, autopilot_addr)
+    # the zenoh link: a truncated frame
+    junk = open_link(f"zenoh://ds1/gcs/down?connect=tcp/127.0.0.1:{sitl.zport}")
+    try:
+        deadline = time.monotonic() + 15.0
+        while not junk.transport.ready() and time.monotonic() < deadline:
+            time.sleep(0.02)  # until the autopilot's subscriber is matched
+        junk.send(b"\xfd\x09\x00garbage")
+    finally:
+        junk.close()
     # the vehicle's HIL port (a udp-server): a stranger's datagrams
     port = int(sitl.urls["vehicle"].rsplit(":", 1)[1])
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
