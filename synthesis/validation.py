@@ -622,6 +622,8 @@ class ValidationResult:
         One per axis and grid point (axis-major, by airspeed).
     requirements : Requirements
         What was required.
+    grid_m_s : list of float
+        The whole validation grid [m/s] (``rows`` may hold a slice of it).
     """
 
     controller: str
@@ -629,11 +631,7 @@ class ValidationResult:
     density: int
     rows: list[GridPointResult]
     requirements: Requirements
-
-    @property
-    def grid_m_s(self) -> list[float]:
-        """The validation grid [m/s]."""
-        return sorted({r.airspeed_m_s for r in self.rows})
+    grid_m_s: list[float]
 
     @property
     def failures(self) -> list[GridPointResult]:
@@ -772,4 +770,5 @@ def validate_schedule(af: Airframe, doc: Mapping[str, Any], *,
             if progress is not None:
                 progress(f"validation {ax} {p.airspeed_m_s:g} m/s")
     return ValidationResult(str(doc.get("controller", "")),
-                            [p.airspeed_m_s for p in pts], density, rows, requirements)
+                            [p.airspeed_m_s for p in pts], density, rows, requirements,
+                            [p.airspeed_m_s for p in grid])
