@@ -712,13 +712,20 @@ class ValidationResult:
         return write_json(Path(path), json.loads(json.dumps(self.to_dict())))
 
 
+def _point_job(j: tuple[Any, ...]) -> GridPointResult:
+    af, ax, p, cell, sched, is_dp, mu, cert, req, grid_n, seed = j
+    return validate_point(af, ax, p, cell, sched, design_point=is_dp, mu=mu,
+                          certificate=cert, requirements=req, grid_n=grid_n, seed=seed)
+
+
 def validate_schedule(af: Airframe, doc: Mapping[str, Any], *,
                       density: int = DEFAULT_DENSITY,
                       points: Sequence[DesignPoint] | None = None,
                       axes: Sequence[Axis] = AXES, mu: bool = True, certificate: bool = True,
                       requirements: Requirements = Requirements(), grid_n: int = 21,
                       seed: int = 0, airspeeds_m_s: Sequence[float] | None = None,
-                      progress: Callable[[str], None] | None = None) -> ValidationResult:
+                      progress: Callable[[str], None] | None = None,
+                      jobs: int = 1) -> ValidationResult:
     """Validate a gain-schedule document on the dense grid (see the module docstring).
 
     Parameters
@@ -746,6 +753,8 @@ def validate_schedule(af: Airframe, doc: Mapping[str, Any], *,
         those of the whole grid).
     progress : callable, optional
         Called with a label after each axis-point.
+    jobs : int
+        Worker processes (1: in this process); the rows are the same either way.
 
     Returns
     -------
@@ -758,17 +767,26 @@ def validate_schedule(af: Airframe, doc: Mapping[str, Any], *,
     design_vs = {p.airspeed_m_s for p in pts}
     sched = FlownSchedule(doc)
     keep = None if airspeeds_m_s is None else {float(v) for v in airspeeds_m_s}
-    rows = []
-    for ax in axes:
-        for p, a, b in zip(grid, lo, hi, strict=True):
-            if keep is not None and p.airspeed_m_s not in keep:
-                continue
-            rows.append(validate_point(af, ax, p, (a, b), sched,
-                                       design_point=p.airspeed_m_s in design_vs, mu=mu,
-                                       certificate=certificate, requirements=requirements,
-                                       grid_n=grid_n, seed=seed))
+    jobs_list = [(af, ax, p, (a, b), sched, p.airspeed_m_s in design_vs, mu, certificate,
+                  requirements, grid_n, seed)
+                 for ax in axes for p, a, b in zip(grid, lo, hi, strict=True)
+                 if keep is None or p.airspeed_m_s in keep]
+    if jobs > 1 and len(jobs_list) > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(min(jobs, len(jobs_list))) as ex:
+            futs = [ex.submit(_point_job, j) for j in jobs_list]
+            rows = []
+            for j, f in zip(jobs_list, futs, strict=True):
+                rows.append(f.result())
+                if progress is not None:
+                    progress(f"validation {j[1]} {j[2].airspeed_m_s:g} m/s")
+    else:
+        rows = []
+        for j in jobs_list:
+            rows.append(_point_job(j))
             if progress is not None:
-                progress(f"validation {ax} {p.airspeed_m_s:g} m/s")
+                progress(f"validation {j[1]} {j[2].airspeed_m_s:g} m/s")
     return ValidationResult(str(doc.get("controller", "")),
                             [p.airspeed_m_s for p in pts], density, rows, requirements,
                             [p.airspeed_m_s for p in grid])
