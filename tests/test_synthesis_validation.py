@@ -184,3 +184,67 @@ def test_validation_json_round_trips(tmp_path) -> None:  # type: ignore[no-untyp
     assert row["design_point"] is False
     assert row["mu_rs"] > 0 and row["mixed_mu_upper"] > 0
     assert row["margins"]["delay_margin_s"] > 0
+
+
+def test_synth_surface_rejects_bad_input(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    from vtolftc.cli.main import run
+
+    for argv, word in ((["--method", "surface", "--degree", "9"], "--degree"),
+                       (["--method", "surface", "--degree", "-1"], "--degree"),
+                       (["--method", "surface", "--max-iter", "0"], "--max-iter"),
+                       (["--degree", "2"], "--method surface only"),
+                       (["--method", "paper", "--max-iter", "3"], "--method surface only")):
+        assert run(["synth", *argv, "--out", str(tmp_path)]) == 2
+        err = capsys.readouterr().err
+        assert word in err
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_validation_report_plots_every_gain(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from vtolftc.synthesis.validation_report import surface_curves, write_validation_report
+
+    af = load_airframe()
+    doc = _shipped()
+    res = validate_schedule(af, doc, axes=("yaw",), airspeeds_m_s=[0.0, 0.25],
+                            certificate=False)
+    md = write_validation_report(doc, res, tmp_path).read_text()
+    for ax in ("roll", "pitch", "yaw"):
+        svg = (tmp_path / f"validation-gains-{ax}.svg").read_text()
+        for k in PARAM_NAMES:
+            assert f"{ax} {k}" in svg   # one panel per gain, titled
+        assert f"validation-gains-{ax}.svg" in md
+    assert (tmp_path / "validation-checks.svg").stat().st_size > 1000
+    assert "| yaw | 0.25 |" in md
+    assert surface_curves(doc, "roll", [1.0]) is None  # a point design has no surface
+
+
+@pytest.mark.slow
+def test_synth_surface_cli_writes_a_gains_dir_the_autopilot_flies(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """Fast settings (degree 1, no random start, one iteration, no mu, no report)."""
+    from vtolftc.cli.main import run
+    from vtolftc.firmware_sim.autopilot.attitude import make_controller
+
+    af = load_airframe()
+    out = tmp_path / "gains"
+    assert run(["synth", "--method", "surface", "--degree", "1", "--starts", "0",
+                "--max-iter", "1", "--no-mu", "--no-report", "--quiet",
+                "--out", str(out)]) == 0
+    assert {"gs-shif.json", "shif.json", "lqr.json", "surfaces.json",
+            "validation.json"} <= {p.name for p in out.iterdir()}
+    surf = json.loads((out / "surfaces.json").read_text())["axes"]
+    for name in ("gs-shif", "shif", "lqr"):
+        ctl = make_controller(name, out, airframe_name=af.name, airframe_sha256=af.sha256)
+        assert ctl.name == name
+    gs = GainSchedule.load(out / "gs-shif.json")
+    assert len(gs.breakpoints_m_s) == 13   # the surface grid
+    from vtolftc.synthesis.validation_report import surface_curves
+
+    doc = json.loads((out / "gs-shif.json").read_text())
+    for ax in ("roll", "pitch", "yaw"):
+        assert surf[ax]["degree"] == 1
+        assert surf[ax]["surface_objective"] <= surf[ax]["constant_objective"]
+        curves = surface_curves(doc, ax, list(gs.breakpoints_m_s))
+        assert curves is not None and set(curves) == set(PARAM_NAMES)
+    val = json.loads((out / "validation.json").read_text())
+    assert len(val["grid_m_s"]) == 4 * 12 + 1
+    assert len(val["rows"]) == 3 * 49
