@@ -248,3 +248,20 @@ def test_synth_surface_cli_writes_a_gains_dir_the_autopilot_flies(tmp_path) -> N
     val = json.loads((out / "validation.json").read_text())
     assert len(val["grid_m_s"]) == 4 * 12 + 1
     assert len(val["rows"]) == 3 * 49
+
+
+def test_synthesis_report_links_the_gain_plots(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The robust / paper report gets every GS-SHIF gain against airspeed."""
+    from vtolftc.synthesis.pipeline import _gain_plots
+
+    gains = tmp_path / "gs-shif.json"
+    gains.write_text(json.dumps(_shipped()))
+    readme = tmp_path / "report" / "README.md"
+    readme.parent.mkdir()
+    readme.write_text("# report\n")
+    _gain_plots(gains, readme)
+    text = readme.read_text()
+    assert text.startswith("# report\n")
+    for ax in ("roll", "pitch", "yaw"):
+        assert f"(validation-gains-{ax}.svg)" in text
+        assert (readme.parent / f"validation-gains-{ax}.svg").is_file()
