@@ -106,10 +106,13 @@ def _cmd_surface(args: argparse.Namespace, af: Any) -> int:
     """``--method surface``: gain surfaces, gain files, validation, report."""
     from tqdm import tqdm
 
+    from vtolftc.synthesis.robust import robust_points
     from vtolftc.synthesis.surface_run import run_surface_synthesis, work_units
 
     t0 = time.perf_counter()
-    bar = tqdm(total=work_units(report=not args.no_report), desc="synth surface",
+    n_grid = 2 * len(robust_points(af)) - 1   # the surface grid: points and midpoints
+    bar = tqdm(total=work_units(report=not args.no_report, n_grid=n_grid),
+               desc="synth surface",
                unit="step", file=sys.stderr, dynamic_ncols=True, disable=args.quiet)
 
     def progress(label: str, n: int) -> None:
