@@ -484,7 +484,8 @@ def _clean(x: Any) -> Any:
     return x
 
 
-def _sweep_peak(af: Airframe, axis: Axis, lo: float, hi: float, theta: Any) -> float:
+def _sweep_peak(af: Airframe, axis: Axis, lo: float, hi: float, theta: Any,
+                seed: int = 0) -> float:
     """Mixed-mu upper peak over the cell [lo, hi] with frozen gains ``theta`` (max over the
     cell's table pieces; inf if a piece's centre is unstable)."""
     from vtolftc.synthesis.certificate import (
@@ -501,7 +502,7 @@ def _sweep_peak(af: Airframe, axis: Axis, lo: float, hi: float, theta: Any) -> f
                                       theta)[0]
         if np.linalg.eigvals(A).real.max() >= 0.0:
             return math.inf
-        peak = max(peak, mu_real_sweep(fam, theta).peak_upper)
+        peak = max(peak, mu_real_sweep(fam, theta, seed=seed).peak_upper)
     return peak
 
 
@@ -585,7 +586,7 @@ def validate_point(af: Airframe, axis: Axis, point: DesignPoint, cell: tuple[flo
         c = certify_point(af, axis, DesignPoint(point.number, V, lo, hi), theta, "lagged",
                           grid_n=grid_n, seed=seed, margin=False)
         r.mixed_mu_upper, r.mixed_mu_lower = float(c.mu_upper), float(c.mu_lower)
-        ends = tuple(_sweep_peak(af, axis, lo, hi, schedule.gains_at(axis, e))
+        ends = tuple(_sweep_peak(af, axis, lo, hi, schedule.gains_at(axis, e), seed)
                      if e != V else r.mixed_mu_upper for e in (lo, hi))
         r.mixed_mu_ends = (float(ends[0]), float(ends[1]))
         samples = [ends[0], r.mixed_mu_upper, ends[1]]

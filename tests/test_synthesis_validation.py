@@ -265,3 +265,16 @@ def test_synthesis_report_links_the_gain_plots(tmp_path) -> None:  # type: ignor
     for ax in ("roll", "pitch", "yaw"):
         assert f"(validation-gains-{ax}.svg)" in text
         assert (readme.parent / f"validation-gains-{ax}.svg").is_file()
+
+
+def test_constant_gains_make_the_cell_bound_the_proved_bound() -> None:
+    """With SHIF's constant gains nothing moves across a cell but the plant, which the LFT
+    covers exactly: the bounds at the cell's ends (same family, same gains) are the centre's
+    and the cell bound adds nothing."""
+    af = load_airframe()
+    (r,) = validate_schedule(af, _shipped("shif.json"), axes=("roll",), airspeeds_m_s=[8.5],
+                             mu=False).rows
+    assert r.mixed_mu_ends is not None and r.mixed_mu_upper is not None
+    assert r.mixed_mu_ends == pytest.approx((r.mixed_mu_upper, r.mixed_mu_upper), rel=2e-3)
+    assert r.mixed_mu_cell == pytest.approx(r.mixed_mu_upper, rel=2e-3)
+    assert r.cell_m_s == (8.125, 8.875)
