@@ -313,6 +313,7 @@ def run_synthesis(af: Airframe, out_dir: str | Path, *, n_starts: int = 4, jobs:
             design_pngs = [n for f in plots_futs for n in f.result()] if plots_futs else None
             mu_pngs = [n for f in mu_futs for n in f.result()] if mu_futs else None
             res.files["report"] = write_report(res, out / "report", design_pngs, mu_pngs)
+            _gain_plots(res.files["gs-shif"], res.files["report"])
             times["report"] = time.perf_counter() - t0
             tick("report")
         res.times = times
@@ -339,6 +340,21 @@ def _loop_margins(res: SynthesisResult) -> None:
         if ax in sh:
             res.margins_shif[ax] = [loop_margins(w.plant(af), sh[ax].gains)
                                     for w in sh[ax].weights]
+
+
+def _gain_plots(gains_file: Path, readme: Path) -> None:
+    """Every GS-SHIF gain against airspeed, as flown (SVG, ``synthesis/validation_report``),
+    beside the report's ``README.md`` and linked from it."""
+    import json
+
+    from vtolftc.synthesis.export import atomic_write_text
+    from vtolftc.synthesis.validation_report import gain_plots
+
+    svgs = gain_plots(json.loads(gains_file.read_text(encoding="utf-8")), readme.parent)
+    atomic_write_text(readme, readme.read_text(encoding="utf-8")
+                      + "\n## GS-SHIF gains against airspeed (as flown: interpolated between "
+                      "the breakpoints, held beyond them)\n\n"
+                      + "\n".join(f"![{p.stem}]({p.name})" for p in svgs) + "\n")
 
 
 def _mu_stage(res: SynthesisResult, seed: int, executor: Executor | None,

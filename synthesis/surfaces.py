@@ -758,7 +758,8 @@ def schedule_from_surfaces(af: Airframe, surfaces: Mapping[str, GainSurface],
 
 
 def write_surface_gains(af: Airframe, designs: Mapping[str, SurfaceDesign],
-                        out_dir: str | Path) -> dict[str, Path]:
+                        out_dir: str | Path, metadata: Mapping[str, Any] | None = None,
+                        ) -> dict[str, Path]:
     """Write a gains directory of surface designs that the autopilot flies
     (``vtolftc fly --gains DIR``, ``run_scenario(..., gains_dir=DIR)``).
 
@@ -774,6 +775,8 @@ def write_surface_gains(af: Airframe, designs: Mapping[str, SurfaceDesign],
         One design per axis (roll, pitch, yaw), all on the same grid.
     out_dir : str or pathlib.Path
         The directory (created if missing).
+    metadata : mapping, optional
+        Extra top-level entries of both gain files (e.g. ``design_points``).
 
     Returns
     -------
@@ -794,8 +797,8 @@ def write_surface_gains(af: Airframe, designs: Mapping[str, SurfaceDesign],
     summary = {"axes": {ax: d.to_dict() for ax, d in designs.items()}}
     return {
         "gs-shif": write_json(out / "gs-shif.json", schedule_from_surfaces(
-            af, {ax: d.surface for ax, d in designs.items()}, bps, "gs-shif")),
+            af, {ax: d.surface for ax, d in designs.items()}, bps, "gs-shif", metadata)),
         "shif": write_json(out / "shif.json", schedule_from_surfaces(
-            af, {ax: d.constant for ax, d in designs.items()}, bps, "shif")),
+            af, {ax: d.constant for ax, d in designs.items()}, bps, "shif", metadata)),
         "surfaces": write_json(out / "surfaces.json", summary),
     }

@@ -44,6 +44,7 @@ ENTRY_POINTS = {
     "design_loop": ("point_seed",),
     "design": ("moment_authority", "parameters", "paper_points", "table2_scaled"),
     "robust": ("robust_points", "trim_rotor_thrusts", "rotor_out_moment", "delay_weight"),
+    "validation": ("FlownSchedule", "cell_bounds", "loop_margins_classical"),
 }
 
 

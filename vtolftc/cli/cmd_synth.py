@@ -2,7 +2,13 @@
 
 ``--method robust`` (default) is the robust design of ``synthesis/robust.py``;
 ``--method paper`` reproduces the paper's design as published (the gains in
-``firmware_sim/autopilot/gains/paper/``).
+``firmware_sim/autopilot/gains/paper/``); ``--method surface [--degree D]`` tunes each axis'
+gains as one smooth function of airspeed (Legendre polynomials of degree D, default 2; SHIF is
+the degree-0 member) over a dense airspeed grid with the robust design's objectives
+(``synthesis/surfaces.py``), then validates the GS-SHIF schedule between its breakpoints
+(``synthesis/validation.py``: stability, margins and mu on a 4x denser grid, the mixed-mu
+certificate over the continuous airspeed range; ``DIR/validation.json``,
+``DIR/report/validation.md``).
 
 Writes ``DIR/gs-shif.json``, ``DIR/shif.json`` (format ``vtolftc-gain-schedule/1``),
 ``DIR/lqr.json`` (``vtolftc-lqr-gains/1``) and ``DIR/report/`` (markdown tables and PNG
@@ -27,7 +33,17 @@ from vtolftc.base.errors import UsageError
 def _check(args: argparse.Namespace) -> None:
 
     if args.starts is None:
-        args.starts = 2 if args.method == "robust" else 4
+        args.starts = 4 if args.method == "paper" else 2
+    if args.method != "surface" and (args.degree is not None or args.max_iter is not None):
+        raise UsageError("--degree and --max-iter apply to --method surface only")
+    if args.degree is None:
+        args.degree = 2
+    if not 0 <= args.degree <= 8:
+        raise UsageError(f"--degree {args.degree}: expected 0..8 (the polynomial degree of "
+                         "the gain surfaces)")
+    if args.max_iter is not None and not 1 <= args.max_iter <= 10000:
+        raise UsageError(f"--max-iter {args.max_iter}: expected 1..10000 iterations per "
+                         "start")
     if not 0 <= args.starts <= 200:
         raise UsageError(f"--starts {args.starts}: expected 0..200 random starts per tune")
     if not 1 <= args.jobs <= 64:
@@ -56,6 +72,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
     af = load_flyable_airframe(args.airframe)
     from tqdm import tqdm
 
+    if args.method == "surface":
+        return _cmd_surface(args, af)
     from vtolftc.synthesis.pipeline import run_synthesis, work_units
 
     n_points = 7 if args.method == "robust" else 6
@@ -82,6 +100,67 @@ def cmd_synth(args: argparse.Namespace) -> int:
     total = time.perf_counter() - t0
     _summary(res, total)
     return 0
+
+
+def _cmd_surface(args: argparse.Namespace, af: Any) -> int:
+    """``--method surface``: gain surfaces, gain files, validation, report."""
+    from tqdm import tqdm
+
+    from vtolftc.synthesis.robust import robust_points
+    from vtolftc.synthesis.surface_run import run_surface_synthesis, work_units
+
+    t0 = time.perf_counter()
+    n_grid = 2 * len(robust_points(af)) - 1   # the surface grid: points and midpoints
+    bar = tqdm(total=work_units(report=not args.no_report, n_grid=n_grid),
+               desc="synth surface",
+               unit="step", file=sys.stderr, dynamic_ncols=True, disable=args.quiet)
+
+    def progress(label: str, n: int) -> None:
+        bar.set_postfix_str(label[:40])
+        bar.update(n)
+
+    def _term(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt  # SIGTERM: same clean stop as Ctrl-C
+
+    old_term = signal.signal(signal.SIGTERM, _term)
+    try:
+        run = run_surface_synthesis(
+            af, args.out, degree=args.degree, n_starts=args.starts, seed=args.seed,
+            max_iter=40 if args.max_iter is None else args.max_iter, jobs=args.jobs,
+            mu=not args.no_mu, report=not args.no_report, progress=progress)
+    finally:
+        signal.signal(signal.SIGTERM, old_term)
+        bar.close()
+    total = time.perf_counter() - t0
+    print(f"Gain surfaces of {af.name} ({af.sha256[:12]}...), degree {args.degree}.")
+    print("\n| axis | SHIF objective | GS-SHIF objective |\n|---|---:|---:|")
+    for ax, d in run.designs.items():
+        print(f"| {ax} | {d.constant_objective:.4f} | {d.surface_objective:.4f} |")
+    if run.validation is not None:
+        v = run.validation
+        print(f"\nValidation of gs-shif on {len(v.grid_m_s)} airspeeds ({v.density}x the "
+              f"{len(v.design_airspeeds_m_s)} breakpoints):")
+        for ax, s in v.summary().items():
+            print(f"  {ax}: max Re(pole) {s['max_real_pole_rad_s']:.3f} rad/s, min delay "
+                  f"margin {_num(s['min_delay_margin_s'], 1e3)} ms, max mu_RS "
+                  f"{_num(s['max_mu_rs'])}, max mixed mu (cell) "
+                  f"{_num(s['max_mixed_mu_cell'])}, failures {s['failures']} "
+                  f"({s['failures_between']} between breakpoints)")
+    print("\nStage times:")
+    for k, t in run.times.items():
+        print(f"  {k:<34s} {t:7.2f} s")
+    print(f"  {'total':<34s} {total:7.2f} s")
+    print("\nFiles:")
+    for k, p in run.files.items():
+        print(f"  {k:<18s} {p}")
+    if run.validation is not None and run.validation.failures_between:
+        print(f"WARNING: {len(run.validation.failures_between)} grid point(s) between "
+              "breakpoints fail the validation (see report/validation.md)")
+    return 0
+
+
+def _num(x: float | None, k: float = 1.0) -> str:
+    return "-" if x is None else f"{k * x:.3g}"
 
 
 def _summary(res: Any, total: float) -> None:
@@ -119,7 +198,7 @@ def register(sub: Any) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--airframe", type=Path, default=None,
                    help="airframe TOML file (default: the shipped DS-1)")
-    p.add_argument("--method", choices=("robust", "paper"), default="robust",
+    p.add_argument("--method", choices=("robust", "paper", "surface"), default="robust",
                    help="robust (default): centred nominal, loop delays, rotor-out and "
                         "delay-margin objectives, Ws by rule, a cruise point; paper: the "
                         "paper's design as published (table 2 weights, six points; for "
@@ -127,7 +206,14 @@ def register(sub: Any) -> None:
                         "transition end, M kept and omega_b scaled by its authority "
                         "bandwidth sqrt(u_max/(J r_max)) over DS-1's, omega_a by its "
                         "actuator bandwidth). Both derive the design airspeeds and gain "
-                        "bounds from the airframe (synthesis/scaling.py)")
+                        "bounds from the airframe (synthesis/scaling.py); surface: the "
+                        "robust objectives on a dense airspeed grid, each gain a polynomial "
+                        "of the airspeed (--degree), validated between the breakpoints")
+    p.add_argument("--degree", type=int, default=None,
+                   help="--method surface: polynomial degree of the gain surfaces (default 2; "
+                        "0 = constant gains)")
+    p.add_argument("--max-iter", type=int, default=None,
+                   help="--method surface: tuner iterations per start (default 40)")
     p.add_argument("--out", type=Path, default=Path("synth_out"),
                    help="output directory (default synth_out)")
     p.add_argument("--starts", type=int, default=None,
@@ -135,7 +221,8 @@ def register(sub: Any) -> None:
                         "2 for robust, 4 for paper)")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random starts (default 0)")
-    p.add_argument("--no-mu", action="store_true", help="skip the mu analysis")
+    p.add_argument("--no-mu", action="store_true",
+                   help="skip the mu analysis (surface: validation without mu)")
     p.add_argument("--no-report", action="store_true", help="skip the report folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_synth)

@@ -1,0 +1,230 @@
+"""End-to-end gain-surface synthesis (``vtolftc synth --method surface``).
+
+The robust design's channels (:class:`vtolftc.synthesis.robust.RobustMethod`) on the surface
+grid (:func:`vtolftc.synthesis.surfaces.surface_grid`: the robust design points and the
+midpoints between them), SHIF as the degree-0 surface and GS-SHIF as the degree-``D``
+surface started from it (:func:`vtolftc.synthesis.surfaces.design_surfaces`), the LQR
+baseline, then the validation of the GS-SHIF schedule between its breakpoints
+(:mod:`vtolftc.synthesis.validation`).
+
+Outputs in ``out_dir``, the layout of the other methods (``vtolftc fly --gains-dir`` flies
+it): ``gs-shif.json``, ``shif.json`` (``vtolftc-gain-schedule/1``, breakpoints = the grid,
+``design_points`` = the grid points with their perturbed ranges), ``lqr.json``; and
+``surfaces.json`` (coefficients, objectives), ``validation.json`` and ``report/``
+(``README.md`` and ``validation.md`` with SVG figures).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from vtolftc.airframe.loader import Airframe
+from vtolftc.synthesis.baselines import LQR_Q, LQR_R, lqr_design
+from vtolftc.synthesis.export import atomic_write_text, lqr_document, write_json
+from vtolftc.synthesis.models import AXES, Axis
+from vtolftc.synthesis.surfaces import SurfaceDesign, design_surfaces, surface_grid
+from vtolftc.synthesis.validation import ValidationResult, validate_schedule
+
+__all__ = ["SurfaceRun", "run_surface_synthesis"]
+
+
+@dataclass
+class SurfaceRun:
+    """What :func:`run_surface_synthesis` produced.
+
+    Parameters
+    ----------
+    designs : dict of str to SurfaceDesign
+        Per axis.
+    validation : ValidationResult or None
+        The validation of ``gs-shif.json`` (None if interrupted before it).
+    files : dict of str to pathlib.Path
+        Files written, by name.
+    times : dict of str to float
+        Wall time per stage [s].
+    """
+
+    designs: dict[str, SurfaceDesign]
+    validation: ValidationResult | None
+    files: dict[str, Path] = field(default_factory=dict)
+    times: dict[str, float] = field(default_factory=dict)
+
+
+def _design_job(args: tuple[Any, ...]) -> SurfaceDesign:
+    from vtolftc.synthesis.robust import RobustMethod
+
+    af, axis, grid, degree, n_starts, seed, max_iter = args
+    return design_surfaces(RobustMethod(), af, axis, grid, degree, n_starts=n_starts,
+                           seed=seed, max_iter=max_iter)
+
+
+def run_surface_synthesis(af: Airframe, out_dir: str | Path, *, degree: int = 2,
+                          n_starts: int = 2, seed: int = 0, max_iter: int | None = 40,
+                          jobs: int = 2, mu: bool = True, report: bool = True,
+                          density: int = 4,
+                          progress: Callable[[str, int], None] | None = None) -> SurfaceRun:
+    """Gain surfaces of all three axes, the gain files, the validation and the report.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    out_dir : str or pathlib.Path
+        The gains directory (created if missing).
+    degree : int
+        Degree of the GS-SHIF surface (>= 0).
+    n_starts : int
+        Random starts of the constant (SHIF) tune besides its initial point.
+    seed : int
+        Seed of the random starts.
+    max_iter : int or None
+        Iteration cap per start of the tuner.
+    jobs : int
+        Worker processes (the three axes, then the validation's grid points).
+    mu : bool
+        Compute mu_RS and the mixed-mu certificate in the validation (False: stability and
+        margins only).
+    report : bool
+        Write ``report/``.
+    density : int
+        The validation grid's intervals per breakpoint interval (default 4).
+    progress : callable, optional
+        ``progress(label, n)`` after ``n`` more work units (3 designs + the validation's
+        axis-points + 1 report).
+
+    Returns
+    -------
+    SurfaceRun
+        Designs, validation, files and times.
+    """
+    from vtolftc.synthesis.robust import robust_points
+
+    tick = progress or (lambda label, n: None)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    grid = surface_grid(robust_points(af), 2)
+    times: dict[str, float] = {}
+    t0 = time.perf_counter()
+    args = [(af, ax, grid, degree, n_starts, seed, max_iter) for ax in AXES]
+    designs: dict[str, SurfaceDesign] = {}
+    if jobs > 1:
+        with ProcessPoolExecutor(min(jobs, len(AXES))) as ex:
+            for ax, d in zip(AXES, ex.map(_design_job, args), strict=True):
+                designs[ax] = d
+                tick(f"surface {ax}", 1)
+    else:
+        for ax, a in zip(AXES, args, strict=True):
+            designs[ax] = _design_job(a)
+            tick(f"surface {ax}", 1)
+    times["surface designs"] = time.perf_counter() - t0
+    meta = {"design_points": [{"number": p.number, "airspeed_m_s": p.airspeed_m_s,
+                               "v_min_m_s": p.v_min_m_s, "v_max_m_s": p.v_max_m_s}
+                              for p in grid],
+            "settings": {"degree": degree, "n_starts": n_starts, "seed": seed,
+                         "max_iter": max_iter},
+            "method": "surface: robust design channels (synthesis/robust.py) on a dense "
+                      "airspeed grid, gains as Legendre polynomials of the airspeed tuned "
+                      "as one design (synthesis/surfaces.py)"}
+    files = dict(write_surface_gains_all(af, designs, out, meta))
+    t1 = time.perf_counter()
+    doc = json.loads(files["gs-shif"].read_text(encoding="utf-8"))
+    val = validate_schedule(af, doc, density=density, mu=mu, certificate=mu, seed=seed,
+                            jobs=jobs, progress=lambda label: tick(label, 1))
+    files["validation"] = val.write(out / "validation.json")
+    times["validation"] = time.perf_counter() - t1
+    run = SurfaceRun(designs, val, files, times)
+    if report:
+        t2 = time.perf_counter()
+        from vtolftc.synthesis.validation_report import write_validation_report
+
+        files["validation report"] = write_validation_report(doc, val, out / "report")
+        files["report"] = _write_readme(af, run, out / "report")
+        times["report"] = time.perf_counter() - t2
+        tick("report", 1)
+    return run
+
+
+def write_surface_gains_all(af: Airframe, designs: dict[str, SurfaceDesign], out: Path,
+                            metadata: dict[str, Any]) -> dict[str, Path]:
+    """``gs-shif.json``, ``shif.json``, ``surfaces.json`` and ``lqr.json`` in ``out``.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    designs : dict of str to SurfaceDesign
+        Per axis.
+    out : pathlib.Path
+        The gains directory.
+    metadata : dict
+        Extra top-level entries of the two schedules.
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        The files, by name.
+    """
+    from vtolftc.synthesis.surfaces import write_surface_gains
+
+    files = write_surface_gains(af, designs, out, metadata)
+    lqr = lqr_design(af)
+    files["lqr"] = write_json(out / "lqr.json", lqr_document(
+        af, {ax: lqr[ax].gains() for ax in AXES},
+        {"Q": list(LQR_Q), "R": LQR_R,
+         "states": ["int(angle_ref - angle) [rad s]", "angle [rad]", "rate [rad/s]"],
+         "design_model": "hover (V = 0): J rate' = D rate + K angle + tau",
+         "closed_loop_poles": {ax: list(lqr[ax].poles) for ax in AXES}}))
+    return files
+
+
+def _write_readme(af: Airframe, run: SurfaceRun, out: Path) -> Path:
+    md = [f"# Attitude synthesis report (gain surfaces): {af.name}", "",
+          f"Airframe file sha256 `{af.sha256}`. SHIF is the degree-0 surface, GS-SHIF the "
+          "degree-d surface started from it (`synthesis/surfaces.py`); the objective is the "
+          "max over the grid's channels of their H-infinity norms.", "",
+          "| axis | degree | SHIF objective | GS-SHIF objective | kept SHIF start | "
+          "time (s) |", "|---|---:|---:|---:|---|---:|"]
+    for ax in AXES:
+        d = run.designs[ax]
+        md.append(f"| {ax} | {d.surface.basis.degree} | {d.constant_objective:.4f} | "
+                  f"{d.surface_objective:.4f} | {'yes' if d.kept_start else 'no'} | "
+                  f"{sum(d.time_s.values()):.1f} |")
+    md += ["", "Validation between the breakpoints (4x grid, gains as flown, margins, mu, "
+           "the mixed-mu certificate over the continuous range): "
+           "[validation.md](validation.md).", ""]
+    p = out / "README.md"
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(p, "\n".join(md) + "\n")
+    return p
+
+
+def work_units(mu: bool = True, report: bool = True, n_grid: int = 13,
+               density: int = 4, axes: tuple[Axis, ...] = AXES) -> int:
+    """Progress units of :func:`run_surface_synthesis` (3 designs, validation, report).
+
+    Parameters
+    ----------
+    mu : bool
+        Unused (every axis-point is one unit either way); kept for symmetry.
+    report : bool
+        Whether the report is written.
+    n_grid : int
+        Breakpoints of the schedule (the surface grid: 13 for seven design points).
+    density : int
+        The validation grid's density.
+    axes : tuple of str
+        The axes.
+
+    Returns
+    -------
+    int
+        The total.
+    """
+    del mu
+    return len(axes) + len(axes) * (density * (n_grid - 1) + 1) + int(report)
