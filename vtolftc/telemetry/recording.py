@@ -320,3 +320,4 @@ class RerunRecorder:
             self._sender.send(self._rows, self._names, final)
         finally:
             self._rows.n = 0
+            self._rows.path_pts.clear()     # taken by the sender (or lost with a failed send)
