@@ -1,64 +1,54 @@
 """Memory benchmark: resident memory of the SITL processes over a long flight.
 
-    python benchmarks/bench_memory.py [--duration 600] [--case 0] [--transport udp] [--realtime]
+    python benchmarks/bench_memory.py [--minutes 12] [--recorder both|on|off] [--case 0]
+                                      [--transport udp] [--realtime]
 
-Flies ``vtolftc.runners.sitl.run_sitl`` (vehicle and autopilot as two processes; lockstep unless
-``--realtime``) and samples the resident set size (``VmRSS`` of ``/proc/PID/status``) of each
-child process every ``--every`` wall seconds. After the warm-up (the first ``--skip`` fraction
-of the flight, when numba, the ground-station streams and the heap settle) it fits a straight
-line to each process's RSS against *simulated* time and prints the slope in KB per simulated
-second and its extrapolation to one hour. Target of issue 24: < 50 MB per hour for each process.
+Flies the SITL (:class:`vtolftc.runners.sitl.SitlRun`: vehicle and autopilot as two processes;
+lockstep unless ``--realtime``) for ``--minutes`` of simulated time, once with the autopilot's
+rerun recorder on (as every run records ``run.rrd``) and once with it off (the autopilot's
+``--no-rerun``), and samples the resident set size (``VmRSS`` of ``/proc/PID/status``) of the
+two processes it started every ``--every`` wall seconds, each sample paired with the simulated
+time the ground station sees. After the warm-up (``--skip-minutes`` of simulated time: take-off,
+transition, numba, the heap settling) it fits a straight line to each process's RSS against
+simulated time and prints the slope in KB per simulated second and its extrapolation to one
+hour. Issue 24: < 50 MB per hour for each process, from a slope measured over >= 10 min (the
+default 12 minutes with 1.5 of warm-up fit 10.5).
 
-The simulated time of a sample is interpolated from the flight's wall time (lockstep runs at a
-steady rate once started), so the slope is per simulated second in either mode.
+Memory grows per row logged (the recorder logs per simulated second), so the slope per
+simulated second of a lockstep flight is that of a real-time flight (``tests/test_memory_sitl.py``
+says why, and runs a shorter version of this in CI).
+
+Measured (case 0, gs-shif, UDP, lockstep at 0.8-1.1x real time on the shared 2-core machine
+at load 13-21; 12 simulated minutes; RSS fit over the last 10-10.5 simulated minutes):
+
+| recorder | fit over (simulated s) | autopilot | vehicle |
+|---|---:|---|---|
+| on, before the fix (test_memory_sitl.py) | 90 | 141 KB/s, 495 MB/h | flat (last session) |
+| on, after the fix | 629 | 0.30 KB/s, 1.0 MB/h | 0.00 KB/s, 0 MB/h |
+| on, after the fix (another run) | 599 | 0.12 KB/s, 0.4 MB/h | 0.00 KB/s, 0 MB/h |
+| off (``--no-rerun``) | 600 | 0.00 KB/s, 0 MB/h | 0.00 KB/s, 0 MB/h |
+
+(KB per simulated second; MB per hour extrapolated.) Before the fix the growth was rerun's
+footer manifest (an entry per chunk, kept in memory until the file closes) and the whole flown
+path re-sent every simulated second; see :mod:`vtolftc.telemetry.recording`.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import tempfile
 import threading
-import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from vtolftc.runners.scenario import paper_scenario
-from vtolftc.runners.sitl import SitlConfig, run_sitl
-
-
-def _children(root: int) -> dict[int, str]:
-    """Descendant processes of ``root``: pid -> a short label from the command line."""
-    parent: dict[int, int] = {}
-    for d in os.listdir("/proc"):
-        if not d.isdigit():
-            continue
-        try:
-            with open(f"/proc/{d}/stat", encoding="ascii", errors="replace") as f:
-                stat = f.read()
-        except OSError:
-            continue
-        parent[int(d)] = int(stat.rsplit(")", 1)[1].split()[1])
-    out: dict[int, str] = {}
-    frontier = [root]
-    while frontier:
-        p = frontier.pop()
-        for c, pp in parent.items():
-            if pp == p and c not in out:
-                try:
-                    with open(f"/proc/{c}/cmdline", "rb") as f:
-                        cmd = f.read().replace(b"\0", b" ").decode(errors="replace")
-                except OSError:
-                    continue
-                label = ("autopilot" if "processes.autopilot" in cmd else
-                         "vehicle" if "processes.vehicle" in cmd else cmd[:40])
-                out[c] = label
-                frontier.append(c)
-    return out
+from vtolftc.runners.sitl import SitlConfig, SitlRun
 
 
 def _rss_kb(pid: int) -> float | None:
+    """``VmRSS`` of ``pid`` [KB] (None once it is gone)."""
     try:
         with open(f"/proc/{pid}/status", encoding="ascii") as f:
             for line in f:
@@ -69,60 +59,83 @@ def _rss_kb(pid: int) -> float | None:
     return None
 
 
+def fly_sampled(cfg: SitlConfig, every_s: float) -> tuple[np.ndarray, float]:
+    """Fly ``cfg`` (the paper's scenario of its case) sampling both processes' RSS.
+
+    Returns
+    -------
+    samples : ndarray, shape (N, 3)
+        simulated time [s], autopilot RSS [KB], vehicle RSS [KB] (simulated time increasing).
+    real_time_factor : float
+        simulated over wall time of the flight.
+    """
+    samples: list[tuple[float, float, float]] = []
+    out: dict[str, Any] = {}
+    with SitlRun(cfg) as run:
+        run.start()
+        pids = {name: p.pid for name, p in run.procs.items()}
+
+        def fly() -> None:
+            try:
+                out["res"] = run.fly(paper_scenario(cfg.case, cfg.duration_s))
+            except BaseException as exc:  # handed to the main thread
+                out["exc"] = exc
+
+        th = threading.Thread(target=fly, daemon=True)
+        th.start()
+        assert run.gs is not None
+        while th.is_alive():
+            t_sim = run.gs.snapshot().sim_time_s
+            ap, veh = _rss_kb(pids["autopilot"]), _rss_kb(pids["vehicle"])
+            if (ap is not None and veh is not None and t_sim < cfg.duration_s
+                    and (not samples or t_sim > samples[-1][0])):
+                samples.append((t_sim, ap, veh))
+            th.join(timeout=every_s)
+    if "exc" in out:
+        raise out["exc"]
+    return np.array(samples), out["res"].real_time_factor
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--duration", type=float, default=600.0, help="simulated seconds")
+    ap.add_argument("--minutes", type=float, default=12.0, help="simulated minutes flown")
+    ap.add_argument("--skip-minutes", type=float, default=1.5,
+                    help="simulated minutes of warm-up left out of the fit")
+    ap.add_argument("--recorder", default="both", choices=("both", "on", "off"),
+                    help="the autopilot's rerun recorder")
     ap.add_argument("--case", default="0")
     ap.add_argument("--controller", default="gs-shif")
     ap.add_argument("--transport", default="udp", choices=("udp", "zenoh"))
     ap.add_argument("--realtime", action="store_true")
     ap.add_argument("--every", type=float, default=1.0, help="sampling period, wall s")
-    ap.add_argument("--skip", type=float, default=0.2,
-                    help="fraction of the samples left out of the fit (warm-up)")
     args = ap.parse_args()
-
-    samples: list[tuple[float, dict[str, float]]] = []
-    done = threading.Event()
-
-    def sampler() -> None:
-        while not done.wait(args.every):
-            kids = _children(os.getpid())
-            row = {}
-            for pid, label in kids.items():
-                if label in ("autopilot", "vehicle"):
-                    kb = _rss_kb(pid)
-                    if kb is not None:
-                        row[label] = kb
-            if len(row) == 2:
-                samples.append((time.monotonic(), row))
-
-    th = threading.Thread(target=sampler, daemon=True)
-    scenario = paper_scenario(args.case, args.duration)
-    with tempfile.TemporaryDirectory(prefix="bench_memory_") as tmp:
-        th.start()
-        res = run_sitl(SitlConfig(case=args.case, controller=args.controller,
-                                  transport=args.transport, realtime=args.realtime,
-                                  duration_s=args.duration, out_dir=Path(tmp), plots=False),
-                       scenario)
-        done.set()
-        th.join()
-    if len(samples) < 10:
-        raise SystemExit(f"only {len(samples)} samples: fly longer (--duration)")
-    t = np.array([s[0] for s in samples])
-    t_sim = (t - t[0]) / (t[-1] - t[0]) * args.duration  # steady lockstep / real-time rate
-    k0 = int(args.skip * len(samples))
-    print(f"{args.duration:g} s simulated ({'real time' if args.realtime else 'lockstep'}, "
-          f"{args.transport}), {res.real_time_factor:.1f}x real time, {len(samples)} samples "
-          f"every {args.every:g} s; fit over the last {len(samples) - k0} samples "
-          f"({t_sim[-1] - t_sim[k0]:.0f} simulated s)")
-    print("| process | RSS at start of fit (MB) | RSS at end (MB) | slope (KB per simulated s) "
-          "| extrapolated growth per hour (MB) |")
-    print("|---|---:|---:|---:|---:|")
-    for label in ("autopilot", "vehicle"):
-        rss = np.array([s[1][label] for s in samples])
-        slope = float(np.polyfit(t_sim[k0:], rss[k0:], 1)[0])
-        print(f"| {label} | {rss[k0] / 1024:.1f} | {rss[-1] / 1024:.1f} | {slope:.1f} | "
-              f"{slope * 3600 / 1024:.1f} |")
+    duration = 60.0 * args.minutes
+    if not 0 <= args.skip_minutes < args.minutes:
+        raise SystemExit("--skip-minutes must be in [0, --minutes)")
+    rows = []
+    for rec in (("on", "off") if args.recorder == "both" else (args.recorder,)):
+        with tempfile.TemporaryDirectory(prefix="bench_memory_") as tmp:
+            cfg = SitlConfig(case=args.case, controller=args.controller,
+                             transport=args.transport, realtime=args.realtime,
+                             duration_s=duration, out_dir=Path(tmp), plots=False,
+                             extra_autopilot_args=[] if rec == "on" else ["--no-rerun"])
+            data, rtf = fly_sampled(cfg, args.every)
+        fit = data[data[:, 0] >= 60.0 * args.skip_minutes]
+        if len(fit) < 10:
+            raise SystemExit(f"only {len(fit)} samples after the warm-up: fly longer")
+        span = fit[-1, 0] - fit[0, 0]
+        print(f"recorder {rec}: {duration:g} s simulated "
+              f"({'real time' if args.realtime else 'lockstep'}, {args.transport}), "
+              f"{rtf:.1f}x real time, {len(data)} samples; fit over {len(fit)} samples, "
+              f"{span:.0f} simulated s{'' if span >= 600 else ' (< 10 min)'}", flush=True)
+        for j, label in ((1, "autopilot"), (2, "vehicle")):
+            slope = float(np.polyfit(fit[:, 0], fit[:, j], 1)[0])
+            rows.append(f"| {rec} | {label} | {fit[0, j] / 1024:.1f} | {fit[-1, j] / 1024:.1f} "
+                        f"| {slope:.2f} | {slope * 3600 / 1024:.1f} |")
+    print("| recorder | process | RSS at start of fit (MB) | RSS at end (MB) "
+          "| slope (KB per simulated s) | extrapolated growth per hour (MB) |")
+    print("|---|---|---:|---:|---:|---:|")
+    print("\n".join(rows))
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@ non-empty time series on the simulated-time timeline, with the values that were 
 
 from __future__ import annotations
 
+import itertools
 import math
 import socket
 import subprocess
@@ -24,6 +25,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
 )
 from vtolftc.telemetry import RunObserver, TelemetrySample, VehicleTruth
 from vtolftc.telemetry.recording import RerunRecorder, actuator_entity, read_recording
+from vtolftc.telemetry.rerun_reader import flown_path
 
 NAMES = ("rotor_1a", "rotor_1b", "rotor_2a", "rotor_2b", "rotor_3a", "rotor_3b", "rotor_4a",
          "rotor_4b", "pusher_left", "pusher_right", "aileron_left", "aileron_right", "elevator",
@@ -69,7 +71,7 @@ def _feed(rec: RerunRecorder, n: int, truth: bool = True) -> None:
 EXPECTED = (
     [f"attitude/{a}" for a in ("roll", "pitch", "yaw")]
     + ["altitude", "airspeed", "mode/id", "mode/state", "mode/armed", "control/virtual",
-       "events", "faults/log", "faults/marker", "world/aircraft", "world/path"]
+       "events", "faults/log", "faults/marker", "world/aircraft", "world/path/00000"]
     + [actuator_entity(n) for n in NAMES]
 )
 
@@ -128,8 +130,45 @@ def test_synthetic_run_entities_and_values(tmp_path):
     tp, tr = data["world/aircraft"]
     assert np.allclose(np.array(tr)[-1], [2.0 * tp[-1], -0.5 * tp[-1], -min(3 * tp[-1], 30)],
                        atol=1e-5)
-    _, paths = data["world/path"]
-    assert len(paths[-1]) >= 25 and len(paths[-1][0]) == 3      # about 5 Hz over 6 s
+    path = flown_path(data)                  # every 10th row (5 Hz) over 6 s, one segment
+    assert path.shape == (30, 3) and [k for k in data if k.startswith("world/path")] == [
+        "world/path/00000"]
+    assert np.allclose(path, [_sample(50 * i).truth.pos_ned_m for i in range(30)], atol=1e-5)
+
+
+def test_flown_path_in_bounded_segments(tmp_path):
+    """A long path goes out in segments of at most path_segment_points points, each logged
+    again only while open (so neither memory nor the bytes of a send grow with the run);
+    joined they are the whole path, every point once; the rows never keep sent points."""
+    path = tmp_path / "seg.rrd"
+    rec = RerunRecorder(path, path_segment_points=7)
+    _feed(rec, 1500)                          # 30 path points: segments 7, 7, 7, 7, 6 (joints)
+    assert rec._rows.path_pts == [] and len(rec._sender._seg) <= 7
+    data = read_recording(path)
+    segs = sorted(k for k in data if k.startswith("world/path/"))
+    assert segs == [f"world/path/{i:05d}" for i in range(5)]
+    for k in segs:
+        t, forms = data[k]
+        assert all(2 <= len(f) <= 7 for f in forms), k
+        assert len(t) <= 3                    # full after <= 1.2 s: sent at most 3 times
+    for a, b in itertools.pairwise(segs):
+        assert data[a][1][-1][-1] == data[b][1][-1][0]       # each starts where one ended
+    assert np.allclose(flown_path(data), [_sample(50 * i).truth.pos_ned_m for i in range(30)],
+                       atol=1e-5)
+
+
+def test_file_has_no_footer_but_verifies(tmp_path):
+    """No rerun footer by default (its manifest would keep an entry for every chunk in memory
+    for the whole run: issue 24); the file still verifies; write_footer=True writes one."""
+    for footer in (False, True):
+        path = tmp_path / f"f{footer}.rrd"
+        _feed(RerunRecorder(path, write_footer=footer), 300)
+        args = [sys.executable, "-m", "rerun", "rrd", "verify", str(path)]
+        strict = subprocess.run(args, capture_output=True, text=True, timeout=120)
+        assert (strict.returncode == 0) == footer, strict.stderr
+        lax = subprocess.run([*args[:5], "--check-footers", "false", *args[5:]],
+                             capture_output=True, text=True, timeout=120)
+        assert lax.returncode == 0, lax.stderr
 
 
 def test_without_truth_only_commands(tmp_path):

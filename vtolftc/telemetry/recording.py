@@ -29,7 +29,8 @@ one ``send_columns`` call per entity and chunk is what keeps the recorder cheap.
                                                 counts the faults so far
 ``world/aircraft`` (+ ``/shape``, ``/rotors``,  pose (Transform3D in NED) and a static aircraft
 ``/axes``)                                      of boxes and discs in body FRD
-``world/path``                                  flown path (LineStrips3D, about 5 Hz)
+``world/path/NNNNN``                            flown path (LineStrips3D, about 5 Hz), in
+                                                segments of ``path_segment_points`` points
 ``run/info``, ``run/metrics``                   run description and final metrics (static)
 ==============================================  ================================================
 
@@ -46,9 +47,22 @@ faults, the path) leaves rerun's batcher within 8 ms of wall time
 time to write what it holds (events logged while the simulation stands still). So a killed
 process (SIGKILL) loses about ``file_flush_sim_s`` of simulated time, however fast the
 simulation runs against the wall clock, and the file written so far stays readable. The flown path
-(``world/path``, the whole path so far each time) is re-sent at most every ``path_period_s``
-of simulated time (default 1 s) and at the end.
+is cut into segments (``world/path/00000``, ``/00001``, ...; at most ``path_segment_points``
+points each, 50 s at the default 5 Hz): the open segment is re-sent at most every
+``path_period_s`` of simulated time (default 1 s) and at the end, a full segment is never sent
+again, and the viewer, showing the latest value of every segment, draws the whole path flown up
+to its time cursor. :func:`~vtolftc.telemetry.rerun_reader.flown_path` joins them back.
 ``benchmarks/bench_dashboard.py`` measures the cost per sample.
+
+Memory: nothing accumulates per logged row, however long the run (issue 24;
+``benchmarks/bench_memory.py``, ``tests/test_memory_sitl.py``). The file is written without
+rerun's footer (``FileSink(write_footer=False)``, unless ``write_footer=True``): a footer needs
+a manifest entry for every chunk ever written, which rerun keeps in memory until the end, about
+3 KB per chunk here (40 chunks per simulated second: 115 KB/s, 400 MB an hour). Without it the
+file is still a complete recording that the viewer and :func:`read_recording` open (``python
+-m rerun rrd verify --check-footers false``); ``python -m rerun rrd optimize`` adds a footer
+afterwards when random access to a huge file matters. The open path segment is the only growing
+state, bounded by ``path_segment_points``.
 
 The parts, one job each: :mod:`.rerun_scene` (blueprint, static scene, entity names),
 :mod:`.rerun_rows` (per-sample rows), :mod:`.rerun_send` (columns to rerun, the writes),
@@ -58,6 +72,7 @@ The parts, one job each: :mod:`.rerun_scene` (blueprint, static scene, entity na
 from __future__ import annotations
 
 import atexit
+import os
 import sys
 import time
 import uuid
@@ -102,7 +117,13 @@ class RerunRecorder:
         the longest simulated time buffered before rows are sent and written to the file:
         a killed process loses about this much (see the module docstring).
     path_period_s
-        simulated time between two sends of the flown path.
+        simulated time between two sends of the flown path's open segment.
+    path_segment_points
+        points of the flown path per segment entity (bounds the memory and the bytes of a
+        send; see the module docstring).
+    write_footer
+        write rerun's footer at the end (keeps a manifest entry per chunk in memory for the
+        whole run: only for short runs; see the module docstring).
     web_port, grpc_port
         ports of the web viewer and of its data server (live, headless).
     airframe
@@ -113,7 +134,13 @@ class RerunRecorder:
                  recording_id: str | None = None, rate_hz: float = 50.0, chunk_rows: int = 500,
                  live_flush_s: float = 0.2, web_port: int = 9090, grpc_port: int = 9876,
                  airframe: Any = None, file_flush_s: float = 0.5,
-                 file_flush_sim_s: float = 0.5, path_period_s: float = 1.0) -> None:
+                 file_flush_sim_s: float = 0.5, path_period_s: float = 1.0,
+                 path_segment_points: int = 250, write_footer: bool = False) -> None:
+        if not write_footer and "RUST_LOG" not in os.environ:
+            # rerun warns about the missing footer on every run (it is meant: module doc); its
+            # logger reads this when rerun is first imported (a later change has no effect);
+            # rerun's default level is warn
+            os.environ["RUST_LOG"] = "warn,re_log_encoding::rrd::file_sink=error"
         import rerun as rr
 
         if not rate_hz > 0:
@@ -136,7 +163,7 @@ class RerunRecorder:
                                        recording_id=recording_id or str(uuid.uuid4()),
                                        batcher_config=rr.ChunkBatcherConfig.LOW_LATENCY())
         self._viewer = LiveViewer()
-        sinks: list[Any] = [rr.FileSink(str(self.path))]
+        sinks: list[Any] = [rr.FileSink(str(self.path), write_footer=write_footer)]
         if live:
             sinks.append(self._viewer.sink(rr, self._rec, web_port, grpc_port))
         self._rec.set_sinks(*sinks, default_blueprint=blueprint())
@@ -152,7 +179,8 @@ class RerunRecorder:
         self._n_faults = 0
         self._last_flush_wall = time.monotonic()
         self._alloc(len(self._names))
-        self._sender = ColumnSender(rr, self._rec, max(0, round(path_period_s * 1e6)))
+        self._sender = ColumnSender(rr, self._rec, max(0, round(path_period_s * 1e6)),
+                                    path_segment_points)
         # rerun writes the file from its own threads; this one asks it to every 0.25 s, so a
         # killed process loses at most about file_flush_s + 0.25 s of the recording
         self._flusher = BackgroundFlusher(self._rec, lambda: self._finished)
@@ -292,3 +320,4 @@ class RerunRecorder:
             self._sender.send(self._rows, self._names, final)
         finally:
             self._rows.n = 0
+            self._rows.path_pts.clear()     # taken by the sender (or lost with a failed send)

@@ -11,7 +11,7 @@ import numpy as np
 
 from vtolftc.telemetry.rerun_scene import TIMELINE
 
-__all__ = ["read_recording"]
+__all__ = ["flown_path", "read_recording"]
 
 
 def read_recording(path: Path | str, entities: Sequence[str] | None = None,
@@ -62,3 +62,20 @@ def read_recording(path: Path | str, entities: Sequence[str] | None = None,
         else:
             out[ent] = (ts, [v[0] if isinstance(v, list) and len(v) == 1 else v for v in vs])
     return out
+
+
+def flown_path(data: dict[str, tuple[np.ndarray, Any]]) -> np.ndarray:
+    """The whole flown path of a recording read by :func:`read_recording`, NED [m], (N, 3).
+
+    Joins the last logged form of every path segment (``world/path/00000``, ``/00001``, ...,
+    in order), each after the first without its first point (the last of the segment before).
+    An empty (0, 3) array when the recording has no path.
+    """
+    keys = sorted(k for k in data if k.startswith("world/path/"))
+    parts = []
+    for i, k in enumerate(keys):
+        strips = data[k][1][-1]                 # the segment's last form: one strip
+        pts = np.asarray(strips[0] if strips and isinstance(strips[0][0], list) else strips,
+                         dtype=float).reshape(-1, 3)
+        parts.append(pts if i == 0 else pts[1:])
+    return np.concatenate(parts) if parts else np.zeros((0, 3))

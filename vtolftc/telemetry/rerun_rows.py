@@ -40,7 +40,8 @@ class RowBuffer:
     has_truth : bool
         a sample carried the vehicle's truth (effective actuators, true airspeed).
     path_pts : list of tuple
-        the flown path so far, NED [m].
+        points of the flown path not yet taken by the sender, NED [m] (the sender empties
+        the list on every send, so it never holds more than a chunk's worth).
     """
 
     def __init__(self, rows: int, n_act: int, path_every: int) -> None:

@@ -1,15 +1,20 @@
 """The flushing part of a rerun recording: buffered rows to rerun in columns, and the writes.
 
 :class:`ColumnSender` sends a :class:`~vtolftc.telemetry.rerun_rows.RowBuffer` with one
-``send_columns`` call per entity (angles in degrees, the display edge), re-sends the flown
-path at most every ``path_period_usec`` of simulated time and then waits for rerun's writer.
+``send_columns`` call per entity (angles in degrees, the display edge), sends the flown path at
+most every ``path_period_usec`` of simulated time and then waits for rerun's writer.
+
+The flown path is cut into segments of at most ``path_segment_points`` points, one entity
+each (``world/path/00000``, ``world/path/00001``, ...; :func:`path_segment_entity`): only the
+open segment is re-sent, a full one stays as it was last logged and the next starts at its last
+point. So the memory and the bytes per send stay bounded however long the run, and the viewer
+(latest value of every segment) still shows the whole path flown up to its time cursor.
 :class:`BackgroundFlusher` asks rerun every 0.25 s of wall time to write what it holds
 (events logged while the simulation stands still).
 """
 
 from __future__ import annotations
 
-import math
 import sys
 import threading
 from collections.abc import Sequence
@@ -22,7 +27,16 @@ from vtolftc.base.rotation import ATTITUDE_AXES
 from vtolftc.telemetry.rerun_rows import RowBuffer
 from vtolftc.telemetry.rerun_scene import TIMELINE, actuator_entity
 
-__all__ = ["BackgroundFlusher", "ColumnSender", "ScalarColumn", "flush_takes_timeout"]
+__all__ = ["BackgroundFlusher", "ColumnSender", "ScalarColumn", "flush_takes_timeout",
+           "path_segment_entity"]
+
+#: Entity path of the flown path's segments (``world/path/NNNNN``).
+PATH_ENTITY = "world/path"
+
+
+def path_segment_entity(index: int) -> str:
+    """Entity of the flown path's segment ``index`` (0, 1, ...): ``world/path/00000``, ..."""
+    return f"{PATH_ENTITY}/{index:05d}"
 
 
 def flush_takes_timeout(rec: Any) -> bool:
@@ -64,13 +78,21 @@ class ColumnSender:
         the ``rerun.RecordingStream``.
     path_period_usec
         simulated time between two sends of the flown path [us].
+    path_segment_points
+        points of the flown path per segment entity (at least 2).
     """
 
-    def __init__(self, rr: Any, rec: Any, path_period_usec: int) -> None:
+    def __init__(self, rr: Any, rec: Any, path_period_usec: int,
+                 path_segment_points: int = 250) -> None:
         self._rr = rr
         self._rec = rec
         self._path_period_usec = path_period_usec
         self._last_path_usec: int | None = None
+        self._seg_cap = max(2, int(path_segment_points))
+        self._seg: list[tuple[float, float, float]] = []     # the open segment, NED [m]
+        self._seg_index = 0
+        self._seg_dirty = False
+        self._last_row_usec = 0                               # time of the last row sent
         self._scalar_desc: Any = None
         self._flush_timeout = flush_takes_timeout(rec)
 
@@ -88,6 +110,11 @@ class ColumnSender:
         them. Errors are printed, never raised; the caller resets the buffer."""
         n = rows.n
         if n == 0:
+            if final:
+                try:
+                    self._send_path(self._last_row_usec, rows.path_pts, final)
+                except Exception as exc:
+                    print(f"rerun recorder: flush: {exc}", file=sys.stderr)
             return
         rr = self._rr
         rec = self._rec
@@ -127,7 +154,8 @@ class ColumnSender:
             q = b[:, sl["q"]]
             rec.send_columns("world/aircraft", indexes=times, columns=rr.Transform3D.columns(
                 translation=b[:, sl["pos"]], quaternion=q[:, [1, 2, 3, 0]]))
-            self._send_path(int(rows.t[n - 1]), rows.path_pts, final)
+            self._last_row_usec = int(rows.t[n - 1])
+            self._send_path(self._last_row_usec, rows.path_pts, final)
             if not final:
                 # rerun writes the file from its own threads, later by wall-clock time: wait
                 # for it here, on simulated time, so a SIGKILL loses about file_flush_sim_s
@@ -138,15 +166,29 @@ class ColumnSender:
 
     def _send_path(self, t_last: int, pts: list[tuple[float, float, float]],
                    final: bool) -> None:
-        """The flown path ``pts`` (NED, m) at ``t_last`` [us], when due."""
-        if pts and (final or self._last_path_usec is None
-                    or t_last - self._last_path_usec >= self._path_period_usec):
+        """Take the new path points ``pts`` (NED, m; the list is emptied) into the open
+        segment, log every segment that fills up, and the open one when due (at ``t_last``
+        [us]; always when ``final``)."""
+        seg = self._seg
+        for p in pts:
+            seg.append(p)
+            self._seg_dirty = True
+            if len(seg) >= self._seg_cap:          # full: its last form, then the next one
+                self._log_segment(t_last)
+                self._seg_index += 1
+                seg = self._seg = [p]               # starts where the last one ended
+        pts.clear()
+        if self._seg_dirty and (final or self._last_path_usec is None
+                                or t_last - self._last_path_usec >= self._path_period_usec):
             self._last_path_usec = t_last
-            self._rec.set_time(TIMELINE, duration=np.timedelta64(t_last * 1000, "ns"))
-            if len(pts) > 4000:           # keep a long run's path light
-                pts = [*pts[::math.ceil(len(pts) / 4000)], pts[-1]]
-            self._rec.log("world/path", self._rr.LineStrips3D([pts], colors=(250, 200, 40),
-                                                              radii=0.05))
+            self._log_segment(t_last)
+
+    def _log_segment(self, t_usec: int) -> None:
+        """Log the open segment at ``t_usec`` [us] on its entity."""
+        self._rec.set_time(TIMELINE, duration=np.timedelta64(t_usec * 1000, "ns"))
+        self._rec.log(path_segment_entity(self._seg_index),
+                      self._rr.LineStrips3D([self._seg], colors=(250, 200, 40), radii=0.05))
+        self._seg_dirty = False
 
 
 class BackgroundFlusher:

@@ -98,6 +98,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--out", type=Path, default=None, help="run folder")
     ap.add_argument("--no-plots", action="store_true",
                     help="no PNG plots in the run folder at the end")
+    ap.add_argument("--no-rerun", action="store_true",
+                    help="no rerun recording run.rrd in the run folder (memory benchmark)")
     ap.add_argument("--no-warmup", action="store_true",
                     help="skip compiling the allocation kernels before reporting ready")
     ap.add_argument("--case", default="", help="case label for the run folder and metrics")
@@ -152,17 +154,19 @@ class EventLog:
             self._f = None
 
 
-def run_observers(out: Path, plots: bool = True, autopilot: Any = None) -> list[Any]:
+def run_observers(out: Path, plots: bool = True, autopilot: Any = None,
+                  rerun: bool = True) -> list[Any]:
     """The run folder of the autopilot's own view (telemetry, events, metrics, plots), its
-    rerun recording ``run.rrd`` (no vehicle truth here: commands, not effective outputs), the
-    event log and, given the autopilot (for its parameters and mission), the PX4 ULog
-    ``flight.ulg`` (:mod:`vtolftc.firmware_sim.autopilot.ulog`)."""
+    rerun recording ``run.rrd`` (no vehicle truth here: commands, not effective outputs;
+    unless ``rerun`` is False), the event log and, given the autopilot (for its parameters
+    and mission), the PX4 ULog ``flight.ulg`` (:mod:`vtolftc.firmware_sim.autopilot.ulog`)."""
     from vtolftc.firmware_sim.autopilot.ulog import ULogWriter
     from vtolftc.telemetry.recording import RerunRecorder
     from vtolftc.telemetry.runfolder import RunFolderWriter
 
-    obs: list[Any] = [RunFolderWriter(out, plots=plots), RerunRecorder(out / "run.rrd"),
-                      EventLog(out / "autopilot_events.jsonl")]
+    obs: list[Any] = [RunFolderWriter(out, plots=plots), EventLog(out / "autopilot_events.jsonl")]
+    if rerun:
+        obs.insert(1, RerunRecorder(out / "run.rrd"))
     if autopilot is not None:
         obs.append(ULogWriter(out / "flight.ulg", autopilot))
     return obs
@@ -228,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             args.out.mkdir(parents=True, exist_ok=True)
             observers = run_observers(args.out, plots=not args.no_plots,
-                                      autopilot=autopilot)
+                                      autopilot=autopilot, rerun=not args.no_rerun)
         except OSError as exc:
             for link in links:
                 link.close()

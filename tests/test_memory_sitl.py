@@ -1,0 +1,129 @@
+"""Issue 24, memory: a long SITL flight does not grow the autopilot's or the vehicle's resident
+memory (< 50 MB an hour each), with the rerun recorder on.
+
+The real two-process SITL (lockstep, UDP, case 0, the autopilot's rerun recorder writing
+``run.rrd`` as in every run) flies ``DURATION_S`` of *simulated* time while this process
+samples the resident set size (``VmRSS`` of ``/proc/PID/status``) of the two processes it
+started, each sample paired with the simulated time the ground station sees. The slope is a
+straight-line fit of RSS against simulated time over the second half of the flight (after
+take-off, transition and warm-up), extrapolated to one hour.
+
+Why simulated time measures the leak: what grew (rerun's per-chunk footer manifest, the flown
+path re-sent whole; see :mod:`vtolftc.telemetry.recording`) grows per row logged, and the
+recorder logs rows per *simulated* second (50 Hz, sent every 0.5 simulated s), so an hour of
+lockstep flight logs what an hour of real-time flight logs; lockstep only runs it faster than
+real time. The few wall-clock-driven parts (the recorder's 0.25 s background flush, the ground
+station's streams) run at most as often per simulated second as in real time whenever lockstep
+is faster than real time.
+
+The issue allows extrapolating only a slope measured over >= 10 min of flight. Ten simulated
+minutes of lockstep SITL take 2-10 wall minutes on this shared 2-core machine (1.1x-6x real
+time), more than a CI test may take, so this test fits 90 simulated seconds (its sensitivity:
+50 MB/h is 1.3 MB over the fit; the leak it guards against, 138 KB per simulated second before
+the fix, is 12 MB) and ``python benchmarks/bench_memory.py --minutes 12`` makes the >= 10 min
+measurement (the figures are in the benchmark's docstring).
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import numpy as np
+import pytest
+
+from vtolftc.runners.scenario import paper_scenario
+from vtolftc.runners.sitl import SitlConfig, SitlRun
+
+DURATION_S = 180.0
+"""Simulated seconds flown; the fit covers the second half."""
+LIMIT_MB_PER_H = 50.0
+
+
+def _rss_kb(pid: int) -> float | None:
+    """``VmRSS`` of ``pid`` [KB] (None once it is gone)."""
+    try:
+        with open(f"/proc/{pid}/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return float(line.split()[1])
+    except OSError:
+        return None
+    return None
+
+
+def slope_mb_per_h(t_s: np.ndarray, rss_kb: np.ndarray) -> float:
+    """Least-squares slope of ``rss_kb`` [KB] against ``t_s`` [simulated s] over the second
+    half of the simulated time span, as MB per simulated hour."""
+    keep = t_s >= t_s[0] + 0.5 * (t_s[-1] - t_s[0])
+    return float(np.polyfit(t_s[keep], rss_kb[keep], 1)[0]) * 3600.0 / 1024.0
+
+
+def test_slope_fit_sees_a_leak_and_ignores_a_warm_up():
+    t = np.linspace(0.0, 180.0, 200)
+    warm = np.where(t < 60.0, 200_000.0 + 500.0 * t, 230_000.0)       # grows, then flat
+    assert abs(slope_mb_per_h(t, warm)) < 1e-6
+    leak = warm + 138.0 * t                                           # 138 KB/s: 485 MB/h
+    assert slope_mb_per_h(t, leak) == pytest.approx(138.0 * 3600 / 1024)
+
+
+@pytest.mark.slow
+def test_sitl_resident_memory_stays_flat_with_the_recorder_on(tmp_path):
+    cfg = SitlConfig(case="0", controller="gs-shif", transport="udp", realtime=False,
+                     duration_s=DURATION_S, out_dir=tmp_path, plots=False)
+    samples: list[tuple[float, float, float]] = []       # (sim s, autopilot KB, vehicle KB)
+    result: dict[str, Any] = {}
+    with SitlRun(cfg) as run:
+        run.start()
+        pids = {name: p.pid for name, p in run.procs.items()}
+        assert set(pids) == {"autopilot", "vehicle"}
+
+        def fly() -> None:
+            try:
+                result["res"] = run.fly(paper_scenario("0", DURATION_S))
+            except BaseException as exc:  # handed to the test thread
+                result["exc"] = exc
+
+        th = threading.Thread(target=fly, daemon=True)
+        th.start()
+        assert run.gs is not None
+        while th.is_alive():
+            t_sim = run.gs.snapshot().sim_time_s
+            ap, veh = _rss_kb(pids["autopilot"]), _rss_kb(pids["vehicle"])
+            if (ap is not None and veh is not None and t_sim < DURATION_S
+                    and (not samples or t_sim > samples[-1][0])):
+                samples.append((t_sim, ap, veh))
+            th.join(timeout=0.5)
+    if "exc" in result:
+        raise result["exc"]
+    assert result["res"].sim_time_s >= DURATION_S - 0.01
+    data = np.array(samples)
+    late = data[data[:, 0] >= DURATION_S / 2]
+    assert len(late) >= 20, f"only {len(late)} samples in the second half"
+    assert late[-1, 0] - late[0, 0] >= 0.4 * DURATION_S
+    assert (tmp_path / "autopilot" / "run.rrd").stat().st_size > 1_000_000   # it recorded
+    for j, name in ((1, "autopilot"), (2, "vehicle")):
+        growth = slope_mb_per_h(data[:, 0], data[:, j])
+        print(f"{name}: {growth:.1f} MB per simulated hour, {len(late)} samples over "
+              f"{late[-1, 0] - late[0, 0]:.0f} simulated s")       # shown with pytest -s
+        assert growth < LIMIT_MB_PER_H, (
+            f"{name}: {growth:.1f} MB per simulated hour (RSS {data[0, j] / 1024:.0f} -> "
+            f"{data[-1, j] / 1024:.0f} MB over {data[-1, 0]:.0f} simulated s)")
+
+
+def test_autopilot_process_records_rerun_unless_no_rerun(tmp_path):
+    """``--no-rerun`` (the memory benchmark's recorder-off figure) leaves only the recorder
+    out of the autopilot process's observers."""
+    from vtolftc.runners.processes.autopilot import _parse_args, run_observers
+    from vtolftc.telemetry.recording import RerunRecorder
+
+    for flag, want in (([], True), (["--no-rerun"], False)):
+        args = _parse_args(["--hil-link", "udpin:127.0.0.1:1", *flag])
+        obs = run_observers(tmp_path / str(want), plots=False, rerun=not args.no_rerun)
+        try:
+            assert any(isinstance(o, RerunRecorder) for o in obs) == want
+            assert len(obs) == 2 + want
+        finally:
+            for o in obs:
+                if isinstance(o, RerunRecorder):
+                    o.close()
