@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from support.compleib import BEFORE_ISSUE_23, compleib
+from support.compleib import BEFORE_ISSUE_23, compleib, slycot_norm
 
 from vtolftc.synthesis import structured
 from vtolftc.synthesis.blocks import StaticGain, lft_problem
@@ -134,3 +134,18 @@ def test_compleib_no_worse_than_before_and_the_norm_is_slycots(name: str) -> Non
     assert res.value <= BEFORE_ISSUE_23[name] * (1 + 1e-4)
     ref = hinf_norm(lft(P, res.theta.reshape(nu, ny)), method="hamiltonian").value
     assert res.value == pytest.approx(ref, rel=1e-6)
+
+
+
+@pytest.mark.slow
+def test_every_ac10_start_stabilises() -> None:
+    """Issue 23's AC10 must-show, its stabilisation part: all 5 starts (K = 0 through the
+    spectral-abscissa phase, 4 random ones centred on its gain) reach a stabilising gain, each
+    norm checked by raw SLICOT AB13DD. (Pulled back towards K = 0 instead, two of the four
+    random starts collapsed onto K = 0's own run.) The norm target 13.45 is not reached yet
+    (``bench_compleib.py AC10``)."""
+    P, pb, (nu, ny) = _sof("AC10")
+    res = tune(pb, n_starts=4, seed=0, max_iter=1)
+    for s in res.starts:
+        assert math.isfinite(s.value), s.status
+        assert s.value == pytest.approx(slycot_norm(lft(P, s.theta.reshape(nu, ny))), rel=1e-6)
