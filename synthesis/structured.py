@@ -59,6 +59,7 @@ __all__ = [
     "Channel",
     "Parameter",
     "Progress",
+    "StartAnchor",
     "StartRecord",
     "TunableSystem",
     "TuneResult",
@@ -69,6 +70,7 @@ __all__ = [
     "mixed_sensitivity_channel",
     "pid",
     "run_start",
+    "start_anchor",
     "start_jobs",
     "tune",
 ]
@@ -1018,8 +1020,8 @@ def _sample_start(
 
 
 SHRINK_STEPS = 40
-"""Plant-scaled random starts (``Parameter.sample_sd``) that are less stable than the initial
-point are pulled halfway back to it up to SHRINK_STEPS times (see :func:`_no_less_stable`)."""
+"""Plant-scaled random starts (``Parameter.sample_sd``) that are less stable than their anchor
+are pulled halfway back to it up to SHRINK_STEPS times (see :func:`_no_less_stable`)."""
 
 
 def _abscissa(ev: _Evaluator, theta: NDArray[np.float64]) -> float:
@@ -1030,24 +1032,85 @@ def _abscissa(ev: _Evaluator, theta: NDArray[np.float64]) -> float:
     return a if math.isfinite(a) else math.inf
 
 
-def _no_less_stable(
-    ev: _Evaluator, theta: NDArray[np.float64], a0: float
-) -> NDArray[np.float64]:
-    """A random start scaled so that it is no less stable than the initial point.
+@dataclass(frozen=True)
+class StartAnchor:
+    """Where :func:`tune`'s plant-scaled random starts are centred and what they must satisfy.
 
-    The deviation of the plant-scaled entries (``sample_sd``) from their initial values is
-    halved while the largest closed-loop spectral abscissa exceeds max(a0, -margin), a0 the
-    initial point's: a stabilising initial point then gives stabilising random starts, an
-    unstable one starts no worse off than the initial point does (a plant scale that is too
-    large for the loop, e.g. one set by a large ||A|| of fast modes, no longer throws every
-    start far outside the stabilising set). Other parameters are left as drawn.
+    Parameters
+    ----------
+    theta : ndarray of float, shape (n_params,)
+        The centre: the initial point if it is stable (with the problem's margin), else the
+        stabilising point that the spectral-abscissa phase (:func:`_stabilize`, the phase 1
+        of every start) finds from it, else the initial point.
+    abscissa : float
+        Largest closed-loop spectral abscissa at ``theta`` (1/s).
+    target : float
+        Random starts are shrunk towards ``theta`` until their abscissa is <= target (1/s).
+    stabilised : bool
+        Whether ``theta`` came from the spectral-abscissa phase.
+    """
+
+    theta: NDArray[np.float64]
+    abscissa: float
+    target: float
+    stabilised: bool
+
+
+def start_anchor(problem: TuningProblem) -> StartAnchor:
+    """The anchor of the plant-scaled random starts of :func:`tune` (see :class:`StartAnchor`).
+
+    An open-loop unstable plant with the initial gain K = 0 would otherwise draw its random
+    starts around an unstable point; with a plant scale far larger than the stabilising set
+    (COMPleib AC10: ||A|| = 1.6e7 from fast modes, random gains spread 1.5e4) no start
+    stabilises. Centred on a stabilising point and shrunk towards it, every random start is
+    stabilising (issue 23).
+
+    Parameters
+    ----------
+    problem : TuningProblem
+        The problem.
+
+    Returns
+    -------
+    StartAnchor
+        The anchor.
+    """
+    ev = _Evaluator(problem)
+    lo, hi = problem.lower, problem.upper
+    x0 = np.clip(problem.initial, lo, hi)
+    a0 = _abscissa(ev, x0)
+    stable_target = -max(problem.stability_margin, 0.0) - 1e-6
+    if a0 <= stable_target:
+        return StartAnchor(x0, a0, max(a0, -problem.stability_margin), False)
+    opts = _Options(1, 0.0, 1, 1.0, 200 * len(problem.parameters) + 200)
+    try:
+        th, ok = _stabilize(ev, x0, lo, hi, opts)
+    except (np.linalg.LinAlgError, FloatingPointError):
+        ok = False
+    if not ok:
+        return StartAnchor(x0, a0, max(a0, -problem.stability_margin), False)
+    a = _abscissa(ev, th)
+    return StartAnchor(th, a, stable_target, True)
+
+
+def _no_less_stable(
+    ev: _Evaluator, theta: NDArray[np.float64], anchor: StartAnchor
+) -> NDArray[np.float64]:
+    """A random start scaled so that it is no less stable than its anchor.
+
+    The deviation of the plant-scaled entries (``sample_sd``) from the anchor is halved while
+    the largest closed-loop spectral abscissa exceeds ``anchor.target``: a stabilising anchor
+    gives stabilising random starts, an unstable one (no stabilising point found) random
+    starts no worse off than it (a plant scale that is too large for the loop, e.g. one set by
+    a large ||A|| of fast modes, no longer throws every start far outside the stabilising
+    set). Other parameters are left as drawn.
     """
     pb = ev.pb
     mask = np.array([p.sample_sd is not None for p in pb.parameters])
     if not mask.any():
         return theta
-    target = max(a0, -pb.stability_margin)
-    x0 = np.clip(pb.initial, pb.lower, pb.upper)
+    target = anchor.target
+    x0 = anchor.theta
     th = theta.copy()
     for _ in range(SHRINK_STEPS):
         if _abscissa(ev, th) <= target + 1e-9 * max(abs(target), 1.0):
@@ -1233,18 +1296,22 @@ def start_jobs(
     starts = [problem.initial]
     children = np.random.SeedSequence(seed).spawn(n_starts)
     ev: _Evaluator | None = None
-    a0 = math.inf
+    anchor: StartAnchor | None = None
+    mask = np.array([p.sample_sd is not None for p in problem.parameters])
     for child in children:
         rng = np.random.default_rng(child)
         if start_sampler is not None:
             th = problem._check_theta(start_sampler(rng))
         else:
             th = _sample_start(problem, rng, spread)
-            if any(p.sample_sd is not None for p in problem.parameters):
-                if ev is None:
+            if mask.any():
+                if ev is None or anchor is None:
                     ev = _Evaluator(problem)
-                    a0 = _abscissa(ev, np.clip(problem.initial, problem.lower, problem.upper))
-                th = _no_less_stable(ev, th, a0)
+                    anchor = start_anchor(problem)
+                if anchor.stabilised:  # the plant-scaled draw, centred on the anchor
+                    th = np.where(mask, np.clip(th - problem.initial + anchor.theta,
+                                                problem.lower, problem.upper), th)
+                th = _no_less_stable(ev, th, anchor)
         starts.append(th)
     return [(problem, i, th, opts) for i, th in enumerate(starts)]
 

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from support.compleib import BEFORE_ISSUE_23, compleib
+from support.compleib import BEFORE_ISSUE_23, compleib, slycot_norm
 
 from vtolftc.synthesis import structured
 from vtolftc.synthesis.blocks import StaticGain, lft_problem
@@ -57,26 +57,47 @@ def test_random_starts_with_a_far_too_large_scale_are_scaled_back_to_stability(
         name: str) -> None:
     """AC10's failure (issue 23: random gains spread 1.46e4, four of five starts never
     stabilise) reproduced with a gain scale 1e4 x the plant's: the random starts are pulled
-    back towards the initial point K = 0 until they are no less stable than it (stabilising
-    where K = 0 is: AC15, BDT1; HE1 is open-loop unstable), and all of them are then
-    stabilised by the tuner (the slow test below)."""
+    back towards their anchor until they are no less stable than it: K = 0 where it
+    stabilises (AC15, BDT1), the stabilising gain of the spectral-abscissa phase where it does
+    not (HE1 is open-loop unstable); all of them then stabilise (the slow test below)."""
     P = compleib(name)
     nu, ny = P.B2.shape[1], P.C2.shape[0]
     pb = lft_problem(P, StaticGain("K", nu, ny, scale=1e4 * P.gain_scale()))
     a0 = float(np.max(np.linalg.eigvals(P.A).real))
+    anchor = structured.start_anchor(pb)
+    assert anchor.stabilised == (a0 >= 0)
+    assert anchor.abscissa < 0
+    if not anchor.stabilised:
+        np.testing.assert_array_equal(anchor.theta, pb.initial)
     jobs = structured.start_jobs(pb, n_starts=4, seed=0)
     rng_starts = [structured._sample_start(pb, np.random.default_rng(c), 1.0)
-                  for c in np.random.SeedSequence(0).spawn(4)]
+                  + (anchor.theta - pb.initial) for c in np.random.SeedSequence(0).spawn(4)]
     shrunk = 0
     for (_, _, th, _), raw in zip(jobs[1:], rng_starts, strict=True):
         a = float(np.max(np.linalg.eigvals(lft(P, th.reshape(nu, ny))[0]).real))
-        assert a <= max(a0, 0.0) + 1e-6 * max(abs(a0), 1.0)
-        shrunk += not np.array_equal(th, raw)
-        if not np.array_equal(th, raw):  # along the ray from K = 0 through the raw sample
-            ratio = th / raw
-            np.testing.assert_allclose(ratio, ratio[0])
+        assert a < 0  # every random start stabilises
+        np.testing.assert_allclose(th - anchor.theta, 0, atol=np.max(np.abs(raw - anchor.theta)))
+        if not np.allclose(th, raw, rtol=1e-12, atol=0):  # along the ray from the anchor
+            ratio = (th - anchor.theta) / (raw - anchor.theta)
+            np.testing.assert_allclose(ratio, ratio[0], rtol=1e-9)
             assert 0 < ratio[0] < 1
+            shrunk += 1
     assert shrunk >= 1  # the raw draws were indeed too large
+
+
+def test_ac10_random_starts_are_centred_on_a_stabilising_gain() -> None:
+    """COMPleib AC10 (55 states, open-loop unstable, plant gain scales 1.46e4 and 7.8e-4):
+    the random starts of the plant-scaled StaticGain all stabilise (before issue 23's fix
+    four of five did not), and they differ from each other and from the anchor."""
+    P, pb, (nu, ny) = _sof("AC10")
+    anchor = structured.start_anchor(pb)
+    assert anchor.stabilised and anchor.abscissa < 0
+    jobs = structured.start_jobs(pb, n_starts=4, seed=0)
+    thetas = [job[2] for job in jobs[1:]]
+    for th in thetas:
+        assert float(np.max(np.linalg.eigvals(lft(P, th.reshape(nu, ny))[0]).real)) < 0
+        assert not np.allclose(th, anchor.theta)
+    assert len({th.tobytes() for th in thetas}) == 4
 
 
 @pytest.mark.slow
@@ -111,5 +132,20 @@ def test_compleib_no_worse_than_before_and_the_norm_is_slycots(name: str) -> Non
     assert res.stable
     assert sum(math.isfinite(s.value) for s in res.starts) >= 4
     assert res.value <= BEFORE_ISSUE_23[name] * (1 + 1e-4)
-    ref = hinf_norm(lft(P, res.theta.reshape(nu, ny)), method="hamiltonian").value
-    assert res.value == pytest.approx(ref, rel=1e-6)
+    cl = lft(P, res.theta.reshape(nu, ny))
+    assert res.value == pytest.approx(hinf_norm(cl, method="hamiltonian").value, rel=1e-6)
+    assert res.value == pytest.approx(slycot_norm(cl), rel=1e-6)  # raw SLICOT AB13DD
+
+
+@pytest.mark.slow
+def test_every_ac10_start_stabilises() -> None:
+    """Issue 23's AC10 must-show, its stabilisation part: all 5 starts (K = 0 through the
+    spectral-abscissa phase, 4 random ones centred on its gain) reach a stabilising gain, each
+    norm checked by raw SLICOT AB13DD. (Pulled back towards K = 0 instead, two of the four
+    random starts collapsed onto K = 0's own run.) The norm target 13.45 is not reached yet
+    (``bench_compleib.py AC10``)."""
+    P, pb, (nu, ny) = _sof("AC10")
+    res = tune(pb, n_starts=4, seed=0, max_iter=1)
+    for s in res.starts:
+        assert math.isfinite(s.value), s.status
+        assert s.value == pytest.approx(slycot_norm(lft(P, s.theta.reshape(nu, ny))), rel=1e-6)
