@@ -416,11 +416,8 @@ class VehicleProcess:
             # bookkeeping while the autopilot computes
             if not battery_now:
                 self._step_battery()
-            tl = self.truth_log
-            if tl is not None:
-                tl.format_pending()
-                if tl.pending >= _FLUSH_ROWS:
-                    tl.flush()
+            if self.truth_log is not None:
+                self.truth_log.between_steps()
         return 0
 
     def _run_realtime(self) -> int:

@@ -80,6 +80,13 @@ class TruthLog:
             self._lines.append(fmt % tuple(row.tolist()))
         self._rows.clear()
 
+    def between_steps(self) -> None:
+        """The work of the wait for the autopilot's answer: format what is pending, and write
+        it once ``flush_rows`` steps are pending."""
+        self.format_pending()
+        if self.pending >= self.flush_rows:
+            self.flush()
+
     def flush(self) -> None:
         """Write the rows (formatting what is not yet) and flush the file."""
         if self._truth is not None and self.pending:
