@@ -72,8 +72,8 @@ def main() -> None:
 
     # fixed costs
     t = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import vtolftc.cli.main; vtolftc.cli.build_parser()"],
-                   check=True)
+    subprocess.run([sys.executable, "-c",
+                    "from vtolftc.cli.main import build_parser; build_parser()"], check=True)
     t_start = time.perf_counter() - t
     from vtolftc.airframe.loader import load_airframe
     from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
