@@ -154,6 +154,17 @@ def test_forked_pool_and_batched_dask_equal_one_process():
                 str(k) for k in dask_scheduler.tasks if "vtolftc-t-" in str(k)])
             assert left == []  # every task released: no result held on a worker
 
+            def profiling(dask_worker):
+                return dask_worker.periodic_callbacks["profile"].is_running()
+
+            assert all(c.run(profiling).values())  # the profiler is back after the campaign
+            from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, PauseProfiler
+
+            c.register_plugin(PauseProfiler(), name=PLUGIN_NAME)
+            assert not any(c.run(profiling).values())  # paused while a campaign runs
+            c.unregister_worker_plugin(PLUGIN_NAME)
+            assert all(c.run(profiling).values())
+
 
 MEMORY = """
 [campaign]

@@ -282,7 +282,9 @@ def run_dask(scenarios: Sequence[CampaignScenario], address: str, *,
     finish. Each worker needs this package (same version) installed; see
     ``docs/campaigns/README.md``. A task flies ``batch`` scenarios (default
     :func:`dask_batch_size` for the cluster's workers) with :func:`fly_batch`; its future is
-    released as soon as its rows are here. Closing the generator cancels what is not done."""
+    released as soon as its rows are here. The workers' statistical profiler is paused while
+    the campaign runs (:mod:`vtolftc.runners.campaign.dask_plugin`). Closing the generator
+    cancels what is not done."""
     from distributed import Client, as_completed
 
     try:
@@ -291,7 +293,12 @@ def run_dask(scenarios: Sequence[CampaignScenario], address: str, *,
         raise ConnectionError(f"--scheduler {address}: cannot reach a Dask scheduler "
                               f"({exc})") from None
     pending: set[Any] = set()
+    plugin = False
     try:
+        from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, PauseProfiler
+
+        client.register_plugin(PauseProfiler(), name=PLUGIN_NAME)
+        plugin = True
         if batch is None:
             batch = dask_batch_size(len(scenarios), len(client.scheduler_info()["workers"]))
         size = max(1, int(batch))
@@ -311,4 +318,7 @@ def run_dask(scenarios: Sequence[CampaignScenario], address: str, *,
     finally:
         if pending:
             client.cancel(list(pending))
+        if plugin:
+            with contextlib.suppress(Exception):  # the workers' profiler back on
+                client.unregister_worker_plugin(PLUGIN_NAME)
         client.close()
