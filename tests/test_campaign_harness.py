@@ -185,8 +185,9 @@ magnitudes = [0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45]
 @pytest.mark.slow
 def test_campaign_memory_does_not_grow_with_scenarios(tmp_path):
     """200 short scenarios on two workers with the parent writing Parquet parts: the robust
-    RSS slope of the parent and of each worker, after a quarter of the scenarios, times 2000
-    scenarios stays < 50 MB (issue 24)."""
+    RSS slope of the parent and of each worker over the second half of the scenarios (the
+    allocators of a fresh worker settle over its first hundred or so), times 2000 scenarios,
+    stays < 50 MB (issue 24; ``bench_campaign.py --memory 2000`` measures the real 2000)."""
     scen = expand(parse_spec(MEMORY))[:200]
     assert len(scen) == 200
     watch = RssWatch()
@@ -199,7 +200,7 @@ def test_campaign_memory_does_not_grow_with_scenarios(tmp_path):
     writer.close()
     assert n == 200
     assert read_results(tmp_path).num_rows == 200
-    growth = watch.growth(2000)
+    growth = watch.growth(2000, skip=0.5)
     assert watch.parent in growth
     assert len(growth) >= 3, growth  # the parent and both workers were sampled
     for pid, g in growth.items():
