@@ -19,8 +19,10 @@ scenarios, 12 by default), so each one costs a full 60 s of simulation. Figures 
 ``--memory N [--duration S]`` instead flies N short scenarios (S s each, default 4; the rotor
 losses at N / 24 magnitudes) on the local pool with the parent writing Parquet parts as the
 CLI does, samples the resident memory of the parent and of each worker (by pid) after each
-row (:mod:`vtolftc.runners.campaign.memwatch`) and prints each process's robust slope after
-the first quarter, extrapolated to N and to 2000 scenarios (target of issue 24: < 50 MB).
+row (:mod:`vtolftc.runners.campaign.memwatch`) and prints the parent's robust slope after the
+first quarter and, for the workers (each replaced after ``WORKER_SCENARIOS``), the largest
+growth in a worker's life and the slope of the largest worker's RSS, extrapolated to 2000
+scenarios (target of issue 24: < 50 MB).
 
 Targets (issue 24): >= 300 scenarios/min on 2 cores, overhead < 5 % of a scenario, Dask
 within 0.9x of the local pool; memory of a 2000-scenario campaign < 50 MB per process.
@@ -191,7 +193,7 @@ def memory_spec(n: int, duration_s: float) -> str:
 
 def memory_run(n: int, duration_s: float, jobs: int) -> None:
     """Fly ``n`` short scenarios on the local pool and print the RSS growth per process."""
-    from vtolftc.runners.campaign.execute import run_local
+    from vtolftc.runners.campaign.execute import WORKER_SCENARIOS, run_local
     from vtolftc.runners.campaign.memwatch import RssWatch
     from vtolftc.runners.campaign.results import PartWriter
     from vtolftc.runners.campaign.scenarios import expand
@@ -215,12 +217,28 @@ def memory_run(n: int, duration_s: float, jobs: int) -> None:
         w.close()
     wall = time.perf_counter() - t
     print(f"{done} scenarios in {wall:.1f} s = {60.0 * done / wall:.1f} scenarios/min")
-    for pid, g in sorted(watch.growth(len(scen)).items()):
-        slope = g["slope_b_per_scenario"]
-        print(f"  {watch.label(pid):>14}: RSS {g['rss_first_b'] / 2**20:7.1f} -> "
-              f"{g['rss_last_b'] / 2**20:7.1f} MB; robust slope {slope / 1024:+8.2f} KB per "
-              f"scenario -> {slope * len(scen) / 2**20:+7.2f} MB per {len(scen)}, "
-              f"{slope * 2000 / 2**20:+7.2f} MB per 2000 (target < 50 MB)")
+    from vtolftc.runners.campaign.memwatch import robust_slope
+
+    mb = 2.0 ** 20
+    g = watch.growth(len(scen))[watch.parent]
+    slope = g["slope_b_per_scenario"]
+    print(f"  parent: RSS {g['rss_first_b'] / mb:.1f} -> {g['rss_last_b'] / mb:.1f} MB; "
+          f"robust slope {slope / 1024:+.2f} KB per scenario -> {slope * 2000 / mb:+.2f} MB "
+          "per 2000 (target < 50 MB)")
+    workers = {p: s for p, s in watch.samples.items() if p != watch.parent and len(s) >= 2}
+    life = [s[-1][1] - s[0][1] for s in workers.values()]
+    largest: dict[int, int] = {}
+    for s in workers.values():
+        for k, rss in s:
+            largest[k] = max(largest.get(k, 0), rss)
+    ks = sorted(k for k in largest if k >= len(scen) // 4)
+    wslope = robust_slope(ks, [largest[k] for k in ks])
+    print(f"  workers: {len(workers)} processes in all (each replaced after "
+          f"{WORKER_SCENARIOS} scenarios); RSS {min(s[0][1] for s in workers.values()) / mb:.1f}"
+          f"-{max(largest.values()) / mb:.1f} MB; largest growth in a worker's life "
+          f"{max(life) / mb:+.1f} MB; robust slope of the largest worker's RSS "
+          f"{wslope / 1024:+.2f} KB per scenario -> {wslope * 2000 / mb:+.2f} MB per 2000 "
+          "(target < 50 MB)")
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 

@@ -16,10 +16,13 @@ What scenarios share is made once per process, never per scenario: the airframe
 (:func:`cached_airframe`), the timeline without its faults (:func:`base_scenario`) and the
 compiled kernels. The local pool forks its workers from this process after
 :func:`warm_up` has flown a short flight of each controller here (imports, gain files and the
-numba kernels then come with the fork instead of costing each worker its own start); a process
-with other threads running (where a fork is not safe) starts them from a forkserver that has
-imported the flight code. A Dask worker keeps the same per-process caches from one task to the
-next; scenarios go to it in small batches (:func:`fly_batch`) and each finished task is
+numba kernels then come with the fork instead of costing each worker its own start). A process
+running threads of its own (a Dask client, a progress monitor), which a fork could catch
+holding a lock, starts them from a forkserver that has imported the flight code instead. A
+worker is replaced by a fresh one every :data:`WORKER_SCENARIOS` scenarios (forked by the
+pool's own thread, as multiprocessing's ``maxtasksperchild`` always does), which bounds its
+memory. A Dask worker keeps the same per-process caches from one task to the next; scenarios
+go to it in small batches (:func:`fly_batch`) and each finished task is
 released at once, so neither the workers nor the client hold the results of a long campaign.
 """
 
@@ -40,12 +43,26 @@ from typing import Any
 from vtolftc.runners.campaign.outcome import outcome
 from vtolftc.runners.campaign.scenarios import CampaignScenario
 
-__all__ = ["base_scenario", "dask_batch_size", "fly_batch", "fly_scenario", "pool_context",
-           "run_dask", "run_local", "vehicle_options", "warm_up"]
+__all__ = [
+    "WORKER_SCENARIOS",
+    "base_scenario",
+    "dask_batch_size",
+    "fly_batch",
+    "fly_scenario",
+    "pool_context",
+    "run_dask",
+    "run_local",
+    "vehicle_options",
+    "warm_up",
+]
 
 _AIRFRAMES: dict[str | None, Any] = {}
 _BASE_SCENARIOS: dict[tuple[float, str | None], Any] = {}
 _WARM: set[tuple[str | None, str | None, str]] = set()
+WORKER_SCENARIOS = 100
+"""Scenarios a local pool worker flies before a fresh one replaces it (a fork of the warmed
+campaign process: a few ms): its memory is then bounded whatever the campaign's length (a
+fresh worker's allocators grow over its first few hundred flights before they settle)."""
 WARM_UP_FLIGHT_S = 2.0
 """Simulated length of :func:`warm_up`'s flight per controller (s): arming and the start of
 the take-off; kernels of later phases are loaded from numba's cache by the first flight."""
@@ -218,6 +235,9 @@ def _watch_parent(parent: int) -> None:
 
 
 def _worker_init(airframe_path: str | None) -> None:
+    # a forked worker inherits the parent's unwritten stdout buffer and would write it again
+    # at its exit: its own output (diagnostics only) goes to stderr, and that copy never
+    sys.stdout = sys.stderr
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # the parent handles Ctrl-C
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
@@ -239,11 +259,14 @@ def pool_context() -> Any:
     return multiprocessing.get_context("spawn")
 
 
-def run_local(scenarios: Sequence[CampaignScenario], jobs: int | None = None,
-              ) -> Iterator[dict[str, Any]]:
+def run_local(scenarios: Sequence[CampaignScenario], jobs: int | None = None, *,
+              worker_scenarios: int | None = None) -> Iterator[dict[str, Any]]:
     """Rows of ``scenarios`` flown on ``jobs`` local processes (default: all cores), as they
-    finish. ``jobs == 1`` flies them in this process. Closing the generator (or an exception
-    in the consumer, e.g. KeyboardInterrupt) terminates the workers."""
+    finish. ``jobs == 1`` flies them in this process. A worker flies ``worker_scenarios``
+    (default :data:`WORKER_SCENARIOS`; five times that from a forkserver, where a new worker
+    loads its kernels again) and is then replaced by a fresh one, so no worker's memory grows
+    with the campaign's length. Closing the generator (or an exception in the consumer, e.g.
+    KeyboardInterrupt) terminates the workers."""
     n = jobs or os.cpu_count() or 1
     af_path = scenarios[0].airframe_path if scenarios else None
     if n <= 1:
@@ -251,12 +274,15 @@ def run_local(scenarios: Sequence[CampaignScenario], jobs: int | None = None,
             yield fly_scenario(sc)
         return
     ctx = pool_context()
-    if ctx.get_start_method() == "fork":
+    fork = ctx.get_start_method() == "fork"
+    if fork:
         warm_up(scenarios)
         for stream in (sys.stdout, sys.stderr):  # nothing buffered here is written twice
             with contextlib.suppress(Exception):
                 stream.flush()
-    pool = ctx.Pool(n, initializer=_worker_init, initargs=(af_path,))
+    per_worker = worker_scenarios or (WORKER_SCENARIOS if fork else 5 * WORKER_SCENARIOS)
+    pool = ctx.Pool(n, initializer=_worker_init, initargs=(af_path,),
+                    maxtasksperchild=max(1, int(per_worker)))
     try:
         yield from pool.imap_unordered(fly_scenario, scenarios, chunksize=1)
         pool.close()
