@@ -3,6 +3,7 @@ Dask tasks that are released, and memory that does not grow with the number of s
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import threading
@@ -12,7 +13,7 @@ import pytest
 
 from vtolftc.runners.campaign import execute
 from vtolftc.runners.campaign.memwatch import RssWatch, child_pids, robust_slope, rss_bytes
-from vtolftc.runners.campaign.results import TIMING_COLUMNS, PartWriter, read_results
+from vtolftc.runners.campaign.results import TIMING_COLUMNS, read_results
 from vtolftc.runners.campaign.scenarios import expand
 from vtolftc.runners.campaign.spec import parse_spec
 
@@ -191,17 +192,32 @@ def test_campaign_memory_does_not_grow_with_scenarios(tmp_path):
     worker's RSS against the scenario count, times 2000, stays < 50 MB (a fresh worker's
     allocators grow over its first few hundred flights before they settle, which the
     replacement cuts short; ``bench_campaign.py --memory 2000`` measures the real 2000)."""
-    scen = expand(parse_spec(MEMORY))[:200]
-    assert len(scen) == 200
-    watch = RssWatch()
-    writer = PartWriter(tmp_path, batch=8)
-    n = 0
-    for row in execute.run_local(scen, 2, worker_scenarios=25):
-        writer.add(row)
-        n += 1
-        watch.sample(n)
-    writer.close()
-    assert n == 200
+    # in a fresh campaign process, as `vtolftc campaign` is (no test's threads: the pool forks)
+    code = f"""
+import json, sys
+from vtolftc.runners.campaign import execute
+from vtolftc.runners.campaign.memwatch import RssWatch
+from vtolftc.runners.campaign.results import PartWriter
+from vtolftc.runners.campaign.scenarios import expand
+from vtolftc.runners.campaign.spec import parse_spec
+assert execute.pool_context().get_start_method() == "fork"
+scen = expand(parse_spec({MEMORY!r}))[:200]
+watch = RssWatch()
+writer = PartWriter({str(tmp_path)!r}, batch=8)
+n = 0
+for row in execute.run_local(scen, 2, worker_scenarios=25):
+    writer.add(row)
+    n += 1
+    watch.sample(n)
+writer.close()
+json.dump({{"parent": watch.parent, "samples": watch.samples}}, sys.stdout)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=600, check=True)
+    got = json.loads(out.stdout)
+    watch = RssWatch(parent=got["parent"],
+                     samples={int(k): [tuple(x) for x in v] for k, v in got["samples"].items()})
+    assert max(n for s in watch.samples.values() for n, _ in s) == 200
     assert read_results(tmp_path).num_rows == 200
     parent = watch.growth(2000, skip=0.5)[watch.parent]
     assert parent["growth_b"] < 50e6, parent
