@@ -8,11 +8,24 @@ scenarios, 12 by default), so each one costs a full 60 s of simulation. Figures 
 - the in-process run alone (``run_scenario``): wall time and real-time factor per scenario;
 - the campaign's fixed costs: ``vtolftc`` start-up (imports), airframe load, autopilot and
   gain-file construction, first-flight compilation (numba cache load), Parquet part writes;
+- the recoverability oracle of these scenarios (in the parent, before the flights): its
+  reference flight and its LPs;
 - the local pool (``--jobs N``) and a Dask ``LocalCluster`` (N workers, loopback): wall time,
   scenarios per minute, and overhead = (wall x workers / scenarios - mean run time) / mean
-  run time, i.e. what the campaign adds to a scenario.
+  run time, i.e. what the campaign adds to a scenario. Dask twice on the same cluster: its
+  first campaign (the workers import the flight code and load the kernels) and a second one
+  (a long-lived cluster, as a Dask deployment is), each as a ratio to the local pool's rate.
 
-Targets (issue 10): >= 100 scenarios/min on 2 cores, overhead < 5 % of a scenario.
+``--memory N [--duration S]`` instead flies N short scenarios (S s each, default 4; the rotor
+losses at N / 24 magnitudes) on the local pool with the parent writing Parquet parts as the
+CLI does, samples the resident memory of the parent and of each worker (by pid) after each
+row (:mod:`vtolftc.runners.campaign.memwatch`) and prints the parent's robust slope after the
+first quarter and, for the workers (each replaced after ``WORKER_SCENARIOS``), the largest
+growth in a worker's life and the slope of the largest worker's RSS, extrapolated to 2000
+scenarios (target of issue 24: < 50 MB).
+
+Targets (issue 24): >= 300 scenarios/min on 2 cores, overhead < 5 % of a scenario, Dask
+within 0.9x of the local pool; memory of a 2000-scenario campaign < 50 MB per process.
 
 Measured (docs/campaigns/README.md, "Speeding up the in-process run"): the warm 60 s flight
 took 2.30 s on an idle core (26x real time) before the step was sped up; after, alternating
@@ -25,6 +38,7 @@ per step; whole flights ~0.92 of the first round's CPU time (old mean 2.13 s, ne
 load 9-11), ~31-41x on an idle core, ~62-82 scenarios/min on 2 cores before overhead.
 
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
+    .venv/bin/python benchmarks/bench_campaign.py --memory 2000 [--duration 4]
 """
 
 from __future__ import annotations
@@ -37,6 +51,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 SPEC = """
 [campaign]
@@ -58,7 +73,13 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--scenarios", type=int, default=12, help="at most 24")
     ap.add_argument("--no-dask", action="store_true")
+    ap.add_argument("--memory", type=int, default=0, metavar="N",
+                    help="memory run: N short scenarios, RSS growth per process")
+    ap.add_argument("--duration", type=float, default=4.0, help="memory run: s per scenario")
     args = ap.parse_args()
+    if args.memory:
+        memory_run(args.memory, args.duration, args.jobs)
+        return
 
     from vtolftc.runners.campaign.execute import fly_scenario, run_dask, run_local
     from vtolftc.runners.campaign.results import PartWriter
@@ -72,8 +93,8 @@ def main() -> None:
 
     # fixed costs
     t = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import vtolftc.cli.main; vtolftc.cli.build_parser()"],
-                   check=True)
+    subprocess.run([sys.executable, "-c",
+                    "from vtolftc.cli.main import build_parser; build_parser()"], check=True)
     t_start = time.perf_counter() - t
     from vtolftc.airframe.loader import load_airframe
     from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
@@ -109,24 +130,39 @@ def main() -> None:
           f"scenario, first flight compile/cache load {t_compile:.2f} s (once per worker), "
           f"Parquet write {t_write * 1e3:.2f} ms per row")
 
-    def report(label: str, wall: float, workers: int, got: list[dict]) -> None:
+    from vtolftc.runners.campaign.oracle import oracle_columns
+
+    t = time.perf_counter()
+    oracle_columns(scen)
+    t_oracle = time.perf_counter() - t
+    print(f"recoverability oracle (parent, before the flights): {t_oracle:.2f} s for {n} "
+          f"scenarios (one reference flight to {max(s.fault_time_s for s in scen):g} s and "
+          f"{len({(s.fault_set.faults, s.fault_time_s) for s in scen})} LPs)")
+
+    def report(label: str, wall: float, workers: int, got: list[dict]) -> float:
         mean_run = statistics.mean(r["run_wall_time_s"] for r in got)
         per = wall * workers / len(got)
-        print(f"{label}: {len(got)} scenarios in {wall:.1f} s = {60.0 * len(got) / wall:.1f} "
+        rate = 60.0 * len(got) / wall
+        print(f"{label}: {len(got)} scenarios in {wall:.1f} s = {rate:.1f} "
               f"scenarios/min; per scenario {per:.2f} s of a worker vs {mean_run:.2f} s of "
               f"flight -> overhead {100 * (per - mean_run) / mean_run:+.1f} % "
-              f"(target >= 100 scenarios/min, < 5 %)")
+              f"(target >= 300 scenarios/min, < 5 %)")
+        return rate
 
-    with tempfile.TemporaryDirectory() as d:
-        t = time.perf_counter()
-        w = PartWriter(Path(d))
-        got = []
-        for r in run_local(scen, args.jobs):
-            w.add(r)
-            got.append(r)
-        w.close()
-        report(f"local pool ({args.jobs} processes, start-up included)",
-               time.perf_counter() - t, args.jobs, got)
+    def fly(stream: Any) -> tuple[float, list[dict]]:
+        with tempfile.TemporaryDirectory() as d:
+            t = time.perf_counter()
+            w = PartWriter(Path(d))
+            got = []
+            for r in stream:
+                w.add(r)
+                got.append(r)
+            w.close()
+            return time.perf_counter() - t, got
+
+    wall, got = fly(run_local(scen, args.jobs))
+    pool_rate = report(f"local pool ({args.jobs} processes, start-up included)", wall,
+                       args.jobs, got)
 
     if not args.no_dask:
         from distributed import LocalCluster
@@ -135,16 +171,74 @@ def main() -> None:
         with LocalCluster(n_workers=args.jobs, threads_per_worker=1, processes=True,
                           host="127.0.0.1", dashboard_address=None) as cluster:
             t_cluster = time.perf_counter() - t0
-            with tempfile.TemporaryDirectory() as d:
-                t = time.perf_counter()
-                w = PartWriter(Path(d))
-                got = []
-                for r in run_dask(scen, cluster.scheduler_address, tag="bench"):
-                    w.add(r)
-                    got.append(r)
-                w.close()
-                report(f"Dask LocalCluster ({args.jobs} workers; cluster start {t_cluster:.1f} s "
-                       "not included)", time.perf_counter() - t, args.jobs, got)
+            for i, what in enumerate(("first campaign: workers import and load the kernels",
+                                      "second campaign on the same cluster")):
+                wall, got = fly(run_dask(scen, cluster.scheduler_address, tag=f"bench{i}"))
+                rate = report(f"Dask LocalCluster ({args.jobs} workers; {what}; cluster start "
+                              f"{t_cluster:.1f} s not included)", wall, args.jobs, got)
+                print(f"  Dask / local pool: {rate / pool_rate:.2f}x (target >= 0.9x)")
+    print(f"load average at end: {os.getloadavg()[0]:.2f}")
+
+
+def memory_spec(n: int, duration_s: float) -> str:
+    """A spec of at least ``n`` short scenarios: each lift rotor's loss at ceil(n / 24)
+    magnitudes, the three controllers, injected at half the duration."""
+    k = max(1, -(-n // 24))
+    mags = ", ".join(f"{0.02 + 0.6 * i / k:.5f}" for i in range(k))
+    return (f'[campaign]\nname = "memory"\nduration_s = {duration_s:g}\n'
+            f'controllers = ["gs-shif", "shif", "lqr"]\nphases = [{duration_s / 2:g}]\n'
+            '[[faults]]\nfamily = "rotor-loss"\ngenerate = "each"\n'
+            f'actuators = ["lift_rotors"]\nkinds = ["loss"]\nmagnitudes = [{mags}]\n')
+
+
+def memory_run(n: int, duration_s: float, jobs: int) -> None:
+    """Fly ``n`` short scenarios on the local pool and print the RSS growth per process."""
+    from vtolftc.runners.campaign.execute import WORKER_SCENARIOS, run_local
+    from vtolftc.runners.campaign.memwatch import RssWatch
+    from vtolftc.runners.campaign.results import PartWriter
+    from vtolftc.runners.campaign.scenarios import expand
+    from vtolftc.runners.campaign.spec import parse_spec
+
+    scen = expand(parse_spec(memory_spec(n, duration_s)))[:n]
+    print(f"load average at start: {os.getloadavg()[0]:.2f}; memory run: {len(scen)} "
+          f"scenarios of {duration_s:g} s on {jobs} processes")
+    watch = RssWatch()
+    every = max(1, len(scen) // 500)
+    t = time.perf_counter()
+    with tempfile.TemporaryDirectory() as d:
+        w = PartWriter(Path(d))
+        done = 0
+        watch.sample(0)
+        for r in run_local(scen, jobs):
+            w.add(r)
+            done += 1
+            if done % every == 0 or done == len(scen):
+                watch.sample(done)
+        w.close()
+    wall = time.perf_counter() - t
+    print(f"{done} scenarios in {wall:.1f} s = {60.0 * done / wall:.1f} scenarios/min")
+    from vtolftc.runners.campaign.memwatch import robust_slope
+
+    mb = 2.0 ** 20
+    g = watch.growth(len(scen))[watch.parent]
+    slope = g["slope_b_per_scenario"]
+    print(f"  parent: RSS {g['rss_first_b'] / mb:.1f} -> {g['rss_last_b'] / mb:.1f} MB; "
+          f"robust slope {slope / 1024:+.2f} KB per scenario -> {slope * 2000 / mb:+.2f} MB "
+          "per 2000 (target < 50 MB)")
+    workers = {p: s for p, s in watch.samples.items() if p != watch.parent and len(s) >= 2}
+    life = [s[-1][1] - s[0][1] for s in workers.values()]
+    largest: dict[int, int] = {}
+    for s in workers.values():
+        for k, rss in s:
+            largest[k] = max(largest.get(k, 0), rss)
+    ks = sorted(k for k in largest if k >= len(scen) // 4)
+    wslope = robust_slope(ks, [largest[k] for k in ks])
+    print(f"  workers: {len(workers)} processes in all (each replaced after "
+          f"{WORKER_SCENARIOS} scenarios); RSS {min(s[0][1] for s in workers.values()) / mb:.1f}"
+          f"-{max(largest.values()) / mb:.1f} MB; largest growth in a worker's life "
+          f"{max(life) / mb:+.1f} MB; robust slope of the largest worker's RSS "
+          f"{wslope / 1024:+.2f} KB per scenario -> {wslope * 2000 / mb:+.2f} MB per 2000 "
+          "(target < 50 MB)")
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 

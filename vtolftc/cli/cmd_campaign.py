@@ -150,7 +150,11 @@ def _fly(args: argparse.Namespace, spec: Any, todo: list[Any], writer: Any, tota
     else:
         stream = run_local(todo, args.jobs)
     survived, flown = n_surv, n_done
-    bar = tqdm(total=total, initial=n_done, unit="scen", dynamic_ncols=True,
+
+    class _Bar(tqdm):  # type: ignore[misc]
+        monitor_interval = 0  # no monitor thread: the local pool forks only a lone thread
+
+    bar = _Bar(total=total, initial=n_done, unit="scen", dynamic_ncols=True,
                desc=spec.name, disable=args.no_progress, file=sys.stderr)
     try:
         for row in stream:

@@ -11,14 +11,29 @@ Dask worker with the same package installed.
 :func:`run_local` runs scenarios on a :class:`multiprocessing.pool.Pool` (workers ignore
 Ctrl-C; the parent stops them); :func:`run_dask` submits them as tasks to a Dask distributed
 scheduler (``tcp://HOST:PORT``). Both yield rows as scenarios finish, in completion order.
+
+What scenarios share is made once per process, never per scenario: the airframe
+(:func:`cached_airframe`), the timeline without its faults (:func:`base_scenario`) and the
+compiled kernels. The local pool forks its workers from this process after
+:func:`warm_up` has flown a short flight of each controller here (imports, gain files and the
+numba kernels then come with the fork instead of costing each worker its own start). A process
+running threads of its own (a Dask client, a progress monitor), which a fork could catch
+holding a lock, starts them from a forkserver that has imported the flight code instead. A
+worker is replaced by a fresh one every :data:`WORKER_SCENARIOS` scenarios (forked by the
+pool's own thread, as multiprocessing's ``maxtasksperchild`` always does), which bounds its
+memory. A Dask worker keeps the same per-process caches from one task to the next; scenarios
+go to it in small batches (:func:`fly_batch`) and each finished task is
+released at once, so neither the workers nor the client hold the results of a long campaign.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 import time
 import traceback
@@ -28,9 +43,29 @@ from typing import Any
 from vtolftc.runners.campaign.outcome import outcome
 from vtolftc.runners.campaign.scenarios import CampaignScenario
 
-__all__ = ["fly_scenario", "run_dask", "run_local", "vehicle_options"]
+__all__ = [
+    "WORKER_SCENARIOS",
+    "base_scenario",
+    "dask_batch_size",
+    "fly_batch",
+    "fly_scenario",
+    "pool_context",
+    "run_dask",
+    "run_local",
+    "vehicle_options",
+    "warm_up",
+]
 
 _AIRFRAMES: dict[str | None, Any] = {}
+_BASE_SCENARIOS: dict[tuple[float, str | None], Any] = {}
+_WARM: set[tuple[str | None, str | None, str]] = set()
+WORKER_SCENARIOS = 100
+"""Scenarios a local pool worker flies before a fresh one replaces it (a fork of the warmed
+campaign process: a few ms): its memory is then bounded whatever the campaign's length (a
+fresh worker's allocators grow over its first few hundred flights before they settle)."""
+WARM_UP_FLIGHT_S = 2.0
+"""Simulated length of :func:`warm_up`'s flight per controller (s): arming and the start of
+the take-off; kernels of later phases are loaded from numba's cache by the first flight."""
 
 
 def cached_airframe(path: str | None) -> Any:
@@ -41,6 +76,34 @@ def cached_airframe(path: str | None) -> Any:
 
         af = _AIRFRAMES[path] = load_airframe(path)
     return af
+
+
+def base_scenario(duration_s: float, airframe_path: str | None = None) -> Any:
+    """The campaign's timeline (:func:`vtolftc.runners.scenario.paper_scenario` of case 0,
+    ``duration_s`` s) without extra faults, built once per process and duration (it reads
+    the fault-case file)."""
+    key = (float(duration_s), airframe_path)
+    base = _BASE_SCENARIOS.get(key)
+    if base is None:
+        from vtolftc.runners.scenario import paper_scenario
+
+        base = _BASE_SCENARIOS[key] = paper_scenario(0, float(duration_s),
+                                                     airframe=cached_airframe(airframe_path))
+    return base
+
+
+def _campaign_scenario(sc: CampaignScenario, faults: Sequence[Any]) -> Any:
+    """``paper_scenario(0, sc.duration_s, extra_faults=faults, window_start_s=...)`` from the
+    cached :func:`base_scenario`: the same actions in the same (stable) order."""
+    import dataclasses
+
+    from vtolftc.runners.scenario import Action
+
+    base = base_scenario(sc.duration_s, sc.airframe_path)
+    actions = list(base.actions)
+    actions += [Action(f.start_s, "fault", f"fault {f.describe()}", fault=f) for f in faults]
+    actions.sort(key=lambda a: a.t_s)
+    return dataclasses.replace(base, actions=tuple(actions), window_start_s=sc.window_start_s)
 
 
 def vehicle_options(steady_ned_m_s: Sequence[float] = (0.0, 0.0, 0.0),
@@ -83,7 +146,7 @@ def fly_scenario(sc: CampaignScenario) -> dict[str, Any]:
     """Fly one scenario and return its result row (never raises on a failing flight: an
     exception inside the simulation is the outcome ``error`` with its message)."""
     from vtolftc.firmware_sim.vehicle.faults import Fault
-    from vtolftc.runners.scenario import paper_scenario, run_scenario
+    from vtolftc.runners.scenario import run_scenario
 
     t0 = time.perf_counter()
     row: dict[str, Any] = {
@@ -96,8 +159,7 @@ def fly_scenario(sc: CampaignScenario) -> dict[str, Any]:
     try:
         af = cached_airframe(sc.airframe_path)
         faults = [Fault(a, kind, loss, sc.fault_time_s) for a, kind, loss in sc.fault_set.faults]
-        scen = paper_scenario(0, sc.duration_s, airframe=af, extra_faults=faults,
-                              window_start_s=sc.window_start_s)
+        scen = _campaign_scenario(sc, faults)
         p = sc.perturbation
         opts = vehicle_options(sc.wind.steady_ned_m_s, sc.gusts(), p.mass_scale,
                                p.inertia_scale, p.cg_offset_m, sc.noise_level, sc.seed)
@@ -110,6 +172,7 @@ def fly_scenario(sc: CampaignScenario) -> dict[str, Any]:
                    sim_time_s=math.nan, run_wall_time_s=math.nan,
                    wall_time_s=time.perf_counter() - t0)
         return row
+    _WARM.add((sc.airframe_path, sc.gains_dir, sc.controller))
     m = res.metrics
     counts = res.allocation.get("counts", {})
     row.update(
@@ -132,6 +195,33 @@ def fly_scenario(sc: CampaignScenario) -> dict[str, Any]:
     return row
 
 
+def fly_batch(scenarios: Sequence[CampaignScenario]) -> list[dict[str, Any]]:
+    """The rows of ``scenarios`` flown one after the other in this process (a Dask task)."""
+    return [fly_scenario(sc) for sc in scenarios]
+
+
+def warm_up(scenarios: Sequence[CampaignScenario]) -> float:
+    """Prepare this process for ``scenarios``: load their airframes and fly a
+    :data:`WARM_UP_FLIGHT_S` flight of each (airframe, gains, controller), which imports the
+    flight code, reads the gain files and compiles (or loads from numba's cache) the kernels
+    of the first control steps. Each combination once per process; a failing one is left to
+    the scenarios (their rows say ``error``). Returns the wall time spent (s)."""
+    t0 = time.perf_counter()
+    for key in dict.fromkeys((sc.airframe_path, sc.gains_dir, sc.controller)
+                             for sc in scenarios):
+        if key in _WARM:
+            continue
+        _WARM.add(key)
+        try:
+            from vtolftc.runners.scenario import run_scenario
+
+            run_scenario(base_scenario(WARM_UP_FLIGHT_S, key[0]), key[2],
+                         airframe=cached_airframe(key[0]), gains_dir=key[1])
+        except Exception:  # each scenario reports its own error in its row
+            continue
+    return time.perf_counter() - t0
+
+
 # --------------------------------------------------------------------------------------------
 # Local process pool
 # --------------------------------------------------------------------------------------------
@@ -145,25 +235,54 @@ def _watch_parent(parent: int) -> None:
 
 
 def _worker_init(airframe_path: str | None) -> None:
+    # a forked worker inherits the parent's unwritten stdout buffer and would write it again
+    # at its exit: its own output (diagnostics only) goes to stderr, and that copy never
+    sys.stdout = sys.stderr
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # the parent handles Ctrl-C
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
     cached_airframe(airframe_path)
 
 
-def run_local(scenarios: Sequence[CampaignScenario], jobs: int | None = None,
-              ) -> Iterator[dict[str, Any]]:
+def pool_context() -> Any:
+    """The multiprocessing context of the local pool: ``fork`` (the workers inherit this
+    process's imports, caches and compiled kernels) when this process runs no other thread,
+    since only then is a fork safe; otherwise a ``forkserver`` that imports the flight code
+    once for all workers (``spawn`` where neither exists)."""
+    methods = multiprocessing.get_all_start_methods()
+    if "fork" in methods and threading.active_count() == 1:
+        return multiprocessing.get_context("fork")
+    if "forkserver" in methods:
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload([__name__, "vtolftc.runners.scenario"])
+        return ctx
+    return multiprocessing.get_context("spawn")
+
+
+def run_local(scenarios: Sequence[CampaignScenario], jobs: int | None = None, *,
+              worker_scenarios: int | None = None) -> Iterator[dict[str, Any]]:
     """Rows of ``scenarios`` flown on ``jobs`` local processes (default: all cores), as they
-    finish. ``jobs == 1`` flies them in this process. Closing the generator (or an exception
-    in the consumer, e.g. KeyboardInterrupt) terminates the workers."""
+    finish. ``jobs == 1`` flies them in this process. A worker flies ``worker_scenarios``
+    (default :data:`WORKER_SCENARIOS`; five times that from a forkserver, where a new worker
+    loads its kernels again) and is then replaced by a fresh one, so no worker's memory grows
+    with the campaign's length. Closing the generator (or an exception in the consumer, e.g.
+    KeyboardInterrupt) terminates the workers."""
     n = jobs or os.cpu_count() or 1
     af_path = scenarios[0].airframe_path if scenarios else None
     if n <= 1:
         for sc in scenarios:
             yield fly_scenario(sc)
         return
-    ctx = multiprocessing.get_context("forkserver" if os.name == "posix" else "spawn")
-    pool = ctx.Pool(n, initializer=_worker_init, initargs=(af_path,))
+    ctx = pool_context()
+    fork = ctx.get_start_method() == "fork"
+    if fork:
+        warm_up(scenarios)
+        for stream in (sys.stdout, sys.stderr):  # nothing buffered here is written twice
+            with contextlib.suppress(Exception):
+                stream.flush()
+    per_worker = worker_scenarios or (WORKER_SCENARIOS if fork else 5 * WORKER_SCENARIOS)
+    pool = ctx.Pool(n, initializer=_worker_init, initargs=(af_path,),
+                    maxtasksperchild=max(1, int(per_worker)))
     try:
         yield from pool.imap_unordered(fly_scenario, scenarios, chunksize=1)
         pool.close()
@@ -176,11 +295,22 @@ def run_local(scenarios: Sequence[CampaignScenario], jobs: int | None = None,
 # Dask distributed
 # --------------------------------------------------------------------------------------------
 
+def dask_batch_size(n_scenarios: int, n_workers: int) -> int:
+    """Scenarios per Dask task: enough tasks (16 per worker) that the last ones balance the
+    workers, at most 8 scenarios each (a task's rows arrive together)."""
+    per = n_scenarios // (16 * max(1, n_workers))
+    return max(1, min(8, per))
+
+
 def run_dask(scenarios: Sequence[CampaignScenario], address: str, *,
-             tag: str = "campaign") -> Iterator[dict[str, Any]]:
+             tag: str = "campaign", batch: int | None = None) -> Iterator[dict[str, Any]]:
     """Rows of ``scenarios`` flown as tasks on the Dask scheduler at ``address``, as they
     finish. Each worker needs this package (same version) installed; see
-    ``docs/campaigns/README.md``. Closing the generator cancels what is not done."""
+    ``docs/campaigns/README.md``. A task flies ``batch`` scenarios (default
+    :func:`dask_batch_size` for the cluster's workers) with :func:`fly_batch`; its future is
+    released as soon as its rows are here. The workers' statistical profiler is paused while
+    the campaign runs (:mod:`vtolftc.runners.campaign.dask_plugin`). Closing the generator
+    cancels what is not done."""
     from distributed import Client, as_completed
 
     try:
@@ -188,14 +318,33 @@ def run_dask(scenarios: Sequence[CampaignScenario], address: str, *,
     except (OSError, TimeoutError) as exc:
         raise ConnectionError(f"--scheduler {address}: cannot reach a Dask scheduler "
                               f"({exc})") from None
-    futures = []
+    pending: set[Any] = set()
+    plugin = False
     try:
-        futures = client.map(fly_scenario, list(scenarios),
-                             key=[f"vtolftc-{tag}-{sc.scenario_id}" for sc in scenarios],
+        from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, PauseProfiler
+
+        client.register_plugin(PauseProfiler(), name=PLUGIN_NAME)
+        plugin = True
+        if batch is None:
+            batch = dask_batch_size(len(scenarios), len(client.scheduler_info()["workers"]))
+        size = max(1, int(batch))
+        chunks = [list(scenarios[i:i + size]) for i in range(0, len(scenarios), size)]
+        futures = client.map(fly_batch, chunks,
+                             key=[f"vtolftc-{tag}-{c[0].scenario_id}-{len(c)}" for c in chunks],
                              pure=False, retries=1)
-        for fut in as_completed(futures, loop=client.loop):
-            yield fut.result()
+        pending = set(futures)
+        done = as_completed(futures, loop=client.loop)
+        del futures
+        for fut in done:
+            rows = fut.result()
+            pending.discard(fut)
+            fut.release()
+            del fut
+            yield from rows
     finally:
-        if futures:
-            client.cancel(futures)
+        if pending:
+            client.cancel(list(pending))
+        if plugin:
+            with contextlib.suppress(Exception):  # the workers' profiler back on
+                client.unregister_worker_plugin(PLUGIN_NAME)
         client.close()
