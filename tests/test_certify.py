@@ -177,6 +177,15 @@ def test_campaign_gates():
     assert judge_campaign(ok + nine)["gate_failures"] == []
     eight = [_row("two-rotors-off", "hover", k < 8) for k in range(10)]
     assert "8/10" in judge_campaign(ok + eight)["gate_failures"][0]
+    # doubles count at hover and mid-transition only: 9/10 there passes even with every cruise
+    # double lost (counted, 9/20 would fail); 8/10 there fails even with cruise doubles saved
+    mixed = [_row("two-rotors-off", "transition", k < 9) for k in range(10)]
+    cruise_lost = [_row("two-rotors-off", "cruise", False) for _ in range(10)]
+    rec = judge_campaign(ok + mixed + cruise_lost)
+    assert rec["gate_failures"] == [] and rec["gates"][1]["recoverable"] == 10
+    assert rec["cells"]["two-rotors-off|cruise"]["recoverable"] == 10  # still reported
+    cruise_saved = [_row("two-rotors-off", "cruise", True) for _ in range(10)]
+    assert "8/10" in judge_campaign(ok + eight + cruise_saved)["gate_failures"][0]
     unjudged = judge_campaign([*ok, _row("surface", "hover", True, None)])
     assert "not judged" in unjudged["gate_failures"][0]
     assert unjudged["cells"]["rotor-off|hover"] == {
