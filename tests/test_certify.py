@@ -177,6 +177,15 @@ def test_campaign_gates():
     assert judge_campaign(ok + nine)["gate_failures"] == []
     eight = [_row("two-rotors-off", "hover", k < 8) for k in range(10)]
     assert "8/10" in judge_campaign(ok + eight)["gate_failures"][0]
+    # doubles count at hover and mid-transition only: 9/10 there passes even with every cruise
+    # double lost (counted, 9/20 would fail); 8/10 there fails even with cruise doubles saved
+    mixed = [_row("two-rotors-off", "transition", k < 9) for k in range(10)]
+    cruise_lost = [_row("two-rotors-off", "cruise", False) for _ in range(10)]
+    rec = judge_campaign(ok + mixed + cruise_lost)
+    assert rec["gate_failures"] == [] and rec["gates"][1]["recoverable"] == 10
+    assert rec["cells"]["two-rotors-off|cruise"]["recoverable"] == 10  # still reported
+    cruise_saved = [_row("two-rotors-off", "cruise", True) for _ in range(10)]
+    assert "8/10" in judge_campaign(ok + eight + cruise_saved)["gate_failures"][0]
     unjudged = judge_campaign([*ok, _row("surface", "hover", True, None)])
     assert "not judged" in unjudged["gate_failures"][0]
     assert unjudged["cells"]["rotor-off|hover"] == {
@@ -260,6 +269,41 @@ def test_certify_ds1_quick(tmp_path):
         assert f"font-weight:bold'>{verdict}</td>" in html
     assert run(["certify", str(DS1), "--out", str(out), "--profile", "quick",
                 "--resume"]) == rc
+
+
+@pytest.mark.slow
+def test_certify_quadplane_quick(tmp_path):
+    """The quick profile on QP-5 (``airframe/quadplane-4p1.toml``: four lift rotors, one
+    pusher, the library airframe least like DS-1): every stage completes, the SITL mission
+    lands within 5 m of home and GS-SHIF survives every recoverable single lift-rotor loss at
+    hover and mid-transition (issue 22); the exit status agrees with the gates."""
+    qp5 = ROOT / "airframe" / "quadplane-4p1.toml"
+    out = tmp_path / "cert"
+    rc = run(["certify", str(qp5), "--out", str(out), "--profile", "quick", "--jobs", "2"])
+    recs = {p.stem: json.loads(p.read_text())["record"]
+            for p in (out / "stages").glob("*.json")}
+    assert set(recs) == {"trim", "synth", "certificate", "campaign", "sitl"}  # none failed
+    fails = [f for r in recs.values() for f in r.get("gate_failures", [])]
+    assert rc == (1 if fails else 0), fails
+    camp = recs["campaign"]
+    assert camp["scenarios"] == 4 * 2                   # 4 rotors x hover, mid-transition
+    assert not any("not judged" in f for f in camp["gate_failures"])
+    singles = camp["gates"][0]
+    assert singles["name"].startswith("single lift rotor off")
+    cells = camp["cells"]
+    assert singles["recoverable"] == sum(cells[f"rotor-off|{p}"]["recoverable"]
+                                         for p in ("hover", "transition"))
+    assert singles["pass"] and singles["survived"] == singles["recoverable"], camp["failures"]
+    # a quadrotor that loses a lift rotor in hover cannot hold roll, pitch and yaw at once
+    # (the opposite rotor must stop too, leaving two that turn the same way): the oracle
+    # calls none of the four recoverable in calm air. Mid-transition it finds no quasi-steady
+    # trim either (measured: the gate above may be empty on QP-5), yet GS-SHIF flies on
+    # through all four losses there (the wing takes the load as the airspeed grows)
+    assert cells["rotor-off|hover"]["recoverable"] == 0, cells
+    assert cells["rotor-off|transition"]["survived"] == 4, camp["failures"]
+    assert recs["sitl"]["verdict"] == "pass", recs["sitl"]["gate_failures"]
+    assert recs["sitl"]["landed_from_home_m"] < 5.0
+    assert recs["sitl"]["reached"] == list(range(recs["sitl"]["items"]))
 
 
 LIBRARY = ("quadplane-4p1.toml", "hexa-ds6.toml", "heavy-25.toml", "small-3.toml")
