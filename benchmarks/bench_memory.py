@@ -37,63 +37,10 @@ from __future__ import annotations
 
 import argparse
 import tempfile
-import threading
 from pathlib import Path
-from typing import Any
 
-import numpy as np
-
-from vtolftc.runners.scenario import paper_scenario
-from vtolftc.runners.sitl import SitlConfig, SitlRun
-
-
-def _rss_kb(pid: int) -> float | None:
-    """``VmRSS`` of ``pid`` [KB] (None once it is gone)."""
-    try:
-        with open(f"/proc/{pid}/status", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("VmRSS:"):
-                    return float(line.split()[1])
-    except OSError:
-        return None
-    return None
-
-
-def fly_sampled(cfg: SitlConfig, every_s: float) -> tuple[np.ndarray, float]:
-    """Fly ``cfg`` (the paper's scenario of its case) sampling both processes' RSS.
-
-    Returns
-    -------
-    samples : ndarray, shape (N, 3)
-        simulated time [s], autopilot RSS [KB], vehicle RSS [KB] (simulated time increasing).
-    real_time_factor : float
-        simulated over wall time of the flight.
-    """
-    samples: list[tuple[float, float, float]] = []
-    out: dict[str, Any] = {}
-    with SitlRun(cfg) as run:
-        run.start()
-        pids = {name: p.pid for name, p in run.procs.items()}
-
-        def fly() -> None:
-            try:
-                out["res"] = run.fly(paper_scenario(cfg.case, cfg.duration_s))
-            except BaseException as exc:  # handed to the main thread
-                out["exc"] = exc
-
-        th = threading.Thread(target=fly, daemon=True)
-        th.start()
-        assert run.gs is not None
-        while th.is_alive():
-            t_sim = run.gs.snapshot().sim_time_s
-            ap, veh = _rss_kb(pids["autopilot"]), _rss_kb(pids["vehicle"])
-            if (ap is not None and veh is not None and t_sim < cfg.duration_s
-                    and (not samples or t_sim > samples[-1][0])):
-                samples.append((t_sim, ap, veh))
-            th.join(timeout=every_s)
-    if "exc" in out:
-        raise out["exc"]
-    return np.array(samples), out["res"].real_time_factor
+from vtolftc.runners.memory_probe import fly_sampled, slope_mb_per_h
+from vtolftc.runners.sitl import SitlConfig
 
 
 def main() -> None:
@@ -119,7 +66,8 @@ def main() -> None:
                              transport=args.transport, realtime=args.realtime,
                              duration_s=duration, out_dir=Path(tmp), plots=False,
                              extra_autopilot_args=[] if rec == "on" else ["--no-rerun"])
-            data, rtf = fly_sampled(cfg, args.every)
+            data, res = fly_sampled(cfg, args.every)
+            rtf = res.real_time_factor
         fit = data[data[:, 0] >= 60.0 * args.skip_minutes]
         if len(fit) < 10:
             raise SystemExit(f"only {len(fit)} samples after the warm-up: fly longer")
@@ -129,7 +77,7 @@ def main() -> None:
               f"{rtf:.1f}x real time, {len(data)} samples; fit over {len(fit)} samples, "
               f"{span:.0f} simulated s{'' if span >= 600 else ' (< 10 min)'}", flush=True)
         for j, label in ((1, "autopilot"), (2, "vehicle")):
-            slope = float(np.polyfit(fit[:, 0], fit[:, j], 1)[0])
+            slope = slope_mb_per_h(fit[:, 0], fit[:, j], from_s=fit[0, 0]) * 1024 / 3600
             rows.append(f"| {rec} | {label} | {fit[0, j] / 1024:.1f} | {fit[-1, j] / 1024:.1f} "
                         f"| {slope:.2f} | {slope * 3600 / 1024:.1f} |")
     print("| recorder | process | RSS at start of fit (MB) | RSS at end (MB) "

@@ -26,37 +26,15 @@ measurement (the figures are in the benchmark's docstring).
 
 from __future__ import annotations
 
-import threading
-from typing import Any
-
 import numpy as np
 import pytest
 
-from vtolftc.runners.scenario import paper_scenario
-from vtolftc.runners.sitl import SitlConfig, SitlRun
+from vtolftc.runners.memory_probe import fly_sampled, slope_mb_per_h
+from vtolftc.runners.sitl import SitlConfig
 
 DURATION_S = 180.0
 """Simulated seconds flown; the fit covers the second half."""
 LIMIT_MB_PER_H = 50.0
-
-
-def _rss_kb(pid: int) -> float | None:
-    """``VmRSS`` of ``pid`` [KB] (None once it is gone)."""
-    try:
-        with open(f"/proc/{pid}/status", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("VmRSS:"):
-                    return float(line.split()[1])
-    except OSError:
-        return None
-    return None
-
-
-def slope_mb_per_h(t_s: np.ndarray, rss_kb: np.ndarray) -> float:
-    """Least-squares slope of ``rss_kb`` [KB] against ``t_s`` [simulated s] over the second
-    half of the simulated time span, as MB per simulated hour."""
-    keep = t_s >= t_s[0] + 0.5 * (t_s[-1] - t_s[0])
-    return float(np.polyfit(t_s[keep], rss_kb[keep], 1)[0]) * 3600.0 / 1024.0
 
 
 def test_slope_fit_sees_a_leak_and_ignores_a_warm_up():
@@ -71,33 +49,8 @@ def test_slope_fit_sees_a_leak_and_ignores_a_warm_up():
 def test_sitl_resident_memory_stays_flat_with_the_recorder_on(tmp_path):
     cfg = SitlConfig(case="0", controller="gs-shif", transport="udp", realtime=False,
                      duration_s=DURATION_S, out_dir=tmp_path, plots=False)
-    samples: list[tuple[float, float, float]] = []       # (sim s, autopilot KB, vehicle KB)
-    result: dict[str, Any] = {}
-    with SitlRun(cfg) as run:
-        run.start()
-        pids = {name: p.pid for name, p in run.procs.items()}
-        assert set(pids) == {"autopilot", "vehicle"}
-
-        def fly() -> None:
-            try:
-                result["res"] = run.fly(paper_scenario("0", DURATION_S))
-            except BaseException as exc:  # handed to the test thread
-                result["exc"] = exc
-
-        th = threading.Thread(target=fly, daemon=True)
-        th.start()
-        assert run.gs is not None
-        while th.is_alive():
-            t_sim = run.gs.snapshot().sim_time_s
-            ap, veh = _rss_kb(pids["autopilot"]), _rss_kb(pids["vehicle"])
-            if (ap is not None and veh is not None and t_sim < DURATION_S
-                    and (not samples or t_sim > samples[-1][0])):
-                samples.append((t_sim, ap, veh))
-            th.join(timeout=0.5)
-    if "exc" in result:
-        raise result["exc"]
-    assert result["res"].sim_time_s >= DURATION_S - 0.01
-    data = np.array(samples)
+    data, res = fly_sampled(cfg, every_s=0.5)
+    assert res.sim_time_s >= DURATION_S - 0.01
     late = data[data[:, 0] >= DURATION_S / 2]
     assert len(late) >= 20, f"only {len(late)} samples in the second half"
     assert late[-1, 0] - late[0, 0] >= 0.4 * DURATION_S
