@@ -24,6 +24,7 @@ import os
 import signal
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -64,23 +65,14 @@ def _check(args: argparse.Namespace) -> None:
         raise UsageError(f"--out {out}: directory is not writable")
 
 
-def cmd_synth(args: argparse.Namespace) -> int:
-    """Structured H-infinity GS-SHIF and SHIF designs, LQR baseline, mu analysis, report."""
-    from vtolftc.firmware_sim.vehicle.flyable import load_flyable_airframe
-
-    _check(args)
-    af = load_flyable_airframe(args.airframe)
+def _with_progress(total: int, desc: str, quiet: bool,
+                   run: Callable[[Callable[[str, int], None]], Any]) -> Any:
+    """Call ``run(progress)`` under a progress bar on stderr, with SIGTERM stopping it as
+    Ctrl-C does (a ``KeyboardInterrupt``, so finished files are kept)."""
     from tqdm import tqdm
 
-    if args.method == "surface":
-        return _cmd_surface(args, af)
-    from vtolftc.synthesis.pipeline import run_synthesis, work_units
-
-    n_points = 7 if args.method == "robust" else 6
-    t0 = time.perf_counter()
-    bar = tqdm(total=work_units(n_points, mu=not args.no_mu, report=not args.no_report),
-               desc="synth", unit="step", file=sys.stderr, dynamic_ncols=True,
-               disable=args.quiet)
+    bar = tqdm(total=total, desc=desc, unit="step", file=sys.stderr, dynamic_ncols=True,
+               disable=quiet)
 
     def progress(label: str, n: int) -> None:
         bar.set_postfix_str(label[:40])
@@ -91,12 +83,30 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
     old_term = signal.signal(signal.SIGTERM, _term)
     try:
-        res = run_synthesis(af, args.out, n_starts=args.starts, jobs=args.jobs,
-                            seed=args.seed, mu=not args.no_mu, report=not args.no_report,
-                            progress=progress, method=args.method)
+        return run(progress)
     finally:
         signal.signal(signal.SIGTERM, old_term)
         bar.close()
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
+    """Structured H-infinity GS-SHIF and SHIF designs, LQR baseline, mu analysis, report."""
+    from vtolftc.firmware_sim.vehicle.flyable import load_flyable_airframe
+
+    _check(args)
+    af = load_flyable_airframe(args.airframe)
+    if args.method == "surface":
+        return _cmd_surface(args, af)
+    from vtolftc.synthesis.pipeline import run_synthesis, work_units
+
+    n_points = 7 if args.method == "robust" else 6
+    t0 = time.perf_counter()
+    res = _with_progress(
+        work_units(n_points, mu=not args.no_mu, report=not args.no_report), "synth", args.quiet,
+        lambda progress: run_synthesis(af, args.out, n_starts=args.starts, jobs=args.jobs,
+                                       seed=args.seed, mu=not args.no_mu,
+                                       report=not args.no_report, progress=progress,
+                                       method=args.method))
     total = time.perf_counter() - t0
     _summary(res, total)
     return 0
@@ -104,33 +114,17 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
 def _cmd_surface(args: argparse.Namespace, af: Any) -> int:
     """``--method surface``: gain surfaces, gain files, validation, report."""
-    from tqdm import tqdm
-
     from vtolftc.synthesis.robust import robust_points
     from vtolftc.synthesis.surface_run import run_surface_synthesis, work_units
 
     t0 = time.perf_counter()
     n_grid = 2 * len(robust_points(af)) - 1   # the surface grid: points and midpoints
-    bar = tqdm(total=work_units(report=not args.no_report, n_grid=n_grid),
-               desc="synth surface",
-               unit="step", file=sys.stderr, dynamic_ncols=True, disable=args.quiet)
-
-    def progress(label: str, n: int) -> None:
-        bar.set_postfix_str(label[:40])
-        bar.update(n)
-
-    def _term(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt  # SIGTERM: same clean stop as Ctrl-C
-
-    old_term = signal.signal(signal.SIGTERM, _term)
-    try:
-        run = run_surface_synthesis(
+    run = _with_progress(
+        work_units(report=not args.no_report, n_grid=n_grid), "synth surface", args.quiet,
+        lambda progress: run_surface_synthesis(
             af, args.out, degree=args.degree, n_starts=args.starts, seed=args.seed,
             max_iter=40 if args.max_iter is None else args.max_iter, jobs=args.jobs,
-            mu=not args.no_mu, report=not args.no_report, progress=progress)
-    finally:
-        signal.signal(signal.SIGTERM, old_term)
-        bar.close()
+            mu=not args.no_mu, report=not args.no_report, progress=progress))
     total = time.perf_counter() - t0
     print(f"Gain surfaces of {af.name} ({af.sha256[:12]}...), degree {args.degree}.")
     print("\n| axis | SHIF objective | GS-SHIF objective |\n|---|---:|---:|")
