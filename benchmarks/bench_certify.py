@@ -16,6 +16,12 @@ mid-transition 32/32 of the recoverable, doubles 152/164 = 92.7 %), SITL mission
 (landed at home). The < 600 s target was not met on that machine; the campaign is two thirds
 of the time (at the 57-72 scenarios/min of ``docs/campaigns/`` on idle cores it would take
 about 4-5 min).
+
+Measured again on the merged tree of the next session (issue 24's faster flights and campaign
+harness; at nice 5 beside a run of the test suite, load 2-3, ``--jobs 2``): 405 s, exit status 0
+(target met): trim 1.5 s, synthesis 58.7 s (tuning 45.0 s), certificate 7.7 s, campaign 301.9 s
+(300 scenarios, 59.6 scenarios/min; 300 survived; singles 32/32, doubles at hover and
+mid-transition 108/108), SITL mission 34.5 s (landed at home).
 """
 
 from __future__ import annotations
