@@ -140,17 +140,23 @@ def _cmd_surface(args: argparse.Namespace, af: Any) -> int:
                   f"{_num(s['max_mu_rs'])}, max mixed mu (cell) "
                   f"{_num(s['max_mixed_mu_cell'])}, failures {s['failures']} "
                   f"({s['failures_between']} between breakpoints)")
-    print("\nStage times:")
-    for k, t in run.times.items():
-        print(f"  {k:<34s} {t:7.2f} s")
-    print(f"  {'total':<34s} {total:7.2f} s")
-    print("\nFiles:")
-    for k, p in run.files.items():
-        print(f"  {k:<18s} {p}")
+    _times_and_files(run.times, total, run.files, width=18)
     if run.validation is not None and run.validation.failures_between:
         print(f"WARNING: {len(run.validation.failures_between)} grid point(s) between "
               "breakpoints fail the validation (see report/validation.md)")
     return 0
+
+
+def _times_and_files(times: dict[str, float], total: float, files: dict[str, Any],
+                     width: int) -> None:
+    """Print the per-stage wall times [s], their total and the files written."""
+    print("\nStage times:")
+    for k, t in times.items():
+        print(f"  {k:<34s} {t:7.2f} s")
+    print(f"  {'total':<34s} {total:7.2f} s")
+    print("\nFiles:")
+    for k, p in files.items():
+        print(f"  {k:<{width}s} {p}")
 
 
 def _num(x: float | None, k: float = 1.0) -> str:
@@ -174,13 +180,7 @@ def _summary(res: Any, total: float) -> None:
                   f"{n['Wt*T']:.3f} | {n['Wr*R']:.3f} | {'yes' if d.stable else 'NO'} | {mu} |")
     print("\nSHIF max gamma over points: "
           + ", ".join(f"{ax} {res.shif[ax].norms['gamma']:.3f}" for ax in AXES))
-    print("\nStage times:")
-    for k, v in res.times.items():
-        print(f"  {k:<34s} {v:7.2f} s")
-    print(f"  {'total':<34s} {total:7.2f} s")
-    print("\nFiles:")
-    for k, p in res.files.items():
-        print(f"  {k:<8s} {p}")
+    _times_and_files(res.times, total, res.files, width=8)
     unstable = [f"{ax} {d.label}" for ax in AXES for d in res.gs[ax] if not d.stable]
     if unstable:
         print("WARNING: nominally unstable closed loops: " + ", ".join(unstable))
