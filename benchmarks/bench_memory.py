@@ -7,8 +7,8 @@ Flies the SITL (:class:`vtolftc.runners.sitl.SitlRun`: vehicle and autopilot as 
 lockstep unless ``--realtime``) for ``--minutes`` of simulated time, once with the autopilot's
 rerun recorder on (as every run records ``run.rrd``) and once with it off (the autopilot's
 ``--no-rerun``), and samples the resident set size (``VmRSS`` of ``/proc/PID/status``) of the
-two processes it started every ``--every`` wall seconds, each sample paired with the simulated
-time the ground station sees. After the warm-up (``--skip-minutes`` of simulated time: take-off,
+two processes it started every ``--every`` simulated seconds (the simulated time the ground
+station sees). After the warm-up (``--skip-minutes`` of simulated time: take-off,
 transition, numba, the heap settling) it fits a straight line to each process's RSS against
 simulated time and prints the slope in KB per simulated second and its extrapolation to one
 hour. Issue 24: < 50 MB per hour for each process, from a slope measured over >= 10 min (the
@@ -54,7 +54,7 @@ def main() -> None:
     ap.add_argument("--controller", default="gs-shif")
     ap.add_argument("--transport", default="udp", choices=("udp", "zenoh"))
     ap.add_argument("--realtime", action="store_true")
-    ap.add_argument("--every", type=float, default=1.0, help="sampling period, wall s")
+    ap.add_argument("--every", type=float, default=1.0, help="sampling period, simulated s")
     args = ap.parse_args()
     duration = 60.0 * args.minutes
     if not 0 <= args.skip_minutes < args.minutes:
@@ -66,7 +66,7 @@ def main() -> None:
                              transport=args.transport, realtime=args.realtime,
                              duration_s=duration, out_dir=Path(tmp), plots=False,
                              extra_autopilot_args=[] if rec == "on" else ["--no-rerun"])
-            data, res = fly_sampled(cfg, args.every)
+            data, res = fly_sampled(cfg, every_sim_s=args.every)
             rtf = res.real_time_factor
         fit = data[data[:, 0] >= 60.0 * args.skip_minutes]
         if len(fit) < 10:

@@ -23,17 +23,35 @@ from vtolftc.runners.sitl import SitlConfig, SitlRun
 __all__ = ["fly_sampled", "slope_mb_per_h"]
 
 
-def fly_sampled(cfg: SitlConfig, every_s: float = 0.5) -> tuple[np.ndarray, Any]:
-    """Fly ``cfg`` sampling both processes' RSS about every ``every_s`` wall seconds.
+def fly_sampled(cfg: SitlConfig, every_sim_s: float = 1.0,
+                poll_wall_s: float = 0.02) -> tuple[np.ndarray, Any]:
+    """Fly ``cfg`` sampling both processes' RSS every ``every_sim_s`` of *simulated* time.
+
+    The ground station's simulated time is polled every ``poll_wall_s`` wall seconds and a
+    sample is taken once it has advanced by ``every_sim_s`` since the last one, so how many
+    samples a flight yields depends on the simulated time flown, not on how fast this
+    machine runs the lockstep (as long as one poll period is shorter than ``every_sim_s``
+    of simulated time: below 50x real time with the defaults).
+
+    Parameters
+    ----------
+    cfg : SitlConfig
+        The flight (its case's paper scenario, ``cfg.duration_s`` of simulated time).
+    every_sim_s : float
+        Sampling period [simulated s], > 0.
+    poll_wall_s : float
+        Polling period [wall s], > 0.
 
     Returns
     -------
     samples : ndarray, shape (N, 3)
         Simulated time [s], autopilot RSS [KB], vehicle RSS [KB]; simulated time strictly
-        increasing and below ``cfg.duration_s``.
+        increasing, consecutive samples >= ``every_sim_s`` apart, below ``cfg.duration_s``.
     result : ScenarioResult
         The flight's result (``sim_time_s``, ``real_time_factor``, metrics).
     """
+    if not (every_sim_s > 0 and poll_wall_s > 0):
+        raise ValueError(f"every_sim_s {every_sim_s} and poll_wall_s {poll_wall_s} must be > 0")
     samples: list[tuple[float, float, float]] = []
     out: dict[str, Any] = {}
     with SitlRun(cfg) as run:
@@ -53,11 +71,12 @@ def fly_sampled(cfg: SitlConfig, every_s: float = 0.5) -> tuple[np.ndarray, Any]
         assert run.gs is not None
         while th.is_alive():
             t_sim = run.gs.snapshot().sim_time_s
-            ap, veh = rss_bytes(pids["autopilot"]), rss_bytes(pids["vehicle"])
-            if (ap is not None and veh is not None and t_sim < cfg.duration_s
-                    and (not samples or t_sim > samples[-1][0])):
-                samples.append((t_sim, ap / 1024.0, veh / 1024.0))
-            th.join(timeout=every_s)
+            if t_sim < cfg.duration_s and (not samples
+                                           or t_sim >= samples[-1][0] + every_sim_s):
+                ap, veh = rss_bytes(pids["autopilot"]), rss_bytes(pids["vehicle"])
+                if ap is not None and veh is not None:
+                    samples.append((t_sim, ap / 1024.0, veh / 1024.0))
+            th.join(timeout=poll_wall_s)
     if "exc" in out:
         raise out["exc"]
     return np.array(samples), out["res"]
