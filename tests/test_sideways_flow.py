@@ -164,7 +164,7 @@ def test_ds1_crosswind_hover_trim_holds_on_the_nonlinear_model(ds1):
 
 def test_ds1_crosswind_hover_has_no_wing_lift(ds1, hover_trim):
     """DS-1 level in hover in a 4 m/s crosswind: the air runs along the span, the wing makes
-    no vertical force (old: CL0 at the sideways dynamic pressure, 5.6 N up)."""
+    no vertical force (old: CL0 at the sideways dynamic pressure, 5.5 N up)."""
     x = hover_trim.state.copy()
     v = Vehicle(ds1, state=x, wind_ned_m_s=(0.0, 4.0, 0.0), physics=dyn.AERODYNAMICS)
     _, fm = v.derivatives(x, hover_trim.commands)
