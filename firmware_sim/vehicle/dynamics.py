@@ -19,6 +19,23 @@ axial inflow, and its reaction torque; wing/tail aerodynamics (lift with a round
 blended into flat-plate post-stall, parabolic drag, side force, the airspeed-dependent
 derivatives C_lp, C_mq, C_malpha, C_nr, C_nbeta interpolated from tables, control-surface
 moments scaling with dynamic pressure); landing-gear spring-dampers against flat ground.
+
+Sideways flow. The wing and the horizontal tail see only the air velocity in the body x-z
+(chordwise) plane, the component normal to the span, as Gazebo's LiftDrag plugin (PX4 SITL)
+does with its ``velInLDPlane``: their terms use ``qbar_xz = 0.5 rho (u^2 + w^2)`` and the rate
+factor ``0.25 rho V_xz S`` with ``V_xz = sqrt(u^2 + w^2)`` (u, w: body FRD air velocity, m/s),
+with ``alpha = atan2(w, u)`` as before. These are lift and drag (CL(alpha), CL_de, CL_q, CD),
+the pitching moment (Cm0, C_malpha, Cm_de, C_mq), the aileron terms (CY_da, Cl_da, Cn_da: the
+ailerons are part of the wing) and the rate terms that come from the wing's lift across the
+span (C_lp, Cl_r, Cn_p). Flow along the span (v alone) then makes no wing lift, drag or pitch
+moment, and a deflected aileron no force; without this a hover in a crosswind had
+``alpha = atan2(0, 0) = 0`` (CL0 at the full sideways dynamic pressure) at level attitude and
++-90 deg (flat plate) at any roll. The fuselage and fin terms keep the full dynamic pressure
+``0.5 rho Va^2`` and ``0.25 rho Va S`` (Va the whole air speed), because sideways flow is what
+drives them: side force CY_beta, dihedral Cl_beta and weathercock C_nbeta (with beta =
+asin(v / Va)), the rudder (CY_dr, Cl_dr, Cn_dr; its chordwise plane x-y contains the sideways
+flow) and the fin's rate terms (CY_p, CY_r, C_nr). The airspeed tables are read at Va. With
+v = 0 every term is what it was.
 Actuators: first-order lag with rate and position limits. Faults enter through ``eff``
 (effectiveness multiplier per actuator, applied to the physical output) and ``stuck`` (the
 actuator position freezes). Integration: classical RK4 at a fixed step, the quaternion
@@ -313,8 +330,13 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
         S = P[P_S]
         b = P[P_B]
         c = P[P_C]
+        # Whole flow (fuselage, fin, rudder) and chordwise x-z flow (wing, tailplane, ailerons):
+        # see the module docstring, "Sideways flow".
         qbar = 0.5 * rho * Va * Va
         k_rate = 0.25 * rho * Va * S  # multiplies C_xp * (b or c)^2 * rate
+        v_xz2 = ub * ub + wb * wb
+        qbar_xz = 0.5 * rho * v_xz2
+        k_xz = 0.25 * rho * math.sqrt(v_xz2) * S
         defl = P[P_DEFL]
         s0 = nr
         d_al = eff[s0] * x[N_RIGID + s0] * defl
@@ -334,9 +356,9 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
             d_r = d_rl
 
         cl, cd = lift_drag_coefficients(alpha, P)
-        lift = qbar * S * (cl + P[P_CLDE] * d_e) + k_rate * c * c * P[P_CLQ] * q
-        drag = qbar * S * cd
-        side = (qbar * S * (P[P_CYB] * beta + P[P_CYDA] * d_a + P[P_CYDR] * d_r)
+        lift = qbar_xz * S * (cl + P[P_CLDE] * d_e) + k_xz * c * c * P[P_CLQ] * q
+        drag = qbar_xz * S * cd
+        side = (qbar * S * (P[P_CYB] * beta + P[P_CYDR] * d_r) + qbar_xz * S * P[P_CYDA] * d_a
                 + k_rate * b * (P[P_CYP] * p + P[P_CYR] * r))
         sa = math.sin(alpha)
         ca = math.cos(alpha)
@@ -361,12 +383,12 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
         cma = table_interp(Va, tab_v, tab[T_CMA])
         cnr = table_interp(Va, tab_v, tab[T_CNR])
         cnb = table_interp(Va, tab_v, tab[T_CNB])
-        Mx += (qbar * S * b * (P[P_CLB] * bm + P[P_CLDA] * d_a + P[P_CLDR] * d_r)
-               + k_rate * b * b * (clp * p + P[P_CLR] * r))
-        My += (qbar * S * c * (P[P_CM0] + cma * am + P[P_CMDE] * d_e)
-               + k_rate * c * c * cmq * q)
-        Mz += (qbar * S * b * (cnb * bm + P[P_CNDA] * d_a + P[P_CNDR] * d_r)
-               + k_rate * b * b * (P[P_CNP] * p + cnr * r))
+        Mx += (qbar * S * b * (P[P_CLB] * bm + P[P_CLDR] * d_r) + qbar_xz * S * b * P[P_CLDA] * d_a
+               + k_xz * b * b * (clp * p + P[P_CLR] * r))
+        My += (qbar_xz * S * c * (P[P_CM0] + cma * am + P[P_CMDE] * d_e)
+               + k_xz * c * c * cmq * q)
+        Mz += (qbar * S * b * (cnb * bm + P[P_CNDR] * d_r) + qbar_xz * S * b * P[P_CNDA] * d_a
+               + k_xz * b * b * P[P_CNP] * p + k_rate * b * b * cnr * r)
 
     # Landing gear against flat ground at NED z = 0.
     if flags & GROUND:
