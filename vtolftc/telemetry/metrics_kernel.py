@@ -166,6 +166,10 @@ def metrics_step_py(s: NDArray[np.float64], tail: NDArray[np.float64], time_usec
     return 1
 
 
-metrics_step = numba.njit(cache=True)(metrics_step_py)
+#: the one signature, compiled (or loaded from numba's cache) at import: a SITL autopilot
+#: never compiles it in flight, whatever array layout its samples carry
+_SIGNATURE = "int64(float64[:], float64[:, :], int64, float64[:], float64, float64, float64, " \
+    "int64, boolean, float64[:], float64, float64)"
+metrics_step = numba.njit(_SIGNATURE, cache=True)(metrics_step_py)
 """:func:`metrics_step_py` compiled by numba (``fastmath`` off: the same operations in the
 same order, hence the same bits; Python's float ``%`` and numba's agree, sign included)."""
