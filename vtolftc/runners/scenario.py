@@ -227,11 +227,6 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
     act_usec = [a.t_usec for a in actions]
     next_usec = act_usec[0] if act_usec else None
     n_steps = round(scenario.duration_s * control_hz)
-    # wire_commands(u) into two buffers reused every step: the same float64 -> float32 ->
-    # float64 casts (numpy's, round to nearest even), no array allocated per step; the
-    # vehicle copies the commands into its own state, so reusing ``cmds`` is safe
-    wire32 = np.empty(af.n_actuators, dtype=np.float32)
-    cmds = np.empty(af.n_actuators)
     t_phys = t_enc = t_ap = t_obs = 0.0
     pc = time.perf_counter
     wall0 = pc()
@@ -271,11 +266,7 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                 n_events += 1
                 warn = "quad-chute" in text or "denied" in text or "forced" in text
                 event(te, "warning" if warn else "mode", text)
-            if u.shape == wire32.shape:
-                np.copyto(wire32, u, casting="same_kind")
-                np.copyto(cmds, wire32)
-            else:  # not one command per actuator: wire_commands says what is wrong
-                cmds = wire_commands(u)
+            cmds = wire_commands(u)
             if obs:
                 st = ap.status()
                 truth = VehicleTruth(x[0:3].copy(), x[3:6].copy(), x[6:10].copy(),
