@@ -22,6 +22,13 @@ separate processes, ground-station commands, no plots) and reports:
 
 and, for reference, the in-process run of the same scenario (same autopilot, no links).
 Target of the issue: >= 20x real time over either transport.
+
+In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
+control step): measured at 57-61x on an idle machine (about 66 us per step: autopilot ~25 us,
+physics ~13 us, HIL codec, metrics and the runner the rest; thread CPU time ~62-85 us per
+step on 2026-12-02 at load 18-26). Where the time goes, what was compiled and why the target
+is out of reach without compiling the whole autopilot step: ``benchmarks/bench_inproc.py``
+(its docstring and ``--profile``).
 """
 
 from __future__ import annotations

@@ -29,7 +29,6 @@ and over the whole run:
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -38,6 +37,7 @@ from numpy.typing import NDArray
 
 from vtolftc.base.rotation import quat_to_euler
 from vtolftc.protocols.hil import NavState
+from vtolftc.telemetry import metrics_kernel as mk
 from vtolftc.telemetry.autopilot_status import FlightMode
 from vtolftc.telemetry.samples import TelemetrySample
 
@@ -45,16 +45,9 @@ __all__ = ["CRASH_ATTITUDE_DEG", "MetricsAccumulator", "compute_metrics", "is_cr
 
 CRASH_ATTITUDE_DEG = 60.0
 _CRASH_ATTITUDE_RAD = math.radians(CRASH_ATTITUDE_DEG)
-_M_FIXED_WING = FlightMode.FIXED_WING
-_M_FRONT_TRANSITION = FlightMode.FRONT_TRANSITION
-_M_HOVER = FlightMode.HOVER
 _RAD_TO_DEG = math.degrees(1.0)  # what math.degrees multiplies by (CPython)
-_FLYING = {FlightMode.HOVER, FlightMode.FRONT_TRANSITION, FlightMode.FIXED_WING,
-           FlightMode.BACK_TRANSITION}
-
-
-def _wrap_deg(x: float) -> float:
-    return -((-x + 180.0) % 360.0 - 180.0)
+_F64 = np.dtype(np.float64)
+_TAIL_CAPACITY = 512  # the tail ring's first size: one second at up to 511 samples/s
 
 
 def is_crash(altitude_above_ground_m: float, roll_rad: float, pitch_rad: float,
@@ -75,29 +68,61 @@ def _is_crash(h: float, roll: float, pitch: float, flying: bool, was_high: bool)
 class MetricsAccumulator:
     """Streaming metrics: ``add(sample)`` per control step, ``result()`` at any time.
 
-    ``add`` is O(1) and allocation-light (a few microseconds): it runs every control step of
-    every run, in-process and in SITL.
+    ``add`` is O(1) and allocation-free: the per-sample arithmetic is one compiled call
+    (:func:`~vtolftc.telemetry.metrics_kernel.metrics_step`, bit-identical to its Python
+    reference) on a flat float64 state and a ring buffer of the last second's attitudes (grown
+    by doubling when a higher sample rate needs it). It runs every control step of every run,
+    in-process and in SITL.
     """
 
     def __init__(self, window_start_s: float = 20.0) -> None:
         self.window_start_s = float(window_start_s)
-        self.n = 0
-        self.n_win = 0
-        self._se = [0.0, 0.0, 0.0, 0.0]          # altitude, roll, pitch, yaw squared errors
-        self._max = [0.0, 0.0, 0.0]
-        self._max_tilt = 0.0
-        self._max_lost = 0.0
-        self.transition_start_s: float | None = None
-        self.transition_complete_s: float | None = None
-        self.quad_chute = False
-        self.crashed = False
-        self.crash_time_s: float | None = None
-        self._ground: float | None = None
-        self._was_high = False
-        self._prev_mode: FlightMode | None = None
-        self._last: tuple[float, float, float] | None = None  # altitude, its error, airspeed
-        self._tail: deque[tuple[float, float, float, float]] = deque()
-        self.t_last = 0.0
+        self._s = mk.new_state(self.window_start_s)
+        self._tail = np.zeros((_TAIL_CAPACITY, 4))
+
+    # the running values under the names the accumulator has always offered
+    @property
+    def n(self) -> int:
+        """Samples added."""
+        return int(self._s[mk.S_N])
+
+    @property
+    def n_win(self) -> int:
+        """Samples added in the window."""
+        return int(self._s[mk.S_N_WIN])
+
+    @property
+    def crashed(self) -> bool:
+        """A sample met the crash criterion."""
+        return bool(self._s[mk.S_CRASHED] != 0.0)
+
+    @property
+    def crash_time_s(self) -> float | None:
+        """Time of the first crashed sample [s], or None."""
+        return self._opt(mk.S_CRASHED, mk.S_CRASH_T)
+
+    @property
+    def transition_start_s(self) -> float | None:
+        """Time of the first FRONT_TRANSITION sample [s], or None."""
+        return self._opt(mk.S_HAS_TS, mk.S_TS)
+
+    @property
+    def transition_complete_s(self) -> float | None:
+        """Time of the first FIXED_WING sample [s], or None."""
+        return self._opt(mk.S_HAS_TC, mk.S_TC)
+
+    @property
+    def quad_chute(self) -> bool:
+        """A front transition ended back in HOVER."""
+        return bool(self._s[mk.S_QUAD_CHUTE] != 0.0)
+
+    @property
+    def t_last(self) -> float:
+        """Time of the last sample [s] (0 before the first)."""
+        return float(self._s[mk.S_T_LAST])
+
+    def _opt(self, flag: int, value: int) -> float | None:
+        return float(self._s[value]) if self._s[flag] != 0.0 else None
 
     def add(self, s: TelemetrySample) -> None:
         """Add one control step: errors, peaks, transition and crash detection."""
@@ -124,92 +149,67 @@ class MetricsAccumulator:
         euler_rad : tuple, optional
             ``quat_to_euler(nav.q_wxyz)`` when the caller has it already [rad].
         """
-        t = time_usec * 1e-6
-        self.t_last = t
         roll, pitch, yaw = quat_to_euler(nav.q_wxyz) if euler_rad is None else euler_rad
         pos = nav.pos_ned_m
-        h = -(pos.tolist()[2] if type(pos) is np.ndarray and pos.shape == (3,)
-              else float(pos[2]))
+        if type(pos) is not np.ndarray or pos.dtype != _F64 or pos.shape != (3,):
+            pos = np.array((float(pos[0]), float(pos[1]), float(pos[2])))
+        ref = attitude_ref_rad
+        if type(ref) is not np.ndarray or ref.dtype != _F64 or ref.shape != (3,):
+            ref = np.array((float(ref[0]), float(ref[1]), float(ref[2])))
         if type(mode) is not FlightMode:
             mode = FlightMode(mode)
-        if self._ground is None and armed:
-            self._ground = h
-        ground = self._ground if self._ground is not None else h
-        if h - ground > 2.0:
-            self._was_high = True
-        if not self.crashed and _is_crash(h - ground, roll, pitch, mode in _FLYING,
-                                          self._was_high):
-            self.crashed = True
-            self.crash_time_s = t
-        if mode is _M_FRONT_TRANSITION:
-            if self.transition_start_s is None:
-                self.transition_start_s = t
-        elif mode is _M_FIXED_WING:
-            if self.transition_complete_s is None:
-                self.transition_complete_s = t
-        elif mode is _M_HOVER and self._prev_mode is _M_FRONT_TRANSITION:
-            self.quad_chute = True
-        self._prev_mode = mode
-        self.n += 1
-        ref = attitude_ref_rad
-        r0, r1, r2 = ref.tolist() if type(ref) is np.ndarray and ref.shape == (3,) else (
-            float(ref[0]), float(ref[1]), float(ref[2]))
-        e_h = float(altitude_ref_m) - h
-        if t >= self.window_start_s:
-            e0 = (r0 - roll) * _RAD_TO_DEG
-            e1 = (r1 - pitch) * _RAD_TO_DEG
-            e2 = _wrap_deg((r2 - yaw) * _RAD_TO_DEG)
-            self.n_win += 1
-            se, mx = self._se, self._max
-            se[0] += e_h * e_h
-            se[1] += e0 * e0
-            se[2] += e1 * e1
-            se[3] += e2 * e2
-            a = abs(e0)
-            if a > mx[0]:
-                mx[0] = a
-            a = abs(e1)
-            if a > mx[1]:
-                mx[1] = a
-            a = abs(e2)
-            if a > mx[2]:
-                mx[2] = a
-            a = abs(roll) if abs(roll) > abs(pitch) else abs(pitch)
-            if a > self._max_tilt:
-                self._max_tilt = a
-            if e_h > self._max_lost:
-                self._max_lost = e_h
-        self._last = (h, e_h, float(nav.airspeed_m_s))
-        tail = self._tail
-        tail.append((t, roll * _RAD_TO_DEG, pitch * _RAD_TO_DEG, yaw * _RAD_TO_DEG))
-        while t - tail[0][0] > 1.0 + 1e-9:
-            tail.popleft()
+        while not mk.metrics_step(self._s, self._tail, time_usec, pos, roll, pitch, yaw,
+                                  int(mode), bool(armed), ref, float(altitude_ref_m),
+                                  float(nav.airspeed_m_s)):
+            self._grow_tail()
+
+    def _grow_tail(self) -> None:
+        """Double the tail ring, its samples moved to the start in order."""
+        s = self._s
+        head, n = int(s[mk.S_HEAD]), int(s[mk.S_LEN])
+        cap = self._tail.shape[0]
+        new = np.zeros((2 * cap, 4))
+        new[:n] = self._tail[(head + np.arange(n)) % cap]
+        self._tail = new
+        s[mk.S_HEAD] = 0.0
+
+    def _tail_rows(self) -> list[tuple[float, float, float, float]]:
+        """The tail's samples, oldest first, as Python floats."""
+        s = self._s
+        head, n = int(s[mk.S_HEAD]), int(s[mk.S_LEN])
+        cap = self._tail.shape[0]
+        rows = self._tail[(head + np.arange(n)) % cap].tolist()
+        return [(r[0], r[1], r[2], r[3]) for r in rows]
 
     def result(self) -> dict[str, Any]:
         """Metrics so far: RMSE and peak errors, transition timing, crash and quad-chute flags."""
-        n = max(self.n_win, 1)
-        rm = [math.sqrt(x / n) if self.n_win else math.nan for x in self._se]
-        tail = list(self._tail) or [(0.0, math.nan, math.nan, math.nan)]
-        dur = (self.transition_complete_s - self.transition_start_s
-               if self.transition_complete_s is not None and self.transition_start_s is not None
-               else None)
-        last = self._last if self._last is not None else (math.nan, math.nan, math.nan)
+        s = self._s
+        n_win = self.n_win
+        n = max(n_win, 1)
+        rm = [math.sqrt(x / n) if n_win else math.nan
+              for x in s[mk.S_SE:mk.S_SE + 4].tolist()]
+        tail = self._tail_rows() or [(0.0, math.nan, math.nan, math.nan)]
+        ts, tc = self.transition_start_s, self.transition_complete_s
+        dur = tc - ts if tc is not None and ts is not None else None
+        last = ((float(s[mk.S_LAST_H]), float(s[mk.S_LAST_EH]), float(s[mk.S_LAST_AIR]))
+                if s[mk.S_HAS_LAST] != 0.0 else (math.nan, math.nan, math.nan))
+        mx = s[mk.S_MAX:mk.S_MAX + 3].tolist()
         return {
             "window_start_s": self.window_start_s,
             "samples": self.n,
-            "samples_in_window": self.n_win,
+            "samples_in_window": n_win,
             "duration_s": self.t_last,
             "rmse_altitude_m": rm[0],
             "rmse_roll_deg": rm[1],
             "rmse_pitch_deg": rm[2],
             "rmse_yaw_deg": rm[3],
-            "max_abs_roll_error_deg": self._max[0],
-            "max_abs_pitch_error_deg": self._max[1],
-            "max_abs_yaw_error_deg": self._max[2],
-            "max_attitude_excursion_deg": self._max_tilt * _RAD_TO_DEG,
-            "max_altitude_lost_m": self._max_lost,
-            "transition_start_s": self.transition_start_s,
-            "transition_complete_s": self.transition_complete_s,
+            "max_abs_roll_error_deg": mx[0],
+            "max_abs_pitch_error_deg": mx[1],
+            "max_abs_yaw_error_deg": mx[2],
+            "max_attitude_excursion_deg": float(s[mk.S_MAX_TILT]) * _RAD_TO_DEG,
+            "max_altitude_lost_m": float(s[mk.S_MAX_LOST]),
+            "transition_start_s": ts,
+            "transition_complete_s": tc,
             "transition_duration_s": dur,
             "quad_chute": self.quad_chute,
             "final_altitude_m": last[0],
