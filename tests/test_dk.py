@@ -137,3 +137,51 @@ def test_dk_rejects_unstable_start_and_bad_settings() -> None:
         fit_scaling([1.0, 2.0], [1.0, 1.0], order=3)
     with pytest.raises(ValueError, match="> 0"):
         RationalScaling(1.0, (-1.0,), (1.0,))
+
+
+def test_synth_dk_rejects_bad_input(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    from vtolftc.cli.main import run
+
+    for argv, word in ((["--dk", "0"], "--dk 0"), (["--dk", "21"], "--dk 21"),
+                       (["--method", "paper", "--dk", "2"], "--method robust only"),
+                       (["--method", "surface", "--dk", "2"], "--method robust only")):
+        assert run(["synth", *argv, "--out", str(tmp_path)]) == 2
+        err = capsys.readouterr().err
+        assert word in err
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+@pytest.mark.slow
+def test_dk_on_ds1_axis_point_keeps_requirements(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """One D-K iteration at DS-1 roll point 3 from the shipped robust gains: mu_RP falls,
+    the delay margin stays >= 50 ms and the rotor-out channel is no worse; the gains file
+    written holds the new gains at that point only."""
+    import json
+    from pathlib import Path
+
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.synthesis.dk_robust import DKSettings, dk_schedule
+    from vtolftc.synthesis.dk_run import write_dk_outputs
+    from vtolftc.synthesis.loops import PARAM_NAMES
+    from vtolftc.synthesis.robust import robust_points
+
+    af = load_airframe()
+    shipped = Path(__file__).resolve().parents[1] / "firmware_sim/autopilot/gains"
+    doc = json.loads((shipped / "gs-shif.json").read_text())
+    pts = robust_points(af)
+    gains = {ax: [{k: doc["axes"][ax][k][i] for k in PARAM_NAMES} for i in range(len(pts))]
+             for ax in ("roll", "pitch", "yaw")}
+    st = DKSettings(max_iter=1)
+    (r,) = dk_schedule(af, pts, gains, only=lambda ax, p: (ax, p.number) == ("roll", 3),
+                       settings=st)
+    assert r.after["mu_rp"] < 0.95 * r.before["mu_rp"]
+    assert r.after["delay_margin_s"] >= 0.050
+    assert r.after["Wd*Sd"] <= r.before["Wd*Sd"] * (1 + 1e-6)
+    files = write_dk_outputs(af, pts, gains, [r], st, tmp_path, shipped)
+    out = json.loads(files["gs-shif"].read_text())
+    assert out["axes"]["roll"]["kp_angle"][2] == pytest.approx(r.gains_after["kp_angle"],
+                                                               rel=1e-5)
+    assert out["axes"]["roll"]["kp_angle"][2] != doc["axes"]["roll"]["kp_angle"][2]
+    for ax in ("pitch", "yaw"):
+        assert out["axes"][ax]["kp_rate"] == doc["axes"][ax]["kp_rate"]
+    assert (tmp_path / "shif.json").is_file() and (tmp_path / "DK.md").is_file()
