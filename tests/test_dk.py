@@ -185,3 +185,36 @@ def test_dk_on_ds1_axis_point_keeps_requirements(tmp_path) -> None:  # type: ign
     for ax in ("pitch", "yaw"):
         assert out["axes"][ax]["kp_rate"] == doc["axes"][ax]["kp_rate"]
     assert (tmp_path / "shif.json").is_file() and (tmp_path / "DK.md").is_file()
+
+
+@pytest.mark.slow
+def test_synth_dk_writes_the_dk_folder(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    """The ``--dk`` stage of ``vtolftc synth`` on a one-point robust result (point 5, the
+    shipped gains): DIR/dk holds the gains, dk.json and DK.md, and the table is printed."""
+    import argparse
+    import json
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.cli.cmd_synth import _cmd_dk
+    from vtolftc.synthesis.loops import PARAM_NAMES
+    from vtolftc.synthesis.robust import robust_points
+
+    af = load_airframe()
+    shipped = Path(__file__).resolve().parents[1] / "firmware_sim/autopilot/gains"
+    doc = json.loads((shipped / "gs-shif.json").read_text())
+    pt = robust_points(af)[4]
+    gs = {ax: [SimpleNamespace(gains={k: doc["axes"][ax][k][4] for k in PARAM_NAMES})]
+          for ax in ("roll", "pitch", "yaw")}
+    res = SimpleNamespace(points=(pt,), gs=gs)
+    args = argparse.Namespace(dk=1, out=tmp_path, jobs=1, quiet=True)
+    assert _cmd_dk(args, af, res) == 0
+    out = capsys.readouterr().out
+    assert "| pitch | 5 | 10 |" in out
+    d = json.loads((tmp_path / "dk" / "dk.json").read_text())
+    assert [(p["axis"], p["point"]) for p in d["points"]] == [("roll", 5), ("pitch", 5),
+                                                              ("yaw", 5)]
+    g = json.loads((tmp_path / "dk" / "gs-shif.json").read_text())
+    assert g["airspeed_breakpoints_m_s"] == [10.0]
+    assert (tmp_path / "dk" / "DK.md").is_file()
