@@ -124,6 +124,8 @@ def main(argv: list[str] | None = None) -> int:
              "points": [r.to_dict() for r in res],
              "case1": {k: {m: v for m, v in f.items() if isinstance(v, (int, float, bool))}
                        for k, f in flights.items()}}, indent=1) + "\n")
+        _stamp(f"{name}.json", "python benchmarks/bench_dk.py --jobs 2 --doc"
+               + (" --pure" if a.pure else " --gains-out /tmp/dk-gains --fly"))
         print(f"wrote {DOC_DIR / name}.json")
     return 0
 
@@ -253,7 +255,23 @@ def render() -> None:
                  f"{s_['scaled_norm_before']:.3f} / {s_['scaled_norm_after']:.3f} | "
                  f"{r['stop']} |")
     (DOC_DIR / "DK.md").write_text("\n".join(L) + "\n")
+    _stamp("DK.md", "python benchmarks/bench_dk.py --render (from DK.json and DK-pure.json)")
     print(f"wrote {DOC_DIR / 'DK.md'}")
+
+
+def _stamp(name: str, command: str) -> None:
+    """Record ``name``'s stamp in the folder's PROVENANCE.json (tests/test_docs_provenance.py):
+    inputs the shipped gains and the airframe file."""
+    from vtolftc.base.provenance import make_file_stamp
+
+    side = DOC_DIR / "PROVENANCE.json"
+    prov = json.loads(side.read_text())
+    ins = [ROOT / "airframe" / "ds1.toml"] + [SHIPPED / f for f in
+                                              ("gs-shif.json", "lqr.json", "shif.json")]
+    prov["files"][name] = make_file_stamp(DOC_DIR / name, command=command, inputs=ins,
+                                          root=ROOT)
+    prov["files"] = dict(sorted(prov["files"].items()))
+    side.write_text(json.dumps(prov, indent=1) + "\n")
 
 
 HEAD = """# D-K iteration on the robust point design (DS-1)
