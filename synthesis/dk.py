@@ -574,7 +574,14 @@ class DKStep:
     message: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        """The step as a JSON-ready dict (gains as a list)."""
+        """The step as a JSON-ready dict.
+
+        Returns
+        -------
+        dict of str to object
+            The fields by name, gains as a list, the scaling as
+            :meth:`RationalScaling.to_dict`.
+        """
         return {"index": self.index, "theta": [float(x) for x in self.theta],
                 "mu_peak": self.mu_peak, "mu_peak_rad_s": self.mu_peak_rad_s,
                 "scaling": None if self.scaling is None else self.scaling.to_dict(),

@@ -75,7 +75,13 @@ class DKSettings:
     keep_requirements: bool = True
 
     def to_dict(self) -> dict[str, Any]:
-        """The settings as a JSON-ready dict."""
+        """The settings as a JSON-ready dict.
+
+        Returns
+        -------
+        dict of str to object
+            The fields by name.
+        """
         return dict(self.__dict__)
 
 
@@ -115,7 +121,13 @@ class DKPoint:
     dk: DKResult
 
     def to_dict(self) -> dict[str, Any]:
-        """Everything as a JSON-ready dict."""
+        """Everything as a JSON-ready dict.
+
+        Returns
+        -------
+        dict of str to object
+            Axis, point, airspeed [m/s], before/after measures, gains and the iterations.
+        """
         return {"axis": self.axis, "point": self.point, "airspeed_m_s": self.airspeed_m_s,
                 "before": self.before, "after": self.after,
                 "gains_before": self.gains_before, "gains_after": self.gains_after,
@@ -262,7 +274,18 @@ def dk_gains(gains: Mapping[str, Sequence[Mapping[str, float]]], points: Sequenc
 
 
 def fmt_ms(x: float) -> str:
-    """A delay [s] in whole milliseconds (``inf`` without a crossover)."""
+    """A delay in whole milliseconds.
+
+    Parameters
+    ----------
+    x : float
+        Delay [s] (inf: no crossover).
+
+    Returns
+    -------
+    str
+        ``"69"`` for 0.069 s, ``"inf"`` for inf.
+    """
     return "inf" if not math.isfinite(x) else f"{1e3 * x:.0f}"
 
 
