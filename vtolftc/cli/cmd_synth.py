@@ -10,6 +10,14 @@ the degree-0 member) over a dense airspeed grid with the robust design's objecti
 certificate over the continuous airspeed range; ``DIR/validation.json``,
 ``DIR/report/validation.md``).
 
+``--dk N`` (robust method only) then runs a D-K iteration with the fixed P-PID structure at
+every GS-SHIF axis-point (``synthesis/dk.py``, ``synthesis/dk_robust.py``: fit a rational
+D(s) to the mu scalings of the robust-performance interconnection, paper eq. 14, re-tune the
+gains on ||D N D^-1||_inf keeping the 50 ms delay-margin and rotor-out channels no worse, at
+most N times, stop when mu_RP falls by less than 1 %) and writes the D-K gains with
+``dk.json`` and ``DK.md`` (table 3 before/after) to ``DIR/dk/`` (``vtolftc fly --gains
+DIR/dk``); ``DIR`` keeps the robust design.
+
 Writes ``DIR/gs-shif.json``, ``DIR/shif.json`` (format ``vtolftc-gain-schedule/1``),
 ``DIR/lqr.json`` (``vtolftc-lqr-gains/1``) and ``DIR/report/`` (markdown tables and PNG
 plots). A progress bar goes to stderr; the per-stage wall times and a summary are printed at
@@ -39,6 +47,12 @@ def _check(args: argparse.Namespace) -> None:
         raise UsageError("--degree and --max-iter apply to --method surface only")
     if args.degree is None:
         args.degree = 2
+    if args.dk is not None:
+        if args.method != "robust":
+            raise UsageError("--dk applies to --method robust only (the D-K iteration starts "
+                             "from the robust point design)")
+        if not 1 <= args.dk <= 20:
+            raise UsageError(f"--dk {args.dk}: expected 1..20 D-K iterations per axis-point")
     if not 0 <= args.degree <= 8:
         raise UsageError(f"--degree {args.degree}: expected 0..8 (the polynomial degree of "
                          "the gain surfaces)")
@@ -109,6 +123,29 @@ def cmd_synth(args: argparse.Namespace) -> int:
                                        method=args.method))
     total = time.perf_counter() - t0
     _summary(res, total)
+    if args.dk is not None:
+        return _cmd_dk(args, af, res)
+    return 0
+
+
+def _cmd_dk(args: argparse.Namespace, af: Any, res: Any) -> int:
+    """``--dk N``: D-K at every GS-SHIF axis-point of the robust run ``res``."""
+    from vtolftc.synthesis.dk_robust import DKSettings, dk_table
+    from vtolftc.synthesis.dk_run import run_dk
+    from vtolftc.synthesis.models import AXES
+
+    t0 = time.perf_counter()
+    gains = {ax: [d.gains for d in res.gs[ax]] for ax in AXES}
+    results, files = _with_progress(
+        3 * len(res.points), "synth D-K", args.quiet,
+        lambda progress: run_dk(af, res.points, gains, Path(args.out) / "dk", args.out,
+                                settings=DKSettings(max_iter=args.dk), jobs=args.jobs,
+                                progress=lambda s: progress(s, 1)))
+    print(f"\nD-K iteration (at most {args.dk} per axis-point), "
+          f"{time.perf_counter() - t0:.1f} s:\n")
+    print(dk_table(results))
+    for k, p in files.items():
+        print(f"  {k:<8s} {p}")
     return 0
 
 
@@ -215,6 +252,10 @@ def register(sub: Any) -> None:
                         "2 for robust, 4 for paper)")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random starts (default 0)")
+    p.add_argument("--dk", type=int, default=None, metavar="N",
+                   help="--method robust: then a D-K iteration (at most N, 1..20) at every "
+                        "GS-SHIF axis-point on the robust-performance interconnection "
+                        "(eq. 14), D-K gains and table 3 before/after in DIR/dk/")
     p.add_argument("--no-mu", action="store_true",
                    help="skip the mu analysis (surface: validation without mu)")
     p.add_argument("--no-report", action="store_true", help="skip the report folder")
