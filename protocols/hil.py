@@ -25,6 +25,7 @@ import math
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np
@@ -37,6 +38,7 @@ __all__ = [
     "HIL_OUTPUTS",
     "HilRoundTrip",
     "HilState",
+    "HilStateDecoder",
     "NavState",
     "decode_hil_state",
     "encode_hil_state",
@@ -142,6 +144,58 @@ def decode_hil_state(h: HilState, home_lat_deg: float, home_lon_deg: float,
         vel_ned_m_s=np.array((h.vx * 0.01, h.vy * 0.01, h.vz * 0.01)),
         airspeed_m_s=h.ind_airspeed * 0.01,
     )
+
+
+class HilStateDecoder:
+    """:func:`decode_hil_state` of a received HIL_STATE_QUATERNION message, bit for bit,
+    without the intermediate :class:`HilState` and the per-call projection.
+
+    The SITL autopilot decodes one message per control step; this reads the message's fields
+    directly, keeps the projection about home, and returns a :class:`NavState` whose four
+    arrays are float64 views of one 13-entry array, the very layout the in-process runner's
+    :class:`HilRoundTrip` hands the autopilot (so both feed its compiled kernels the same
+    argument types). ``tests/test_interface.py`` checks it against :func:`decode_hil_state`.
+
+    Parameters
+    ----------
+    home_lat_deg, home_lon_deg, home_alt_m : float
+        Home (the projection's origin): latitude and longitude [deg], altitude AMSL [m].
+    """
+
+    __slots__ = ("_alt0", "_cos", "_lat0", "_lon0")
+
+    def __init__(self, home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> None:
+        self._lat0 = home_lat_deg
+        self._lon0 = home_lon_deg
+        self._alt0 = home_alt_m
+        # FlatEarth.to_local's east: radians(.) * EARTH_RADIUS_M * cos_lat0, left to right
+        self._cos = FlatEarth(home_lat_deg, home_lon_deg).cos_lat0
+
+    def __call__(self, msg: Any) -> NavState:
+        """The :class:`NavState` of ``msg`` (a HIL_STATE_QUATERNION message or anything with
+        its fields: ``time_usec``, ``attitude_quaternion`` (w, x, y, z), ``rollspeed``,
+        ``pitchspeed``, ``yawspeed`` [rad/s], ``lat``, ``lon`` [degE7], ``alt`` [mm],
+        ``vx``, ``vy``, ``vz`` [cm/s], ``ind_airspeed`` [cm/s]).
+
+        Raises
+        ------
+        ValueError
+            The attitude is not a rotation quaternion (zero or not finite).
+        """
+        qw, qx, qy, qz = (float(x) for x in msg.attitude_quaternion)
+        n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        if not (n > 0.0 and math.isfinite(n)):
+            raise ValueError(f"HIL_STATE_QUATERNION attitude {(qw, qx, qy, qz)}: "
+                             "not a rotation quaternion")
+        a = np.array((
+            qw / n, qx / n, qy / n, qz / n,
+            float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed),
+            math.radians(int(msg.lat) * 1e-7 - self._lat0) * EARTH_RADIUS_M,
+            math.radians(int(msg.lon) * 1e-7 - self._lon0) * EARTH_RADIUS_M * self._cos,
+            self._alt0 - int(msg.alt) * 1e-3,
+            int(msg.vx) * 0.01, int(msg.vy) * 0.01, int(msg.vz) * 0.01))
+        return NavState(int(msg.time_usec), a[0:4], a[4:7], a[7:10], a[10:13],
+                        int(msg.ind_airspeed) * 0.01)
 
 
 class HilRoundTrip:

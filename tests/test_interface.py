@@ -17,7 +17,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
     encode_hil_state,
     wire_commands,
 )
-from vtolftc.protocols.hil import HilRoundTrip
+from vtolftc.protocols.hil import HilRoundTrip, HilStateDecoder
 from vtolftc.protocols.mavlink import make_codec
 
 HOME = (45.5027, 9.1566, 120.0)
@@ -165,3 +165,56 @@ def test_compiled_round_trip_equals_its_python_and_refuses_alike():
             rt(0, x, 0.0)
         with pytest.raises(err):
             rt._python(0, x, 0.0)
+
+
+def _wire_msg(codec, h: HilState):
+    """The HIL_STATE_QUATERNION message the autopilot parses from ``h``'s bytes."""
+    return codec.parse_char(bytearray(codec.hil_state_quaternion_encode(
+        h.time_usec, list(h.attitude_quaternion), h.rollspeed, h.pitchspeed, h.yawspeed,
+        h.lat, h.lon, h.alt, h.vx, h.vy, h.vz, h.ind_airspeed, h.true_airspeed,
+        h.xacc, h.yacc, h.zacc).pack(codec)))
+
+
+@pytest.mark.parametrize("home", [HOME, (-33.9, 151.2, 3.0), (0.0, -179.9, -20.0)])
+def test_sitl_decoder_equals_decode_hil_state_bit_for_bit(home):
+    """HilStateDecoder (the SITL autopilot's, straight from the parsed message) gives
+    decode_hil_state's NavState to the last bit, clipped fields and ties included."""
+    rng = np.random.default_rng(4)
+    codec = make_codec(system_id=1, component_id=1)
+    dec = HilStateDecoder(*home)
+    navs = [_nav(rng) for _ in range(200)]
+    navs.append(NavState(5, np.array([1.0, 0, 0, 0]), np.zeros(3), np.array([3e7, -3e7, -1e7]),
+                         np.array([400.0, -400.0, 0.125]), 900.0))
+    for nav in navs:
+        msg = _wire_msg(codec, encode_hil_state(nav, *home))
+        wire = HilState(msg.time_usec, tuple(msg.attitude_quaternion), msg.rollspeed,
+                        msg.pitchspeed, msg.yawspeed, msg.lat, msg.lon, msg.alt, msg.vx,
+                        msg.vy, msg.vz, msg.ind_airspeed, msg.true_airspeed)
+        assert _bits(dec(msg)) == _bits(decode_hil_state(wire, *home))
+
+
+def test_sitl_decoder_hands_the_kernels_the_in_process_argument_types():
+    """The SITL autopilot's NavState arrays have the numba types of the in-process runner's
+    (float64, 1-D, C-contiguous, writable, right shapes): another type would make every
+    compiled kernel type-check a second signature, or compile one in flight."""
+    numba = pytest.importorskip("numba")
+    codec = make_codec(system_id=1, component_id=1)
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.normal(size=6), [1.0, 0.0, 0.0, 0.0], rng.normal(size=3)])
+    ref = HilRoundTrip(*HOME)(1000, x, 12.0)
+    nav = HilStateDecoder(*HOME)(_wire_msg(codec, encode_hil_state(ref, *HOME)))
+    for name, n in (("q_wxyz", 4), ("omega_body_rad_s", 3), ("pos_ned_m", 3),
+                    ("vel_ned_m_s", 3)):
+        a, b = getattr(nav, name), getattr(ref, name)
+        assert a.shape == (n,) and a.dtype == np.float64 and a.flags.c_contiguous
+        assert a.flags.writeable
+        assert numba.typeof(a) == numba.typeof(b), name
+    assert type(nav.airspeed_m_s) is float and type(nav.time_usec) is int
+
+
+def test_sitl_decoder_rejects_a_zero_quaternion():
+    codec = make_codec(system_id=1, component_id=1)
+    h = encode_hil_state(NavState(0, np.zeros(4), np.zeros(3), np.zeros(3), np.zeros(3), 0.0),
+                         *HOME)
+    with pytest.raises(ValueError, match="quaternion"):
+        HilStateDecoder(*HOME)(_wire_msg(codec, h))
