@@ -36,6 +36,29 @@ from vtolftc.runners.scenario import paper_scenario, run_scenario
 from vtolftc.runners.sitl import SitlConfig, run_sitl
 
 
+def _in_process_step_cpu_us(scenario: object, controller: str) -> float:
+    """Mean CPU time of ``Autopilot.step`` in an in-process flight [us] (thread CPU clock
+    read around each call), the yardstick of the SITL process's ``step_cpu_mean_us``."""
+    from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
+
+    step = Autopilot.step
+    acc = [0.0, 0]
+
+    def timed(self: Autopilot, nav: object) -> object:
+        c0 = time.thread_time()
+        u = step(self, nav)  # type: ignore[arg-type]
+        acc[0] += time.thread_time() - c0
+        acc[1] += 1
+        return u
+
+    Autopilot.step = timed  # type: ignore[assignment,method-assign]
+    try:
+        run_scenario(scenario, controller)  # type: ignore[arg-type]
+    finally:
+        Autopilot.step = step  # type: ignore[method-assign]
+    return 1e6 * acc[0] / max(1, acc[1])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--transport", default="both", choices=("udp", "zenoh", "both"))
@@ -53,7 +76,9 @@ def main() -> None:
     print(f"in-process: {args.duration:g} s simulated in {wall:.2f} s "
           f"({args.duration / wall:.1f}x real time); autopilot "
           f"{1e6 * ref.timing_s['autopilot'] / (args.duration * 250):.0f} us/step, physics "
-          f"{1e6 * ref.timing_s['physics'] / (args.duration * 250):.0f} us/step")
+          f"{1e6 * ref.timing_s['physics'] / (args.duration * 250):.0f} us/step; "
+          f"Autopilot.step CPU {_in_process_step_cpu_us(scenario, args.controller):.0f} us "
+          "(mean, a second flight)")
 
     transports = ("udp", "zenoh") if args.transport == "both" else (args.transport,)
     print("\n| transport | real-time factor | flight wall (s) | HIL step round trip mean / "
@@ -77,7 +102,9 @@ def main() -> None:
             same = {k: (ref.metrics[k], res.metrics.get(k))
                     for k in ("rmse_altitude_m", "rmse_roll_deg")}
             print(f"    autopilot control step in the process: median {sw.get('median', nan):.0f}"
-                  f" us, p99 {sw.get('p99', nan):.0f} us; metrics (in-process, SITL): {same}")
+                  f" us, p99 {sw.get('p99', nan):.0f} us, CPU mean "
+                  f"{res.autopilot_summary.get('step_cpu_mean_us', nan):.0f} us (step, status, "
+                  f"answer); metrics (in-process, SITL): {same}")
             print(f"    CPU per step (every thread): autopilot process "
                   f"{res.autopilot_summary.get('cpu_per_step_us', nan):.0f} us, vehicle "
                   f"process {res.vehicle_summary.get('cpu_per_step_us', nan):.0f} us; load "
