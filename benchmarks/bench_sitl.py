@@ -55,7 +55,9 @@ so every wall figure below is the load's more than the code's):
   per-step CPU of the two processes did not move beyond the load's noise (vehicle 643-820 us
   against 585-676 us; autopilot 994-1266 against 851-1014 us): a saving of 20-40 us a step is
   below what a load of 20 does to these figures, and the real-time factors (UDP 0.5-0.8x
-  against 0.7-1.1x, zenoh 1.3-4.3x against 2.3-4.2x) only follow the load.
+  against 0.7-1.1x, zenoh 1.3-4.3x against 2.3-4.2x) only follow the load; a second pair
+  at load 10-17 gave UDP 1.0x and 2.9x against 1.9x and 1.3x, zenoh 1.4x and 3.3x against
+  1.5x and 0.9x (ratios 0.5-3.7 from one pair to the next).
 - The 20x target means 200 us of wall time per step for both processes and both hops. The
   last measurements on a quieter machine (UDP 7.8-8.5x, zenoh 4.4-4.9x) spent about 500 us a
   step; on this machine the cold autopilot step alone is 94-220 us of CPU, the vehicle's
