@@ -25,6 +25,7 @@ import math
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np
@@ -37,6 +38,8 @@ __all__ = [
     "HIL_OUTPUTS",
     "HilRoundTrip",
     "HilState",
+    "HilStateDecoder",
+    "HilStateEncoder",
     "NavState",
     "decode_hil_state",
     "encode_hil_state",
@@ -142,6 +145,58 @@ def decode_hil_state(h: HilState, home_lat_deg: float, home_lon_deg: float,
         vel_ned_m_s=np.array((h.vx * 0.01, h.vy * 0.01, h.vz * 0.01)),
         airspeed_m_s=h.ind_airspeed * 0.01,
     )
+
+
+class HilStateDecoder:
+    """:func:`decode_hil_state` of a received HIL_STATE_QUATERNION message, bit for bit,
+    without the intermediate :class:`HilState` and the per-call projection.
+
+    The SITL autopilot decodes one message per control step; this reads the message's fields
+    directly, keeps the projection about home, and returns a :class:`NavState` whose four
+    arrays are float64 views of one 13-entry array, the very layout the in-process runner's
+    :class:`HilRoundTrip` hands the autopilot (so both feed its compiled kernels the same
+    argument types). ``tests/test_interface.py`` checks it against :func:`decode_hil_state`.
+
+    Parameters
+    ----------
+    home_lat_deg, home_lon_deg, home_alt_m : float
+        Home (the projection's origin): latitude and longitude [deg], altitude AMSL [m].
+    """
+
+    __slots__ = ("_alt0", "_cos", "_lat0", "_lon0")
+
+    def __init__(self, home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> None:
+        self._lat0 = home_lat_deg
+        self._lon0 = home_lon_deg
+        self._alt0 = home_alt_m
+        # FlatEarth.to_local's east: radians(.) * EARTH_RADIUS_M * cos_lat0, left to right
+        self._cos = FlatEarth(home_lat_deg, home_lon_deg).cos_lat0
+
+    def __call__(self, msg: Any) -> NavState:
+        """The :class:`NavState` of ``msg`` (a HIL_STATE_QUATERNION message or anything with
+        its fields: ``time_usec``, ``attitude_quaternion`` (w, x, y, z), ``rollspeed``,
+        ``pitchspeed``, ``yawspeed`` [rad/s], ``lat``, ``lon`` [degE7], ``alt`` [mm],
+        ``vx``, ``vy``, ``vz`` [cm/s], ``ind_airspeed`` [cm/s]).
+
+        Raises
+        ------
+        ValueError
+            The attitude is not a rotation quaternion (zero or not finite).
+        """
+        qw, qx, qy, qz = (float(x) for x in msg.attitude_quaternion)
+        n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        if not (n > 0.0 and math.isfinite(n)):
+            raise ValueError(f"HIL_STATE_QUATERNION attitude {(qw, qx, qy, qz)}: "
+                             "not a rotation quaternion")
+        a = np.array((
+            qw / n, qx / n, qy / n, qz / n,
+            float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed),
+            math.radians(int(msg.lat) * 1e-7 - self._lat0) * EARTH_RADIUS_M,
+            math.radians(int(msg.lon) * 1e-7 - self._lon0) * EARTH_RADIUS_M * self._cos,
+            self._alt0 - int(msg.alt) * 1e-3,
+            int(msg.vx) * 0.01, int(msg.vy) * 0.01, int(msg.vz) * 0.01))
+        return NavState(int(msg.time_usec), a[0:4], a[4:7], a[7:10], a[10:13],
+                        int(msg.ind_airspeed) * 0.01)
 
 
 class HilRoundTrip:
@@ -304,6 +359,98 @@ def _round_trip_kernel(state, airspeed, lat0, lon0, alt0, r_cos, cos_lat0,
     a[11] = ivy * 0.01
     a[12] = ivz * 0.01
     return int(air)
+
+
+class HilStateEncoder:
+    """:func:`encode_hil_state` of a rigid-body state, bit for bit, in one compiled call.
+
+    The SITL vehicle encodes its state every control step on the lockstep's critical path;
+    this does :func:`encode_hil_state`'s arithmetic (the encode half of
+    :class:`HilRoundTrip`'s kernel, the same operations in the same order) with the projection
+    about home kept, and falls back to :func:`encode_hil_state` itself for what the wire
+    refuses (non-finite values, a float32 overflow), which then raises its own error.
+    ``tests/test_interface.py`` checks it against :func:`encode_hil_state`.
+
+    Parameters
+    ----------
+    home_lat_deg, home_lon_deg, home_alt_m : float
+        Home (the projection's origin): latitude and longitude [deg], altitude AMSL [m].
+    """
+
+    __slots__ = ("_alt0", "_lat0", "_lon0", "_out", "_r_cos")
+
+    def __init__(self, home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> None:
+        self._lat0 = home_lat_deg
+        self._lon0 = home_lon_deg
+        self._alt0 = home_alt_m
+        self._r_cos = EARTH_RADIUS_M * FlatEarth(home_lat_deg, home_lon_deg).cos_lat0
+        self._out = np.empty(14)
+
+    def __call__(self, time_usec: int, state: NDArray[np.float64],
+                 airspeed_m_s: float) -> HilState:
+        """The HIL_STATE_QUATERNION fields of a rigid-body state.
+
+        Parameters
+        ----------
+        time_usec : int
+            Simulated time [us].
+        state : numpy.ndarray
+            At least 13 float64 entries: position NED [m], velocity NED [m/s], quaternion
+            ``(w, x, y, z)`` body FRD -> NED, body rates [rad/s] (the vehicle's state order).
+        airspeed_m_s : float
+            Airspeed [m/s] (both airspeed fields).
+
+        Returns
+        -------
+        HilState
+            Equal to ``encode_hil_state(NavState(time_usec, state[6:10], state[10:13],
+            state[0:3], state[3:6], airspeed_m_s), *home)``.
+        """
+        o = self._out
+        if type(state) is np.ndarray and state.dtype == _F64 and state.ndim == 1 \
+                and state.shape[0] >= 13 and _encode_kernel(
+                    state, float(airspeed_m_s), self._lat0, self._lon0, self._alt0,
+                    self._r_cos, o):
+            (qw, qx, qy, qz, p, q, r, lat, lon, alt, vx, vy, vz, air) = o.tolist()
+            air_i = int(air)
+            return HilState(int(time_usec), (qw, qx, qy, qz), p, q, r, int(lat), int(lon),
+                            int(alt), int(vx), int(vy), int(vz), air_i, air_i)
+        return encode_hil_state(NavState(time_usec, state[6:10], state[10:13], state[0:3],
+                                         state[3:6], airspeed_m_s),
+                                self._lat0, self._lon0, self._alt0)
+
+
+@numba.njit(cache=True)
+def _encode_kernel(state, airspeed, lat0, lon0, alt0, r_cos, out):  # pragma: no cover
+    """:func:`encode_hil_state` compiled (as :func:`_round_trip_kernel`'s encode half).
+
+    Writes the float32-rounded quaternion and rates, then the rounded and clipped lat, lon
+    [degE7], alt [mm], vx, vy, vz [cm/s] and airspeed [cm/s] into ``out`` (14,); returns
+    False (``out`` then meaningless) for what the codec refuses.
+    """
+    for i in range(7):
+        x = state[6 + i]
+        if not math.isfinite(x):
+            return False
+        y = np.float32(x)
+        if math.isinf(y):
+            return False
+        out[i] = np.float64(y)
+    lat = lat0 + (state[0] / EARTH_RADIUS_M) * _RAD_TO_DEG
+    lon = lon0 + (state[1] / r_cos) * _RAD_TO_DEG
+    v = (lat * 1e7, lon * 1e7, 1000.0 * (alt0 - state[2]), 100.0 * state[3],
+         100.0 * state[4], 100.0 * state[5], 100.0 * airspeed)
+    for x in v:
+        if not math.isfinite(x):
+            return False
+    out[7] = _clip(_round_half_even(v[0]), -2147483648.0, 2147483647.0)
+    out[8] = _clip(_round_half_even(v[1]), -2147483648.0, 2147483647.0)
+    out[9] = _clip(_round_half_even(v[2]), -2147483648.0, 2147483647.0)
+    out[10] = _clip(_round_half_even(v[3]), -32768.0, 32767.0)
+    out[11] = _clip(_round_half_even(v[4]), -32768.0, 32767.0)
+    out[12] = _clip(_round_half_even(v[5]), -32768.0, 32767.0)
+    out[13] = _clip(_round_half_even(v[6]), 0.0, 65535.0)
+    return True
 
 
 def wire_commands(u: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:

@@ -17,7 +17,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
     encode_hil_state,
     wire_commands,
 )
-from vtolftc.protocols.hil import HilRoundTrip
+from vtolftc.protocols.hil import HilRoundTrip, HilStateDecoder, HilStateEncoder
 from vtolftc.protocols.mavlink import make_codec
 
 HOME = (45.5027, 9.1566, 120.0)
@@ -165,3 +165,106 @@ def test_compiled_round_trip_equals_its_python_and_refuses_alike():
             rt(0, x, 0.0)
         with pytest.raises(err):
             rt._python(0, x, 0.0)
+
+
+def _wire_msg(codec, h: HilState):
+    """The HIL_STATE_QUATERNION message the autopilot parses from ``h``'s bytes."""
+    return codec.parse_char(bytearray(codec.hil_state_quaternion_encode(
+        h.time_usec, list(h.attitude_quaternion), h.rollspeed, h.pitchspeed, h.yawspeed,
+        h.lat, h.lon, h.alt, h.vx, h.vy, h.vz, h.ind_airspeed, h.true_airspeed,
+        h.xacc, h.yacc, h.zacc).pack(codec)))
+
+
+@pytest.mark.parametrize("home", [HOME, (-33.9, 151.2, 3.0), (0.0, -179.9, -20.0)])
+def test_sitl_decoder_equals_decode_hil_state_bit_for_bit(home):
+    """HilStateDecoder (the SITL autopilot's, straight from the parsed message) gives
+    decode_hil_state's NavState to the last bit, clipped fields and ties included."""
+    rng = np.random.default_rng(4)
+    codec = make_codec(system_id=1, component_id=1)
+    dec = HilStateDecoder(*home)
+    navs = [_nav(rng) for _ in range(200)]
+    navs.append(NavState(5, np.array([1.0, 0, 0, 0]), np.zeros(3), np.array([3e7, -3e7, -1e7]),
+                         np.array([400.0, -400.0, 0.125]), 900.0))
+    for nav in navs:
+        msg = _wire_msg(codec, encode_hil_state(nav, *home))
+        wire = HilState(msg.time_usec, tuple(msg.attitude_quaternion), msg.rollspeed,
+                        msg.pitchspeed, msg.yawspeed, msg.lat, msg.lon, msg.alt, msg.vx,
+                        msg.vy, msg.vz, msg.ind_airspeed, msg.true_airspeed)
+        assert _bits(dec(msg)) == _bits(decode_hil_state(wire, *home))
+
+
+def test_sitl_decoder_hands_the_kernels_the_in_process_argument_types():
+    """The SITL autopilot's NavState arrays have the numba types of the in-process runner's
+    (float64, 1-D, C-contiguous, writable, right shapes): another type would make every
+    compiled kernel type-check a second signature, or compile one in flight."""
+    numba = pytest.importorskip("numba")
+    codec = make_codec(system_id=1, component_id=1)
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.normal(size=6), [1.0, 0.0, 0.0, 0.0], rng.normal(size=3)])
+    ref = HilRoundTrip(*HOME)(1000, x, 12.0)
+    nav = HilStateDecoder(*HOME)(_wire_msg(codec, encode_hil_state(ref, *HOME)))
+    for name, n in (("q_wxyz", 4), ("omega_body_rad_s", 3), ("pos_ned_m", 3),
+                    ("vel_ned_m_s", 3)):
+        a, b = getattr(nav, name), getattr(ref, name)
+        assert a.shape == (n,) and a.dtype == np.float64 and a.flags.c_contiguous
+        assert a.flags.writeable
+        assert numba.typeof(a) == numba.typeof(b), name
+    assert type(nav.airspeed_m_s) is float and type(nav.time_usec) is int
+
+
+def test_sitl_decoder_rejects_a_zero_quaternion():
+    codec = make_codec(system_id=1, component_id=1)
+    h = encode_hil_state(NavState(0, np.zeros(4), np.zeros(3), np.zeros(3), np.zeros(3), 0.0),
+                         *HOME)
+    with pytest.raises(ValueError, match="quaternion"):
+        HilStateDecoder(*HOME)(_wire_msg(codec, h))
+
+
+def _hil_bits(h: HilState) -> tuple:
+    """Every field of ``h``, floats by their bits and ints by type and value."""
+    out = []
+    for v in (h.time_usec, *h.attitude_quaternion, h.rollspeed, h.pitchspeed, h.yawspeed,
+              h.lat, h.lon, h.alt, h.vx, h.vy, h.vz, h.ind_airspeed, h.true_airspeed, h.xacc,
+              h.yacc, h.zacc):
+        out.append((type(v), np.float64(v).tobytes() if type(v) is float else v))
+    return tuple(out)
+
+
+@pytest.mark.parametrize("home", [HOME, (-33.9, 151.2, 3.0), (0.0, -179.9, -20.0)])
+def test_sitl_encoder_equals_encode_hil_state_bit_for_bit(home):
+    """HilStateEncoder (the SITL vehicle's, compiled) gives encode_hil_state's fields to the
+    last bit: rounding ties, clipped fields, states far from home, and the Python path's
+    own result or error for what the wire refuses."""
+    rng = np.random.default_rng(6)
+    enc = HilStateEncoder(*home)
+    cases = []
+    for _ in range(300):
+        x = np.concatenate([rng.normal(scale=200.0, size=3), rng.normal(scale=10.0, size=3),
+                            rng.normal(size=4), rng.normal(size=3), rng.normal(size=15)])
+        x[6:10] /= np.linalg.norm(x[6:10])
+        cases.append((int(rng.integers(0, 10**9)), x, float(rng.uniform(0, 30))))
+    tie = np.zeros(13)
+    tie[3:6] = (0.125, -0.375, 0.005)   # 100 v on a .5 tie (round half to even)
+    tie[6] = 1.0
+    cases.append((7, tie, 0.125))
+    big = tie.copy()
+    big[3:6] = (400.0, -400.0, 1e4)     # clipped int16 velocities
+    big[0:3] = (3e7, -3e7, -1e7)        # clipped latitude/longitude/altitude
+    cases += [(8, big, 900.0), (9, big, -5.0)]
+    nanq = tie.copy()
+    nanq[7] = math.nan                  # packs as a float32 NaN: no error on the wire
+    for t, x, air in cases:
+        ref = encode_hil_state(NavState(t, x[6:10], x[10:13], x[0:3], x[3:6], air), *home)
+        assert _hil_bits(enc(t, x, air)) == _hil_bits(ref)
+    infw = tie.copy()
+    infw[10] = math.inf                 # packs as a float32 inf: no error on the wire either
+    for t, x, air in ((10, nanq, 1.0), (11, infw, 1.0)):
+        ref = encode_hil_state(NavState(t, x[6:10], x[10:13], x[0:3], x[3:6], air), *home)
+        assert _hil_bits(enc(t, x, air)) == _hil_bits(ref)
+    for i, bad, err in ((10, 1e39, OverflowError), (0, math.nan, ValueError)):
+        x = tie.copy()
+        x[i] = bad                      # a rate float32 cannot carry / a position NaN
+        with pytest.raises(err):
+            encode_hil_state(NavState(0, x[6:10], x[10:13], x[0:3], x[3:6], 1.0), *home)
+        with pytest.raises(err):
+            enc(0, x, 1.0)

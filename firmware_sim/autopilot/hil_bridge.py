@@ -6,7 +6,8 @@ autopilot's outputs into HIL_ACTUATOR_CONTROLS:
 - GPS_GLOBAL_ORIGIN gives the geodetic origin of the NED frame (home), needed to decode
   positions; degE7 / mm are turned back into the decimal degrees and metres they came from.
 - HIL_SENSOR and HIL_STATE_QUATERNION of the same ``time_usec`` form one control step: the
-  navigation state is :func:`interface.decode_hil_state` of the HIL_STATE_QUATERNION (the
+  navigation state is :func:`interface.decode_hil_state` of the HIL_STATE_QUATERNION, bit for
+  bit, computed by :class:`~vtolftc.protocols.hil.HilStateDecoder` straight from the message (the
   autopilot has no estimator; HIL_SENSOR and HIL_GPS are kept for health flags and telemetry).
 - :meth:`send_controls` answers a step with ``controls[0:15]`` = :func:`interface.wire_commands`,
   ``mode`` = MAV_MODE_FLAG_SAFETY_ARMED when armed, ``flags`` bit 0 = lockstep.
@@ -36,10 +37,10 @@ from numpy.typing import NDArray
 from vtolftc.firmware_sim.autopilot.interface import (
     HilState,
     NavState,
-    decode_hil_state,
     wire_commands,
 )
 from vtolftc.protocols.generated import constants as mav
+from vtolftc.protocols.hil import HilStateDecoder
 from vtolftc.protocols.link import Link
 
 __all__ = ["HilBridge"]
@@ -55,7 +56,7 @@ class HilBridge:
     def __init__(self, link: Link, *, lockstep: bool = True) -> None:
         self.link = link
         self.lockstep = lockstep
-        self.home: tuple[float, float, float] | None = None
+        self._home: tuple[float, float, float] | None = None
         self.last_sensor: Any = None
         self.last_gps: Any = None
         self.last_state: Any = None
@@ -74,6 +75,19 @@ class HilBridge:
         self.resent = 0
         self._last_answer: tuple[int, bytes] | None = None
         self.decode_errors = 0
+        self._decode: HilStateDecoder | None = None
+        """Decodes HIL_STATE_QUATERNION about :attr:`home` (made when home is known)."""
+
+    @property
+    def home(self) -> tuple[float, float, float] | None:
+        """Geodetic origin of the NED frame (lat [deg], lon [deg], alt AMSL [m]) from
+        GPS_GLOBAL_ORIGIN; None until it came (no step can be decoded before)."""
+        return self._home
+
+    @home.setter
+    def home(self, home: tuple[float, float, float] | None) -> None:
+        self._home = home
+        self._decode = None if home is None else HilStateDecoder(*home)
 
     # ------------------------------------------------------------------ input
     def handle(self, msg: Any) -> None:
@@ -85,7 +99,8 @@ class HilBridge:
             self._sensor_time = int(msg.time_usec)
         elif t == "HIL_STATE_QUATERNION":
             self.last_state = msg
-            if self.home is None:
+            decode = self._decode
+            if decode is None:
                 self.decode_errors += 1
                 return
             t_us = int(msg.time_usec)
@@ -97,7 +112,7 @@ class HilBridge:
                     self.resent += 1
                 return
             try:
-                nav = decode_hil_state(self.hil_state(msg), *self.home)
+                nav = decode(msg)
             except ValueError:
                 self.decode_errors += 1
                 return
@@ -110,9 +125,10 @@ class HilBridge:
         elif t == "BATTERY_STATUS":
             self.last_battery = msg
         elif t == "GPS_GLOBAL_ORIGIN":
-            self.home = (float(f"{msg.latitude * 1e-7:.7f}"),
-                         float(f"{msg.longitude * 1e-7:.7f}"),
-                         float(f"{msg.altitude * 1e-3:.3f}"))
+            home = (float(f"{msg.latitude * 1e-7:.7f}"), float(f"{msg.longitude * 1e-7:.7f}"),
+                    float(f"{msg.altitude * 1e-3:.3f}"))
+            if home != self._home:
+                self.home = home
         elif t == "FAULT_INJECTION_STATUS":
             self.fault_status = msg
         elif t == "COMMAND_ACK":

@@ -13,7 +13,7 @@ from typing import Any
 
 from vtolftc.firmware_sim.vehicle.battery import BatteryModel
 from vtolftc.firmware_sim.vehicle.model import Vehicle
-from vtolftc.protocols.hil import NavState, encode_hil_state
+from vtolftc.protocols.hil import HilStateEncoder
 
 __all__ = ["StateEncoder"]
 
@@ -46,6 +46,7 @@ class StateEncoder:
         self.battery = battery
         self.codec = codec
         self.home = vehicle.sensor_model.home
+        self._encode = HilStateEncoder(self.home.lat_deg, self.home.lon_deg, self.home.alt_m)
         self.gps_period_usec = round(1e6 / gps_rate_hz) if gps_rate_hz > 0 else 0
         self._status_msg = status_msg
         self._resign = resign
@@ -100,9 +101,7 @@ class StateEncoder:
                 t, 3, round(s.gps_lat_deg * 1e7), round(s.gps_lon_deg * 1e7),
                 round(s.gps_alt_m * 1e3), 100, 100, min(65535, round(100 * math.hypot(vn, ve))),
                 round(100 * vn), round(100 * ve), round(100 * vd), cog, 12, 0, 0)))
-        x = v.x  # views: encode_hil_state only reads them
-        nav = NavState(t, x[6:10], x[10:13], x[0:3], x[3:6], float(v.fm[6]))
-        hs = encode_hil_state(nav, self.home.lat_deg, self.home.lon_deg, self.home.alt_m)
+        hs = self._encode(t, v.x, float(v.fm[6]))  # = encode_hil_state, bit for bit
         parts.append(self._pack(c.hil_state_quaternion_encode(
             hs.time_usec, hs.attitude_quaternion, hs.rollspeed, hs.pitchspeed, hs.yawspeed,
             hs.lat, hs.lon, hs.alt, hs.vx, hs.vy, hs.vz, hs.ind_airspeed, hs.true_airspeed,
