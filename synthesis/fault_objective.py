@@ -61,10 +61,12 @@ __all__ = [
     "controller_from_document",
     "disturbance_loop",
     "fault_gamma",
+    "fault_inputs",
     "fault_moment",
     "lqr_controller",
     "ppid_controller",
     "predicted_rmse",
+    "rmse_from_inputs",
     "step_ise",
 ]
 
@@ -361,6 +363,63 @@ PAPER_CASES: dict[str, FaultCase] = {
 }
 
 
+def fault_inputs(af: Airframe, axis: Axis, case: FaultCase,
+                 plant_at: Callable[[float, float], object] | None = None,
+                 ) -> list[tuple[float, float, StateSpaceData, float]]:
+    """What the case does to ``axis`` at each of its airspeeds (independent of the controller:
+    compute once per design).
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe.
+    axis : {"roll", "pitch", "yaw"}
+        The axis.
+    case : FaultCase
+        The case.
+    plant_at : callable, optional
+        (airspeed [m/s], gamma) -> plant; default the robust design plant
+        (:func:`~vtolftc.synthesis.robust.design_plant`).
+
+    Returns
+    -------
+    list of (float, float, tuple of ndarray, float)
+        Per airspeed: (airspeed [m/s], time share, faulty plant (A, B, C, D), moment step
+        [N m]).
+    """
+    from vtolftc.synthesis.robust import design_plant
+
+    plant = plant_at or (lambda v, g: design_plant(af, axis, v, g))
+    return [(v, w, as_state_space(plant(v, fault_gamma(af, axis, v, case.losses))),
+             fault_moment(af, axis, v, case.losses))
+            for v, w in zip(case.airspeeds_m_s, case.weights, strict=True)]
+
+
+def rmse_from_inputs(inputs: Sequence[tuple[float, float, StateSpaceData, float]],
+                     controller_at: Callable[[float], StateSpaceData], case: FaultCase,
+                     ) -> float:
+    """:func:`predicted_rmse` from :func:`fault_inputs` [rad].
+
+    Parameters
+    ----------
+    inputs : sequence
+        :func:`fault_inputs` of the case.
+    controller_at : callable
+        Airspeed [m/s] -> feedback.
+    case : FaultCase
+        The case (horizon and window).
+
+    Returns
+    -------
+    float
+        RMSE_pred [rad] (inf when a loop on the way is unstable).
+    """
+    total = 0.0
+    for v, w, G, d in inputs:
+        total += w * step_ise(disturbance_loop(G, controller_at(v)), d, case.horizon_s)
+    return math.sqrt(total / case.window_s)
+
+
 def predicted_rmse(af: Airframe, axis: Axis, controller_at: Callable[[float], StateSpaceData],
                    case: FaultCase, plant_at: Callable[[float, float], object] | None = None,
                    ) -> float:
@@ -386,15 +445,4 @@ def predicted_rmse(af: Airframe, axis: Axis, controller_at: Callable[[float], St
     float
         RMSE_pred [rad] (inf when a loop on the way is unstable).
     """
-    from vtolftc.synthesis.robust import design_plant
-
-    plant = plant_at or (lambda v, g: design_plant(af, axis, v, g))
-    total = 0.0
-    for v, w in zip(case.airspeeds_m_s, case.weights, strict=True):
-        d = fault_moment(af, axis, v, case.losses)
-        cl = disturbance_loop(plant(v, fault_gamma(af, axis, v, case.losses)),
-                              controller_at(v))
-        if np.max(np.linalg.eigvals(cl[0]).real) >= 0:
-            return math.inf
-        total += w * step_ise(cl, d, case.horizon_s)
-    return math.sqrt(total / case.window_s)
+    return rmse_from_inputs(fault_inputs(af, axis, case, plant_at), controller_at, case)

@@ -1,0 +1,243 @@
+"""Regenerate ``docs/ds1-surfaces/``: the fault-response predictor against table 4, and the
+gain-surface design tuned for it (issue 23, items 1-2).
+
+1. Designs (unless ``--no-design``): per axis, on the surface grid, the reference (the
+   caps and the start: the shipped robust SHIF), then SHIF (degree 0) and GS-SHIF (degree
+   ``--degree``, started from that SHIF) on the predicted-RMSE objective with the
+   H-infinity channels as constraints
+   (:func:`vtolftc.synthesis.fault_surfaces.design_fault_surfaces`); written to
+   ``firmware_sim/autopilot/gains/surface/`` (``gs-shif.json``, ``shif.json``,
+   ``surfaces.json``, ``lqr.json``: the shipped LQR copied), flown by
+   ``vtolftc fly --gains firmware_sim/autopilot/gains/surface``.
+2. Flies the paper's cases 1 and 2 with every controller: shipped robust GS-SHIF, SHIF, LQR;
+   the paper design's GS-SHIF and SHIF; the surface design's GS-SHIF and SHIF.
+3. Predicts each flight's RMSE per axis on the linear models
+   (:func:`vtolftc.synthesis.fault_objective.predicted_rmse`) and writes the table, the
+   rank correlations (Spearman) and the validation of the new schedule (delay margins, mu)
+   to ``docs/ds1-surfaces/README.md`` and ``results.json``::
+
+    python benchmarks/regen_surfaces_doc.py [--degree 2] [--jobs 2] [--no-design] [--no-mu]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+GAINS = ROOT / "firmware_sim" / "autopilot" / "gains"
+SURFACE = GAINS / "surface"
+DOCS = ROOT / "docs" / "ds1-surfaces"
+AXES = ("roll", "pitch", "yaw")
+#: (label, gains directory, controller)
+CONTROLLERS = (
+    ("robust GS-SHIF", GAINS, "gs-shif"), ("robust SHIF", GAINS, "shif"),
+    ("LQR", GAINS, "lqr"), ("paper GS-SHIF", GAINS / "paper", "gs-shif"),
+    ("paper SHIF", GAINS / "paper", "shif"), ("surface GS-SHIF", SURFACE, "gs-shif"),
+    ("surface SHIF", SURFACE, "shif"),
+)
+
+
+def _design_job(args: tuple[str, int, int]) -> Any:
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.synthesis.fault_surfaces import design_fault_surfaces
+    from vtolftc.synthesis.loops import PARAM_NAMES
+    from vtolftc.synthesis.robust import RobustMethod, robust_points
+    from vtolftc.synthesis.surfaces import surface_grid
+
+    axis, degree, max_evals = args
+    af = load_airframe()
+    grid = surface_grid(robust_points(af), 2)
+    shipped = json.loads((GAINS / "shif.json").read_text(encoding="utf-8"))
+    ref = {k: float(shipped["axes"][axis][k][0]) for k in PARAM_NAMES}
+    return axis, design_fault_surfaces(RobustMethod(), af, axis, grid, degree,
+                                       max_evals=max_evals, reference=ref)
+
+
+def _fly_job(args: tuple[str, str, str]) -> tuple[str, str, str, dict[str, Any]]:
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
+
+    case, gdir, ctl = args
+    m = run_scenario(paper_scenario(int(case)), ctl, gains_dir=gdir).metrics
+    return case, gdir, ctl, m
+
+
+def _design(degree: int, max_evals: int, jobs: int) -> dict[str, Any]:
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.synthesis.export import write_json
+    from vtolftc.synthesis.surfaces import schedule_from_surfaces
+
+    af = load_airframe()
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(jobs) as ex:
+        out = dict(ex.map(_design_job, [(ax, degree, max_evals) for ax in AXES]))
+    wall = time.perf_counter() - t0
+    from vtolftc.synthesis.robust import robust_points
+    from vtolftc.synthesis.surfaces import surface_grid
+
+    grid = surface_grid(robust_points(af), 2)
+    bps = [p.airspeed_m_s for p in grid]
+    meta = {"design_points": [{"number": p.number, "airspeed_m_s": p.airspeed_m_s,
+                               "v_min_m_s": p.v_min_m_s, "v_max_m_s": p.v_max_m_s}
+                              for p in grid],
+            "method": "surface, fault objective: predicted table-4 RMSE (synthesis/"
+                      "fault_objective.py) with the robust H-infinity channels as "
+                      "constraints (synthesis/fault_surfaces.py)",
+            "settings": {"degree": degree, "max_evals": max_evals,
+                         "slack": out["roll"].slack}}
+    SURFACE.mkdir(parents=True, exist_ok=True)
+    write_json(SURFACE / "gs-shif.json", schedule_from_surfaces(
+        af, {ax: d.surface for ax, d in out.items()}, bps, "gs-shif", meta))
+    write_json(SURFACE / "shif.json", schedule_from_surfaces(
+        af, {ax: d.constant for ax, d in out.items()}, bps, "shif", meta))
+    shutil.copyfile(GAINS / "lqr.json", SURFACE / "lqr.json")
+    summary = {ax: {"h_ref": d.h_ref, "slack": d.slack,
+                    "shif": {"J_deg": d.constant_J, "pred_deg": d.constant_pred_deg,
+                             "hinf": d.constant_hinf},
+                    "gs_shif": {"J_deg": d.surface_J, "pred_deg": d.surface_pred_deg,
+                                "hinf": d.surface_hinf},
+                    "kept_start": d.kept_start, "evaluations": d.evaluations,
+                    "time_s": d.time_s}
+               for ax, d in out.items()}
+    summary["wall_time_s"] = wall
+    write_json(SURFACE / "surfaces.json", summary)
+    return summary
+
+
+def _spearman(a: list[float], b: list[float]) -> float:
+    ra = np.argsort(np.argsort(a)).astype(float)
+    rb = np.argsort(np.argsort(b)).astype(float)
+    return float(np.corrcoef(ra, rb)[0, 1])
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run (see the module docstring); returns the exit status."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--degree", type=int, default=2)
+    ap.add_argument("--max-evals", type=int, default=300)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--no-design", action="store_true")
+    ap.add_argument("--no-mu", action="store_true")
+    a = ap.parse_args(argv)
+    if a.degree < 1 or a.jobs < 1 or a.max_evals < 1:
+        print("regen_surfaces_doc: expected --degree >= 1, --jobs >= 1, --max-evals >= 1",
+              file=sys.stderr)
+        return 2
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.synthesis.fault_objective import (
+        PAPER_CASES,
+        controller_from_document,
+        predicted_rmse,
+    )
+    from vtolftc.synthesis.validation import validate_schedule
+
+    af = load_airframe()
+    if not a.no_design:
+        s = _design(a.degree, a.max_evals, a.jobs)
+        print(f"designs: {s['wall_time_s']:.1f} s")
+    design = json.loads((SURFACE / "surfaces.json").read_text(encoding="utf-8"))
+    t0 = time.perf_counter()
+    jobs = [(c, str(g), ctl) for c in ("1", "2") for _, g, ctl in CONTROLLERS]
+    with ProcessPoolExecutor(a.jobs) as ex:
+        flown = {(c, g, ctl): m for c, g, ctl, m in ex.map(_fly_job, jobs)}
+    t_fly = time.perf_counter() - t0
+    rows = []
+    for c in ("1", "2"):
+        for label, g, ctl in CONTROLLERS:
+            doc = json.loads((Path(g) / f"{ctl}.json").read_text(encoding="utf-8"))
+            m = flown[(c, str(g), ctl)]
+            row: dict[str, Any] = {"case": c, "controller": label,
+                                   "crashed": bool(m.get("crashed"))}
+            for ax in AXES:
+                p = predicted_rmse(af, ax, controller_from_document(doc, ax), PAPER_CASES[c])
+                row[f"pred_{ax}_deg"] = math.degrees(p)
+                row[f"rmse_{ax}_deg"] = float(m[f"rmse_{ax}_deg"])
+            rows.append(row)
+    rho = {ax: _spearman([r[f"pred_{ax}_deg"] for r in rows],
+                         [r[f"rmse_{ax}_deg"] for r in rows]) for ax in AXES}
+    rho["all"] = _spearman([r[f"pred_{ax}_deg"] for r in rows for ax in AXES],
+                           [r[f"rmse_{ax}_deg"] for r in rows for ax in AXES])
+    val: dict[str, Any] = {}
+    t1 = time.perf_counter()
+    for ctl in ("gs-shif", "shif"):
+        doc = json.loads((SURFACE / f"{ctl}.json").read_text(encoding="utf-8"))
+        v = validate_schedule(af, doc, density=2, mu=not a.no_mu, certificate=False,
+                              jobs=a.jobs)
+        val[ctl] = v.summary()
+    t_val = time.perf_counter() - t1
+    DOCS.mkdir(parents=True, exist_ok=True)
+    res = {"rows": rows, "spearman": rho, "validation": val, "design": design,
+           "times_s": {"flights": t_fly, "validation": t_val}}
+    (DOCS / "results.json").write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
+    _write_readme(res)
+    print(f"flights {t_fly:.0f} s, validation {t_val:.0f} s; spearman {rho}")
+    return 0
+
+
+def _write_readme(res: dict[str, Any]) -> None:
+    rows, rho, val, des = res["rows"], res["spearman"], res["validation"], res["design"]
+    md = ["# DS-1 gain surfaces designed for the fault response (issue 23, items 1-2)", "",
+          "Generated by `python benchmarks/regen_surfaces_doc.py`; numbers in "
+          "[`results.json`](results.json). Gains in `firmware_sim/autopilot/gains/surface/` "
+          "(`vtolftc fly --case 1 --controller gs-shif --gains "
+          "firmware_sim/autopilot/gains/surface`).", "",
+          "## Predicted against flown RMSE (t >= 20 s, deg)", "",
+          "Predicted: `synthesis/fault_objective.py` (design plant at 3.6, 5.8, 7.6, 9.2 m/s, "
+          "step of the trim moment the fault removes at the plant input, effectiveness loss in "
+          "the plant, ISE over 6 s, time-weighted, over the 20 s window). Flown: "
+          "`run_scenario(paper_scenario(case), controller, gains_dir=...)`.", "",
+          "| case | controller | roll pred | roll flown | pitch pred | pitch flown | "
+          "yaw pred | yaw flown | crashed |", "|---|---|---:|---:|---:|---:|---:|---:|---|"]
+    for r in rows:
+        md.append(f"| {r['case']} | {r['controller']} | " + " | ".join(
+            f"{r[f'pred_{ax}_deg']:.3f} | {r[f'rmse_{ax}_deg']:.3f}" for ax in AXES)
+            + f" | {r['crashed']} |")
+    md += ["", "Spearman rank correlation, predicted vs flown (14 flights per axis): "
+           + ", ".join(f"{k} {v:.2f}" for k, v in rho.items()) + ".", "",
+           "## Table 4 with the surface design", ""]
+    for c in ("1", "2"):
+        by = {r["controller"]: r for r in rows if r["case"] == c}
+        gs, sh, lq = by["surface GS-SHIF"], by["surface SHIF"], by["LQR"]
+        for ax in AXES:
+            k = f"rmse_{ax}_deg"
+            ok = gs[k] < sh[k] < lq[k]
+            md.append(f"- case {c} {ax}: GS-SHIF {gs[k]:.3f}, SHIF {sh[k]:.3f}, LQR "
+                      f"{lq[k]:.3f}: GS-SHIF < SHIF < LQR {'holds' if ok else 'FAILS'}")
+    md += ["", "## The design (per axis)", "",
+           "| axis | reference (shipped SHIF) h_ref | SHIF J (deg) | SHIF pred (deg) | SHIF h | "
+           "GS-SHIF J (deg) | GS-SHIF pred (deg) | GS-SHIF h | kept start | time (s) |",
+           "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|"]
+    for ax in AXES:
+        d = des[ax]
+        md.append(f"| {ax} | {d['h_ref']:.3f} | {d['shif']['J_deg']:.4f} | "
+                  f"{d['shif']['pred_deg']:.4f} | {d['shif']['hinf']:.3f} | "
+                  f"{d['gs_shif']['J_deg']:.4f} | {d['gs_shif']['pred_deg']:.4f} | "
+                  f"{d['gs_shif']['hinf']:.3f} | {d['kept_start']} | "
+                  f"{sum(d['time_s'].values()):.0f} |")
+    md += ["", "## Validation of the surface schedules (2x grid between breakpoints)", "",
+           "| schedule | axis | min delay margin (ms) | min phase margin (deg) | "
+           "max mu_RS | failures |", "|---|---|---:|---:|---:|---:|"]
+    for ctl, s in val.items():
+        for ax in AXES:
+            x = s.get(ax, {})
+            dm = x.get("min_delay_margin_s")
+            mu = x.get("max_mu_rs")
+            pm = x.get("min_phase_margin_deg")
+            md.append(f"| {ctl} | {ax} | {1e3 * dm:.0f} | {pm:.1f} | "
+                      f"{'-' if mu is None else f'{mu:.2f}'} | {x.get('failures')} |"
+                      if dm is not None and pm is not None else f"| {ctl} | {ax} | - | - | - | - |")
+    DOCS.mkdir(parents=True, exist_ok=True)
+    (DOCS / "README.md").write_text("\n".join(md) + "\n", encoding="utf-8")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
