@@ -9,14 +9,17 @@ gain-surface design tuned for it (issue 23, items 1-2).
    ``firmware_sim/autopilot/gains/surface/`` (``gs-shif.json``, ``shif.json``,
    ``surfaces.json``, ``lqr.json``: the shipped LQR copied), flown by
    ``vtolftc fly --gains firmware_sim/autopilot/gains/surface``.
-2. Flies the paper's cases 1 and 2 with every controller: shipped robust GS-SHIF, SHIF, LQR;
-   the paper design's GS-SHIF and SHIF; the surface design's GS-SHIF and SHIF.
+2. Flies the paper's cases 1 and 2 with the surface design's GS-SHIF and SHIF; the shipped
+   robust GS-SHIF, SHIF, LQR and the paper design's GS-SHIF and SHIF are taken from their
+   flights documented in ``docs/ds1-claims/robust.json`` and ``paper.json`` (flown on this
+   code: their command digests are ``benchmarks/command_digest.py``'s).
 3. Predicts each flight's RMSE per axis on the linear models
    (:func:`vtolftc.synthesis.fault_objective.predicted_rmse`) and writes the table, the
    rank correlations (Spearman) and the validation of the new schedule (delay margins, mu)
    to ``docs/ds1-surfaces/README.md`` and ``results.json``::
 
-    python benchmarks/regen_surfaces_doc.py [--degree 2] [--jobs 2] [--no-design] [--no-mu]
+    python benchmarks/regen_surfaces_doc.py [--degree 2] [--jobs 2] [--no-design]
+        [--no-mu] [--no-validation]
 """
 
 from __future__ import annotations
@@ -127,6 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--no-design", action="store_true")
     ap.add_argument("--no-mu", action="store_true")
+    ap.add_argument("--no-validation", action="store_true")
     a = ap.parse_args(argv)
     if a.degree < 1 or a.jobs < 1 or a.max_evals < 1:
         print("regen_surfaces_doc: expected --degree >= 1, --jobs >= 1, --max-evals >= 1",
@@ -145,10 +149,16 @@ def main(argv: list[str] | None = None) -> int:
         s = _design(a.degree, a.max_evals, a.jobs)
         print(f"designs: {s['wall_time_s']:.1f} s")
     design = json.loads((SURFACE / "surfaces.json").read_text(encoding="utf-8"))
+    DOCS.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    jobs = [(c, str(g), ctl) for c in ("1", "2") for _, g, ctl in CONTROLLERS]
+    flown = _documented_flights()
+    new = [(c, str(g), ctl) for c in ("1", "2") for _, g, ctl in CONTROLLERS
+           if (c, str(g), ctl) not in flown]
     with ProcessPoolExecutor(a.jobs) as ex:
-        flown = {(c, g, ctl): m for c, g, ctl, m in ex.map(_fly_job, jobs)}
+        for c, g, ctl, m in ex.map(_fly_job, new):
+            flown[(c, g, ctl)] = m
+            print(f"flown case {c} {ctl} {g}: " + " / ".join(
+                f"{m[f'rmse_{ax}_deg']:.3f}" for ax in AXES), flush=True)
     t_fly = time.perf_counter() - t0
     rows = []
     for c in ("1", "2"):
@@ -156,7 +166,8 @@ def main(argv: list[str] | None = None) -> int:
             doc = json.loads((Path(g) / f"{ctl}.json").read_text(encoding="utf-8"))
             m = flown[(c, str(g), ctl)]
             row: dict[str, Any] = {"case": c, "controller": label,
-                                   "crashed": bool(m.get("crashed"))}
+                                   "crashed": bool(m.get("crashed")),
+                                   "source": m.get("source", "flown by this script")}
             for ax in AXES:
                 p = predicted_rmse(af, ax, controller_from_document(doc, ax), PAPER_CASES[c])
                 row[f"pred_{ax}_deg"] = math.degrees(p)
@@ -166,21 +177,43 @@ def main(argv: list[str] | None = None) -> int:
                          [r[f"rmse_{ax}_deg"] for r in rows]) for ax in AXES}
     rho["all"] = _spearman([r[f"pred_{ax}_deg"] for r in rows for ax in AXES],
                            [r[f"rmse_{ax}_deg"] for r in rows for ax in AXES])
-    val: dict[str, Any] = {}
+    res = {"rows": rows, "spearman": rho, "validation": {}, "design": design,
+           "times_s": {"flights": t_fly}}
+    _write(res)
+    print(f"flights {t_fly:.0f} s; spearman {rho}", flush=True)
+    if a.no_validation:
+        return 0
     t1 = time.perf_counter()
     for ctl in ("gs-shif", "shif"):
         doc = json.loads((SURFACE / f"{ctl}.json").read_text(encoding="utf-8"))
         v = validate_schedule(af, doc, density=2, mu=not a.no_mu, certificate=False,
                               jobs=a.jobs)
-        val[ctl] = v.summary()
-    t_val = time.perf_counter() - t1
-    DOCS.mkdir(parents=True, exist_ok=True)
-    res = {"rows": rows, "spearman": rho, "validation": val, "design": design,
-           "times_s": {"flights": t_fly, "validation": t_val}}
+        res["validation"][ctl] = v.summary()
+        res["times_s"]["validation"] = time.perf_counter() - t1
+        _write(res)
+        print(f"validated {ctl}: {time.perf_counter() - t1:.0f} s", flush=True)
+    return 0
+
+
+def _write(res: dict[str, Any]) -> None:
     (DOCS / "results.json").write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
     _write_readme(res)
-    print(f"flights {t_fly:.0f} s, validation {t_val:.0f} s; spearman {rho}")
-    return 0
+
+
+def _documented_flights() -> dict[tuple[str, str, str], dict[str, Any]]:
+    """The flights of the shipped and paper gains documented in ``docs/ds1-claims``
+    (``robust.json``, ``paper.json``: flown on this code, their command digests are
+    ``benchmarks/command_digest.py``'s)."""
+    out: dict[tuple[str, str, str], dict[str, Any]] = {}
+    for name, gdir in (("robust", GAINS), ("paper", GAINS / "paper")):
+        p = ROOT / "docs" / "ds1-claims" / f"{name}.json"
+        for m in json.loads(p.read_text(encoding="utf-8")):
+            c = m["label"].removeprefix("case ")
+            g = GAINS if m["controller"] == "lqr" else gdir
+            key = (c, str(g), m["controller"])
+            if key not in out:
+                out[key] = {**m, "source": f"docs/ds1-claims/{name}.json"}
+    return out
 
 
 def _write_readme(res: dict[str, Any]) -> None:
@@ -194,7 +227,9 @@ def _write_readme(res: dict[str, Any]) -> None:
           "Predicted: `synthesis/fault_objective.py` (design plant at 3.6, 5.8, 7.6, 9.2 m/s, "
           "step of the trim moment the fault removes at the plant input, effectiveness loss in "
           "the plant, ISE over 6 s, time-weighted, over the 20 s window). Flown: "
-          "`run_scenario(paper_scenario(case), controller, gains_dir=...)`.", "",
+          "`run_scenario(paper_scenario(case), controller, gains_dir=...)`; the shipped "
+          "and paper gains' flights are those of `docs/ds1-claims/robust.json` and "
+          "`paper.json` (same code: their `commands_sha256` are `command_digest.py`'s).", "",
           "| case | controller | roll pred | roll flown | pitch pred | pitch flown | "
           "yaw pred | yaw flown | crashed |", "|---|---|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
