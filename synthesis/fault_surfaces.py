@@ -36,7 +36,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -95,8 +95,9 @@ class FaultObjective:
     caps: NDArray[np.float64]
     cases: Sequence[FaultCase]
     rho: float = PENALTY_DEG
-    _inputs: list[list[tuple[float, float, Any, float]]] = field(default_factory=list,
-                                                                 repr=False)
+
+    def __post_init__(self) -> None:
+        self._inputs: list[list[tuple[float, float, Any, float]]] = []
 
     def predicted_deg(self, theta: NDArray[np.float64]) -> float:
         """Root mean square over the cases of the predicted RMSE [deg].
@@ -143,8 +144,23 @@ class FaultObjective:
 
 
 def channel_kind(name: str) -> str:
-    """The requirement a surface channel stands for: ``"eq8"``, ``"disturbance"`` or
-    ``"delay"`` (from its name, e.g. ``"roll point 3 delay @ 7 m/s"``)."""
+    """The requirement a surface channel stands for, from its name.
+
+    Parameters
+    ----------
+    name : str
+        A surface problem's channel name, e.g. ``"roll point 3 delay @ 7 m/s"``.
+
+    Returns
+    -------
+    str
+        ``"eq8"``, ``"disturbance"`` or ``"delay"``.
+
+    Examples
+    --------
+    >>> channel_kind("roll point 3 delay @ 7 m/s")
+    'delay'
+    """
     head = name.split(" @ ")[0]
     return head.rsplit(" ", 1)[-1]
 
