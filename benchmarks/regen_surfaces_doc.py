@@ -3,7 +3,7 @@ gain-surface design tuned for it (issue 23, items 1-2).
 
 1. Designs (unless ``--no-design``): per axis, on the surface grid, the reference (the
    caps and the start: the shipped robust SHIF), then SHIF (degree 0) and GS-SHIF (degree
-   ``--degree``, started from that SHIF) on the predicted-RMSE objective with the
+   ``--degrees`` per axis, started from that SHIF) on the predicted-RMSE objective with the
    H-infinity channels as constraints
    (:func:`vtolftc.synthesis.fault_surfaces.design_fault_surfaces`); written to
    ``firmware_sim/autopilot/gains/surface/`` (``gs-shif.json``, ``shif.json``,
@@ -18,8 +18,8 @@ gain-surface design tuned for it (issue 23, items 1-2).
    rank correlations (Spearman) and the validation of the new schedule (delay margins, mu)
    to ``docs/ds1-surfaces/README.md`` and ``results.json``::
 
-    python benchmarks/regen_surfaces_doc.py [--degree 2] [--jobs 2] [--no-design]
-        [--no-mu] [--no-validation]
+    python benchmarks/regen_surfaces_doc.py [--degrees roll=2,pitch=1,yaw=2] [--jobs 2]
+        [--no-design] [--no-mu] [--no-validation]
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def _split_job(args: tuple[str, str, str, float | None]) -> tuple[Any, ...]:
     return case, ctl, ws, {ax: float(m[f"rmse_{ax}_deg"]) for ax in AXES}
 
 
-def _design(degree: int, max_evals: int, jobs: int) -> dict[str, Any]:
+def _design(degrees: dict[str, int], max_evals: int, jobs: int) -> dict[str, Any]:
     from vtolftc.airframe.loader import load_airframe
     from vtolftc.synthesis.export import write_json
     from vtolftc.synthesis.surfaces import schedule_from_surfaces
@@ -90,7 +90,7 @@ def _design(degree: int, max_evals: int, jobs: int) -> dict[str, Any]:
     af = load_airframe()
     t0 = time.perf_counter()
     with ProcessPoolExecutor(jobs) as ex:
-        out = dict(ex.map(_design_job, [(ax, degree, max_evals) for ax in AXES]))
+        out = dict(ex.map(_design_job, [(ax, degrees[ax], max_evals) for ax in AXES]))
     wall = time.perf_counter() - t0
     from vtolftc.synthesis.robust import robust_points
     from vtolftc.synthesis.surfaces import surface_grid
@@ -103,7 +103,7 @@ def _design(degree: int, max_evals: int, jobs: int) -> dict[str, Any]:
             "method": "surface, fault objective: predicted table-4 RMSE (synthesis/"
                       "fault_objective.py) with the robust H-infinity channels as "
                       "constraints (synthesis/fault_surfaces.py)",
-            "settings": {"degree": degree, "max_evals": max_evals,
+            "settings": {"degree": degrees, "max_evals": max_evals,
                          "slack": out["roll"].slack}}
     SURFACE.mkdir(parents=True, exist_ok=True)
     write_json(SURFACE / "gs-shif.json", schedule_from_surfaces(
@@ -158,7 +158,8 @@ def _spearman(a: list[float], b: list[float]) -> float:
 def main(argv: list[str] | None = None) -> int:
     """Run (see the module docstring); returns the exit status."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--degree", type=int, default=2)
+    ap.add_argument("--degrees", default="roll=2,pitch=1,yaw=2",
+                    help="GS-SHIF surface degree per axis (>= 1)")
     ap.add_argument("--max-evals", type=int, default=300)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--no-design", action="store_true")
@@ -167,9 +168,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--render-only", action="store_true",
                     help="rewrite README.md from results.json")
     a = ap.parse_args(argv)
-    if a.degree < 1 or a.jobs < 1 or a.max_evals < 1:
-        print("regen_surfaces_doc: expected --degree >= 1, --jobs >= 1, --max-evals >= 1",
-              file=sys.stderr)
+    try:
+        degrees = {k: int(v) for k, v in (x.split("=") for x in a.degrees.split(","))}
+    except ValueError:
+        degrees = {}
+    if (set(degrees) != set(AXES) or min(degrees.values()) < 1 or a.jobs < 1
+            or a.max_evals < 1):
+        print("regen_surfaces_doc: expected --degrees roll=D,pitch=D,yaw=D with D >= 1, "
+              "--jobs >= 1, --max-evals >= 1", file=sys.stderr)
         return 2
     from vtolftc.airframe.loader import load_airframe
     from vtolftc.synthesis.fault_objective import (
@@ -184,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     af = load_airframe()
     if not a.no_design:
-        s = _design(a.degree, a.max_evals, a.jobs)
+        s = _design(degrees, a.max_evals, a.jobs)
         print(f"designs: {s['wall_time_s']:.1f} s")
     design = json.loads((SURFACE / "surfaces.json").read_text(encoding="utf-8"))
     DOCS.mkdir(parents=True, exist_ok=True)
