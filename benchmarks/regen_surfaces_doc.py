@@ -156,8 +156,8 @@ READING = [
     "axis-points missing a requirement of `synthesis/validation.py` (6 dB, 30 deg, 50 ms, "
     "mu_RS < 1); the hover points' mu floors (|W_t(0)| >= 1, docs/ds1-claims) fail for "
     "every design with integral action. The roll surface's derivative filter reaches "
-    "0.012 s at hover (kd / tf = 68 N m s/rad): gyro noise is not in J (the flights are noise-free). Not shipped as "
-    "defaults: the lead decides.",
+    "0.012 s at hover (kd / tf = 68 N m s/rad): gyro noise is not in J (the flights "
+    "are noise-free). Not shipped as defaults: the lead decides.",
 ]
 
 
