@@ -31,18 +31,19 @@ item 2).
 
 ``--objective fault`` (``synthesis/fault_surfaces.py``: minimise the predicted fault RMSE of
 ``synthesis/fault_objective.py``, the robust channels capped at 5 % above the shipped SHIF's
-worst per requirement; start and caps from the shipped SHIF, so no H-infinity tune): the
-design written to ``firmware_sim/autopilot/gains/surface/`` (degree 2, 300 evaluations per
-stage, jobs 2) took 290 s wall at load average 20-25 (roll 289, pitch 141, yaw 110 s per
-axis; ``benchmarks/regen_surfaces_doc.py``). Per evaluation of J, measured pairwise in one
+worst per requirement; start and caps from the shipped SHIF, so no H-infinity tune), 300
+evaluations per stage, jobs 2 (``benchmarks/regen_surfaces_doc.py``): all axes degree 2,
+290 s wall at load average 20-25 (roll 289, pitch 141, yaw 110 s per axis); the design in
+``firmware_sim/autopilot/gains/surface/`` (degrees roll 2, pitch 1, yaw 2), 437 s wall at
+load average ~25 (roll 436, pitch 282, yaw 136 s). Per evaluation of J, measured pairwise in one
 run at load 18.5: the 39 H-infinity channel norms 0.48 s, the predictor (2 cases x 4
 airspeeds) 0.09 s: the caps are 84 % of the time. At load ~9 the channel norms took 0.068 s,
 which puts the 600 evaluations of an axis near 50 s and the three axes on 2 cores near
 100 s: the < 90 s target is not shown on this machine (fewer evaluations, or skipping the
 channel norms where the predictor alone already exceeds the simplex's worst, are the levers).
-Case 1 / case 2 RMSE roll / pitch / yaw [deg] of that design: GS-SHIF 0.112 / 0.383 / 0.128
-and 0.141 / 0.339 / 0.136, SHIF 0.122 / 0.382 / 0.130 and 0.155 / 0.354 / 0.137
-(``docs/ds1-surfaces/README.md``).
+Case 1 / case 2 RMSE roll / pitch / yaw [deg] of the shipped surface design: GS-SHIF
+0.112 / 0.368 / 0.128 and 0.141 / 0.337 / 0.136, SHIF 0.122 / 0.382 / 0.130 and
+0.155 / 0.354 / 0.137 (``docs/ds1-surfaces/README.md``).
 """
 
 from __future__ import annotations
