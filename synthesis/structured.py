@@ -44,7 +44,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -1129,6 +1129,77 @@ def _run_start(args: tuple[TuningProblem, int, NDArray[np.float64], _Options]) -
     return StartRecord(index, np.array(theta0), np.array(theta), f, hist, it, status)
 
 
+POLISH_ROUNDS = 4
+"""At most POLISH_ROUNDS restarts of :func:`_polish` from the best point (each stops as a start
+does); fewer when a restart no longer lowers the objective by PROGRESS_TOL (relative)."""
+
+
+def _alt_units(problem: TuningProblem) -> TuningProblem | None:
+    """``problem`` with the other step unit for the plant-scaled parameters.
+
+    Parameters with a ``sample_sd`` (plant-scaled, :mod:`vtolftc.synthesis.blocks`) step in
+    their own unit (``scale``); the restart takes ``sample_sd`` as the unit instead when the
+    two differ (and the other way round when they were equal). None if that changes no
+    parameter's unit (no parameter has a ``sample_sd``, or each equals its unit).
+    """
+    prm = list(problem.parameters)
+    if not any(p.sample_sd is not None for p in prm):
+        return None
+    alt = []
+    for p in prm:
+        if p.sample_sd is None:
+            alt.append(p)
+        elif p.scale is None or p.scale != p.sample_sd:
+            alt.append(replace(p, scale=p.sample_sd))
+        else:
+            alt.append(replace(p, scale=None))
+    out = TuningProblem(alt, problem.channels, problem.channel_names,
+                        problem.stability_margin)
+    return None if np.array_equal(out.scales, problem.scales) else out
+
+
+def _polish(problem: TuningProblem, rec: StartRecord, opts: _Options) -> StartRecord:
+    """Restart the local solver from the best start's point (``tune(..., polish=True)``).
+
+    A start stops where the frequency model is stationary or its trust region collapsed: on a
+    nonsmooth max of singular values that is often a kink that the step unit or the active
+    frequency set of that run cannot resolve. Each round restarts :func:`_local` from the best
+    point, first with the other step unit (:func:`_alt_units`), then with the problem's own,
+    each with a fresh frequency set and trust radius; the rounds end when one lowers the
+    objective by less than PROGRESS_TOL (relative), after POLISH_ROUNDS, or at the deadline.
+    The record returned is ``rec`` with the better point, its history extended, the
+    iterations added and the status saying by how much the polish improved it.
+    """
+    if not math.isfinite(rec.value):
+        return rec
+    variants = [problem]
+    alt = _alt_units(problem) if opts.regularization == 0 else None
+    if alt is not None:
+        variants.insert(0, alt)
+    theta, f = np.array(rec.theta), float(rec.value)
+    hist, its = list(rec.history), rec.iterations
+    for _ in range(POLISH_ROUNDS):
+        f_round = f
+        for pb in variants:
+            if opts.interrupted or (opts.deadline is not None
+                                    and time.monotonic() >= opts.deadline):
+                break
+            try:
+                th, fn, h, it, _ = _local(_Evaluator(pb), theta, opts, rec.index)
+            except (np.linalg.LinAlgError, FloatingPointError, ValueError):
+                continue
+            its += it
+            if fn < f:
+                hist += [v for v in h if v < f]
+                theta, f = th, fn
+        if not f < f_round * (1 - PROGRESS_TOL):
+            break
+    if f >= rec.value:
+        return rec
+    return StartRecord(rec.index, rec.theta0, theta, f, hist, its,
+                       f"{rec.status}; polished from {rec.value:.6g} to {f:.6g}")
+
+
 def tune(
     problem: TuningProblem,
     *,
@@ -1145,6 +1216,7 @@ def tune(
     time_limit: float | None = None,
     progress: Callable[[Progress], None] | None = None,
     regularization: float = 0.0,
+    polish: bool | None = None,
 ) -> TuneResult:
     """Minimise max_i ||channel_i(theta)||_inf over theta (paper eqs. 7-8, ``systune`` role).
 
@@ -1191,6 +1263,12 @@ def tune(
         rho >= 0: minimise max_i ||T_i||_inf + rho sum_k (theta_k / scale_k)^2 instead (a
         small rho keeps gains finite on problems whose infimum is approached only as gains
         grow without bound). ``value`` then includes the penalty; ``channel_values`` do not.
+    polish : bool or None
+        Restart the local solver from the best start's point with the other step unit of
+        the plant-scaled parameters and fresh frequency sets until it stops improving
+        (:data:`POLISH_ROUNDS` at most; the best start's record says by how much). ``None``
+        (default): only when running to convergence (``max_iter=None``), so an explicit
+        ``max_iter`` (the DS-1 design's 40) gives the same numbers as before.
 
     Returns
     -------
@@ -1242,6 +1320,12 @@ def tune(
             records.append(StartRecord(0, th0, th0, math.inf, [math.inf], 0, "interrupted"))
     else:
         records = list(map_fn(run_start, jobs))
+    if (opts.to_convergence if polish is None else polish) and not stopped:
+        best = min(records, key=lambda r: (r.value, r.index))
+        try:
+            records = [_polish(problem, r, opts) if r is best else r for r in records]
+        except KeyboardInterrupt:
+            stopped = "interrupted"
     return collect_starts(problem, records, opts.t_start, stopped)
 
 
