@@ -9,7 +9,8 @@ the value before issue 23's fix (``BEFORE_ISSUE_23``) or its target (``ISSUE_23_
 each start's value, iterations and stop reason, the number of starts that stabilised, and the
 wall time.
 
-Usage: ``python benchmarks/bench_compleib.py [NAME ...] [--max-iter N] [--starts N]``.
+Usage: ``python benchmarks/bench_compleib.py [NAME ...] [--max-iter N] [--starts N]
+[--no-polish]``.
 Timings are wall-clock on whatever else the machine is doing.
 """
 
@@ -30,13 +31,14 @@ from vtolftc.synthesis.lft import lft
 from vtolftc.synthesis.structured import tune
 
 
-def run(name: str, n_random: int, max_iter: int | None) -> dict[str, object]:
+def run(name: str, n_random: int, max_iter: int | None,
+        polish: bool | None = None) -> dict[str, object]:
     """Tune problem ``name``; the measured numbers as a dict."""
     P = compleib(name)
     nu, ny = P.B2.shape[1], P.C2.shape[0]
     pb = lft_problem(P, StaticGain("K", nu, ny, plant=P))
     t0 = time.perf_counter()
-    res = tune(pb, n_starts=n_random, seed=0, max_iter=max_iter)
+    res = tune(pb, n_starts=n_random, seed=0, max_iter=max_iter, polish=polish)
     wall = time.perf_counter() - t0
     K = res.theta.reshape(nu, ny)
     return {"name": name, "value": res.value, "slycot": slycot_norm(lft(P, K)),
@@ -51,6 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("names", nargs="*", default=list(NAMES))
     ap.add_argument("--max-iter", type=int, default=None)
     ap.add_argument("--starts", type=int, default=4, help="random starts besides K = 0")
+    ap.add_argument("--no-polish", action="store_true",
+                    help="tune without the polish stage (the tuner before issue 23 item 6)")
     a = ap.parse_args(argv)
     bad = [n for n in a.names if n not in NAMES]
     if bad:
@@ -58,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     for name in a.names:
-        r = run(name, a.starts, a.max_iter)
+        r = run(name, a.starts, a.max_iter, False if a.no_polish else None)
         print(f"{name:5s} best {r['value']:.5f} slycot {r['slycot']:.5f} ref "
               f"{r['before']:.5f} stabilised {r['stabilised']}/{a.starts + 1} "
               f"{r['wall_s']:.1f} s", flush=True)

@@ -1158,28 +1158,45 @@ def _alt_units(problem: TuningProblem) -> TuningProblem | None:
     return None if np.array_equal(out.scales, problem.scales) else out
 
 
+def _units_at(problem: TuningProblem, theta: NDArray[np.float64]) -> TuningProblem | None:
+    """``problem`` with each parameter's step unit set to its magnitude at ``theta``.
+
+    Relative coordinates at the point being polished: on COMPleib AC10 the best gain is
+    [0.166, 1.5e-5; 0.167, 8.7e-5] while the plant's gain scales are 1.46e4 and 7.8e-4 per
+    column and the default unit is 1, so in either unit the entries differ by 1e4 or more
+    in size and the SLSQP model of the step is that badly conditioned. Zero entries keep
+    their unit. None if that changes nothing.
+    """
+    prm = [replace(p, scale=abs(float(t))) if t != 0 and math.isfinite(t) else p
+           for p, t in zip(problem.parameters, theta, strict=True)]
+    out = TuningProblem(prm, problem.channels, problem.channel_names,
+                        problem.stability_margin)
+    return None if np.array_equal(out.scales, problem.scales) else out
+
+
 def _polish(problem: TuningProblem, rec: StartRecord, opts: _Options) -> StartRecord:
     """Restart the local solver from the best start's point (``tune(..., polish=True)``).
 
     A start stops where the frequency model is stationary or its trust region collapsed: on a
     nonsmooth max of singular values that is often a kink that the step unit or the active
     frequency set of that run cannot resolve. Each round restarts :func:`_local` from the best
-    point, first with the other step unit (:func:`_alt_units`), then with the problem's own,
-    each with a fresh frequency set and trust radius; the rounds end when one lowers the
+    point, first in units of the point's own magnitudes (:func:`_units_at`), then with the
+    other step unit (:func:`_alt_units`), then with the problem's own, each with a fresh
+    frequency set and trust radius; the rounds end when one lowers the
     objective by less than PROGRESS_TOL (relative), after POLISH_ROUNDS, or at the deadline.
     The record returned is ``rec`` with the better point, its history extended, the
     iterations added and the status saying by how much the polish improved it.
     """
     if not math.isfinite(rec.value):
         return rec
-    variants = [problem]
-    alt = _alt_units(problem) if opts.regularization == 0 else None
-    if alt is not None:
-        variants.insert(0, alt)
     theta, f = np.array(rec.theta), float(rec.value)
     hist, its = list(rec.history), rec.iterations
     for _ in range(POLISH_ROUNDS):
         f_round = f
+        variants = [problem]
+        if opts.regularization == 0:  # the penalty is in units of the problem's own scales
+            variants = [v for v in (_units_at(problem, theta), _alt_units(problem))
+                        if v is not None] + variants
         for pb in variants:
             if opts.interrupted or (opts.deadline is not None
                                     and time.monotonic() >= opts.deadline):
