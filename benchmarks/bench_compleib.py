@@ -12,6 +12,37 @@ wall time.
 Usage: ``python benchmarks/bench_compleib.py [NAME ...] [--max-iter N] [--starts N]
 [--no-polish]``.
 Timings are wall-clock on whatever else the machine is doing.
+
+Measured 2026-12-02 (compleib-10, issue 23 item 6) on the shared 2-core machine at load
+average 9-31 (nice 5; wall times are that load's, not the tuner's), best of 5 starts, every
+norm re-computed by raw slycot AB13DD (equal to 5 digits):
+
+=======  ==========  ===================  ========================  ==================
+problem  reference   --no-polish (before)  with the polish (after)  wall before
+=======  ==========  ===================  ========================  ==================
+AC2      0.11149     0.11149 (5/5)         never worse (a)          13.0 s
+AC4      0.93547     0.93547 (5/5)         never worse (a)          6.5 s
+AC6      4.11396     4.11396 (5/5)         never worse (a)          56.5 s
+AC7      0.06509     0.06509 (5/5)         never worse (a)          7.4 s
+AC8      2.00501     2.00501 (5/5)         never worse (a)          47.5 s
+AC10     <= 13.45    14.554 (5/5) (b)      13.2365 (c)              211 s (start 0)
+HE3      <= 0.8157   0.82254 (b)           see (d)                  1405 s (start 0)
+=======  ==========  ===================  ========================  ==================
+
+(a) the polish replaces the best start's point only by a strictly better one, and the
+starts themselves are unchanged, so no problem can get worse; the quick ones are checked by
+``test_compleib_no_worse_than_before_and_the_norm_is_slycots``.
+(b) start 0 (K = 0) alone gives the best of the five: AC10 14.55400 after 32 iterations
+("no progress": < 1e-4 relative decrease in 15 iterations), HE3 0.82254 after 84 iterations
+("small decrease").
+(c) the diagnosis: AC10's best gain is [0.166, 1.5e-5; 0.167, 8.7e-5] while the step unit is
+1 (the plant's gain scales, 1.46e4 and 7.8e-4 per column, are no better): the trust-region
+step and SLSQP's quadratic model are conditioned like the 1e4 ratio of the entries' sizes,
+so each iteration gains < 1e-5 relative. Restarted in the point's own units (the polish's
+first variant) the same solver reaches 13.23651 (slycot 13.23651) in 30 iterations, 36 s.
+(d) filled in below when measured.
+HE4, AC15, HE1 and BDT1 were not re-measured in this session: at load 20-30 the run of HE4
+(5 starts to convergence) had not finished after 40 min.
 """
 
 from __future__ import annotations
