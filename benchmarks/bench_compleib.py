@@ -3,7 +3,8 @@
 For each problem (``tests/support/compleib.py``): ``tune`` of a static gain u = K y built with
 ``StaticGain(..., plant=P)`` (plant-scaled random starts centred on a stabilising anchor,
 ``structured.start_anchor``), 5 starts (the initial K = 0 and 4 random ones, seed 0),
-``max_iter`` as given (default: to convergence). The closed-loop norm of the best K is
+``max_iter`` as given (default: to convergence), with ``tune``'s polish stage unless
+``--no-polish``. The closed-loop norm of the best K is
 re-computed with raw ``slycot.ab13dd``. Prints, per problem: the best norm, the slycot norm,
 the value before issue 23's fix (``BEFORE_ISSUE_23``) or its target (``ISSUE_23_TARGETS``),
 each start's value, iterations and stop reason, the number of starts that stabilised, and the
@@ -63,7 +64,7 @@ from vtolftc.synthesis.structured import tune
 
 
 def run(name: str, n_random: int, max_iter: int | None,
-        polish: bool | None = None) -> dict[str, object]:
+        polish: bool = True) -> dict[str, object]:
     """Tune problem ``name``; the measured numbers as a dict."""
     P = compleib(name)
     nu, ny = P.B2.shape[1], P.C2.shape[0]
@@ -93,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     for name in a.names:
-        r = run(name, a.starts, a.max_iter, False if a.no_polish else None)
+        r = run(name, a.starts, a.max_iter, not a.no_polish)
         print(f"{name:5s} best {r['value']:.5f} slycot {r['slycot']:.5f} ref "
               f"{r['before']:.5f} stabilised {r['stabilised']}/{a.starts + 1} "
               f"{r['wall_s']:.1f} s", flush=True)

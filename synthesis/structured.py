@@ -1233,7 +1233,7 @@ def tune(
     time_limit: float | None = None,
     progress: Callable[[Progress], None] | None = None,
     regularization: float = 0.0,
-    polish: bool | None = None,
+    polish: bool = False,
 ) -> TuneResult:
     """Minimise max_i ||channel_i(theta)||_inf over theta (paper eqs. 7-8, ``systune`` role).
 
@@ -1280,12 +1280,14 @@ def tune(
         rho >= 0: minimise max_i ||T_i||_inf + rho sum_k (theta_k / scale_k)^2 instead (a
         small rho keeps gains finite on problems whose infimum is approached only as gains
         grow without bound). ``value`` then includes the penalty; ``channel_values`` do not.
-    polish : bool or None
-        Restart the local solver from the best start's point with the other step unit of
-        the plant-scaled parameters and fresh frequency sets until it stops improving
-        (:data:`POLISH_ROUNDS` at most; the best start's record says by how much). ``None``
-        (default): only when running to convergence (``max_iter=None``), so an explicit
-        ``max_iter`` (the DS-1 design's 40) gives the same numbers as before.
+    polish : bool
+        Restart the local solver from the best start's point in the point's own units, in
+        the other step unit of the plant-scaled parameters and in the problem's units, each
+        with a fresh frequency set, until it stops improving (:data:`POLISH_ROUNDS` at most;
+        the best start's record says by how much; never worse than without). Off by default:
+        the result then stays :func:`collect_starts` of :func:`start_jobs`, bit for bit, and
+        the DS-1 design's numbers are unchanged (COMPleib AC10: 14.554 without, 13.2365 with;
+        ``benchmarks/bench_compleib.py``).
 
     Returns
     -------
@@ -1337,7 +1339,7 @@ def tune(
             records.append(StartRecord(0, th0, th0, math.inf, [math.inf], 0, "interrupted"))
     else:
         records = list(map_fn(run_start, jobs))
-    if (opts.to_convergence if polish is None else polish) and not stopped:
+    if polish and not stopped:
         best = min(records, key=lambda r: (r.value, r.index))
         try:
             records = [_polish(problem, r, opts) if r is best else r for r in records]
