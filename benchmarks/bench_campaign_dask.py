@@ -143,7 +143,6 @@ def dask_run(args: argparse.Namespace, scen: list[Any], pool_wall: float,
 
     from vtolftc.runners.campaign import execute
     from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, PauseProfiler
-    from vtolftc.runners.campaign.dask_run import prepare_workers
 
     n = len(scen)
     me = psutil.Process()
@@ -160,12 +159,12 @@ def dask_run(args: argparse.Namespace, scen: list[Any], pool_wall: float,
         if args.no_warm:
             client.register_plugin(PauseProfiler(), name=PLUGIN_NAME)
         else:
-            prepare_workers(client, scen)
+            execute.prepare_dask(client, scen)
         size = args.batch or execute.dask_batch_size(n, args.jobs)
         chunks = [scen[i:i + size] for i in range(0, n, size)]
         futs = client.map(_timed_batch, chunks, pure=False)
         tasks = []
-        for f in as_completed(futs):
+        for f in as_completed(futs, loop=client.loop):
             tasks.append(f.result())
             f.release()
         wall = time.perf_counter() - t0
@@ -174,7 +173,7 @@ def dask_run(args: argparse.Namespace, scen: list[Any], pool_wall: float,
     dask_run_s = {r["scenario_id"]: r["run_wall_time_s"] for r in rows}
     same = sorted(set(dask_run_s) & set(pool_run))
     ratio_flight = statistics.mean(dask_run_s[k] / pool_run[k] for k in same)
-    how = "no warm-up plugin" if args.no_warm else "warmed by prepare_workers"
+    how = "no warm-up plugin" if args.no_warm else "warmed by prepare_dask"
     print(f"Dask fresh LocalCluster ({how}; batch {size}): {n} in {wall:.1f} s = "
           f"{60 * n / wall:.1f} "
           f"scenarios/min -> Dask / pool {pool_wall / wall:.2f}x")

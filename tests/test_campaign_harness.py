@@ -147,7 +147,6 @@ def test_rss_of_this_process_and_a_child():
 def test_forked_pool_and_batched_dask_equal_one_process():
     from distributed import Client, LocalCluster
 
-    from vtolftc.runners.campaign import dask_run
     from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, WARM_PLUGIN_NAME, PauseProfiler
 
     scen = expand(parse_spec(SHORT))
@@ -163,7 +162,7 @@ def test_forked_pool_and_batched_dask_equal_one_process():
             # before any task reaches them
             c.wait_for_workers(2, timeout=120)
             assert all(v == [] for v in c.run(lambda: sorted(execute._WARM)).values())
-            dask_run.prepare_workers(c, scen)
+            execute.prepare_dask(c, scen)
             keys = sorted(execute.warm_keys(scen), key=repr)
 
             def warmed(dask_worker):
@@ -175,7 +174,7 @@ def test_forked_pool_and_batched_dask_equal_one_process():
                 assert time.monotonic() < deadline, c.run(lambda: sorted(execute._WARM))
                 time.sleep(0.2)
             # a client kept open by the caller (as vtolftc campaign does)
-            _same_rows(serial, list(dask_run.run_dask(scen, c, tag="c", batch=2)))
+            _same_rows(serial, list(execute.run_dask(scen, c, tag="c", batch=2)))
             assert not any(set(v) & {PLUGIN_NAME, WARM_PLUGIN_NAME} for v in c.run(
                 lambda dask_worker: list(dask_worker.plugins)).values())  # unregistered
         rows = list(execute.run_dask(scen, cluster.scheduler_address, tag="t", batch=3))

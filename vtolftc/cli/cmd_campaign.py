@@ -124,13 +124,14 @@ def _cpus() -> int:
 def _dask_client(address: str, todo: list[Any]) -> Any:
     """A client of the Dask scheduler at ``address`` whose workers start warming for
     ``todo`` at once (while this process computes the oracle); bad address: usage error."""
-    from vtolftc.runners.campaign.dask_run import connect, prepare_workers
+    from vtolftc.runners.campaign.dask_run import connect
+    from vtolftc.runners.campaign.execute import prepare_dask
 
     try:
         client = connect(address)
     except ConnectionError as exc:
         raise _usage(str(exc)) from None
-    prepare_workers(client, todo)
+    prepare_dask(client, todo)
     return client
 
 
@@ -155,8 +156,7 @@ def _fly(args: argparse.Namespace, spec: Any, todo: list[Any], writer: Any, tota
          client: Any = None) -> None:
     from tqdm import tqdm
 
-    from vtolftc.runners.campaign.dask_run import run_dask
-    from vtolftc.runners.campaign.execute import run_local
+    from vtolftc.runners.campaign.execute import run_dask, run_local
 
     if client is not None:
         stream: Any = run_dask(todo, client, tag=spec.sha256[:8])

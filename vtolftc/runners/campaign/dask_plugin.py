@@ -13,7 +13,7 @@ A Dask worker samples the stack of its task threads every 10 ms
 (``distributed.worker.profile``) on its event loop, which takes the GIL from the flight
 running in the task thread each time. A campaign's tasks are flights whose profile nobody
 reads, so :class:`PauseProfiler` stops the two profiling callbacks of each worker while it
-is registered (:mod:`vtolftc.runners.campaign.dask_run` registers both plugins for the
+is registered (:func:`vtolftc.runners.campaign.execute.run_dask` registers both plugins for the
 campaign and unregisters them at the end, which starts the profiler again). Imported only
 with Dask; importing this module does not import the flight code (a worker unpickles the
 plugin on its event loop).
@@ -22,7 +22,7 @@ plugin on its event loop).
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from distributed.diagnostics.plugin import WorkerPlugin
@@ -59,15 +59,11 @@ class PauseProfiler(WorkerPlugin):
         self.stopped = []
 
 
-def _warm(keys: Sequence[tuple[str | None, str | None, str]]) -> float:
-    from vtolftc.runners.campaign.execute import warm_up_keys
-
-    return warm_up_keys(keys)
-
-
 class WarmWorker(WorkerPlugin):
     """Warm a worker for the flights of ``keys`` (airframe path, gains folder, controller;
-    None: the shipped ones) in its task thread, once per worker and key.
+    None: the shipped ones) in its task thread: ``warm(keys)`` there (pickled by reference:
+    :func:`vtolftc.runners.campaign.execute.warm_up_keys`, which warms each key once per
+    process).
 
     :meth:`setup` only hands the warm-up to the worker's default executor and returns (the
     worker's event loop and the client's ``register_plugin`` do not wait for it);
@@ -76,7 +72,9 @@ class WarmWorker(WorkerPlugin):
 
     name = WARM_PLUGIN_NAME
 
-    def __init__(self, keys: Sequence[tuple[str | None, str | None, str]]) -> None:
+    def __init__(self, warm: Callable[[list[tuple[Any, ...]]], Any],
+                 keys: Sequence[tuple[str | None, str | None, str]]) -> None:
+        self.warm = warm
         self.keys = [tuple(k) for k in keys]
         self.pending: Any = None
 
@@ -84,4 +82,4 @@ class WarmWorker(WorkerPlugin):
         """Queue the warm-up on ``worker``'s task thread (the executor its tasks run on)."""
         executor = worker.executors.get("default")
         loop = asyncio.get_running_loop()
-        self.pending = loop.run_in_executor(executor, _warm, self.keys)
+        self.pending = loop.run_in_executor(executor, self.warm, self.keys)

@@ -1,4 +1,4 @@
-"""Campaign scenarios as tasks on a Dask distributed cluster.
+"""The Dask side of a campaign: the client, the workers' plugins, the task size.
 
 :func:`connect` opens a client to a scheduler (``tcp://HOST:PORT``; an unreachable one is a
 :class:`ConnectionError` with one line). :func:`prepare_workers` registers the campaign's
@@ -7,20 +7,16 @@ that joins later, warms itself for the campaign's (airframe, gains, controller) 
 thread without blocking anyone, and pauses its statistical profiler. ``vtolftc campaign``
 calls it before it computes the recoverability oracle, so a fresh cluster's workers import
 the flight code and load their kernels meanwhile, as the local pool's workers inherit them
-from the campaign process. :func:`run_dask` submits the scenarios in batches
-(:func:`dask_batch_size`) of :func:`~vtolftc.runners.campaign.execute.fly_batch` and yields
-their rows as tasks finish; each finished task is released at once, so neither the workers
-nor the client hold the results of a long campaign.
+from the campaign process. :func:`vtolftc.runners.campaign.execute.run_dask` submits the
+scenarios in batches of :func:`dask_batch_size`. This module never imports the flight code.
 """
 
 from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
-
-from vtolftc.runners.campaign.scenarios import CampaignScenario
 
 __all__ = [
     "TASKS_PER_WORKER",
@@ -29,7 +25,6 @@ __all__ = [
     "dask_batch_size",
     "prepare_workers",
     "release_workers",
-    "run_dask",
 ]
 
 TASK_SIM_S = 60.0
@@ -61,21 +56,21 @@ def connect(address: str) -> Any:
                               f"({exc})") from None
 
 
-def prepare_workers(client: Any, scenarios: Sequence[CampaignScenario]) -> None:
+def prepare_workers(client: Any, warm: Callable[[list[tuple[Any, ...]]], Any],
+                    keys: Sequence[tuple[str | None, str | None, str]]) -> None:
     """Register the campaign's worker plugins on ``client``'s cluster: each worker (and each
-    one joining later) pauses its profiler and warms for ``scenarios`` in its task thread.
-    Returns at once (the warm-up runs on the workers); a worker already warm for these
-    scenarios costs nothing more."""
+    one joining later) pauses its profiler and runs ``warm(keys)`` in its task thread.
+    Returns at once (the warm-up runs on the workers); a worker already warm for these keys
+    costs nothing more (see :func:`vtolftc.runners.campaign.execute.prepare_dask`)."""
     from vtolftc.runners.campaign.dask_plugin import (
         PLUGIN_NAME,
         WARM_PLUGIN_NAME,
         PauseProfiler,
         WarmWorker,
     )
-    from vtolftc.runners.campaign.execute import warm_keys
 
     client.register_plugin(PauseProfiler(), name=PLUGIN_NAME)
-    client.register_plugin(WarmWorker(warm_keys(scenarios)), name=WARM_PLUGIN_NAME)
+    client.register_plugin(WarmWorker(warm, keys), name=WARM_PLUGIN_NAME)
 
 
 def release_workers(client: Any) -> None:
@@ -86,60 +81,3 @@ def release_workers(client: Any) -> None:
     for name in (WARM_PLUGIN_NAME, PLUGIN_NAME):
         with contextlib.suppress(Exception):
             client.unregister_worker_plugin(name)
-
-
-def run_dask(scenarios: Sequence[CampaignScenario], scheduler: Any, *,
-             tag: str = "campaign", batch: int | None = None) -> Iterator[dict[str, Any]]:
-    """Rows of ``scenarios`` flown as tasks on a Dask cluster, as they finish.
-
-    Parameters
-    ----------
-    scenarios
-        The scenarios to fly.
-    scheduler
-        The scheduler's address (``tcp://HOST:PORT``: a client is opened and closed here) or
-        a :class:`distributed.Client` (kept open; typically one :func:`prepare_workers` was
-        called on earlier, which this call repeats at no cost).
-    tag
-        Part of the task keys (``vtolftc-TAG-...``).
-    batch
-        Scenarios per task (default :func:`dask_batch_size` of the cluster's workers).
-
-    Each worker needs this package (same version) installed; see ``docs/campaigns/README.md``.
-    A task flies its batch with :func:`~vtolftc.runners.campaign.execute.fly_batch`; its
-    future is released as soon as its rows are here. The plugins are unregistered at the
-    end. Closing the generator cancels what is not done.
-    """
-    from distributed import as_completed
-
-    from vtolftc.runners.campaign.execute import fly_batch
-
-    own = isinstance(scheduler, str)
-    client = connect(scheduler) if own else scheduler
-    pending: set[Any] = set()
-    try:
-        prepare_workers(client, scenarios)
-        if batch is None:
-            dur = max((sc.duration_s for sc in scenarios), default=TASK_SIM_S)
-            batch = dask_batch_size(len(scenarios), len(client.scheduler_info()["workers"]),
-                                    dur)
-        size = max(1, int(batch))
-        chunks = [list(scenarios[i:i + size]) for i in range(0, len(scenarios), size)]
-        futures = client.map(fly_batch, chunks,
-                             key=[f"vtolftc-{tag}-{c[0].scenario_id}-{len(c)}" for c in chunks],
-                             pure=False, retries=1)
-        pending = set(futures)
-        done = as_completed(futures, loop=client.loop)
-        del futures
-        for fut in done:
-            rows = fut.result()
-            pending.discard(fut)
-            fut.release()
-            del fut
-            yield from rows
-    finally:
-        if pending:
-            client.cancel(list(pending))
-        release_workers(client)
-        if own:
-            client.close()

@@ -21,8 +21,11 @@ running threads of its own (a Dask client, a progress monitor), which a fork cou
 holding a lock, starts them from a forkserver that has imported the flight code instead. A
 worker is replaced by a fresh one every :data:`WORKER_SCENARIOS` scenarios (forked by the
 pool's own thread, as multiprocessing's ``maxtasksperchild`` always does), which bounds its
-memory. A Dask worker keeps the same per-process caches from one task to the next; the Dask side
-(warmed workers, batched tasks released at once) is :mod:`vtolftc.runners.campaign.dask_run`.
+memory. A Dask worker keeps the same per-process caches from one task to the next; its scenarios
+go to it in batches (:func:`fly_batch`), each finished task is released at once, so neither
+the workers nor the client hold the results of a long campaign; :func:`prepare_dask` warms
+fresh workers in their task threads without blocking (see
+:mod:`vtolftc.runners.campaign.dask_run`).
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ __all__ = [
     "fly_batch",
     "fly_scenario",
     "pool_context",
+    "prepare_dask",
     "run_dask",
     "run_local",
     "vehicle_options",
@@ -306,19 +310,78 @@ def run_local(scenarios: Sequence[CampaignScenario], jobs: int | None = None, *,
 
 
 # --------------------------------------------------------------------------------------------
-# Dask distributed (vtolftc.runners.campaign.dask_run; the names kept here for their callers)
+# Dask distributed (the client, plugins and task size: vtolftc.runners.campaign.dask_run)
 # --------------------------------------------------------------------------------------------
 
-def dask_batch_size(n_scenarios: int, n_workers: int) -> int:
+def dask_batch_size(n_scenarios: int, n_workers: int, duration_s: float = 60.0) -> int:
     """See :func:`vtolftc.runners.campaign.dask_run.dask_batch_size`."""
     from vtolftc.runners.campaign.dask_run import dask_batch_size as size
 
-    return size(n_scenarios, n_workers)
+    return size(n_scenarios, n_workers, duration_s)
+
+
+def prepare_dask(client: Any, scenarios: Sequence[CampaignScenario]) -> None:
+    """Register the campaign's worker plugins on ``client``'s cluster for ``scenarios``
+    (:func:`vtolftc.runners.campaign.dask_run.prepare_workers`: each worker warms with
+    :func:`warm_up_keys` in its task thread, its profiler paused); returns at once."""
+    from vtolftc.runners.campaign.dask_run import prepare_workers
+
+    prepare_workers(client, warm_up_keys, warm_keys(scenarios))
 
 
 def run_dask(scenarios: Sequence[CampaignScenario], scheduler: Any, *,
              tag: str = "campaign", batch: int | None = None) -> Iterator[dict[str, Any]]:
-    """See :func:`vtolftc.runners.campaign.dask_run.run_dask`."""
-    from vtolftc.runners.campaign.dask_run import run_dask as run
+    """Rows of ``scenarios`` flown as tasks on a Dask cluster, as they finish.
 
-    return run(scenarios, scheduler, tag=tag, batch=batch)
+    Parameters
+    ----------
+    scenarios
+        The scenarios to fly.
+    scheduler
+        The scheduler's address (``tcp://HOST:PORT``: a client is opened and closed here) or
+        a :class:`distributed.Client` (kept open; typically one :func:`prepare_dask` was
+        called on earlier, which this call repeats at no cost).
+    tag
+        Part of the task keys (``vtolftc-TAG-...``).
+    batch
+        Scenarios per task (default
+        :func:`~vtolftc.runners.campaign.dask_run.dask_batch_size` of the cluster's workers).
+
+    Each worker needs this package (same version) installed; see ``docs/campaigns/README.md``.
+    A task flies its batch with :func:`fly_batch`; its future is released as soon as its
+    rows are here. The worker plugins (:func:`prepare_dask`) are unregistered at the end.
+    Closing the generator cancels what is not done.
+    """
+    from distributed import as_completed
+
+    from vtolftc.runners.campaign.dask_run import connect, release_workers
+
+    own = isinstance(scheduler, str)
+    client = connect(scheduler) if own else scheduler
+    pending: set[Any] = set()
+    try:
+        prepare_dask(client, scenarios)
+        if batch is None:
+            dur = max((sc.duration_s for sc in scenarios), default=60.0)
+            batch = dask_batch_size(len(scenarios), len(client.scheduler_info()["workers"]),
+                                    dur)
+        size = max(1, int(batch))
+        chunks = [list(scenarios[i:i + size]) for i in range(0, len(scenarios), size)]
+        futures = client.map(fly_batch, chunks,
+                             key=[f"vtolftc-{tag}-{c[0].scenario_id}-{len(c)}" for c in chunks],
+                             pure=False, retries=1)
+        pending = set(futures)
+        done = as_completed(futures, loop=client.loop)
+        del futures
+        for fut in done:
+            rows = fut.result()
+            pending.discard(fut)
+            fut.release()
+            del fut
+            yield from rows
+    finally:
+        if pending:
+            client.cancel(list(pending))
+        release_workers(client)
+        if own:
+            client.close()
