@@ -147,7 +147,13 @@ def test_rss_of_this_process_and_a_child():
 def test_forked_pool_and_batched_dask_equal_one_process():
     from distributed import Client, LocalCluster
 
-    from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, WARM_PLUGIN_NAME, PauseProfiler
+    from vtolftc.runners.campaign.dask_plugin import (
+        NANNY_PLUGIN_NAME,
+        PLUGIN_NAME,
+        WARM_PLUGIN_NAME,
+        PauseProfiler,
+        QuietNanny,
+    )
 
     scen = expand(parse_spec(SHORT))
     assert len(scen) == 4
@@ -177,6 +183,8 @@ def test_forked_pool_and_batched_dask_equal_one_process():
             _same_rows(serial, list(execute.run_dask(scen, c, tag="c", batch=2)))
             assert not any(set(v) & {PLUGIN_NAME, WARM_PLUGIN_NAME} for v in c.run(
                 lambda dask_worker: list(dask_worker.plugins)).values())  # unregistered
+            assert not any(NANNY_PLUGIN_NAME in v for v in c.run(
+                lambda dask_worker: list(dask_worker.plugins), nanny=True).values())
         rows = list(execute.run_dask(scen, cluster.scheduler_address, tag="t", batch=3))
         _same_rows(serial, rows)
         with Client(cluster.scheduler_address, set_as_default=False) as c:
@@ -185,13 +193,26 @@ def test_forked_pool_and_batched_dask_equal_one_process():
             assert left == []  # every task released: no result held on a worker
 
             def profiling(dask_worker):
-                return dask_worker.periodic_callbacks["profile"].is_running()
+                pcs = dask_worker.periodic_callbacks
+                return pcs["profile"].is_running(), pcs["tick"].is_running()
 
-            assert all(c.run(profiling).values())  # the profiler is back after the campaign
+            def nanny_state(dask_worker):  # run on the nannies
+                pcs = dask_worker.periodic_callbacks
+                return (pcs["tick"].is_running(), pcs["monitor"].is_running(),
+                        pcs["memory_monitor"].callback_time)
+
+            on = {(True, True)}
+            assert set(c.run(profiling).values()) == on  # back after the campaign
+            nanny_on = set(c.run(nanny_state, nanny=True).values())
+            assert nanny_on == {(True, True, 100.0)}
             c.register_plugin(PauseProfiler(), name=PLUGIN_NAME)
-            assert not any(c.run(profiling).values())  # paused while a campaign runs
+            c.register_plugin(QuietNanny(), name=NANNY_PLUGIN_NAME)
+            assert set(c.run(profiling).values()) == {(False, False)}  # paused meanwhile
+            assert set(c.run(nanny_state, nanny=True).values()) == {(False, False, 1000.0)}
             c.unregister_worker_plugin(PLUGIN_NAME)
-            assert all(c.run(profiling).values())
+            c.unregister_worker_plugin(NANNY_PLUGIN_NAME, nanny=True)
+            assert set(c.run(profiling).values()) == on
+            assert set(c.run(nanny_state, nanny=True).values()) == nanny_on
 
 
 MEMORY = """

@@ -4,7 +4,8 @@
 :class:`ConnectionError` with one line). :func:`prepare_workers` registers the campaign's
 worker plugins (:mod:`vtolftc.runners.campaign.dask_plugin`): every worker, and every worker
 that joins later, warms itself for the campaign's (airframe, gains, controller) in its task
-thread without blocking anyone, and pauses its statistical profiler. ``vtolftc campaign``
+thread without blocking anyone, and pauses its statistical profiler and its event-loop
+ticks (and its nanny's). ``vtolftc campaign``
 calls it before it computes the recoverability oracle, so a fresh cluster's workers import
 the flight code and load their kernels meanwhile, as the local pool's workers inherit them
 from the campaign process. :func:`vtolftc.runners.campaign.execute.run_dask` submits the
@@ -59,25 +60,35 @@ def connect(address: str) -> Any:
 def prepare_workers(client: Any, warm: Callable[[list[tuple[Any, ...]]], Any],
                     keys: Sequence[tuple[str | None, str | None, str]]) -> None:
     """Register the campaign's worker plugins on ``client``'s cluster: each worker (and each
-    one joining later) pauses its profiler and runs ``warm(keys)`` in its task thread.
+    one joining later) pauses its profiler and ticks (and its nanny's ticks) and runs
+    ``warm(keys)`` in its task thread.
     Returns at once (the warm-up runs on the workers); a worker already warm for these keys
     costs nothing more (see :func:`vtolftc.runners.campaign.execute.prepare_dask`)."""
     from vtolftc.runners.campaign.dask_plugin import (
+        NANNY_PLUGIN_NAME,
         PLUGIN_NAME,
         WARM_PLUGIN_NAME,
         PauseProfiler,
+        QuietNanny,
         WarmWorker,
     )
 
     client.register_plugin(PauseProfiler(), name=PLUGIN_NAME)
+    client.register_plugin(QuietNanny(), name=NANNY_PLUGIN_NAME)
     client.register_plugin(WarmWorker(warm, keys), name=WARM_PLUGIN_NAME)
 
 
 def release_workers(client: Any) -> None:
     """Unregister :func:`prepare_workers`' plugins (the workers' profiler back on; what they
     loaded stays for the next campaign)."""
-    from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, WARM_PLUGIN_NAME
+    from vtolftc.runners.campaign.dask_plugin import (
+        NANNY_PLUGIN_NAME,
+        PLUGIN_NAME,
+        WARM_PLUGIN_NAME,
+    )
 
     for name in (WARM_PLUGIN_NAME, PLUGIN_NAME):
         with contextlib.suppress(Exception):
             client.unregister_worker_plugin(name)
+    with contextlib.suppress(Exception):
+        client.unregister_worker_plugin(NANNY_PLUGIN_NAME, nanny=True)
