@@ -17,6 +17,26 @@ end on the wall clock and the CPU time of its own thread and of its whole proces
   loop: heartbeats, ticks, the memory monitor) and by the scheduler and nannies;
 - wall time, rate and the Dask / pool ratio.
 
+Measured (12:55-13:00 UTC 2026-12-02, load 17 rising to 29; 24 scenarios, 2 workers, the
+workers' plugins registered just before the tasks, i.e. no oracle to hide the warm-up):
+
+- a fresh worker: interpreter start 3.5 s, imports of the flight code 4.6 s (``-X
+  importtime`` at load 10: 3.2 s, of which numba 1.1 s and scipy.sparse 0.7 s through the
+  autopilot's optional OSQP allocator module), airframe 26 ms, warm-up (gain files, numba
+  kernels from the cache) 1.9 s; its first 60 s flight 3.51 s against 3.42 s for the second:
+  the worker's first task started 12.6-12.8 s after the submission, where the pool's forked
+  workers start at once;
+- on the wire: a scenario 665 B (85-167 us to pickle and unpickle), a row 933 B (8 us):
+  < 0.01 % of a flight (Arrow would change nothing);
+- dispatch (one 60 s scenario per task): gaps between tasks 25-42 ms (median), a task's
+  overhead over its flights 38-56 ms median, 0.4-0.7 % of 8-13 s flights;
+- the workers' other threads (event loop) took 1.4 % of their busy time (profiler paused);
+  the scheduler and client 6.8 s, the two nannies 13.6 s and the workers 34.5 s of CPU
+  over the 182 s campaign: the Dask processes' background costs CPU at a fixed rate per
+  second (idle LocalCluster: 13-14 % of a core, 7.9 % since the round-10 plugins);
+- the rate ratio (0.53x) and the flight-time ratio (1.72) of that run measure the load's
+  rise between the pool and the cluster, not Dask.
+
     python benchmarks/bench_campaign_dask.py [--jobs 2] [--scenarios 24] [--batch B]
         [--no-warm]   # leave the campaign's worker warm-up out (as before issue 24's fix)
 """
