@@ -50,13 +50,14 @@ rate ratios printed (0.62x before, 0.48x after, 0.39x on the warm cluster) measu
 not the harness. What the harness adds per scenario, against the flights of the same
 campaign, is load-robust: pool +0.7 %; Dask on a fresh LocalCluster +10.7 % before the fix
 (workers warm after the oracle, in front of their first flights), +3.6 % after (warming
-during the oracle), +0.8 % for a second campaign on the same cluster; as flight-normalised
-ratios (1 + pool overhead) / (1 + Dask overhead): 0.91x before, 0.97x after, 1.00x warm.
-Not in that figure, the Dask processes' background CPU (it slows the flights): an idle
-LocalCluster of 2 workers took 13.3-14.0 % of a core before and 7.9 % after (profiler,
-ticks and the nannies' system monitor paused, their memory check every 1 s; alternated in
-one run at load 19-20), i.e. ~4 % of 2 cores after. Estimated on 2 idle cores: ~0.93x after
-(0.97 x 0.96), ~0.85x before. ``bench_campaign_dask.py`` gives the breakdown.
+during the oracle), +0.8 % for a second campaign on the same cluster. Whole campaigns
+(oracle + flights) in units of their own flight time: pool 1.04, Dask before 1.16 (0.90x),
+after 1.14 (0.91x): on 2 cores the workers' warm-up slows the parent's oracle (6.9 -> 21.0
+s) and only uses the core the oracle leaves idle. Not in these figures, the Dask processes'
+background CPU (it slows the flights): an idle LocalCluster of 2 workers took 13.3-14.0 % of
+a core before and 7.9 % after (profiler, ticks and the nannies' system monitor paused, their
+memory check every 1 s; alternated in one run at load 19-20). The breakdown:
+``bench_campaign_dask.py``.
 
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --memory 2000 [--duration 4]
