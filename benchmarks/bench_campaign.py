@@ -43,7 +43,7 @@ Second round (P-PID axes and LQR law one compiled call each): attitude update 11
 per step; whole flights ~0.92 of the first round's CPU time (old mean 2.13 s, new 1.96 s at
 load 9-11), ~31-41x on an idle core, ~62-82 scenarios/min on 2 cores before overhead.
 
-Round 10 (Dask on a fresh cluster; one run of ``--scenarios 24`` at 13:13-13:45 UTC 2026-12-02,
+Round 10 (Dask on a fresh cluster; one run of ``--scenarios 24`` at 13:13-13:36 UTC 2026-12-02,
 load 17 rising to 32 on the 2 cores shared with 7 other engineers). The load moved the flight
 itself from 8.3 s (pool) to 12.1, 16.9 and 21.4 s (the Dask campaigns run after it), so the
 rate ratios printed (0.62x before, 0.48x after, 0.39x on the warm cluster) measure the load,
@@ -53,7 +53,9 @@ campaign, is load-robust: pool +0.7 %; Dask on a fresh LocalCluster +10.7 % befo
 during the oracle), +0.8 % for a second campaign on the same cluster. Whole campaigns
 (oracle + flights) in units of their own flight time: pool 1.04, Dask before 1.16 (0.90x),
 after 1.14 (0.91x): on 2 cores the workers' warm-up slows the parent's oracle (6.9 -> 21.0
-s) and only uses the core the oracle leaves idle. Not in these figures, the Dask processes'
+s) and only uses the core the oracle leaves idle. A separately started ``tcp://`` cluster:
++8.2 % over the flights even after a 45.5 s oracle (whole campaign 0.78x; not explained by
+this run), +2.3 % for its second campaign. Not in these figures, the Dask processes'
 background CPU (it slows the flights): an idle LocalCluster of 2 workers took 13.3-14.0 % of
 a core before and 7.9 % after (profiler, ticks and the nannies' system monitor paused, their
 memory check every 1 s; alternated in one run at load 19-20). The breakdown:
