@@ -107,7 +107,10 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         raise
     finally:
         writer.close()
-        if client is not None:
+        if client is not None:  # e.g. Ctrl-C during the oracle: the workers' plugins off
+            from vtolftc.runners.campaign.dask_run import release_workers
+
+            release_workers(client)
             client.close()
         signal.signal(signal.SIGTERM, old)
     wall = time.perf_counter() - t0
