@@ -87,8 +87,19 @@ def release_workers(client: Any) -> None:
         WARM_PLUGIN_NAME,
     )
 
+    try:  # only those registered (the scheduler logs a missing one as an error)
+        workers, nannies = client.run_on_scheduler(_plugin_names)
+    except Exception:
+        return
     for name in (WARM_PLUGIN_NAME, PLUGIN_NAME):
+        if name in workers:
+            with contextlib.suppress(Exception):
+                client.unregister_worker_plugin(name)
+    if NANNY_PLUGIN_NAME in nannies:
         with contextlib.suppress(Exception):
-            client.unregister_worker_plugin(name)
-    with contextlib.suppress(Exception):
-        client.unregister_worker_plugin(NANNY_PLUGIN_NAME, nanny=True)
+            client.unregister_worker_plugin(NANNY_PLUGIN_NAME, nanny=True)
+
+
+def _plugin_names(dask_scheduler: Any) -> tuple[list[str], list[str]]:
+    """The worker and nanny plugins the scheduler holds (run on the scheduler)."""
+    return list(dask_scheduler.worker_plugins), list(dask_scheduler.nanny_plugins)
