@@ -55,7 +55,9 @@ during the oracle), +0.8 % for a second campaign on the same cluster. Whole camp
 after 1.14 (0.91x): on 2 cores the workers' warm-up slows the parent's oracle (6.9 -> 21.0
 s) and only uses the core the oracle leaves idle. A separately started ``tcp://`` cluster:
 +8.2 % over the flights even after a 45.5 s oracle (whole campaign 0.78x; not explained by
-this run), +2.3 % for its second campaign. Not in these figures, the Dask processes'
+this run), +2.3 % for its second campaign. A second run (13:36-13:45, load 10 falling to 5):
+pool +2.1 %; fresh LocalCluster before +17.7 %, after +4.9 %, second campaign +1.6 %; fresh
+tcp:// cluster +5.1 %, second campaign +4.1 %. Not in these figures, the Dask processes'
 background CPU (it slows the flights): an idle LocalCluster of 2 workers took 13.3-14.0 % of
 a core before and 7.9 % after (profiler, ticks and the nannies' system monitor paused, their
 memory check every 1 s; alternated in one run at load 19-20). The breakdown:
