@@ -204,16 +204,29 @@ def main() -> None:
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 
+def proc_stat(pid: int) -> tuple[int, float] | None:
+    """(parent pid, user + system CPU s) of process ``pid`` from ``/proc`` (Linux); None
+    when it is gone."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
+            fields = fh.read().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    tick = os.sysconf("SC_CLK_TCK")
+    return int(fields[1]), (int(fields[11]) + int(fields[12])) / tick
+
+
 def cpu_s() -> float:
     """CPU time (user + system, s) of this process, its descendants alive and the children
     it has waited for (the pool's replaced workers)."""
-    import psutil
+    from vtolftc.runners.campaign.memwatch import child_pids
 
-    me = psutil.Process()
-    total = sum(me.cpu_times()[:4])
-    for p in me.children(recursive=True):
-        with contextlib.suppress(psutil.Error):
-            total += sum(p.cpu_times()[:2])
+    t = os.times()
+    total = t.user + t.system + t.children_user + t.children_system
+    for pid in child_pids():
+        st = proc_stat(pid)
+        if st is not None:
+            total += st[1]
     return total
 
 

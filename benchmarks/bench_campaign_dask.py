@@ -37,6 +37,11 @@ workers' plugins registered just before the tasks, i.e. no oracle to hide the wa
 - the rate ratio (0.53x) and the flight-time ratio (1.72) of that run measure the load's
   rise between the pool and the cluster, not Dask.
 
+At load 2 (13:51, ``--scenarios 4``, a smoke run): a fresh worker's first task started
+1.6-2.1 s after the submission (its warm-up; the 4 flights took 1.3-1.9 s each), gaps
+between tasks 2-6 ms, a task's overhead over its flight 4.5 ms (0.3 %), the Dask flights
+took 1.023x the pool's flight time, the workers' other threads 1.3-1.4 % of their busy time.
+
     python benchmarks/bench_campaign_dask.py [--jobs 2] [--scenarios 24] [--batch B]
         [--no-warm]   # leave the campaign's worker warm-up out (as before issue 24's fix)
 """
@@ -158,22 +163,21 @@ def main() -> None:
 def dask_run(args: argparse.Namespace, scen: list[Any], pool_wall: float,
              pool_run: dict[str, float]) -> None:
     """The same scenarios on a fresh LocalCluster, every task timed; prints the breakdown."""
-    import psutil
+    from bench_campaign import proc_stat
     from distributed import Client, LocalCluster, as_completed
 
     from vtolftc.runners.campaign import execute
     from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, PauseProfiler
 
     n = len(scen)
-    me = psutil.Process()
     with LocalCluster(n_workers=args.jobs, threads_per_worker=1, processes=True,
                       host="127.0.0.1", dashboard_address=None) as cluster, \
             Client(cluster.scheduler_address, set_as_default=False) as client:
         wpids = client.run(os.getpid)
-        procs = {"parent (scheduler, client)": [me]}
-        procs["nannies"] = [psutil.Process(p).parent() for p in wpids.values()]
-        procs["workers"] = [psutil.Process(p) for p in wpids.values()]
-        cpu0 = {k: sum(sum(p.cpu_times()[:2]) for p in v) for k, v in procs.items()}
+        procs = {"parent (scheduler, client)": [os.getpid()]}
+        procs["nannies"] = [proc_stat(p)[0] for p in wpids.values()]
+        procs["workers"] = list(wpids.values())
+        cpu0 = {k: sum(proc_stat(p)[1] for p in v) for k, v in procs.items()}
         t0w = time.time()
         t0 = time.perf_counter()
         if args.no_warm:
@@ -188,7 +192,7 @@ def dask_run(args: argparse.Namespace, scen: list[Any], pool_wall: float,
             tasks.append(f.result())
             f.release()
         wall = time.perf_counter() - t0
-        cpu1 = {k: sum(sum(p.cpu_times()[:2]) for p in v) for k, v in procs.items()}
+        cpu1 = {k: sum(proc_stat(p)[1] for p in v) for k, v in procs.items()}
     rows = [r for t in tasks for r in t["rows"]]
     dask_run_s = {r["scenario_id"]: r["run_wall_time_s"] for r in rows}
     same = sorted(set(dask_run_s) & set(pool_run))
