@@ -10,11 +10,17 @@ scenarios, 12 by default), so each one costs a full 60 s of simulation. Figures 
   gain-file construction, first-flight compilation (numba cache load), Parquet part writes;
 - the recoverability oracle of these scenarios (in the parent, before the flights): its
   reference flight and its LPs;
-- the local pool (``--jobs N``) and a Dask ``LocalCluster`` (N workers, loopback): wall time,
-  scenarios per minute, and overhead = (wall x workers / scenarios - mean run time) / mean
-  run time, i.e. what the campaign adds to a scenario. Dask twice on the same cluster: its
-  first campaign (the workers import the flight code and load the kernels) and a second one
-  (a long-lived cluster, as a Dask deployment is), each as a ratio to the local pool's rate.
+- the local pool (``--jobs N``) and Dask on fresh clusters of N workers (one thread each,
+  loopback): wall time, scenarios per minute, overhead = (wall x workers / scenarios - mean
+  run time) / mean run time, i.e. what the campaign adds to a scenario, and the CPU time of
+  every process of the campaign per scenario (load-robust, unlike the wall times). Dask on
+  a ``LocalCluster`` started here, first as before issue 24's round-10 fix (the oracle, then
+  the flights: fresh workers warm in front of their first flights), then as ``vtolftc
+  campaign --scheduler`` runs it now (the worker plugins registered first, so the workers
+  warm while the parent computes the oracle) followed by a second campaign on the same
+  cluster (a long-lived one); then the same two on a ``tcp://`` cluster started separately
+  (``dask scheduler`` and ``dask worker --nworkers N --nthreads 1`` processes). Ratios to the
+  local pool's rate: the flights alone, and oracle + flights (as the CLI runs them).
 
 ``--memory N [--duration S]`` instead flies N short scenarios (S s each, default 4; the rotor
 losses at N / 24 magnitudes) on the local pool with the parent writing Parquet parts as the
@@ -37,6 +43,26 @@ Second round (P-PID axes and LQR law one compiled call each): attitude update 11
 per step; whole flights ~0.92 of the first round's CPU time (old mean 2.13 s, new 1.96 s at
 load 9-11), ~31-41x on an idle core, ~62-82 scenarios/min on 2 cores before overhead.
 
+Round 10 (Dask on a fresh cluster; one run of ``--scenarios 24`` at 13:13-13:36 UTC 2026-12-02,
+load 17 rising to 32 on the 2 cores shared with 7 other engineers). The load moved the flight
+itself from 8.3 s (pool) to 12.1, 16.9 and 21.4 s (the Dask campaigns run after it), so the
+rate ratios printed (0.62x before, 0.48x after, 0.39x on the warm cluster) measure the load,
+not the harness. What the harness adds per scenario, against the flights of the same
+campaign, is load-robust: pool +0.7 %; Dask on a fresh LocalCluster +10.7 % before the fix
+(workers warm after the oracle, in front of their first flights), +3.6 % after (warming
+during the oracle), +0.8 % for a second campaign on the same cluster. Whole campaigns
+(oracle + flights) in units of their own flight time: pool 1.04, Dask before 1.16 (0.90x),
+after 1.14 (0.91x): on 2 cores the workers' warm-up slows the parent's oracle (6.9 -> 21.0
+s) and only uses the core the oracle leaves idle. A separately started ``tcp://`` cluster:
++8.2 % over the flights even after a 45.5 s oracle (whole campaign 0.78x; not explained by
+this run), +2.3 % for its second campaign. A second run (13:36-13:45, load 10 falling to 5):
+pool +2.1 %; fresh LocalCluster before +17.7 %, after +4.9 %, second campaign +1.6 %; fresh
+tcp:// cluster +5.1 %, second campaign +4.1 %. Not in these figures, the Dask processes'
+background CPU (it slows the flights): an idle LocalCluster of 2 workers took 13.3-14.0 % of
+a core before and 7.9 % after (profiler, ticks and the nannies' system monitor paused, their
+memory check every 1 s; alternated in one run at load 19-20). The breakdown:
+``bench_campaign_dask.py``.
+
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --memory 2000 [--duration 4]
 """
@@ -44,12 +70,14 @@ load 9-11), ~31-41x on an idle core, ~62-82 scenarios/min on 2 cores before over
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -81,7 +109,7 @@ def main() -> None:
         memory_run(args.memory, args.duration, args.jobs)
         return
 
-    from vtolftc.runners.campaign.execute import fly_scenario, run_dask, run_local
+    from vtolftc.runners.campaign.execute import fly_scenario, run_local
     from vtolftc.runners.campaign.results import PartWriter
     from vtolftc.runners.campaign.scenarios import expand
     from vtolftc.runners.campaign.spec import parse_spec
@@ -151,6 +179,7 @@ def main() -> None:
 
     def fly(stream: Any) -> tuple[float, list[dict]]:
         with tempfile.TemporaryDirectory() as d:
+            c = cpu_s()
             t = time.perf_counter()
             w = PartWriter(Path(d))
             got = []
@@ -158,26 +187,137 @@ def main() -> None:
                 w.add(r)
                 got.append(r)
             w.close()
-            return time.perf_counter() - t, got
+            wall = time.perf_counter() - t
+            print(f"  CPU of every process of the campaign (this one, its workers, a cluster's "
+                  f"scheduler and nannies): {(cpu_s() - c) / len(got):.2f} s per scenario")
+            return wall, got
 
     wall, got = fly(run_local(scen, args.jobs))
     pool_rate = report(f"local pool ({args.jobs} processes, start-up included)", wall,
                        args.jobs, got)
 
     if not args.no_dask:
+        for kind, early, second in (("LocalCluster", False, False),
+                                    ("LocalCluster", True, True), ("tcp", True, True)):
+            dask_runs(kind, scen, args.jobs, t_oracle, pool_rate, report, fly, early=early,
+                      second=second)
+    print(f"load average at end: {os.getloadavg()[0]:.2f}")
+
+
+def proc_stat(pid: int) -> tuple[int, float] | None:
+    """(parent pid, user + system CPU s) of process ``pid`` from ``/proc`` (Linux); None
+    when it is gone."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
+            fields = fh.read().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    tick = os.sysconf("SC_CLK_TCK")
+    return int(fields[1]), (int(fields[11]) + int(fields[12])) / tick
+
+
+def cpu_s() -> float:
+    """CPU time (user + system, s) of this process, its descendants alive and the children
+    it has waited for (the pool's replaced workers)."""
+    from vtolftc.runners.campaign.memwatch import child_pids
+
+    t = os.times()
+    total = t.user + t.system + t.children_user + t.children_system
+    for pid in child_pids():
+        st = proc_stat(pid)
+        if st is not None:
+            total += st[1]
+    return total
+
+
+@contextlib.contextmanager
+def fresh_cluster(kind: str, jobs: int) -> Iterator[str]:
+    """A fresh Dask cluster of ``jobs`` worker processes (one thread each) on 127.0.0.1:
+    ``LocalCluster`` (started in this process, as a script or notebook does) or ``tcp`` (a
+    ``dask scheduler`` and a ``dask worker --nworkers N --nthreads 1`` started as separate
+    processes, as a deployment is). Yields the scheduler's address; stops what it started."""
+    if kind == "LocalCluster":
         from distributed import LocalCluster
 
-        t0 = time.perf_counter()
-        with LocalCluster(n_workers=args.jobs, threads_per_worker=1, processes=True,
+        with LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
                           host="127.0.0.1", dashboard_address=None) as cluster:
+            yield cluster.scheduler_address
+        return
+    import json
+    import signal
+
+    dask = str(Path(sys.executable).parent / "dask")
+    with tempfile.TemporaryDirectory() as d:
+        sfile = Path(d) / "scheduler.json"
+        procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
+                                   "--no-dashboard", "--scheduler-file", str(sfile)],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+        try:
+            deadline = time.monotonic() + 120
+            while not sfile.is_file():
+                if time.monotonic() > deadline or procs[0].poll() is not None:
+                    raise RuntimeError("dask scheduler did not start")
+                time.sleep(0.1)
+            procs.append(subprocess.Popen(
+                [dask, "worker", "--scheduler-file", str(sfile), "--nworkers", str(jobs),
+                 "--nthreads", "1", "--no-dashboard", "--host", "127.0.0.1"],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            yield json.loads(sfile.read_text())["address"]
+        finally:
+            for p in reversed(procs):
+                p.send_signal(signal.SIGTERM)
+                try:
+                    p.wait(timeout=60)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait(timeout=30)
+
+
+def dask_runs(kind: str, scen: list[Any], jobs: int, t_oracle: float, pool_rate: float,
+              report: Any, fly: Any, *, early: bool = True, second: bool = True) -> None:
+    """Campaigns on a fresh ``kind`` cluster, ratios to the local pool's rate.
+
+    The first as ``vtolftc campaign --scheduler`` runs it: with ``early`` (since issue 24's
+    fix) the client connects and registers the campaign's worker plugins (the workers start
+    warming), then the parent computes the oracle, then the flights; without (before), the
+    oracle first and the workers warm in front of their first flights. Compared with the
+    pool's oracle + flights (its workers fork from the warm parent), and its flights alone.
+    With ``second``, a second campaign on the same cluster (a long-lived one, as a
+    deployment is): the flights alone."""
+    from vtolftc.runners.campaign.dask_run import connect
+    from vtolftc.runners.campaign.execute import prepare_dask, run_dask
+    from vtolftc.runners.campaign.oracle import oracle_columns
+
+    t0 = time.perf_counter()
+    with fresh_cluster(kind, jobs) as address:
+        client = connect(address)
+        try:
+            client.wait_for_workers(jobs, timeout=300)
             t_cluster = time.perf_counter() - t0
-            for i, what in enumerate(("first campaign: workers import and load the kernels",
-                                      "second campaign on the same cluster")):
-                wall, got = fly(run_dask(scen, cluster.scheduler_address, tag=f"bench{i}"))
-                rate = report(f"Dask LocalCluster ({args.jobs} workers; {what}; cluster start "
-                              f"{t_cluster:.1f} s not included)", wall, args.jobs, got)
+            t = time.perf_counter()
+            if early:
+                prepare_dask(client, scen)
+            oracle_columns(scen)
+            t_or = time.perf_counter() - t
+            wall, got = fly(run_dask(scen, client, tag="bench0"))
+            how = ("workers warming during the oracle" if early else
+                   "before the fix: the workers warm after the oracle")
+            label = f"Dask {kind} ({jobs} workers; cluster start {t_cluster:.1f} s not included)"
+            rate = report(f"{label}, first campaign on the fresh cluster ({how}), flights",
+                          wall, jobs, got)
+            n = len(got)
+            pool_whole = 60.0 * n / (t_oracle + 60.0 * n / pool_rate)
+            dask_whole = 60.0 * n / (t_or + wall)
+            print(f"  Dask / local pool: flights {rate / pool_rate:.2f}x; oracle + flights "
+                  f"(as `vtolftc campaign` runs them; oracle {t_or:.1f} s here, "
+                  f"{t_oracle:.1f} s before the pool) {dask_whole / pool_whole:.2f}x "
+                  "(target >= 0.9x)")
+            if second:
+                wall, got = fly(run_dask(scen, client, tag="bench1"))
+                rate = report(f"{label}, second campaign on the same cluster", wall, jobs, got)
                 print(f"  Dask / local pool: {rate / pool_rate:.2f}x (target >= 0.9x)")
-    print(f"load average at end: {os.getloadavg()[0]:.2f}")
+        finally:
+            client.close()
 
 
 def memory_spec(n: int, duration_s: float) -> str:

@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -56,6 +57,7 @@ def _same_rows(a: list[dict], b: list[dict]) -> None:
     b = sorted(b, key=lambda r: r["index"])
     assert [r["scenario_id"] for r in a] == [r["scenario_id"] for r in b]
     for ra, rb in zip(a, b, strict=True):
+        assert list(ra) == list(rb)  # the same columns, in the same order
         for k, v in ra.items():
             if k in TIMING_COLUMNS:
                 continue
@@ -98,12 +100,17 @@ def test_pool_forks_only_a_single_threaded_process():
 
 
 def test_dask_batch_size():
-    assert execute.dask_batch_size(12, 2) == 1
-    assert execute.dask_batch_size(24, 2) == 1
-    assert execute.dask_batch_size(100, 2) == 3
-    assert execute.dask_batch_size(2000, 2) == 8
-    assert execute.dask_batch_size(2000, 200) == 1
-    assert execute.dask_batch_size(0, 0) == 1
+    from vtolftc.runners.campaign.dask_run import dask_batch_size
+
+    assert execute.dask_batch_size(12, 2) == 1      # 60 s flights: one per task
+    assert dask_batch_size(24, 2, 60.0) == 1
+    assert dask_batch_size(2000, 2, 60.0) == 1
+    assert dask_batch_size(2000, 2, 2.0) == 30      # 60 simulated seconds per task
+    assert dask_batch_size(2000, 2, 4.0) == 15
+    assert dask_batch_size(2000, 2, 7.0) == 9       # rounded up
+    assert dask_batch_size(100, 2, 2.0) == 6        # but 8 tasks per worker at least
+    assert dask_batch_size(2000, 200, 2.0) == 1
+    assert dask_batch_size(0, 0) == 1
 
 
 def test_robust_slope_ignores_jumps():
@@ -140,6 +147,14 @@ def test_rss_of_this_process_and_a_child():
 def test_forked_pool_and_batched_dask_equal_one_process():
     from distributed import Client, LocalCluster
 
+    from vtolftc.runners.campaign.dask_plugin import (
+        NANNY_PLUGIN_NAME,
+        PLUGIN_NAME,
+        WARM_PLUGIN_NAME,
+        PauseProfiler,
+        QuietNanny,
+    )
+
     scen = expand(parse_spec(SHORT))
     assert len(scen) == 4
     serial = [execute.fly_scenario(sc) for sc in scen]
@@ -148,6 +163,28 @@ def test_forked_pool_and_batched_dask_equal_one_process():
     _same_rows(serial, list(execute.run_local(scen, 2)))
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                       dashboard_address=None) as cluster:
+        with Client(cluster.scheduler_address, set_as_default=False) as c:
+            # fresh workers warm themselves for the campaign once its plugins are registered,
+            # before any task reaches them
+            c.wait_for_workers(2, timeout=120)
+            assert all(v == [] for v in c.run(lambda: sorted(execute._WARM)).values())
+            execute.prepare_dask(c, scen)
+            keys = sorted(execute.warm_keys(scen), key=repr)
+
+            def warmed(dask_worker):
+                fut = dask_worker.plugins[WARM_PLUGIN_NAME].pending
+                return fut is not None and fut.done() and set(keys) <= execute._WARM
+
+            deadline = time.monotonic() + 300
+            while not all(c.run(warmed).values()):
+                assert time.monotonic() < deadline, c.run(lambda: sorted(execute._WARM))
+                time.sleep(0.2)
+            # a client kept open by the caller (as vtolftc campaign does)
+            _same_rows(serial, list(execute.run_dask(scen, c, tag="c", batch=2)))
+            assert not any(set(v) & {PLUGIN_NAME, WARM_PLUGIN_NAME} for v in c.run(
+                lambda dask_worker: list(dask_worker.plugins)).values())  # unregistered
+            assert not any(NANNY_PLUGIN_NAME in v for v in c.run(
+                lambda dask_worker: list(dask_worker.plugins), nanny=True).values())
         rows = list(execute.run_dask(scen, cluster.scheduler_address, tag="t", batch=3))
         _same_rows(serial, rows)
         with Client(cluster.scheduler_address, set_as_default=False) as c:
@@ -156,15 +193,26 @@ def test_forked_pool_and_batched_dask_equal_one_process():
             assert left == []  # every task released: no result held on a worker
 
             def profiling(dask_worker):
-                return dask_worker.periodic_callbacks["profile"].is_running()
+                pcs = dask_worker.periodic_callbacks
+                return pcs["profile"].is_running(), pcs["tick"].is_running()
 
-            assert all(c.run(profiling).values())  # the profiler is back after the campaign
-            from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, PauseProfiler
+            def nanny_state(dask_worker):  # run on the nannies
+                pcs = dask_worker.periodic_callbacks
+                return (pcs["tick"].is_running(), pcs["monitor"].is_running(),
+                        pcs["memory_monitor"].callback_time)
 
+            on = {(True, True)}
+            assert set(c.run(profiling).values()) == on  # back after the campaign
+            nanny_on = set(c.run(nanny_state, nanny=True).values())
+            assert nanny_on == {(True, True, 100.0)}
             c.register_plugin(PauseProfiler(), name=PLUGIN_NAME)
-            assert not any(c.run(profiling).values())  # paused while a campaign runs
+            c.register_plugin(QuietNanny(), name=NANNY_PLUGIN_NAME)
+            assert set(c.run(profiling).values()) == {(False, False)}  # paused meanwhile
+            assert set(c.run(nanny_state, nanny=True).values()) == {(False, False, 1000.0)}
             c.unregister_worker_plugin(PLUGIN_NAME)
-            assert all(c.run(profiling).values())
+            c.unregister_worker_plugin(NANNY_PLUGIN_NAME, nanny=True)
+            assert set(c.run(profiling).values()) == on
+            assert set(c.run(nanny_state, nanny=True).values()) == nanny_on
 
 
 MEMORY = """

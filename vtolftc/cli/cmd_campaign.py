@@ -94,10 +94,12 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     old = signal.signal(signal.SIGTERM, _on_sigterm)
     writer = PartWriter(out, batch=args.batch)
     t0 = time.perf_counter()
+    client = None
     try:
         if todo:
+            client = _dask_client(args.scheduler, todo) if args.scheduler else None
             oracle = _oracle(todo)
-            _fly(args, spec, todo, writer, len(scenarios), n_done, n_surv, oracle)
+            _fly(args, spec, todo, writer, len(scenarios), n_done, n_surv, oracle, client)
     except KeyboardInterrupt:
         writer.close()
         print(f"interrupted: {writer.written} new results written to {out}/parts; "
@@ -105,6 +107,11 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         raise
     finally:
         writer.close()
+        if client is not None:  # e.g. Ctrl-C during the oracle: the workers' plugins off
+            from vtolftc.runners.campaign.dask_run import release_workers
+
+            release_workers(client)
+            client.close()
         signal.signal(signal.SIGTERM, old)
     wall = time.perf_counter() - t0
     table = write_final(out)
@@ -115,6 +122,20 @@ def _cpus() -> int:
     import os
 
     return os.cpu_count() or 1
+
+
+def _dask_client(address: str, todo: list[Any]) -> Any:
+    """A client of the Dask scheduler at ``address`` whose workers start warming for
+    ``todo`` at once (while this process computes the oracle); bad address: usage error."""
+    from vtolftc.runners.campaign.dask_run import connect
+    from vtolftc.runners.campaign.execute import prepare_dask
+
+    try:
+        client = connect(address)
+    except ConnectionError as exc:
+        raise _usage(str(exc)) from None
+    prepare_dask(client, todo)
+    return client
 
 
 def _oracle(todo: list[Any]) -> dict[str, dict[str, Any]]:
@@ -134,19 +155,14 @@ def _oracle(todo: list[Any]) -> dict[str, dict[str, Any]]:
 
 
 def _fly(args: argparse.Namespace, spec: Any, todo: list[Any], writer: Any, total: int,
-         n_done: int, n_surv: int, oracle: dict[str, dict[str, Any]] | None = None) -> None:
+         n_done: int, n_surv: int, oracle: dict[str, dict[str, Any]] | None = None,
+         client: Any = None) -> None:
     from tqdm import tqdm
 
     from vtolftc.runners.campaign.execute import run_dask, run_local
 
-    if args.scheduler:
-        try:
-            rows = run_dask(todo, args.scheduler, tag=spec.sha256[:8])
-            first = next(rows, None)
-        except ConnectionError as exc:
-            raise _usage(str(exc)) from None
-        it = ([first] if first is not None else [])
-        stream: Any = _chain(it, rows)
+    if client is not None:
+        stream: Any = run_dask(todo, client, tag=spec.sha256[:8])
     else:
         stream = run_local(todo, args.jobs)
     survived, flown = n_surv, n_done
@@ -169,11 +185,6 @@ def _fly(args: argparse.Namespace, spec: Any, todo: list[Any], writer: Any, tota
         if close is not None:
             close()
         bar.close()
-
-
-def _chain(first: list[Any], rest: Any) -> Any:
-    yield from first
-    yield from rest
 
 
 def _finish(spec: Any, table: Any, out: Path, wall: float, n_flown: int, total: int) -> int:

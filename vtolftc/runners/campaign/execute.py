@@ -21,9 +21,11 @@ running threads of its own (a Dask client, a progress monitor), which a fork cou
 holding a lock, starts them from a forkserver that has imported the flight code instead. A
 worker is replaced by a fresh one every :data:`WORKER_SCENARIOS` scenarios (forked by the
 pool's own thread, as multiprocessing's ``maxtasksperchild`` always does), which bounds its
-memory. A Dask worker keeps the same per-process caches from one task to the next; scenarios
-go to it in small batches (:func:`fly_batch`) and each finished task is
-released at once, so neither the workers nor the client hold the results of a long campaign.
+memory. A Dask worker keeps the same per-process caches from one task to the next; its scenarios
+go to it in batches (:func:`fly_batch`), each finished task is released at once, so neither
+the workers nor the client hold the results of a long campaign; :func:`prepare_dask` warms
+fresh workers in their task threads without blocking (see
+:mod:`vtolftc.runners.campaign.dask_run`).
 """
 
 from __future__ import annotations
@@ -46,14 +48,18 @@ from vtolftc.runners.campaign.scenarios import CampaignScenario
 __all__ = [
     "WORKER_SCENARIOS",
     "base_scenario",
+    "cached_airframe",
     "dask_batch_size",
     "fly_batch",
     "fly_scenario",
     "pool_context",
+    "prepare_dask",
     "run_dask",
     "run_local",
     "vehicle_options",
+    "warm_keys",
     "warm_up",
+    "warm_up_keys",
 ]
 
 _AIRFRAMES: dict[str | None, Any] = {}
@@ -200,15 +206,21 @@ def fly_batch(scenarios: Sequence[CampaignScenario]) -> list[dict[str, Any]]:
     return [fly_scenario(sc) for sc in scenarios]
 
 
-def warm_up(scenarios: Sequence[CampaignScenario]) -> float:
-    """Prepare this process for ``scenarios``: load their airframes and fly a
-    :data:`WARM_UP_FLIGHT_S` flight of each (airframe, gains, controller), which imports the
-    flight code, reads the gain files and compiles (or loads from numba's cache) the kernels
-    of the first control steps. Each combination once per process; a failing one is left to
-    the scenarios (their rows say ``error``). Returns the wall time spent (s)."""
+def warm_keys(scenarios: Sequence[CampaignScenario]) -> list[tuple[str | None, str | None, str]]:
+    """The distinct (airframe path, gains folder, controller) of ``scenarios``, in order."""
+    return list(dict.fromkeys((sc.airframe_path, sc.gains_dir, sc.controller)
+                              for sc in scenarios))
+
+
+def warm_up_keys(keys: Sequence[tuple[str | None, str | None, str]]) -> float:
+    """Prepare this process for the flights of ``keys`` (see :func:`warm_keys`): load their
+    airframes and fly a :data:`WARM_UP_FLIGHT_S` flight of each, which imports the flight
+    code, reads the gain files and compiles (or loads from numba's cache) the kernels of the
+    first control steps. Each key once per process; a failing one is left to the scenarios
+    (their rows say ``error``). Returns the wall time spent (s)."""
     t0 = time.perf_counter()
-    for key in dict.fromkeys((sc.airframe_path, sc.gains_dir, sc.controller)
-                             for sc in scenarios):
+    for key in keys:
+        key = (key[0], key[1], key[2])
         if key in _WARM:
             continue
         _WARM.add(key)
@@ -220,6 +232,12 @@ def warm_up(scenarios: Sequence[CampaignScenario]) -> float:
         except Exception:  # each scenario reports its own error in its row
             continue
     return time.perf_counter() - t0
+
+
+def warm_up(scenarios: Sequence[CampaignScenario]) -> float:
+    """:func:`warm_up_keys` of the (airframe, gains, controller) of ``scenarios``; returns
+    the wall time spent (s)."""
+    return warm_up_keys(warm_keys(scenarios))
 
 
 # --------------------------------------------------------------------------------------------
@@ -292,41 +310,61 @@ def run_local(scenarios: Sequence[CampaignScenario], jobs: int | None = None, *,
 
 
 # --------------------------------------------------------------------------------------------
-# Dask distributed
+# Dask distributed (the client, plugins and task size: vtolftc.runners.campaign.dask_run)
 # --------------------------------------------------------------------------------------------
 
-def dask_batch_size(n_scenarios: int, n_workers: int) -> int:
-    """Scenarios per Dask task: enough tasks (16 per worker) that the last ones balance the
-    workers, at most 8 scenarios each (a task's rows arrive together)."""
-    per = n_scenarios // (16 * max(1, n_workers))
-    return max(1, min(8, per))
+def dask_batch_size(n_scenarios: int, n_workers: int, duration_s: float = 60.0) -> int:
+    """See :func:`vtolftc.runners.campaign.dask_run.dask_batch_size`."""
+    from vtolftc.runners.campaign.dask_run import dask_batch_size as size
+
+    return size(n_scenarios, n_workers, duration_s)
 
 
-def run_dask(scenarios: Sequence[CampaignScenario], address: str, *,
+def prepare_dask(client: Any, scenarios: Sequence[CampaignScenario]) -> None:
+    """Register the campaign's worker plugins on ``client``'s cluster for ``scenarios``
+    (:func:`vtolftc.runners.campaign.dask_run.prepare_workers`: each worker warms with
+    :func:`warm_up_keys` in its task thread, its profiler paused); returns at once."""
+    from vtolftc.runners.campaign.dask_run import prepare_workers
+
+    prepare_workers(client, warm_up_keys, warm_keys(scenarios))
+
+
+def run_dask(scenarios: Sequence[CampaignScenario], scheduler: Any, *,
              tag: str = "campaign", batch: int | None = None) -> Iterator[dict[str, Any]]:
-    """Rows of ``scenarios`` flown as tasks on the Dask scheduler at ``address``, as they
-    finish. Each worker needs this package (same version) installed; see
-    ``docs/campaigns/README.md``. A task flies ``batch`` scenarios (default
-    :func:`dask_batch_size` for the cluster's workers) with :func:`fly_batch`; its future is
-    released as soon as its rows are here. The workers' statistical profiler is paused while
-    the campaign runs (:mod:`vtolftc.runners.campaign.dask_plugin`). Closing the generator
-    cancels what is not done."""
-    from distributed import Client, as_completed
+    """Rows of ``scenarios`` flown as tasks on a Dask cluster, as they finish.
 
-    try:
-        client = Client(address, timeout="30s", set_as_default=False)
-    except (OSError, TimeoutError) as exc:
-        raise ConnectionError(f"--scheduler {address}: cannot reach a Dask scheduler "
-                              f"({exc})") from None
+    Parameters
+    ----------
+    scenarios
+        The scenarios to fly.
+    scheduler
+        The scheduler's address (``tcp://HOST:PORT``: a client is opened and closed here) or
+        a :class:`distributed.Client` (kept open; typically one :func:`prepare_dask` was
+        called on earlier, which this call repeats at no cost).
+    tag
+        Part of the task keys (``vtolftc-TAG-...``).
+    batch
+        Scenarios per task (default
+        :func:`~vtolftc.runners.campaign.dask_run.dask_batch_size` of the cluster's workers).
+
+    Each worker needs this package (same version) installed; see ``docs/campaigns/README.md``.
+    A task flies its batch with :func:`fly_batch`; its future is released as soon as its
+    rows are here. The worker plugins (:func:`prepare_dask`) are unregistered at the end.
+    Closing the generator cancels what is not done.
+    """
+    from distributed import as_completed
+
+    from vtolftc.runners.campaign.dask_run import connect, release_workers
+
+    own = isinstance(scheduler, str)
+    client = connect(scheduler) if own else scheduler
     pending: set[Any] = set()
-    plugin = False
     try:
-        from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, PauseProfiler
-
-        client.register_plugin(PauseProfiler(), name=PLUGIN_NAME)
-        plugin = True
+        prepare_dask(client, scenarios)
         if batch is None:
-            batch = dask_batch_size(len(scenarios), len(client.scheduler_info()["workers"]))
+            dur = max((sc.duration_s for sc in scenarios), default=60.0)
+            batch = dask_batch_size(len(scenarios), len(client.scheduler_info()["workers"]),
+                                    dur)
         size = max(1, int(batch))
         chunks = [list(scenarios[i:i + size]) for i in range(0, len(scenarios), size)]
         futures = client.map(fly_batch, chunks,
@@ -344,7 +382,6 @@ def run_dask(scenarios: Sequence[CampaignScenario], address: str, *,
     finally:
         if pending:
             client.cancel(list(pending))
-        if plugin:
-            with contextlib.suppress(Exception):  # the workers' profiler back on
-                client.unregister_worker_plugin(PLUGIN_NAME)
-        client.close()
+        release_workers(client)
+        if own:
+            client.close()

@@ -1,0 +1,105 @@
+"""The Dask side of a campaign: the client, the workers' plugins, the task size.
+
+:func:`connect` opens a client to a scheduler (``tcp://HOST:PORT``; an unreachable one is a
+:class:`ConnectionError` with one line). :func:`prepare_workers` registers the campaign's
+worker plugins (:mod:`vtolftc.runners.campaign.dask_plugin`): every worker, and every worker
+that joins later, warms itself for the campaign's (airframe, gains, controller) in its task
+thread without blocking anyone, and pauses its statistical profiler and its event-loop
+ticks (and its nanny's). ``vtolftc campaign``
+calls it before it computes the recoverability oracle, so a fresh cluster's workers import
+the flight code and load their kernels meanwhile, as the local pool's workers inherit them
+from the campaign process. :func:`vtolftc.runners.campaign.execute.run_dask` submits the
+scenarios in batches of :func:`dask_batch_size`. This module never imports the flight code.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+__all__ = [
+    "TASKS_PER_WORKER",
+    "TASK_SIM_S",
+    "connect",
+    "dask_batch_size",
+    "prepare_workers",
+    "release_workers",
+]
+
+TASK_SIM_S = 60.0
+"""Simulated seconds a Dask task flies at least when the campaign is long enough (s): a
+60 s flight is 1-3 s of a worker, against a few ms of dispatch per task (the result to the
+scheduler, the next task back), so the per-task overhead stays well under 2 %."""
+TASKS_PER_WORKER = 8
+"""Tasks per worker at least (when there are scenarios enough): the last ones balance the
+workers' ends."""
+
+
+def dask_batch_size(n_scenarios: int, n_workers: int, duration_s: float = TASK_SIM_S) -> int:
+    """Scenarios per Dask task for ``n_scenarios`` flights of ``duration_s`` simulated seconds
+    on ``n_workers``: enough for :data:`TASK_SIM_S` of simulated flight per task, but no more
+    than leaves :data:`TASKS_PER_WORKER` tasks per worker; at least 1."""
+    want = math.ceil(TASK_SIM_S / max(float(duration_s), 1e-3) - 1e-9)
+    most = n_scenarios // (TASKS_PER_WORKER * max(1, n_workers))
+    return max(1, min(want, most))
+
+
+def connect(address: str) -> Any:
+    """A :class:`distributed.Client` of the scheduler at ``address`` (30 s to connect)."""
+    from distributed import Client
+
+    try:
+        return Client(address, timeout="30s", set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ConnectionError(f"--scheduler {address}: cannot reach a Dask scheduler "
+                              f"({exc})") from None
+
+
+def prepare_workers(client: Any, warm: Callable[[list[tuple[Any, ...]]], Any],
+                    keys: Sequence[tuple[str | None, str | None, str]]) -> None:
+    """Register the campaign's worker plugins on ``client``'s cluster: each worker (and each
+    one joining later) pauses its profiler and ticks (and its nanny's ticks) and runs
+    ``warm(keys)`` in its task thread.
+    Returns at once (the warm-up runs on the workers); a worker already warm for these keys
+    costs nothing more (see :func:`vtolftc.runners.campaign.execute.prepare_dask`)."""
+    from vtolftc.runners.campaign.dask_plugin import (
+        NANNY_PLUGIN_NAME,
+        PLUGIN_NAME,
+        WARM_PLUGIN_NAME,
+        PauseProfiler,
+        QuietNanny,
+        WarmWorker,
+    )
+
+    client.register_plugin(PauseProfiler(), name=PLUGIN_NAME)
+    client.register_plugin(QuietNanny(), name=NANNY_PLUGIN_NAME)
+    client.register_plugin(WarmWorker(warm, keys), name=WARM_PLUGIN_NAME)
+
+
+def release_workers(client: Any) -> None:
+    """Unregister :func:`prepare_workers`' plugins (the workers' profiler back on; what they
+    loaded stays for the next campaign)."""
+    from vtolftc.runners.campaign.dask_plugin import (
+        NANNY_PLUGIN_NAME,
+        PLUGIN_NAME,
+        WARM_PLUGIN_NAME,
+    )
+
+    try:  # only those registered (the scheduler logs a missing one as an error)
+        workers, nannies = client.run_on_scheduler(_plugin_names)
+    except Exception:
+        return
+    for name in (WARM_PLUGIN_NAME, PLUGIN_NAME):
+        if name in workers:
+            with contextlib.suppress(Exception):
+                client.unregister_worker_plugin(name)
+    if NANNY_PLUGIN_NAME in nannies:
+        with contextlib.suppress(Exception):
+            client.unregister_worker_plugin(NANNY_PLUGIN_NAME, nanny=True)
+
+
+def _plugin_names(dask_scheduler: Any) -> tuple[list[str], list[str]]:
+    """The worker and nanny plugins the scheduler holds (run on the scheduler)."""
+    return list(dask_scheduler.worker_plugins), list(dask_scheduler.nanny_plugins)
