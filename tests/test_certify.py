@@ -192,6 +192,27 @@ def test_campaign_gates():
         "scenarios": 1, "survived": 1, "recoverable": 1, "survived_recoverable": 1}
 
 
+def test_vacuous_campaign_gate_is_said(tmp_path, capsys):
+    """A gate with no recoverable scenario holds (0 of 0), but the record, the command's
+    output and the report say that it held vacuously (QP-5, SM-3: no lift-rotor loss at
+    hover or mid-transition leaves a trim); a gate with recoverable scenarios, or with none
+    flown, has no such note."""
+    rows = [_row("rotor-off", "hover", False, False), _row("rotor-off", "transition", True, False),
+            _row("two-rotors-off", "hover", True), _row("rotor-off", "cruise", True)]
+    rec = judge_campaign(rows)
+    assert rec["verdict"] == "pass" and rec["gate_failures"] == []
+    assert [g["flown"] for g in rec["gates"]] == [2, 1]
+    assert len(rec["notes"]) == 1, rec["notes"]
+    assert "single lift rotor off" in rec["notes"][0] and "vacuously" in rec["notes"][0]
+    assert "none of its 2 scenarios" in rec["notes"][0]
+    assert judge_campaign([_row("surface", "hover", True)])["notes"] == []  # none flown
+    st = Stage("campaign", "stub campaign", lambda ctx: judge_campaign(rows))
+    assert run_certify(DS1, tmp_path / "v", stages=[st], code="v") == 0
+    assert "note: campaign: the gate on single lift rotor off" in capsys.readouterr().out
+    html = (tmp_path / "v" / "report.html").read_text()
+    assert "pass, vacuously (none of 2 flown recoverable)" in html
+
+
 def test_mission_gate():
     rec = {"pos": [(0.0, 0.0, -30.0), (3.0, 2.0, -0.1)], "reached": list(range(8)),
            "fw": [False, False], "flight_wall_s": 1.0}

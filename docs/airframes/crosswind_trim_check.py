@@ -5,13 +5,17 @@
 For each airframe and each set of ``k`` lift rotors off in hover (the pushers held off, as the
 flight software holds them), the oracle's verdict and margin (rad/s^2) in a steady wind
 (NED, m/s; default a 4 m/s crosswind, the certify campaign's); for a recoverable verdict,
-the attitude change (deg) of the oracle's trim and the body force Fz (N, FRD, + down) and
-pitch moment M (N m) the *nonlinear* vehicle model gives at the LP's own commands and
-attitude, with the weight: 0 means the trim holds, +x % of the weight means the vehicle
-sinks. In a pure crosswind the model's angle of attack is ``atan2(0, 0) = 0`` at exactly
-level attitude and +-90 deg at any roll, and the oracle's roll secant straddles that jump
-(docs/airframes/README.md, SM-3). Only the steady wind is checked here (the campaign also
-takes the gust's peak), with the oracle's attitude slope read at zero commands.
+the attitude change (deg) of the oracle's trim and what the *nonlinear* vehicle model gives
+at the LP's own commands and attitude, weight included (FRD body axes): the vertical force
+Fz (N, + down; also as a share of the weight: 0 means the trim holds, +x % means the vehicle
+sinks, -x % that it has that much lift to spare) and the moments L, M, N (N m) that the LP
+demands to be zero. Before the vehicle model's fix for sideways flow (commit "vehicle aero:
+sideways flow": wing terms on the chordwise x-z dynamic pressure) the angle of attack of a
+pure crosswind was ``atan2(0, 0) = 0`` at level attitude and +-90 deg at any roll, the
+oracle's roll secant straddled that jump and these trims left up to 23 % of the weight
+unbalanced (SM-3, QP-5); now the same check reads within 4 % (docs/airframes/README.md).
+Only the steady wind is checked here (the campaign also takes the gust's peak), with the
+oracle's attitude slope read at zero commands.
 """
 
 from __future__ import annotations
@@ -54,7 +58,8 @@ def check(path: str, wind: tuple[float, float, float], k: int = 1) -> list[str]:
         fz = float(fm[2] + (R.T @ np.array([0.0, 0.0, af.weight_N]))[2])
         lines.append(f"{head} (recoverable; pitch {math.degrees(dpitch):+.1f} deg, roll "
                      f"{math.degrees(droll):+.1f} deg): nonlinear Fz {fz:+.2f} N = "
-                     f"{fz / af.weight_N:+.0%} of the weight, M {float(fm[4]):+.2f} N m")
+                     f"{fz / af.weight_N:+.0%} of the weight, L {float(fm[3]):+.2f}, "
+                     f"M {float(fm[4]):+.2f}, N {float(fm[5]):+.2f} N m")
     return lines
 
 

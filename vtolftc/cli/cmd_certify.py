@@ -94,6 +94,9 @@ def run_certify(airframe: Path, out: Path, *, profile: str = "full", jobs: int |
         f"{n} {r.get('verdict', '?')}" + (" (cached)" if n in res.cached else "")
         for n, r in res.records.items()))
     print(f"report: {report}")
+    for r in res.records.values():
+        for note in r.get("notes", []):
+            print(f"note: {note}")
     for f in res.gate_failures:
         print(f"gate failed: {f}", file=sys.stderr)
     return 0 if res.passed else 1

@@ -153,7 +153,9 @@ def _stage_section(name: str, rec: Mapping[str, Any]) -> str:
         parts.append(_table(("gate", "survived / recoverable", "minimum", "verdict"),
                             [(g["name"], f"{g['survived']}/{g['recoverable']}",
                               f"{g['min']:.0%}",
-                              "n/a (none in this profile)" if not g["recoverable"]
+                              (f"pass, vacuously (none of {g['flown']} flown recoverable)"
+                               if g.get("flown") else "n/a (none in this profile)")
+                              if not g["recoverable"]
                               else "pass" if g["pass"] else "FAIL")
                              for g in rec.get("gates", [])]))
         parts.append(_table(("family", "phase", "scenarios", "recoverable", "survived",

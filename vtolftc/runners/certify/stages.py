@@ -17,7 +17,9 @@ Gates (each a one-line message in the record's ``gate_failures``; the command ex
   recoverable among single lift-rotor losses (family ``rotor-off``) at hover and
   mid-transition, and >= 90 % of the recoverable double losses (``two-rotors-off``) at the
   same two phases (the cruise losses are flown and reported, not gated, as issue 22 asks); a
-  scenario the oracle could not judge fails the gate;
+  scenario the oracle could not judge fails the gate; a gate with no recoverable scenario
+  holds vacuously and the record's ``notes`` say so (a 4-rotor quadplane: no lift-rotor loss
+  in hover leaves a trim);
 - SITL: the mission reaches every item and lands (below 0.5 m) within 5 m of home.
 """
 
@@ -319,15 +321,22 @@ def judge_campaign(rows: list[Mapping[str, Any]]) -> dict[str, Any]:
     doubles = [r for r in rows if r["family"] == "two-rotors-off" and r["phase"] in GATE_PHASES
                and r.get("recoverable")]
     gates = []
-    for name, sel, need in (("single lift rotor off, hover and mid-transition", singles,
-                             SINGLE_MIN),
-                            ("double lift rotor off, hover and mid-transition", doubles,
-                             DOUBLE_MIN)):
+    notes = []
+    for name, family, sel, need in (
+            ("single lift rotor off, hover and mid-transition", "rotor-off", singles,
+             SINGLE_MIN),
+            ("double lift rotor off, hover and mid-transition", "two-rotors-off", doubles,
+             DOUBLE_MIN)):
         k = sum(bool(r["survived"]) for r in sel)
         n = len(sel)
         ok = n == 0 or k / n >= need
+        flown = [r for r in rows if r["family"] == family and r["phase"] in GATE_PHASES]
         gates.append({"name": name, "survived": k, "recoverable": n, "min": need,
-                      "pass": ok})
+                      "pass": ok, "flown": len(flown)})
+        if n == 0 and flown:
+            notes.append(f"campaign: the gate on {name} holds vacuously: the oracle calls none "
+                         f"of its {len(flown)} scenarios recoverable (GS-SHIF survived "
+                         f"{sum(bool(r['survived']) for r in flown)} of them)")
         if not ok:
             fails.append(f"campaign: GS-SHIF survives {k}/{n} = {k / n:.1%} of the recoverable "
                          f"{name}, below {need:.0%}")
@@ -343,7 +352,7 @@ def judge_campaign(rows: list[Mapping[str, Any]]) -> dict[str, Any]:
     failures = [dict(r) for r in rows if not r["survived"]]
     return {"verdict": "fail" if fails else "pass", "scenarios": len(rows),
             "survived": sum(bool(r["survived"]) for r in rows), "gates": gates,
-            "cells": cells, "failures": failures, "gate_failures": fails}
+            "cells": cells, "failures": failures, "gate_failures": fails, "notes": notes}
 
 
 # --------------------------------------------------------------------------------------------
