@@ -29,7 +29,8 @@ times are 3-5x an idle machine's; ratios are what to read):
   modes, arming, saturation tracking and the result objects the remaining ~10 %.
 
 What was built on this (branch inproc-10), every flight bit-identical
-(``command_digest.py``: fad6f718..., 2be6f774..., 1a23074e... unchanged; every metric of
+(``command_digest.py``: fad6f718..., 2be6f774..., 1a23074e... unchanged on the aerodynamics
+of that time, dbd91a71..., 121a7434..., e937b801... since the sideways-flow fix; every metric of
 cases 0, 1, 2, with and without an observer, equal to the last digit):
 
 - the metrics' per-sample arithmetic in one numba kernel on a flat state and a ring buffer
