@@ -22,6 +22,12 @@ harness; at nice 5 beside a run of the test suite, load 2-3, ``--jobs 2``): 405 
 (target met): trim 1.5 s, synthesis 58.7 s (tuning 45.0 s), certificate 7.7 s, campaign 301.9 s
 (300 scenarios, 59.6 scenarios/min; 300 survived; singles 32/32, doubles at hover and
 mid-transition 108/108), SITL mission 34.5 s (landed at home).
+
+On the wing aerodynamics fixed for sideways flow (session 10, `vtolftc certify` itself beside a
+CI run of the whole test suite, load 2-6): 560 s, exit status 0: synthesis 64.3 s, certificate
+8.2 s, campaign 452.0 s (300 of 300 survived; singles 32/32, doubles at hover and
+mid-transition 104/104 recoverable, the oracle no longer counting 8 crosswind hover pairs),
+SITL mission 34.1 s (landed at home).
 """
 
 from __future__ import annotations
