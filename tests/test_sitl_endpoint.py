@@ -23,7 +23,13 @@ from vtolftc.runners.sitl import SitlConfig, SitlRun
 
 pytestmark = pytest.mark.slow
 
-ACK_BUDGET_S = 0.5
+ACK_BUDGET_S = 2.0
+"""Wall-clock bound on a command's answer, as a guard against stalls (an ACK that waits on a
+multi-second path: a compile, a blocked link). On an idle machine every command is answered
+within 0.5 s of wall time; a loaded CI machine took 0.68 s (two cores shared with a campaign),
+so the wall-clock bound here is a stall guard, and the autopilot's own answer time is checked in
+simulated time from its event log (the last test of this file)."""
+ACK_SIM_BUDGET_S = 0.1
 
 
 @pytest.fixture(scope="module")
@@ -236,3 +242,25 @@ def test_garbage_on_every_port_dropped_counted_nothing_crashes(sitl):
     assert veh["link"]["dropped"] >= 2, veh["link"]
     log = (sitl.out / "autopilot.log").read_text()
     assert "frames dropped" in log and "Traceback" not in log
+
+
+def test_every_logged_command_acked_within_100_ms_of_simulated_time(sitl):
+    """The autopilot's event log (simulated time) holds each COMMAND_LONG it took in and its
+    ACK: every one answered within ``ACK_SIM_BUDGET_S`` of simulated time (a few control
+    steps), whatever the machine's load did to the wall-clock latency."""
+    lines = (sitl.cfg.out_dir / "autopilot" / "events.log").read_text().splitlines()
+    rows = [(float(ln.split()[0]), ln.split()[1], ln.split(None, 2)[2])
+            for ln in lines if len(ln.split()) >= 3]
+    pending: dict[str, float] = {}
+    answered = 0
+    for t, kind, text in rows:
+        if kind == "command":
+            pending[text.split(" (")[0]] = t
+        elif kind == "ack":
+            name = text.split(" -> ")[0]
+            if name in pending:
+                dt = t - pending.pop(name)
+                assert 0.0 <= dt <= ACK_SIM_BUDGET_S, f"{name} acked after {dt:.3f} simulated s"
+                answered += 1
+    assert answered >= 3, rows[:20]
+    assert not pending, f"commands never acked: {pending}"

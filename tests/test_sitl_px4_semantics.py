@@ -198,18 +198,23 @@ def test_disarms_on_the_ground_after_com_disarm_prflt(sitl):
     fi = c.wait(lambda: c.last.get("FLIGHT_INFORMATION"), 10.0, "FLIGHT_INFORMATION")
     armed_ms = fi.arming_time_utc / 1000.0
     assert armed_ms > 0
-    last_armed_ms = 0
     c.keep = {"HEARTBEAT"}
     c.log.clear()
     c.wait(lambda: not c.armed, 120.0, "the pre-flight auto-disarm")
     c.keep = set()
-    last_armed_ms = max(t for t, m in c.log if m.base_mode & ARMED)
-    disarmed_ms = min(t for t, m in c.log if not m.base_mode & ARMED)
-    # heartbeats at 1 Hz of simulated time: armed until at least 9 s, off by 11.5 s
-    assert last_armed_ms - armed_ms >= 8900, (armed_ms, last_armed_ms)
-    assert disarmed_ms - armed_ms <= 11500, (armed_ms, disarmed_ms)
+    assert any(m.base_mode & ARMED for _, m in c.log), "no armed heartbeat before the disarm"
+    assert not c.log[-1][1].base_mode & ARMED
     c.wait(lambda: any("Disarmed by auto preflight disarming" in t for _, t in c.texts), 10.0,
            "PX4's STATUSTEXT")
+    # When, in simulated time: the autopilot's event log. (The heartbeats come at 1 Hz of
+    # simulated time when the machine keeps up; on a loaded one the ground-station worker may
+    # skip some while the lockstep runs on, so their times bound the disarm only loosely.)
+    events = (_run.cfg.out_dir / "autopilot" / "events.log").read_text().splitlines()
+    t_arm = max(float(ln.split()[0]) for ln in events if ln.split()[1:3] == ["autopilot", "armed"])
+    t_off = [float(ln.split()[0]) for ln in events
+             if "Disarmed by auto preflight disarming" in ln]
+    assert len(t_off) == 1 and t_off[0] > t_arm, events
+    assert 9.9 <= t_off[0] - t_arm <= 10.1, (t_arm, t_off)           # COM_DISARM_PRFLT = 10 s
     assert c.param("COM_FLIGHT_UUID") == uuid0 + 1
 
 
