@@ -246,6 +246,16 @@ def test_campaign_spec_of_the_full_profile(tmp_path):
     assert "--airframe" in scen[0].fly_command() and "--gains" in scen[0].fly_command()
     quick = StageContext(DS1, "x" * 64, tmp_path, PROFILES["quick"], records=ctx.records)
     assert len(expand(parse_spec(campaign_spec_text(quick), base_dir=tmp_path))) == 16
+    # the gates profile: the full synthesis (same starts, so the same gains) and exactly the
+    # gated families (8 singles + 28 doubles at hover and mid-transition, calm)
+    gates = StageContext(DS1, "x" * 64, tmp_path, PROFILES["gates"], records=ctx.records)
+    assert PROFILES["gates"]["synth_starts"] == PROFILES["full"]["synth_starts"]
+    gscen = expand(parse_spec(campaign_spec_text(gates), base_dir=tmp_path))
+    assert len(gscen) == (8 + 28) * 2
+    assert {s.family for s in gscen} == {"rotor-off", "two-rotors-off"}
+    assert {s.phase for s in gscen} == {"hover", "transition"}
+    assert {s.wind.name for s in gscen} == {"calm"}
+    assert {s.duration_s for s in gscen} == {40.0}
 
 
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys):
@@ -325,6 +335,46 @@ def test_certify_quadplane_quick(tmp_path):
     assert recs["sitl"]["verdict"] == "pass", recs["sitl"]["gate_failures"]
     assert recs["sitl"]["landed_from_home_m"] < 5.0
     assert recs["sitl"]["reached"] == list(range(recs["sitl"]["items"]))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "n_lift", "gated"), [
+    ("hexa-ds6.toml", 6, True), ("heavy-25.toml", 8, True), ("small-3.toml", 4, False)])
+def test_certify_library_gates(tmp_path, name, n_lift, gated):
+    """Issue 22's gates on HD-6, HV-25 and SM-3 with ``--profile gates`` (the full profile's
+    synthesis; every single and double lift-rotor loss at hover and mid-transition, calm):
+    every stage passes and the command exits 0, the SITL mission reaches every item and lands
+    within 5 m of home, GS-SHIF survives every recoverable single loss and >= 90 % of the
+    recoverable doubles. ``gated``: the oracle finds recoverable single losses (HD-6 and
+    HV-25; SM-3 is a 4+1 quadplane whose gates hold vacuously, which the record says)."""
+    out = tmp_path / "cert"
+    rc = run(["certify", str(ROOT / "airframe" / name), "--out", str(out),
+              "--profile", "gates", "--jobs", "2"])
+    recs = {p.stem: json.loads(p.read_text())["record"]
+            for p in (out / "stages").glob("*.json")}
+    assert set(recs) == {"trim", "synth", "certificate", "campaign", "sitl"}
+    fails = [f for r in recs.values() for f in r.get("gate_failures", [])]
+    assert rc == 0 and not fails, (rc, fails)
+    assert all(r["verdict"] == "pass" for r in recs.values())
+    camp = recs["campaign"]
+    assert camp["scenarios"] == 2 * (n_lift + n_lift * (n_lift - 1) // 2)
+    singles, doubles = camp["gates"]
+    assert singles["name"].startswith("single lift rotor off")
+    assert doubles["name"].startswith("double lift rotor off")
+    cells = camp["cells"]
+    for gate, family in ((singles, "rotor-off"), (doubles, "two-rotors-off")):
+        assert gate["recoverable"] == sum(cells[f"{family}|{p}"]["recoverable"]
+                                          for p in ("hover", "transition"))
+        assert gate["flown"] == sum(cells[f"{family}|{p}"]["scenarios"]
+                                    for p in ("hover", "transition"))
+    assert singles["survived"] == singles["recoverable"], camp["failures"]
+    assert doubles["survived"] >= 0.9 * doubles["recoverable"], camp["failures"]
+    assert (singles["recoverable"] > 0) == gated, singles
+    if not gated:
+        assert any("vacuous" in n for n in camp["notes"]), camp["notes"]
+    sitl = recs["sitl"]
+    assert sitl["landed_from_home_m"] < 5.0
+    assert sitl["reached"] == list(range(sitl["items"]))
 
 
 LIBRARY = ("quadplane-4p1.toml", "hexa-ds6.toml", "heavy-25.toml", "small-3.toml")

@@ -1,7 +1,7 @@
 """``vtolftc certify``: an airframe file to a certified, fault-campaigned, SITL-flown GS-SHIF.
 
 ``vtolftc certify AIRFRAME.toml [--out DIR] [--jobs N] [--scheduler tcp://HOST:PORT]
-[--resume] [--profile full|quick]`` runs trim table -> robust synthesis -> mixed-mu
+[--resume] [--profile full|gates|quick]`` runs trim table -> robust synthesis -> mixed-mu
 certificate -> envelope campaign (judged by the recoverability oracle) -> SITL mission over
 UDP, writes ``DIR/report.html`` and exits 0 when every gate holds, 1 when one fails (the
 report and stderr say which), 2 for bad input (one line), 130 on Ctrl-C / SIGTERM (finished
@@ -130,6 +130,8 @@ def register(sub: Any) -> None:
                    help="fly the campaign on the Dask scheduler at ADDRESS (tcp://HOST:PORT)")
     p.add_argument("--resume", action="store_true",
                    help="reuse the finished stages in --out (same airframe file and code)")
-    p.add_argument("--profile", choices=("full", "quick"), default="full",
-                   help="full (default): the certification; quick: a slice for tests")
+    p.add_argument("--profile", choices=("full", "gates", "quick"), default="full",
+                   help="full (default): the certification; gates: the full synthesis and "
+                        "the campaign's gated families only (single and double lift rotors "
+                        "off, hover and mid-transition, calm); quick: a slice for tests")
     p.set_defaults(func=cmd_certify)

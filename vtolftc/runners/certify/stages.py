@@ -75,11 +75,25 @@ PROFILES: dict[str, dict[str, Any]] = {
         "campaign_winds": ["calm"], "campaign_duration_s": 40.0,
         "trim_stall_fractions": [0.5, 1.0, 1.4],
     },
+    "gates": {
+        "synth_starts": 2, "synth_mu": False, "synth_report": False,
+        "certificate_axes": ["roll"], "certificate_points": "ends+middle",
+        "certificate_grid_n": 21,
+        "certificate_margin": False, "certificate_claim": "all",
+        "campaign_families": [[f[0], f[1], f[2], list(f[3]), f[4]] for f in _FULL_FAMILIES[:2]],
+        "campaign_phases": list(GATE_PHASES),
+        "campaign_winds": ["calm"], "campaign_duration_s": 40.0,
+        "trim_stall_fractions": [0.5, 1.0, 1.4],
+    },
 }
 """``full``: the certification (issue 22). ``quick``: the same chain on a slice (one tune
 start, no lumped mu, no synthesis report, the roll certificate at the first, middle and
 last design points, single lift rotors off at
-hover and mid-transition in calm air, 40 s flights), for tests."""
+hover and mid-transition in calm air, 40 s flights), for tests. ``gates``: the full
+profile's synthesis (the same tune starts, so the same gains; without the lumped mu and the
+synthesis report, which only analyse) and the campaign families its gates count (every single
+and double lift-rotor loss at hover and mid-transition), calm, 40 s flights, with the quick
+profile's certificate: the gates of issue 22 at a fraction of the full profile's time."""
 
 _WINDS = {
     "calm": '[[wind]]\nname = "calm"\n',
