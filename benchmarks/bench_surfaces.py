@@ -71,15 +71,16 @@ def _axis_job(args: tuple[Any, ...]) -> tuple[str, SurfaceDesign, float]:
     af = load_airframe()
     t0 = time.perf_counter()
     grid = surface_grid(robust_points(af), density)
-    if objective == "fault":
-        return axis, _fault_design(af, axis, grid, degree, max_evals), \
-            time.perf_counter() - t0
+    if objective in ("fault", "requirements"):
+        return axis, _fault_design(af, axis, grid, degree, max_evals,
+                                   objective == "requirements"), time.perf_counter() - t0
     d = design_surfaces(RobustMethod(), af, axis, grid, degree, n_starts=n_starts,
                         max_iter=max_iter)
     return axis, d, time.perf_counter() - t0
 
 
-def _fault_design(af: Any, axis: str, grid: Any, degree: int, max_evals: int) -> SurfaceDesign:
+def _fault_design(af: Any, axis: str, grid: Any, degree: int, max_evals: int,
+                  requirements: bool = False) -> SurfaceDesign:
     """The fault-objective design (reference: the shipped robust SHIF) as a SurfaceDesign
     whose objectives are J [deg] (predicted RMSE + cap penalty)."""
     import json
@@ -93,8 +94,10 @@ def _fault_design(af: Any, axis: str, grid: Any, degree: int, max_evals: int) ->
     gains = Path(__file__).resolve().parents[1] / "firmware_sim/autopilot/gains/shif.json"
     doc = json.loads(gains.read_text(encoding="utf-8"))
     ref = {k: float(doc["axes"][axis][k][0]) for k in PARAM_NAMES}
+    extra: dict[str, Any] = ({"margins": True, "nominal": True, "lazy": True,
+                              "max_degree": max(degree, 1)} if requirements else {})
     f = design_fault_surfaces(RobustMethod(), af, axis, grid, degree, max_evals=max_evals,
-                              reference=ref)
+                              reference=ref, **extra)
     return SurfaceDesign(axis, tuple(grid), f.constant, f.surface, f.constant_J, f.surface_J,
                          np.array([f.constant_hinf]), np.array([f.surface_hinf]),
                          f.kept_start, f.time_s, {})
@@ -109,9 +112,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--density", type=int, default=2)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--no-fly", action="store_true")
-    ap.add_argument("--objective", choices=("hinf", "fault"), default="hinf",
+    ap.add_argument("--objective", choices=("hinf", "fault", "requirements"), default="hinf",
                     help="hinf: max of the robust channels' norms; fault: predicted fault "
-                         "RMSE with those channels as caps (synthesis/fault_surfaces.py)")
+                         "RMSE with those channels as caps (synthesis/fault_surfaces.py); "
+                         "requirements: fault + nominal-transition term, 6 dB / 30 deg / "
+                         "50 ms margins as constraints, degree chosen up to --degree, lazy "
+                         "simplex (benchmarks/regen_surface2.py)")
     ap.add_argument("--max-evals", type=int, default=300,
                     help="objective evaluations per stage of the fault design")
     a = ap.parse_args(argv)
