@@ -132,22 +132,12 @@ def fly(jobs: int) -> dict[str, Any]:
 
 
 def _lqr_from(doc: Any) -> dict[str, Any]:
-    """LQR's case 1 and 2 RMSE from a docs/ds1-claims results file (searched by shape)."""
-    found: dict[str, Any] = {}
-
-    def walk(x: Any, path: str) -> None:
-        if isinstance(x, dict):
-            if str(x.get("controller", "")).lower() == "lqr" and "rmse_roll_deg" in x:
-                found[str(x.get("case", path))] = {k: x[k] for k in (
-                    "rmse_roll_deg", "rmse_pitch_deg", "rmse_yaw_deg", "crashed") if k in x}
-            for k, v in x.items():
-                walk(v, f"{path}/{k}")
-        elif isinstance(x, list):
-            for i, v in enumerate(x):
-                walk(v, f"{path}/{i}")
-
-    walk(doc, "")
-    return found
+    """LQR's paper case 1 and 2 flights of a docs/ds1-claims results file (rows labelled
+    ``case 1`` / ``case 2`` with controller ``lqr``)."""
+    return {r["label"]: {k: r[k] for k in ("rmse_roll_deg", "rmse_pitch_deg", "rmse_yaw_deg",
+                                          "crashed", "commands_sha256")}
+            for r in doc if str(r.get("controller", "")).lower() == "lqr"
+            and r.get("label") in ("case 1", "case 2")}
 
 
 def validate(jobs: int) -> dict[str, Any]:

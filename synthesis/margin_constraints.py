@@ -17,7 +17,8 @@ gains are interpolated). v = 0 exactly when every design-grid point meets the ta
 
 Speed: the plant's frequency response on the search grid (400 log-spaced frequencies,
 1e-2 .. 1e3 rad/s) is computed once; each evaluation forms the P-PID's response in closed
-form and refines only the crossings (Brent) with exact single-frequency responses.
+form and refines only the crossings (Brent) with exact single-frequency responses (the
+plain resolvent of the state-space data).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.airframe.loader import Airframe
-from vtolftc.synthesis.hinfnorm import frequency_response
+from vtolftc.synthesis.hinfnorm import StateSpaceData, as_state_space
 from vtolftc.synthesis.models import Axis
 from vtolftc.synthesis.validation import ClassicalMargins, Requirements, loop_margins_classical
 
@@ -45,6 +46,15 @@ def _pid_response(g: NDArray[np.float64], w: NDArray[np.float64]) -> NDArray[np.
     rate_controller`)."""
     s = 1j * w
     return g[1] + g[2] / s + g[3] * s / (g[4] * s + 1.0)
+
+
+def _plant_response(G: StateSpaceData, w: NDArray[np.float64]) -> NDArray[np.complex128]:
+    """C (j w I - A)^-1 B + D at each frequency, shape (n, p, m) (the plain resolvent: no
+    wrapper overhead for the single frequencies of the crossing refinement)."""
+    A, B, C, D = G
+    n = A.shape[0]
+    M = 1j * np.asarray(w, float)[:, None, None] * np.eye(n) - A
+    return C @ np.linalg.solve(M, np.broadcast_to(B, (len(w), *B.shape))) + D
 
 
 @dataclass
@@ -74,10 +84,10 @@ class MarginConstraints:
     def __post_init__(self) -> None:
         from vtolftc.synthesis.robust import design_plant
 
-        self._plants = [design_plant(self.af, self.axis, float(v))
+        self._plants = [as_state_space(design_plant(self.af, self.axis, float(v)))
                         for v in self.airspeeds_m_s]
         w = MARGIN_SEARCH_OMEGAS
-        self._F = [frequency_response(G, w) for G in self._plants]
+        self._F = [_plant_response(G, w) for G in self._plants]
         r, k = self.requirements, 1.0 + self.target_margin
         self.targets = (k * r.delay_margin_s, k * r.phase_margin_deg, k * r.gain_margin_db)
 
@@ -100,11 +110,11 @@ class MarginConstraints:
         for G, F, g in zip(self._plants, self._F, np.asarray(gains, float), strict=True):
             grid_L = _pid_response(g, w) * (g[0] * F[:, 1, 0] + F[:, 0, 0])
 
-            def L(x: NDArray[np.float64], G: object = G, g: NDArray[np.float64] = g,
+            def L(x: NDArray[np.float64], G: StateSpaceData = G, g: NDArray[np.float64] = g,
                   grid_L: NDArray[np.complex128] = grid_L) -> NDArray[np.complex128]:
                 if x is w:
                     return grid_L
-                Fx = frequency_response(G, x)
+                Fx = _plant_response(G, x)
                 return _pid_response(g, x) * (g[0] * Fx[:, 1, 0] + Fx[:, 0, 0])
 
             out.append(loop_margins_classical(L, w))

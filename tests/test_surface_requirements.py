@@ -134,3 +134,20 @@ def test_surface_never_worse_than_constant_with_requirements(design,  # type: ig
     assert J_surf <= J_const
     th = d.surface.coefficients.reshape(-1)
     assert f.bounded(th, math.inf) == pytest.approx(J_surf, rel=1e-12)
+
+
+def test_margin_constraints_are_the_validations_margins() -> None:
+    from vtolftc.synthesis.robust import loop_frequency_response
+    from vtolftc.synthesis.validation import loop_margins_classical
+
+    af = load_airframe()
+    v = [0.0, 4.0, 13.0, 18.0]
+    gains = np.array([[REF[k] for k in REF], [3.0, 20.0, 60.0, 0.3, 0.03],
+                      [2.0, 10.0, 40.0, 0.5, 0.05], [4.0, 30.0, 100.0, 0.2, 0.02]])
+    got = MarginConstraints(af, "roll", v).margins(gains)
+    for V, g, m in zip(v, gains, got, strict=True):
+        G = design_plant(af, "roll", V)
+        want = loop_margins_classical(lambda w, G=G, g=g: loop_frequency_response(G, g, w))
+        assert m.delay_margin_s == pytest.approx(want.delay_margin_s, rel=1e-6)
+        assert m.phase_margin_deg == pytest.approx(want.phase_margin_deg, rel=1e-6)
+        assert m.gain_margin_upper == pytest.approx(want.gain_margin_upper, rel=1e-6)
