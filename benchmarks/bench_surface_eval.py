@@ -13,9 +13,12 @@ with the margin constraints and the nominal term (``synthesis/fault_surfaces.py`
 
     python benchmarks/bench_surface_eval.py [--n 10] [--evals 120]
 
-Measured (2026-12-02, load average 17-20 on 2 cores, so absolute times are ~10x an idle
-machine's; the ratios are pairwise): see the branch surf2-11 report and
-``docs/ds1-surfaces/surface2/README.md``.
+Measured (2026-12-02, 2 cores shared, absolute times several times an idle machine's; the
+ratios are pairwise): at load average 24.2, predictor 16.6 ms (modal ISE) against 427.6 ms
+(matrix exponential), x25.7; margins at 13 airspeeds 76.2 ms; 39 cap norms 172.8 ms.
+Nelder-Mead, 80 evaluations: lazy 24.4 s, full 13.9 s (x0.57, same result); 13 lazy
+evaluations stopped early, all at the caps. At load 23.5 the predictor ratio was x12.3 and
+the margins took 136 ms (before the plain resolvent), lazy 20.7 s against full 18.5 s.
 """
 
 from __future__ import annotations

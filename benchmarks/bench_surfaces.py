@@ -44,6 +44,14 @@ channel norms where the predictor alone already exceeds the simplex's worst, are
 Case 1 / case 2 RMSE roll / pitch / yaw [deg] of the shipped surface design: GS-SHIF
 0.112 / 0.368 / 0.128 and 0.141 / 0.337 / 0.136, SHIF 0.122 / 0.382 / 0.130 and
 0.155 / 0.354 / 0.137 (``docs/ds1-surfaces/README.md``).
+
+``--objective requirements --degree 2`` (branch surf2-11: the nominal-transition term, the
+6 dB / 30 deg / 50 ms margins at every grid airspeed as constraints, degree chosen by J up to
+``--degree``; ``benchmarks/regen_surface2.py`` made ``gains/surface2`` this way with 250
+evaluations per stage): 460 s wall at load average ~20 (per axis roll 350, pitch 326, yaw
+134 s; three stages of 250 evaluations each). Per evaluation, pairwise at load 24
+(``benchmarks/bench_surface_eval.py``): predictor 16.6 ms (matrix-exponential ISE 428 ms),
+margins 76 ms, cap norms 173 ms. The < 90 s target is not shown on this machine.
 """
 
 from __future__ import annotations
