@@ -204,6 +204,19 @@ def plot_surfaces() -> list[str]:
     return files
 
 
+def _finite(x: Any) -> Any:
+    """Non-finite floats as null (strict JSON; e.g. an infinite gain margin)."""
+    import math
+
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_finite(v) for v in x]
+    return x
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the stages (module docstring); returns the exit status."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -232,7 +245,8 @@ def main(argv: list[str] | None = None) -> int:
         results["validation_2x"] = validate(a.jobs)
         print(json.dumps(results["validation_2x"], indent=1))
     results["plots"] = plot_surfaces()
-    res_path.write_text(json.dumps(results, indent=1, default=str) + "\n", encoding="utf-8")
+    res_path.write_text(json.dumps(_finite(results), indent=1, default=str) + "\n",
+                        encoding="utf-8")
     return 0
 
 
