@@ -29,6 +29,19 @@ degree-d surface started from that SHIF embedded (the same gains at every airspe
 minimise the same J with the same optimiser (bounded Nelder-Mead in coordinates scaled by
 the gains' typical values), and the surface keeps its start if the optimiser returns
 anything worse, so J(GS-SHIF) <= J(SHIF) by construction.
+
+Options of :func:`design_fault_surfaces` (all off by default: the design of
+``gains/surface/`` is reproduced unchanged):
+
+- ``margins``: the validation's loop margins (6 dB, 30 deg, 50 ms; targets 4 % above) at
+  every grid airspeed as constraints with the same ``rho``
+  (:mod:`~vtolftc.synthesis.margin_constraints`);
+- ``nominal``: the nominal rest of the transition (t >= 24 s of table 4) added to the
+  prediction in quadrature (:mod:`~vtolftc.synthesis.nominal_objective`);
+- ``max_degree``: GS-SHIF's degree chosen by J (each degree started from the one below,
+  kept only if it lowers J by more than ``degree_gain``, 1 %);
+- ``lazy``: the simplex of :mod:`~vtolftc.synthesis.lazy_simplex` on
+  :meth:`FaultObjective.bounded`, restarted from its best while budget remains.
 """
 
 from __future__ import annotations
