@@ -44,6 +44,14 @@ channel norms where the predictor alone already exceeds the simplex's worst, are
 Case 1 / case 2 RMSE roll / pitch / yaw [deg] of the shipped surface design: GS-SHIF
 0.112 / 0.368 / 0.128 and 0.141 / 0.337 / 0.136, SHIF 0.122 / 0.382 / 0.130 and
 0.155 / 0.354 / 0.137 (``docs/ds1-surfaces/README.md``).
+
+``--objective requirements --degree 2`` (branch surf2-11: the nominal-transition term, the
+6 dB / 30 deg / 50 ms margins at every grid airspeed as constraints, degree chosen by J up to
+``--degree``; ``benchmarks/regen_surface2.py`` made ``gains/surface2`` this way with 250
+evaluations per stage): 460 s wall at load average ~20 (per axis roll 350, pitch 326, yaw
+134 s; three stages of 250 evaluations each). Per evaluation, pairwise at load 24
+(``benchmarks/bench_surface_eval.py``): predictor 16.6 ms (matrix-exponential ISE 428 ms),
+margins 76 ms, cap norms 173 ms. The < 90 s target is not shown on this machine.
 """
 
 from __future__ import annotations
@@ -71,15 +79,16 @@ def _axis_job(args: tuple[Any, ...]) -> tuple[str, SurfaceDesign, float]:
     af = load_airframe()
     t0 = time.perf_counter()
     grid = surface_grid(robust_points(af), density)
-    if objective == "fault":
-        return axis, _fault_design(af, axis, grid, degree, max_evals), \
-            time.perf_counter() - t0
+    if objective in ("fault", "requirements"):
+        return axis, _fault_design(af, axis, grid, degree, max_evals,
+                                   objective == "requirements"), time.perf_counter() - t0
     d = design_surfaces(RobustMethod(), af, axis, grid, degree, n_starts=n_starts,
                         max_iter=max_iter)
     return axis, d, time.perf_counter() - t0
 
 
-def _fault_design(af: Any, axis: str, grid: Any, degree: int, max_evals: int) -> SurfaceDesign:
+def _fault_design(af: Any, axis: str, grid: Any, degree: int, max_evals: int,
+                  requirements: bool = False) -> SurfaceDesign:
     """The fault-objective design (reference: the shipped robust SHIF) as a SurfaceDesign
     whose objectives are J [deg] (predicted RMSE + cap penalty)."""
     import json
@@ -93,8 +102,10 @@ def _fault_design(af: Any, axis: str, grid: Any, degree: int, max_evals: int) ->
     gains = Path(__file__).resolve().parents[1] / "firmware_sim/autopilot/gains/shif.json"
     doc = json.loads(gains.read_text(encoding="utf-8"))
     ref = {k: float(doc["axes"][axis][k][0]) for k in PARAM_NAMES}
+    extra: dict[str, Any] = ({"margins": True, "nominal": True, "lazy": True,
+                              "max_degree": max(degree, 1)} if requirements else {})
     f = design_fault_surfaces(RobustMethod(), af, axis, grid, degree, max_evals=max_evals,
-                              reference=ref)
+                              reference=ref, **extra)
     return SurfaceDesign(axis, tuple(grid), f.constant, f.surface, f.constant_J, f.surface_J,
                          np.array([f.constant_hinf]), np.array([f.surface_hinf]),
                          f.kept_start, f.time_s, {})
@@ -109,9 +120,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--density", type=int, default=2)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--no-fly", action="store_true")
-    ap.add_argument("--objective", choices=("hinf", "fault"), default="hinf",
+    ap.add_argument("--objective", choices=("hinf", "fault", "requirements"), default="hinf",
                     help="hinf: max of the robust channels' norms; fault: predicted fault "
-                         "RMSE with those channels as caps (synthesis/fault_surfaces.py)")
+                         "RMSE with those channels as caps (synthesis/fault_surfaces.py); "
+                         "requirements: fault + nominal-transition term, 6 dB / 30 deg / "
+                         "50 ms margins as constraints, degree chosen up to --degree, lazy "
+                         "simplex (benchmarks/regen_surface2.py)")
     ap.add_argument("--max-evals", type=int, default=300,
                     help="objective evaluations per stage of the fault design")
     a = ap.parse_args(argv)

@@ -254,8 +254,9 @@ def disturbance_loop(G: object, K: StateSpaceData) -> StateSpaceData:
 
 def step_ise(sys: StateSpaceData, d: float, horizon_s: float) -> float:
     """Integral of y(t)^2 over [0, horizon_s] of the response to the step d at t = 0 from rest
-    (exact for a stable loop: the response about its steady state through the observability
-    Gramian over the horizon, a Lyapunov equation and a matrix exponential).
+    (exact for a stable loop: the response about its steady state in the loop's modes, each
+    term integrated in closed form; through the observability Gramian over the horizon and a
+    matrix exponential when the eigenvectors are ill-conditioned, cond > 1e6).
 
     Parameters
     ----------
@@ -272,19 +273,49 @@ def step_ise(sys: StateSpaceData, d: float, horizon_s: float) -> float:
         ISE (output unit squared times s; rad^2 s for an angle); inf for an unstable loop.
     """
     A, B, C, D = (np.asarray(m, float) for m in sys)
-    if A.size and np.max(np.linalg.eigvals(A).real) >= 0:
+    if not A.size:
+        return float(D[0, 0] * d) ** 2 * horizon_s
+    lam, V = np.linalg.eig(A)
+    if np.max(lam.real) >= 0:
         return math.inf
     b = B[:, 0] * d
     c = C[0]
     # y(t) = y_ss + c e^{At} z, z = -x_ss = A^-1 b d, y_ss = D d - c A^-1 b
     z = np.linalg.solve(A, b)
     y_ss = float(D[0, 0] * d - c @ z)
-    E = sla.expm(A * horizon_s)
+    if np.linalg.cond(V) < _EIG_COND_MAX:
+        val = _ise_modal(lam, V, c, z, y_ss, horizon_s)
+    else:
+        val = _ise_expm(A, c, z, y_ss, horizon_s)
+    return max(0.0, val) if math.isfinite(val) else math.inf
+
+
+#: Largest condition number of the eigenvector matrix for the modal ISE (beyond it: expm).
+_EIG_COND_MAX = 1e6
+
+
+def _ise_modal(lam: NDArray[np.complex128], V: NDArray[np.complex128], c: NDArray[np.float64],
+               z: NDArray[np.float64], y_ss: float, T: float) -> float:
+    """ISE of y_ss + c e^{At} z over [0, T] through A = V diag(lam) V^-1: with
+    g_i = (c V)_i (V^-1 z)_i, y = y_ss + sum_i g_i e^{lam_i t}, and every term integrates in
+    closed form (one eigendecomposition instead of a matrix exponential: ~20x faster)."""
+    g = (c @ V) * np.linalg.solve(V, z.astype(complex))
+    e1 = np.expm1(lam * T) / lam                          # int_0^T e^{lam t} dt
+    s = lam[:, None] + lam[None, :]
+    e2 = np.expm1(s * T) / s                              # int_0^T e^{(lam_i + lam_j) t} dt
+    val = y_ss**2 * T + 2.0 * y_ss * complex(g @ e1).real + complex(g @ e2 @ g).real
+    return float(val)
+
+
+def _ise_expm(A: NDArray[np.float64], c: NDArray[np.float64], z: NDArray[np.float64],
+              y_ss: float, T: float) -> float:
+    """The same ISE through the Gramian over the horizon (a Lyapunov equation and a matrix
+    exponential): for a defective or nearly defective A."""
+    E = sla.expm(A * T)
     W_inf = sla.solve_continuous_lyapunov(A.T, -np.outer(c, c))
     W = W_inf - E.T @ W_inf @ E                      # int_0^T e^{A't} c'c e^{At} dt
     int_e = np.linalg.solve(A, E - np.eye(A.shape[0]))   # int_0^T e^{At} dt
-    val = y_ss**2 * horizon_s + 2.0 * y_ss * float(c @ int_e @ z) + float(z @ W @ z)
-    return max(0.0, val) if math.isfinite(val) else math.inf
+    return float(y_ss**2 * T + 2.0 * y_ss * float(c @ int_e @ z) + float(z @ W @ z))
 
 
 def controller_from_document(doc: Mapping[str, Any], axis: Axis,

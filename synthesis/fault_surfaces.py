@@ -29,6 +29,19 @@ degree-d surface started from that SHIF embedded (the same gains at every airspe
 minimise the same J with the same optimiser (bounded Nelder-Mead in coordinates scaled by
 the gains' typical values), and the surface keeps its start if the optimiser returns
 anything worse, so J(GS-SHIF) <= J(SHIF) by construction.
+
+Options of :func:`design_fault_surfaces` (all off by default: the design of
+``gains/surface/`` is reproduced unchanged):
+
+- ``margins``: the validation's loop margins (6 dB, 30 deg, 50 ms; targets 4 % above) at
+  every grid airspeed as constraints with the same ``rho``
+  (:mod:`~vtolftc.synthesis.margin_constraints`);
+- ``nominal``: the nominal rest of the transition (t >= 24 s of table 4) added to the
+  prediction in quadrature (:mod:`~vtolftc.synthesis.nominal_objective`);
+- ``max_degree``: GS-SHIF's degree chosen by J (each degree started from the one below,
+  kept only if it lowers J by more than ``degree_gain``, 1 %);
+- ``lazy``: the simplex of :mod:`~vtolftc.synthesis.lazy_simplex` on
+  :meth:`FaultObjective.bounded`, restarted from its best while budget remains.
 """
 
 from __future__ import annotations
@@ -36,7 +49,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -52,7 +65,15 @@ from vtolftc.synthesis.fault_objective import (
     ppid_controller,
     rmse_from_inputs,
 )
+from vtolftc.synthesis.hinfnorm import as_state_space, hinf_norm
+from vtolftc.synthesis.lazy_simplex import lazy_nelder_mead
+from vtolftc.synthesis.margin_constraints import MarginConstraints
 from vtolftc.synthesis.models import Axis
+from vtolftc.synthesis.nominal_objective import (
+    NominalStep,
+    nominal_inputs,
+    nominal_rmse_from_inputs,
+)
 from vtolftc.synthesis.surfaces import (
     GainSurface,
     SurfaceBasis,
@@ -87,6 +108,13 @@ class FaultObjective:
         The fault cases whose predicted RMSEs are combined (root mean square).
     rho : float
         Penalty weight [deg].
+    margins : MarginConstraints, optional
+        Loop-margin requirements at the grid airspeeds
+        (:mod:`~vtolftc.synthesis.margin_constraints`), penalised with the same ``rho``.
+    nominal_steps : sequence of NominalStep, optional
+        Reference steps of the nominal rest of the transition
+        (:mod:`~vtolftc.synthesis.nominal_objective`); their predicted RMSE adds to the
+        fault's in quadrature. None: the fault transient only.
     """
 
     sp: SurfaceProblem
@@ -95,9 +123,14 @@ class FaultObjective:
     caps: NDArray[np.float64]
     cases: Sequence[FaultCase]
     rho: float = PENALTY_DEG
+    margins: MarginConstraints | None = None
+    nominal_steps: Sequence[NominalStep] | None = None
 
     def __post_init__(self) -> None:
         self._inputs: list[list[tuple[float, float, Any, float]]] = []
+        self._nominal: list[tuple[NominalStep, Any]] | None = None
+        self._order: NDArray[np.intp] | None = None
+        self.stops = {"prediction": 0, "margins": 0, "caps": 0, "full": 0}
 
     def predicted_deg(self, theta: NDArray[np.float64]) -> float:
         """Root mean square over the cases of the predicted RMSE [deg].
@@ -117,7 +150,83 @@ class FaultObjective:
         sf = self.sp.surface(theta)
         vals = [rmse_from_inputs(inp, lambda v: ppid_controller(sf.gains_at(v)), c)
                 for inp, c in zip(self._inputs, self.cases, strict=True)]
-        return math.degrees(math.sqrt(sum(x * x for x in vals) / len(vals)))
+        ms = sum(x * x for x in vals) / len(vals)
+        if self.nominal_steps is not None:
+            if self._nominal is None:
+                self._nominal = nominal_inputs(self.af, self.axis, self.nominal_steps)
+            n = nominal_rmse_from_inputs(self._nominal,
+                                         lambda v: ppid_controller(sf.gains_at(v)))
+            ms += n * n
+        return math.degrees(math.sqrt(ms))
+
+    def margin_violation(self, theta: NDArray[np.float64]) -> float:
+        """The margin penalty v (dimensionless; 0 without margin constraints).
+
+        Parameters
+        ----------
+        theta : ndarray of float
+            Surface coefficients, gain-major.
+
+        Returns
+        -------
+        float
+            v of :mod:`~vtolftc.synthesis.margin_constraints`.
+        """
+        if self.margins is None:
+            return 0.0
+        sf = self.sp.surface(theta)
+        return self.margins.violation(sf.gain_matrix(list(self.margins.airspeeds_m_s)))
+
+    def bounded(self, theta: NDArray[np.float64], bound: float) -> float:
+        """J, computed only as far as needed to know whether it is below ``bound``.
+
+        The terms are added cheapest first (prediction, margins, then the caps one channel
+        at a time, the most binding first); as soon as the partial sum reaches ``bound`` it
+        is returned (a lower bound of J, >= ``bound``). Below ``bound`` the value is J
+        exactly (:mod:`~vtolftc.synthesis.lazy_simplex`).
+
+        Parameters
+        ----------
+        theta : ndarray of float
+            Surface coefficients, gain-major.
+        bound : float
+            The threshold [deg] (inf: always exact).
+
+        Returns
+        -------
+        float
+            [deg].
+        """
+        theta = np.asarray(theta, float)
+        acc = self.predicted_deg(theta)
+        if not math.isfinite(acc):
+            return math.inf
+        if acc >= bound:
+            self.stops["prediction"] += 1
+            return acc
+        acc += self.rho * self.margin_violation(theta)
+        if acc >= bound:
+            self.stops["margins"] += 1
+            return acc
+        pb = self.sp.problem
+        chans = pb.channels
+        if self._order is None:
+            n0 = pb.channel_norms(theta)
+            self._order = np.argsort(-(n0 / self.caps), kind="stable")
+        for i in self._order:
+            A, B, C, D = as_state_space(chans[i](theta))
+            if pb.stability_margin > 0 and A.size and (
+                    np.max(np.linalg.eigvals(A).real) >= -pb.stability_margin):
+                return math.inf
+            n = hinf_norm((A, B, C, D)).value
+            if not math.isfinite(n):
+                return math.inf
+            acc += self.rho * max(0.0, n / float(self.caps[i]) - 1.0)
+            if acc >= bound:
+                self.stops["caps"] += 1
+                return acc
+        self.stops["full"] += 1
+        return acc
 
     def violation(self, theta: NDArray[np.float64]) -> float:
         """Sum over channels of the relative violation of their caps (0 when all hold).
@@ -140,6 +249,8 @@ class FaultObjective:
         if not math.isfinite(p):
             return math.inf
         v = self.violation(theta)
+        if self.margins is not None:
+            v += self.margin_violation(theta)
         return p + self.rho * v if math.isfinite(v) else math.inf
 
 
@@ -199,6 +310,33 @@ def _simplex(n: int, step: float = 0.2) -> NDArray[np.float64]:
     return s
 
 
+def _minimise_lazy(f: FaultObjective, theta0: NDArray[np.float64], max_evals: int,
+                   ) -> tuple[NDArray[np.float64], float, int]:
+    """:func:`_minimise`'s problem (same scaled coordinates, simplex and tolerances) by
+    :func:`~vtolftc.synthesis.lazy_simplex.lazy_nelder_mead` on :meth:`FaultObjective.bounded`;
+    returns the start when nothing better was found."""
+    pb = f.sp.problem
+    lo, hi, sc = pb.lower, pb.upper, pb.scales
+
+    def g(z: NDArray[np.float64], bound: float) -> float:
+        return f.bounded(np.clip(theta0 + z * sc, lo, hi), bound)
+
+    n = theta0.size
+    z_lo, z_hi = (lo - theta0) / sc, (hi - theta0) / sc
+    z, fz, nfev = lazy_nelder_mead(g, _simplex(n), z_lo, z_hi, max_evals)
+    while nfev < max_evals - 2 * (n + 1):
+        # restart from the best with a fresh simplex (the penalty's kinks stall a simplex)
+        z2, f2, k = lazy_nelder_mead(g, z + _simplex(n), z_lo, z_hi, max_evals - nfev)
+        nfev += k
+        if not (f2 < fz):
+            break
+        z, fz = z2, f2
+    f0 = f.bounded(theta0, math.inf)
+    if not (fz < f0):
+        return theta0, f0, nfev
+    return np.clip(theta0 + z * sc, lo, hi), fz, nfev
+
+
 @dataclass
 class FaultSurfaceDesign:
     """SHIF and GS-SHIF of one axis designed on J (module docstring).
@@ -225,6 +363,8 @@ class FaultSurfaceDesign:
         Objective evaluations of each stage.
     time_s : dict of str to float
         Wall time of each stage [s].
+    degree_J : dict of int to float
+        J [deg] of GS-SHIF at each degree tried.
     """
 
     hinf: SurfaceDesign | None
@@ -241,6 +381,7 @@ class FaultSurfaceDesign:
     kept_start: bool
     evaluations: dict[str, int]
     time_s: dict[str, float]
+    degree_J: dict[int, float] = field(default_factory=dict)
 
 
 def design_fault_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
@@ -250,6 +391,8 @@ def design_fault_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
                           max_evals: int = 300, seed: int = 0,
                           hinf: SurfaceDesign | None = None,
                           reference: Mapping[str, float] | None = None,
+                          margins: bool = False, nominal: bool = False, lazy: bool = False,
+                          max_degree: int | None = None, degree_gain: float = 0.01,
                           ) -> FaultSurfaceDesign:
     """H-infinity SHIF (the caps and the start), then SHIF and GS-SHIF on J.
 
@@ -280,6 +423,24 @@ def design_fault_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
     reference : mapping of str to float, optional
         The gains of a constant P-PID to take the caps and the start from instead of the
         H-infinity SHIF (e.g. the shipped robust SHIF's; no H-infinity tune then).
+    margins : bool
+        Add the loop-margin requirements (6 dB, 30 deg, 50 ms, targets 4 % above) at every
+        grid airspeed as constraints (:class:`~vtolftc.synthesis.margin_constraints.
+        MarginConstraints`, penalty ``rho``).
+    nominal : bool
+        Add the nominal-transition term (:data:`~vtolftc.synthesis.nominal_objective.
+        NOMINAL_STEPS` of the axis) to the prediction.
+    lazy : bool
+        Minimise with :func:`~vtolftc.synthesis.lazy_simplex.lazy_nelder_mead` (cap norms
+        skipped where the cheaper terms already decide) instead of scipy's Nelder-Mead.
+    max_degree : int, optional
+        Choose GS-SHIF's degree by the objective instead of ``degree``: degree 1 started
+        from SHIF, then each degree d + 1 started from degree d's surface, kept only while
+        it lowers J by more than ``degree_gain`` (relative) below degree d's; the first
+        degree that does not stops the search. The chosen degree is
+        ``surface.basis.degree``; ``degree_J`` records J per degree tried.
+    degree_gain : float
+        The relative decrease of J a higher degree must bring.
 
     Returns
     -------
@@ -303,21 +464,53 @@ def design_fault_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
     ref_norms = sp0.problem.channel_norms(th_ref)
     h_ref = float(np.max(ref_norms))
     caps = _caps(sp0, ref_norms, slack)
-    f0 = FaultObjective(sp0, af, axis, caps, cs)
-    th0, _, n0 = _minimise(f0, th_ref, max_evals)
+    mc = (MarginConstraints(af, axis, [p.airspeed_m_s for p in grid]) if margins else None)
+    steps = None
+    if nominal:
+        from vtolftc.synthesis.nominal_objective import NOMINAL_STEPS
+
+        steps = NOMINAL_STEPS[axis]
+    minimise = _minimise_lazy if lazy else _minimise
+
+    def objective(sp: SurfaceProblem) -> FaultObjective:
+        return FaultObjective(sp, af, axis, caps, cs, margins=mc, nominal_steps=steps)
+
+    f0 = objective(sp0)
+    th0, _, n0 = minimise(f0, th_ref, max_evals)
     const = sp0.surface(th0)
     t2 = time.perf_counter()
-    spd = surface_problem(method, af, axis, grid, degree, start=const, weights=ws)
-    fd = FaultObjective(spd, af, axis, caps, cs)
-    start = spd.problem.initial
-    thd, Jd, nd = _minimise(fd, start, max_evals)
-    Js = fd(start)
-    kept = not (Jd <= Js)
-    if kept:
-        thd, Jd = start, Js
+    evals = {"constant": n0}
+    degrees = [degree] if max_degree is None else list(range(1, max_degree + 1))
+    start_surface = const
+    best: tuple[SurfaceProblem, FaultObjective, NDArray[np.float64], float] | None = None
+    degree_J: dict[int, float] = {}
+    Js = math.nan
+    rejected = False
+    for d in degrees:
+        spd = surface_problem(method, af, axis, grid, d, start=start_surface, weights=ws)
+        fd = objective(spd)
+        start = spd.problem.initial
+        J_start = fd.bounded(start, math.inf) if lazy else fd(start)
+        if best is None:
+            Js = J_start                      # SHIF on the degree-d problem
+        thd, Jd, nd = minimise(fd, start, max_evals)
+        if not (Jd <= J_start):
+            thd, Jd = start, J_start
+            rejected = rejected or best is None
+        evals[f"surface degree {d}"] = nd
+        degree_J[d] = Jd
+        if best is not None and not (Jd < best[3] * (1.0 - degree_gain)):
+            break
+        best = (spd, fd, thd, Jd)
+        start_surface = spd.surface(thd)
+    assert best is not None
+    spd, fd, thd, Jd = best
+    kept = rejected if max_degree is None else not (Jd < Js)
+    if max_degree is None:
+        evals = {"constant": n0, "surface": evals[f"surface degree {degree}"]}
     t3 = time.perf_counter()
-    return FaultSurfaceDesign(
+    out = FaultSurfaceDesign(
         hinf, const, spd.surface(thd), Js, Jd, f0.predicted_deg(th0), fd.predicted_deg(thd),
         sp0.problem.objective(th0), spd.problem.objective(thd), h_ref, slack, kept,
-        {"constant": n0, "surface": nd},
-        {"hinf": t1 - t0, "constant": t2 - t1, "surface": t3 - t2})
+        evals, {"hinf": t1 - t0, "constant": t2 - t1, "surface": t3 - t2}, degree_J)
+    return out
