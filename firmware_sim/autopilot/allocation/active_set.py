@@ -447,6 +447,71 @@ class ActiveSetAllocator(WLSAllocator):
         return self._finish(u, v, B, ST_FALLBACK, it, t_solve, t0, "active set not converged",
                             False)
 
+    def allocate_trusted(self, v: np.ndarray, B: np.ndarray, u_max: np.ndarray,
+                         u_pref: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        """:meth:`allocate` for a caller whose arguments are already of the kernel's types
+        (the autopilot's output stage, every control step): no argument checks and, on a
+        converged step, no :class:`AllocationResult`.
+
+        Parameters
+        ----------
+        v : numpy.ndarray
+            Virtual command (n_v,) [N, N m], float64, C-contiguous.
+        B : numpy.ndarray
+            Effectiveness (n_v, n_u) [N or N m per normalised unit], float64, C-contiguous.
+        u_max, u_pref : numpy.ndarray
+            This step's upper position limits and preferred command (n_u,), float64,
+            C-contiguous (lower limits: the construction ones).
+
+        Returns
+        -------
+        tuple
+            ``(u, v_achieved, status)``: the ``u``, ``v_achieved`` and ``status`` (an
+            ``AllocationStatus`` value) that ``allocate(v, B, u_max=u_max, u_pref=u_pref)``
+            returns, bit for bit: the same compiled call on the same arguments, the same
+            ``B @ u`` in numpy, the same statistics (the non-converged branches are
+            :meth:`allocate`'s own code).
+        """
+        t0 = _perf_counter()
+        if B is self._bk_of:
+            Bk = self._bk
+        else:
+            Bk = _readonly_c(B) if B.flags.writeable or not B.flags.c_contiguous else B
+            if B.flags.c_contiguous:
+                self._bk_of, self._bk = B, Bk
+        last = self._u_last
+        rate = self.rate_limit
+        u = np.empty(self.n_u)
+        code, ok, it = _allocate_step_packed(
+            v, Bk, u_pref, self.u_min, self.u_max, self.u_min, u_max,
+            self._zeros_u if last is None else last, last is not None,
+            self._zeros_u if rate is None else rate, rate is not None, self.dt, self._ws,
+            self._iws, u_pref if last is None else last, self.max_iter, self.tol, u)
+        if code < 0:
+            hold = last if last is not None else self.u_pref
+            res = self._finish(np.clip(hold, self._lo, self._hi), v, B, ST_INVALID_INPUT, 0,
+                               0.0, t0, "non-finite input", False)
+            return res.u, res.v_achieved, ST_INVALID_INPUT
+        if not ok:
+            u = self._fallback(v, B, self._lo, self._hi, u_pref, u)
+            res = self._finish(u, v, B, ST_FALLBACK, it, 0.0, t0, "active set not converged",
+                               False)
+            return res.u, res.v_achieved, ST_FALLBACK
+        # _solved's bookkeeping, without the result object
+        va = B @ u
+        self._u_last = u
+        st = self.stats
+        st.calls += 1
+        st.counts[ST_SOLVED] += 1
+        st.total_iterations += it
+        if it > st.max_iterations:
+            st.max_iterations = it
+        t_wall = _perf_counter() - t0
+        st.total_wall_time_s += t_wall
+        if t_wall > st.max_wall_time_s:
+            st.max_wall_time_s = t_wall
+        return u, va, ST_SOLVED
+
     def _solved(self, u: np.ndarray, v: np.ndarray, B: np.ndarray, it: int, t_solve: float,
                 t0: float) -> AllocationResult:
         """``_finish(u, v, B, ST_SOLVED, it, t_solve, t0, "solved", True)`` with the
