@@ -7,10 +7,14 @@ from __future__ import annotations
 import copy
 
 import numpy as np
+import pytest
 
+from vtolftc.base.rotation import quat_to_euler
 from vtolftc.firmware_sim.autopilot.allocation import ActiveSetAllocator, AllocationStatus
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
+from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
+from vtolftc.firmware_sim.autopilot.interface import FlightMode, NavState
 
 
 def _bits(a: np.ndarray) -> bytes:
@@ -80,3 +84,59 @@ def test_output_stage_saturation_flags_equal_the_reference(ds1):
         assert out.saturated_steps == ref.saturated_steps, k
     assert 0 < out.saturated_steps < 300
 
+
+
+def _nav(q: np.ndarray, rates: np.ndarray, t_usec: int = 4000) -> NavState:
+    return NavState(t_usec, q, rates, np.array([1.0, -2.0, -30.0]), np.array([12.0, 0.5, -0.3]),
+                    13.0)
+
+
+def test_estimate_euler_equals_quat_to_euler(ds1):
+    """``StateEstimate.update``'s inlined Euler angles are ``quat_to_euler``'s, bit for bit,
+    on random attitudes and at the gimbal lock (pitch clipped at +-pi/2); a non-finite rate
+    still rejects the sample."""
+    est = StateEstimate()
+    rng = np.random.default_rng(5)
+    qs = list(rng.normal(size=(500, 4)))
+    h = np.sqrt(0.5)
+    qs += [np.array([h, 0.0, h, 0.0]), np.array([h, 0.0, -h, 0.0]),
+           np.array([h * (1 + 1e-16), 1e-9, h, 0.0]), np.array([0.5, -0.5, 0.5, -0.5])]
+    for eps in (1e-3, 1e-5, 1e-7):  # pitch just short of +-90 deg: sin(pitch) near +-1
+        a = np.pi / 4 - eps
+        qs += [np.array([np.cos(a), 0.0, np.sin(a), 0.0]),
+               np.array([np.cos(a), 0.0, -np.sin(a), 0.0])]
+    for q in qs:
+        q = q / np.linalg.norm(q) if abs(np.linalg.norm(q) - 1.0) > 1e-6 else q
+        got = est.update(_nav(q, rng.normal(size=3)))
+        want = quat_to_euler(q)
+        assert got is not None
+        assert np.array([got]).tobytes() == np.array([want]).tobytes(), q
+        assert est.att.tobytes() == np.array(want).tobytes()
+    assert est.update(_nav(qs[0], np.array([0.0, np.inf, 0.0]))) is None
+
+
+@pytest.mark.parametrize("controller", ["gs-shif", "shif"])
+def test_attitude_stage_direct_kernel_equals_controller_update(ds1, controller):
+    """The attitude stage's direct call of the compiled scheduled step gives, step after
+    step, the moments and controller state that ``ScheduledPPIDController.update`` gives
+    (two controllers fed the same random references, attitudes, rates, airspeeds and
+    saturation flags)."""
+    fast = Autopilot(ds1, controller=controller).attitude_stage
+    ref_ctrl = Autopilot(ds1, controller=controller).attitude_stage.controller
+    rng = np.random.default_rng(11)
+    v_sched = np.nan
+    for k in range(300):
+        V = float(rng.uniform(-1.0, 22.0))
+        ref = rng.normal(0, 0.3, 3)
+        att = rng.normal(0, 0.3, 3)
+        att[2] = rng.uniform(-np.pi, np.pi)
+        rates = rng.normal(0, 0.5, 3)
+        sat_hi = [bool(b) for b in rng.random(3) < 0.2]
+        sat_lo = [bool(b) for b in rng.random(3) < 0.2]
+        tau = fast.update(FlightMode.HOVER, 30.0, V, ref, att, rates, sat_hi, sat_lo).copy()
+        tc = 0.5  # FTC_SCHED_TAU: the stage's low-pass, written out
+        v_sched = V if k == 0 else v_sched + min(1.0, 0.004 / tc) * (V - v_sched)
+        want = ref_ctrl.update(ref, att, rates, v_sched, sat_hi, sat_lo)
+        assert fast.v_sched == v_sched
+        assert tau.tobytes() == want.tobytes(), k
+        assert fast.controller.kernel_arrays[1].tobytes() == ref_ctrl.kernel_arrays[1].tobytes()
