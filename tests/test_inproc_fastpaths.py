@@ -140,3 +140,51 @@ def test_attitude_stage_direct_kernel_equals_controller_update(ds1, controller):
         assert fast.v_sched == v_sched
         assert tau.tobytes() == want.tobytes(), k
         assert fast.controller.kernel_arrays[1].tobytes() == ref_ctrl.kernel_arrays[1].tobytes()
+
+
+def test_arming_check_skipped_in_flight_changes_nothing():
+    """The commander skips ``ArmingMonitor.check`` while ``airborne`` and still armed out of
+    IDLE: a monitor checked every step and one skipped that way end every step in the same
+    state and say the same thing, on random arm / disarm / mode sequences (takeoffs,
+    landings, re-arming, both disarm timers)."""
+    from vtolftc.firmware_sim.autopilot.arming import ArmingMonitor
+    from vtolftc.firmware_sim.autopilot.parameters import default_parameters
+
+    ref, fast = ArmingMonitor(default_parameters()), ArmingMonitor(default_parameters())
+    rng = np.random.default_rng(3)
+    modes = [FlightMode.IDLE, FlightMode.TAKEOFF, FlightMode.HOVER, FlightMode.FIXED_WING]
+    armed, mode, skipped = False, FlightMode.IDLE, 0
+    for k in range(4000):
+        t = 4000 * k
+        r = rng.random()
+        if r < 0.01:
+            armed = not armed
+        elif r < 0.03:
+            mode = modes[int(rng.integers(len(modes)))]
+        want = ref.check(t, armed, mode)
+        if armed and fast.armed and fast.airborne and mode != FlightMode.IDLE:
+            got = ""
+            skipped += 1
+        else:
+            got = fast.check(t, armed, mode)
+        assert got == want, k
+        assert vars(fast) == vars(ref), k
+    assert 500 < skipped < 3500
+
+
+def test_metrics_add_step_returns_crashed():
+    """``MetricsAccumulator.add_step`` returns ``crashed`` (the in-process runner stops on
+    it): False in level flight, True from the first sample tilted past the crash limit on."""
+    from vtolftc.telemetry.metrics import MetricsAccumulator
+
+    acc = MetricsAccumulator(window_start_s=0.0)
+    nav = NavState(0, np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), np.array([0.0, 0.0, -30.0]),
+                   np.zeros(3), 0.0)
+    seen = []
+    for k in range(20):
+        roll = 1.5 if k >= 12 else 0.0  # 86 deg: past the 60 deg crash limit
+        got = acc.add_step(4000 * k, nav, FlightMode.HOVER, True, np.zeros(3), 30.0,
+                           (roll, 0.0, 0.0))
+        assert got is acc.crashed
+        seen.append(got)
+    assert seen == [False] * 12 + [True] * 8
