@@ -47,8 +47,16 @@ def test_allocate_trusted_equals_allocate_bit_for_bit(ds1):
         hi = np.ones(n_u)
         hi[: ap.n_rotors] = float(rng.choice([1.0, 0.6, 0.0]))
         pref = ap.u_pref_mc if k % 2 else ap.u_pref_fw
+        if k in (100, 300):  # a hand-over: warm start from a given command
+            u0 = rng.uniform(0.0, 1.0, n_u)
+            ref.reset(u0)
+            fast.reset(u0)
         res = ref.allocate(v, B, u_max=hi, u_pref=pref)
-        u, va, st = fast.allocate_trusted(v, B, hi, pref)
+        if k % 50 == 25:  # the public call in between: its own array becomes the warm start
+            r2 = fast.allocate(v, B, u_max=hi, u_pref=pref)
+            u, va, st = r2.u, r2.v_achieved, r2.status
+        else:
+            u, va, st = fast.allocate_trusted(v, B, hi, pref)
         statuses.add(st)
         assert st == res.status, k
         assert _bits(u) == _bits(res.u), k
