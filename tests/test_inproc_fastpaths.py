@@ -196,3 +196,40 @@ def test_metrics_add_step_returns_crashed():
         assert got is acc.crashed
         seen.append(got)
     assert seen == [False] * 12 + [True] * 8
+
+
+def test_vehicle_step_one_kernel_equals_take_commands_and_step_n_flat(ds1):
+    """``Vehicle.step``'s fused call (``_take_and_step``) flies what its two kernels flew
+    one after the other, bit for bit, over random commands, through a fault injection (the
+    pending-fault path) and on; a non-finite command raises and changes nothing."""
+    from vtolftc.firmware_sim.vehicle import dynamics as dyn
+    from vtolftc.firmware_sim.vehicle import model as vm
+    from vtolftc.firmware_sim.vehicle.faults import case_faults
+
+    fast, ref = vm.Vehicle(ds1), vm.Vehicle(ds1)
+    fault = case_faults("1", ds1.actuator_names)[0]
+    rng = np.random.default_rng(2)
+    u_min = np.r_[np.zeros(10), -np.ones(5)]
+    for k in range(400):
+        cmds = rng.uniform(u_min, 1.0).astype(np.float32).astype(np.float64)
+        if k == 150:
+            fast.inject(fault)
+            ref.inject(fault)
+        fast.step(cmds, 4)
+        if ref._pending or ref._packed_args[0] is not ref.packed:
+            ref.step(cmds, 4)  # (the same branch in both: nothing fused there)
+        else:  # the two kernels the fused call replaces, as Vehicle.step called them
+            assert vm._take_commands(cmds, ref.u)
+            pa = ref._packed_args
+            dyn.step_n_flat(ref.x, ref.u, ref.eff, ref.stuck, 4, ref.dt_usec * 1e-6, pa[1],
+                            pa[2], ref.wind, ref.physics, ref.fm)
+            ref.time_usec += 4 * ref.dt_usec
+        assert fast.time_usec == ref.time_usec
+        for name in ("x", "u", "eff", "stuck", "fm"):
+            assert getattr(fast, name).tobytes() == getattr(ref, name).tobytes(), (k, name)
+    x0 = fast.x.copy()
+    bad = cmds.copy()
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match="NaN or inf"):
+        fast.step(bad, 4)
+    assert fast.x.tobytes() == x0.tobytes() and fast.u.tobytes() == ref.u.tobytes()
