@@ -48,6 +48,31 @@ pairs, load average 19 on 2 cores): ``ActiveSetAllocator.allocate`` 15.5 -> 14.6
 40 s flights, base vs branch: median ratio of thread CPU time 0.97). A reused float32 buffer
 for the wire rounding measured 1.14 vs 1.12 us and was reverted.
 
+Issue 24, branch compile-11 (2026-12-02): fewer Python calls and fewer compiled-call
+arguments per control step, every flight bit-identical (``command_digest.py``: dbd91a71...,
+121a7434..., e937b801... unchanged after each commit; each fast path has a test against the
+code it replaces, equal to the last bit on random inputs, ``tests/test_inproc_fastpaths.py``):
+
+- the output stage calls ``ActiveSetAllocator.allocate_trusted`` (no argument checks, no
+  ``AllocationResult`` on a converged step, the saturation tracking inlined) and its kernel
+  ``_allocate_step_trusted`` takes 8 arrays instead of 13 (each array argument of a numba
+  call costs ~0.15-0.2 us here to type-check and unbox: measured with no-op kernels of 1 and
+  13 arrays, 0.27 vs 2.2 us a call at load 17);
+- the attitude stage steps ``scheduled_ppid3_step`` directly on the controller's arrays
+  (``ScheduledPPIDController.kernel_arrays``), no ``update`` / ``_f64`` / copy;
+- ``StateEstimate.update`` computes the Euler angles inline (``quat_to_euler``'s expressions);
+- the commander calls the auto-disarm only when it can act (``ArmingMonitor.airborne``), and
+  ``drain_events`` / ``hover_recoverable`` only when they have something to do;
+- ``Vehicle.step`` takes the commands and flies the batch in one compiled call
+  (``_take_and_step``); the runner takes the crash flag from ``add_step``.
+
+Python function calls per control step (cProfile, ``--profile``): 121 -> 96. Measured A/B
+(case 1 gs-shif, 40 s, thread CPU time per control step, 5 interleaved pairs of processes
+main/branch, 2 flights each, load average 27-30 on 2 cores, i.e. ~15 engineers' jobs): main
+53.4 us, branch 45.0 us (medians); per pair ratio branch/main 0.68-1.07, median 0.91 (wall
+time median ratio 0.72). At this load the figures are 2-3x an idle core's; the ratio is what
+to read, and its spread says +-15 %.
+
 Why 150x (26 us per step in all) is not reached with this structure: the physics kernel
 alone is ~13 us per step on an idle core (4 RK4 steps of the 6-DOF model; bit-identical
 flights forbid a cheaper integrator), which leaves ~13 us for everything else, while the
