@@ -73,15 +73,32 @@ main/branch, 2 flights each, load average 27-30 on 2 cores, i.e. ~15 engineers' 
 time median ratio 0.72). At this load the figures are 2-3x an idle core's; the ratio is what
 to read, and its spread says +-15 %.
 
-Why 150x (26 us per step in all) is not reached with this structure: the physics kernel
-alone is ~13 us per step on an idle core (4 RK4 steps of the 6-DOF model; bit-identical
-flights forbid a cheaper integrator), which leaves ~13 us for everything else, while the
-autopilot's ~110 Python calls per step cost ~8-10 us in call overhead alone before any
-arithmetic (~70-90 ns each on this CPU) and each compiled call ~1-3 us to unbox its array
-arguments. Reaching the target needs the whole autopilot step (mode logic, navigator, outer
-loops, attitude, allocation) as one compiled function over flat state arrays, called once per
-step with Python only at commands, events and mode changes: a rewrite of ~3000 lines whose
-every branch must be re-proved bit-identical, not done here.
+Why 150x (26 us per step in all) is still not reached. The issue's 57-61x per core (idle)
+times the ratio above is ~63-67x (an estimate: no idle core to measure on). What a step
+still does after this branch (cProfile, case 1): 96 calls, of which ~27 Python functions
+(runner loop and ``HilRoundTrip``; ``Autopilot.step``, ``StateEstimate.update``,
+``Commander.update_mode`` with ``ModeMachine.update`` and ``Navigator.update``, the outer
+loops' 4-6 (``update``, ``aero_estimate``, ``_outer_mc`` or ``_outer_fw``, an altitude hold,
+``_position_hold``, ``pusher_max_force``), ``AttitudeStage.update``, ``OutputStage.allocate``
+and ``allocate_trusted``; ``metrics_inputs``, ``add_step``, ``wire_commands``,
+``Vehicle.step``) and ~70 builtins (16 ``isfinite``, 16 ``min``/``max``, 7 ``tolist``, 7
+``perf_counter``, ~11 trigonometric); and 5 compiled calls (HIL round trip, P-PID,
+allocation, metrics, vehicle) with 33 array arguments, ~5-6 us of unboxing per step at this
+load by ``bench_dispatch.py``'s figures. Per-stage wall time at load 26 (``bench_inproc``):
+physics 54 us (36 %), autopilot 73 us (49 %), metrics 12 us (8 %), HIL codec 10 us (6 %).
+The physics kernel alone is ~13 us per step on an idle core (4 RK4 steps of the 6-DOF model;
+bit-identical flights forbid a cheaper integrator), which leaves ~13 us for everything
+else; the Python that remains is spread thin (no function left costs more than ~2 % of the
+step), so removing calls one by one has reached diminishing returns. What would take it
+there: the autopilot's continuous part (estimate, outer loops with their altitude and
+airspeed holds, position hold, attitude, allocation and saturation tracking) as one compiled
+function over one flat state array, with Python only for mode changes, commands, the
+navigator's rare decisions and events; and the runner's per-step work (HIL round trip,
+metrics, wire rounding, vehicle step) fused into one compiled call: 1-2 dispatches of a few
+array arguments per step instead of 5 of 33 plus ~27 Python functions. That is a rewrite of
+the outer loops, the altitude holds and the navigator's per-step guidance (~1,500 lines)
+whose every branch must be re-proved bit-identical (``math`` functions called from numba
+must be shown to give CPython's bits, as this branch's tests do for the kernels it calls).
 """
 
 from __future__ import annotations

@@ -233,3 +233,34 @@ def test_vehicle_step_one_kernel_equals_take_commands_and_step_n_flat(ds1):
     with pytest.raises(ValueError, match="NaN or inf"):
         fast.step(bad, 4)
     assert fast.x.tobytes() == x0.tobytes() and fast.u.tobytes() == ref.u.tobytes()
+
+
+def test_a_replaced_allocate_or_update_is_still_the_one_called(ds1):
+    """The fast paths step aside for an ``allocate`` or ``update`` replaced on the instance
+    (a benchmark's or a test's spy): the output stage and the attitude stage call them."""
+    from vtolftc.firmware_sim.autopilot.autopilot import CMD_COMPONENT_ARM_DISARM
+
+    def nav(t_s: float, alt: float) -> NavState:
+        return NavState(round(t_s * 1e6), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3),
+                        np.array([0.0, 0.0, -alt]), np.zeros(3), 0.0)
+
+    ap = Autopilot(ds1)
+    calls: list[str] = []
+    alloc, ctrl = ap.allocator, ap.attitude
+    a0, u0 = alloc.allocate, ctrl.update
+
+    def spy_allocate(*a, **kw):
+        calls.append("allocate")
+        return a0(*a, **kw)
+
+    def spy_update(*a, **kw):
+        calls.append("update")
+        return u0(*a, **kw)
+
+    alloc.allocate = spy_allocate
+    ctrl.update = spy_update
+    ap.step(nav(0.0, 0.29))
+    assert ap.command(CMD_COMPONENT_ARM_DISARM, [1.0] + [np.nan] * 6).name == "ACCEPTED"
+    ap.modes.set_mode(FlightMode.HOVER, "test")
+    ap.step(nav(0.004, 10.0))
+    assert calls == ["update", "allocate"]

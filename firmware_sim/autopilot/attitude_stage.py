@@ -5,6 +5,11 @@ The controller (``gs-shif``, ``shif`` or ``lqr``, :mod:`.attitude`) gives the bo
 airspeed through a first-order low-pass of time constant ``FTC_SCHED_TAU`` (0.5 s; the modes,
 the allocation and the outer loops use the raw value). On the ground before takeoff the
 controller is held reset (no integrator wind-up against the ground).
+
+With a :class:`~.attitude.ScheduledPPIDController` (``gs-shif``, ``shif``) the stage calls the
+compiled step (:func:`.control_kernels.scheduled_ppid3_step`) itself on the controller's
+arrays: what ``update`` calls, on the same arrays (no conversion, no copy), so the same bits;
+compiled without ``fastmath``.
 """
 
 from __future__ import annotations
@@ -72,8 +77,9 @@ class AttitudeStage:
             vs = V
         self.v_sched = vs
         ctrl = self.controller
-        if type(ctrl) is ScheduledPPIDController and type(rates) is np.ndarray \
-                and rates.dtype is _F64:
+        if type(ctrl) is ScheduledPPIDController and "update" not in ctrl.__dict__ \
+                and type(rates) is np.ndarray and rates.dtype is _F64:
+            # (an ``update`` replaced on the instance, e.g. by a test's spy, is called below)
             # ctrl.update(ref, att, rates, vs, sat_hi, sat_lo) without its argument
             # conversions (``ref`` and ``att`` are the autopilot's own float64 arrays): the
             # same compiled step on the same arrays, hence the same bits. The result is the
