@@ -67,14 +67,17 @@ code it replaces, equal to the last bit on random inputs, ``tests/test_inproc_fa
   (``_take_and_step``); the runner takes the crash flag from ``add_step``.
 
 Python function calls per control step (cProfile, ``--profile``): 121 -> 96. Measured A/B
-(case 1 gs-shif, 40 s, thread CPU time per control step, 5 interleaved pairs of processes
-main/branch, 2 flights each, load average 27-30 on 2 cores, i.e. ~15 engineers' jobs): main
-53.4 us, branch 45.0 us (medians); per pair ratio branch/main 0.68-1.07, median 0.91 (wall
-time median ratio 0.72). At this load the figures are 2-3x an idle core's; the ratio is what
-to read, and its spread says +-15 %.
+(case 1 gs-shif, 40 s, thread CPU time per control step, interleaved pairs of processes
+main/branch, 2 flights each, in one script): 5 pairs at load average 27-30 on 2 cores: main
+53.4 us, branch 45.0 us (medians), ratio branch/main per pair 0.68-1.07, median 0.91; 6 pairs
+at load 16-18: main 49.1 us, branch 39.4 us, ratio 0.74-0.97, median 0.80 (wall time 0.81;
+real time 39x -> 49x at that load). All 11 pairs: median ratio 0.80, i.e. ~1.25x faster.
+At this load the figures are 2-3x an idle core's; the ratio is what to read, and its spread
+says +-15 %. One run of this script afterwards (load 17): 61x real time, 65 us per step,
+autopilot 51 %, physics 32 %, metrics 12 %, HIL codec 4 %.
 
 Why 150x (26 us per step in all) is still not reached. The issue's 57-61x per core (idle)
-times the ratio above is ~63-67x (an estimate: no idle core to measure on). What a step
+divided by the ratio above (0.80) is ~71-76x (an estimate: no idle core to measure on). What a step
 still does after this branch (cProfile, case 1): 96 calls, of which ~27 Python functions
 (runner loop and ``HilRoundTrip``; ``Autopilot.step``, ``StateEstimate.update``,
 ``Commander.update_mode`` with ``ModeMachine.update`` and ``Navigator.update``, the outer
