@@ -48,15 +48,63 @@ pairs, load average 19 on 2 cores): ``ActiveSetAllocator.allocate`` 15.5 -> 14.6
 40 s flights, base vs branch: median ratio of thread CPU time 0.97). A reused float32 buffer
 for the wire rounding measured 1.14 vs 1.12 us and was reverted.
 
-Why 150x (26 us per step in all) is not reached with this structure: the physics kernel
-alone is ~13 us per step on an idle core (4 RK4 steps of the 6-DOF model; bit-identical
-flights forbid a cheaper integrator), which leaves ~13 us for everything else, while the
-autopilot's ~110 Python calls per step cost ~8-10 us in call overhead alone before any
-arithmetic (~70-90 ns each on this CPU) and each compiled call ~1-3 us to unbox its array
-arguments. Reaching the target needs the whole autopilot step (mode logic, navigator, outer
-loops, attitude, allocation) as one compiled function over flat state arrays, called once per
-step with Python only at commands, events and mode changes: a rewrite of ~3000 lines whose
-every branch must be re-proved bit-identical, not done here.
+Issue 24, branch compile-11 (2026-12-02): fewer Python calls and fewer compiled-call
+arguments per control step, every flight bit-identical (``command_digest.py``: dbd91a71...,
+121a7434..., e937b801... unchanged after each commit; each fast path has a test against the
+code it replaces, equal to the last bit on random inputs, ``tests/test_inproc_fastpaths.py``):
+
+- the output stage calls ``ActiveSetAllocator.allocate_trusted`` (no argument checks, no
+  ``AllocationResult`` on a converged step, the saturation tracking inlined) and its kernel
+  ``_allocate_step_trusted`` takes 8 arrays instead of 13 (each array argument of a numba
+  call costs ~0.15-0.2 us here to type-check and unbox: measured with no-op kernels of 1 and
+  13 arrays, 0.27 vs 2.2 us a call at load 17);
+- the attitude stage steps ``scheduled_ppid3_step`` directly on the controller's arrays
+  (``ScheduledPPIDController.kernel_arrays``), no ``update`` / ``_f64`` / copy;
+- ``StateEstimate.update`` computes the Euler angles inline (``quat_to_euler``'s expressions);
+- the commander calls the auto-disarm only when it can act (``ArmingMonitor.airborne``), and
+  ``drain_events`` / ``hover_recoverable`` only when they have something to do;
+- ``Vehicle.step`` takes the commands and flies the batch in one compiled call
+  (``_take_and_step``); the runner takes the crash flag from ``add_step``.
+
+Python function calls per control step (cProfile, ``--profile``): 121 -> 96. Measured A/B
+(case 1 gs-shif, 40 s, thread CPU time per control step, interleaved pairs of processes
+main/branch, 2 flights each, in one script): 5 pairs at load average 27-30 on 2 cores: main
+53.4 us, branch 45.0 us (medians), ratio branch/main per pair 0.68-1.07, median 0.91; 6 pairs
+at load 16-18: main 49.1 us, branch 39.4 us, ratio 0.74-0.97, median 0.80 (wall time 0.81;
+real time 39x -> 49x at that load). All 11 pairs: median ratio 0.80, i.e. ~1.25x faster.
+At this load the figures are 2-3x an idle core's; the ratio is what to read, and its spread
+says +-15 %. One run of this script afterwards (load 17): 61x real time, 65 us per step,
+autopilot 51 %, physics 32 %, metrics 12 %, HIL codec 4 %.
+
+Why 150x (26 us per step in all) is still not reached. The issue's 57-61x per core (idle)
+divided by the ratio above (0.80) is ~71-76x (an estimate: no idle core to measure on). What a step
+still does after this branch (cProfile, case 1): 96 calls, of which ~27 Python functions
+(runner loop and ``HilRoundTrip``; ``Autopilot.step``, ``StateEstimate.update``,
+``Commander.update_mode`` with ``ModeMachine.update`` and ``Navigator.update``, the outer
+loops' 4-6 (``update``, ``aero_estimate``, ``_outer_mc`` or ``_outer_fw``, an altitude hold,
+``_position_hold``, ``pusher_max_force``), ``AttitudeStage.update``, ``OutputStage.allocate``
+and ``allocate_trusted``; ``metrics_inputs``, ``add_step``, ``wire_commands``,
+``Vehicle.step``) and ~70 builtins (16 ``isfinite``, 16 ``min``/``max``, 7 ``tolist``, 7
+``perf_counter``, ~11 trigonometric); and 5 compiled calls (HIL round trip, P-PID,
+allocation, metrics, vehicle) with 33 array arguments, ~5-6 us of unboxing per step at this
+load by ``bench_dispatch.py``'s figures. Per-stage wall time at load 26 (``bench_inproc``):
+physics 54 us (36 %), autopilot 73 us (49 %), metrics 12 us (8 %), HIL codec 10 us (6 %).
+The physics kernel alone is ~13 us per step on an idle core (4 RK4 steps of the 6-DOF model;
+bit-identical flights forbid a cheaper integrator), which leaves ~13 us for everything
+else; the Python that remains is spread thin (no function left costs more than ~2 % of the
+step), so removing calls one by one has reached diminishing returns. What would take it
+there: the autopilot's continuous part (estimate, outer loops with their altitude and
+airspeed holds, position hold, attitude, allocation and saturation tracking) as one compiled
+function over one flat state array, with Python only for mode changes, commands, the
+navigator's rare decisions and events; and the runner's per-step work (HIL round trip,
+metrics, wire rounding, vehicle step) fused into one compiled call: 1-2 dispatches of a few
+array arguments per step instead of 5 of 33 plus ~27 Python functions. That is a rewrite of
+the outer loops, the altitude holds and the navigator's per-step guidance (~1,500 lines)
+whose every branch must be re-proved bit-identical. One trap measured on this machine
+(200,000 random pairs): numba's ``math.atan2``, ``sin``, ``cos``, ``asin`` and ``sqrt`` give
+CPython's bits (both call the C library), ``math.hypot`` differs in 1,129 of them (CPython
+3.11 computes it with its own algorithm), so the position hold's ``hypot`` would need a port
+of CPython's to stay bit-identical.
 """
 
 from __future__ import annotations

@@ -64,6 +64,10 @@ class ArmingMonitor:
         self.landing_ms = 0
         """Simulated time of the landing since the last arming [ms] (0: none yet)."""
         self._ground_since = -1  # us: armed on the ground (IDLE) since then; -1 not on it
+        self.airborne = False
+        """Armed, taken off and not back on the ground, as :meth:`track` last left it: a
+        :meth:`check` that is still armed in a mode other than IDLE then changes nothing and
+        returns "" (the autopilot skips that call, every control step of a flight)."""
 
     def track(self, now_usec: int, armed: bool, mode: FlightMode) -> None:
         """Follow arming, takeoff and landing at simulated time ``now_usec`` [us]."""
@@ -80,6 +84,7 @@ class ArmingMonitor:
                 uuid = int(self._params.get("COM_FLIGHT_UUID"))
                 self._params.set("COM_FLIGHT_UUID", (uuid + 1) % 2**31)
         if not armed:
+            self.airborne = False
             return
         if mode != _IDLE:
             if not self.taken_off:
@@ -89,6 +94,7 @@ class ArmingMonitor:
         elif self._ground_since < 0:  # back on the ground: landed
             self._ground_since = int(now_usec)
             self.landing_ms = max(1, int(now_usec) // 1000)
+        self.airborne = self.taken_off and self._ground_since < 0
 
     def check(self, now_usec: int, armed: bool, mode: FlightMode,
               mission_running: bool = False) -> str:

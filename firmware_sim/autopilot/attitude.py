@@ -230,6 +230,11 @@ class ScheduledPPIDController(_GainFileController):
                           row=k)
             for k, (ax, rl) in enumerate(zip(ATTITUDE_AXES, rate_limits, strict=True)))
         self._out = np.zeros(3)
+        #: ``(gains, state, const, out)``: the arrays of the compiled step
+        #: (``control_kernels.scheduled_ppid3_step``), for a caller that steps it directly as
+        #: :meth:`update` does (the autopilot's attitude stage): this step's gains (3, 5),
+        #: the P-PID state (3, N_STATE), the constants (3, N_CONST), the output (3,) [N m]
+        self.kernel_arrays = (self._gains, self._state, self._const, self._out)
 
     def reset(self) -> None:
         """Clear the integrators of the three axes' P-PID loops (``CascadedPPID.reset``)."""

@@ -5,6 +5,11 @@ The controller (``gs-shif``, ``shif`` or ``lqr``, :mod:`.attitude`) gives the bo
 airspeed through a first-order low-pass of time constant ``FTC_SCHED_TAU`` (0.5 s; the modes,
 the allocation and the outer loops use the raw value). On the ground before takeoff the
 controller is held reset (no integrator wind-up against the ground).
+
+With a :class:`~.attitude.ScheduledPPIDController` (``gs-shif``, ``shif``) the stage calls the
+compiled step (:func:`.control_kernels.scheduled_ppid3_step`) itself on the controller's
+arrays: what ``update`` calls, on the same arrays (no conversion, no copy), so the same bits;
+compiled without ``fastmath``.
 """
 
 from __future__ import annotations
@@ -15,13 +20,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from vtolftc.firmware_sim.autopilot.attitude import AttitudeController
+from vtolftc.firmware_sim.autopilot.attitude import AttitudeController, ScheduledPPIDController
+from vtolftc.firmware_sim.autopilot.control_kernels import scheduled_ppid3_step
 from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
 from vtolftc.firmware_sim.autopilot.interface import FlightMode
 
 __all__ = ["AttitudeStage"]
 
 _M_TAKEOFF = FlightMode.TAKEOFF
+_F64 = np.dtype(np.float64)
 
 
 class AttitudeStage:
@@ -54,7 +61,8 @@ class AttitudeStage:
         """The body torque commands [N m] (FRD) for the reference ``ref`` (roll, pitch, yaw
         [rad]): ``att`` roll/pitch/yaw [rad], ``rates`` body rates [rad/s], ``V`` airspeed
         [m/s], ``h`` altitude [m]; ``sat_hi``/``sat_lo`` the moment axes the last allocation
-        fell short of upwards/downwards (anti-windup)."""
+        fell short of upwards/downwards (anti-windup). The result may be the controller's
+        own output array (read it before the next step, do not keep it)."""
         if mode == _M_TAKEOFF and h - self.est.ground_alt < 0.5:  # still on the ground
             self.controller.reset()
         # gains scheduled on a low-passed airspeed: the measurement's noise would otherwise
@@ -68,4 +76,20 @@ class AttitudeStage:
         else:
             vs = V
         self.v_sched = vs
-        return self.controller.update(ref, att, rates, vs, sat_hi, sat_lo)
+        ctrl = self.controller
+        if type(ctrl) is ScheduledPPIDController and "update" not in ctrl.__dict__ \
+                and type(rates) is np.ndarray and rates.dtype is _F64:
+            # (an ``update`` replaced on the instance, e.g. by a test's spy, is called below)
+            # ctrl.update(ref, att, rates, vs, sat_hi, sat_lo) without its argument
+            # conversions (``ref`` and ``att`` are the autopilot's own float64 arrays): the
+            # same compiled step on the same arrays, hence the same bits. The result is the
+            # controller's output array (the output stage copies it into the virtual command
+            # at once), not a copy
+            bp, rows, slopes = ctrl.schedule.kernel_tables
+            gains, state, const, out = ctrl.kernel_arrays
+            scheduled_ppid3_step(bp, rows, slopes, vs, ref, att, rates, gains, state, const,
+                                 bool(sat_hi[0]), bool(sat_hi[1]),
+                                 bool(sat_hi[2]), bool(sat_lo[0]), bool(sat_lo[1]),
+                                 bool(sat_lo[2]), out)
+            return out
+        return ctrl.update(ref, att, rates, vs, sat_hi, sat_lo)

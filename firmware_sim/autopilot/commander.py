@@ -55,6 +55,7 @@ MAV_VTOL_STATE_FW = mav.MAV_VTOL_STATE_FW
 TAKEOFF_MIN_HEIGHT_M = 1.0
 
 _M_LAND = FlightMode.LAND
+_M_IDLE = FlightMode.IDLE
 
 
 class Commander:
@@ -248,10 +249,12 @@ class Commander:
             else:
                 self._landed_timer = 0.0
             landed = self._landed_timer > 1.0
+        dl = self.outer.degraded
         m.update(self.est.time_usec, altitude_m=h, takeoff_alt_m=self.sp.takeoff_alt,
                  airspeed_m_s=V, arsp_trans=pp["VT_ARSP_TRANS"].value,
+                 # (hover_recoverable() is True while not active: no call then)
                  trans_timeout_s=(pp["VT_TRANS_TMOUT"].value
-                                  if self.outer.degraded.hover_recoverable() else math.inf),
+                                  if not dl.active or dl.hover_recoverable() else math.inf),
                  b_trans_arsp=pp["VT_B_TRANS_ARSP"].value,
                  b_trans_dur_s=pp["VT_B_TRANS_DUR"].value, landed=landed)
         mode = m.mode
@@ -263,9 +266,14 @@ class Commander:
             if self._dl_noted:
                 self.note(f"degraded lift: lift rotors short and sinking at {-v_up:.1f} m/s "
                           f"in the transition, pitching up (airspeed {V:.1f} m/s)")
-        self.drain_events()
+        if m.events:  # drain_events() has nothing to do otherwise
+            self.drain_events()
         self.navigator.update(nav, yaw)
-        if m.armed or self.arming.armed:
+        ar = self.arming
+        # in flight (armed before and now, out of IDLE) the auto-disarm's check changes
+        # nothing and says "stay armed" (ArmingMonitor.airborne): no call then
+        if (m.armed or ar.armed) and not (m.armed and ar.armed and ar.airborne
+                                          and m.mode != _M_IDLE):
             self._auto_disarm()
         return mode
 

@@ -13,7 +13,6 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from vtolftc.base.rotation import quat_to_euler
 from vtolftc.firmware_sim.autopilot.interface import NavState
 
 __all__ = ["StateEstimate", "body_velocity", "body_velocity_f"]
@@ -91,13 +90,22 @@ class StateEstimate:
         ql = nav.q_wxyz.tolist()
         isf = math.isfinite
         if not (isf(pos[0]) and isf(pos[1]) and isf(pos[2]) and isf(vel[0]) and isf(vel[1])
-                and isf(vel[2]) and isf(ql[0]) and isf(ql[1]) and isf(ql[2]) and isf(ql[3])
-                and all(map(isf, nav.omega_body_rad_s.tolist()))):
+                and isf(vel[2]) and isf(ql[0]) and isf(ql[1]) and isf(ql[2]) and isf(ql[3])):
+            return None
+        p_, q_, r_ = nav.omega_body_rad_s.tolist()
+        if not (isf(p_) and isf(q_) and isf(r_)):
             return None
         self.have_nav = True
         self.last_nav = nav
         self.time_usec = int(nav.time_usec)
-        roll, pitch, yaw = quat_to_euler(ql)
+        # quat_to_euler(ql), inlined: the same expressions in the same order (its clip
+        # max(-1, min(1, s)) written as comparisons: equal for the finite s it gets here)
+        w, x, y, z = ql
+        roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+        s_ = 2.0 * (w * y - z * x)
+        s_ = s_ if s_ < 1.0 else 1.0
+        pitch = math.asin(s_ if s_ > -1.0 else -1.0)
+        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
         att = self.att
         att[0], att[1], att[2] = roll, pitch, yaw
         self.ql = ql

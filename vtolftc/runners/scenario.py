@@ -260,7 +260,7 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
             t1 = pc()
             u = ap.step(nav_ap)
             t2 = pc()
-            log = ap.event_log
+            log = ap.commander.event_log  # (ap.event_log, without the delegation's call)
             while n_events < len(log):
                 te, text = log[n_events]
                 n_events += 1
@@ -277,8 +277,9 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                 acc.add(sample)
                 for o in obs:
                     o.on_sample(sample)
+                crashed = acc.crashed
             else:  # nobody reads the status: the metrics take its fields directly
-                acc.add_step(now, nav, *ap.metrics_inputs(nav))
+                crashed = acc.add_step(now, nav, *ap.metrics_inputs(nav))
             t3 = pc()
             veh.step(cmds, n_sub)
             t4 = pc()
@@ -286,7 +287,7 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
             t_ap += t2 - t1
             t_obs += t3 - t2
             t_phys += t4 - t3
-            if stop_on_crash and acc.crashed:
+            if stop_on_crash and crashed:
                 event(now, "warning", f"crash detected at t = {now * 1e-6:.2f} s: run stopped")
                 break
     except KeyboardInterrupt:

@@ -133,9 +133,10 @@ class MetricsAccumulator:
     def add_step(self, time_usec: int, nav: NavState, mode: FlightMode | int, armed: bool,
                  attitude_ref_rad: NDArray[np.float64] | Sequence[float],
                  altitude_ref_m: float,
-                 euler_rad: tuple[float, float, float] | None = None) -> None:
+                 euler_rad: tuple[float, float, float] | None = None) -> bool:
         """:meth:`add` from the sample's parts (the in-process runner's path: no
-        :class:`AutopilotStatus` built when nobody else reads it).
+        :class:`AutopilotStatus` built when nobody else reads it); returns :attr:`crashed`
+        (so that the runner's stop test needs no call of its own).
 
         Parameters
         ----------
@@ -148,6 +149,11 @@ class MetricsAccumulator:
             references [rad]; altitude reference above home [m]); read, never kept.
         euler_rad : tuple, optional
             ``quat_to_euler(nav.q_wxyz)`` when the caller has it already [rad].
+
+        Returns
+        -------
+        bool
+            :attr:`crashed` after this sample.
         """
         roll, pitch, yaw = quat_to_euler(nav.q_wxyz) if euler_rad is None else euler_rad
         pos = nav.pos_ned_m
@@ -162,6 +168,7 @@ class MetricsAccumulator:
                                   int(mode), bool(armed), ref, float(altitude_ref_m),
                                   float(nav.airspeed_m_s)):
             self._grow_tail()
+        return bool(self._s[mk.S_CRASHED] != 0.0)
 
     def _grow_tail(self) -> None:
         """Double the tail ring, its samples moved to the start in order."""

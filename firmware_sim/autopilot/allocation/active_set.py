@@ -285,6 +285,25 @@ def _allocate_step_packed(v, B, pref, umin_def, umax_def, umin_in, umax_in, prev
                           BtW2s, scale, qn, u0, max_iter, tol, u_out)
 
 
+@numba.njit(cache=True)
+def _allocate_step_trusted(v, B, pref, umax_in, cst, has_prev, has_rate, dt, ws, iws, ubuf,
+                           max_iter, tol):
+    """:func:`_allocate_step_packed` as ``ActiveSetAllocator.allocate_trusted`` calls it, on
+    8 arrays instead of 13 (each array argument of a compiled call costs its own type check
+    and unboxing, ~0.15-0.2 us on this machine): the construction limits and rate limits are
+    the rows of ``cst`` (``u_min``, ``u_max``, ``rate_limit``; this step's lower limits are
+    the construction ones), and ``ubuf`` is at once the previous command (read first, by
+    the bounds and as the warm start, when ``has_prev``; else the warm start is ``pref``)
+    and the output (written last). The same kernels on the same numbers: the same bits.
+    """
+    umin = cst[0]
+    umax = cst[1]
+    rate = cst[2]
+    u0 = ubuf if has_prev else pref
+    return _allocate_step_packed(v, B, pref, umin, umax, umin, umax_in, ubuf, has_prev, rate,
+                                 has_rate, dt, ws, iws, u0, max_iter, tol, ubuf)
+
+
 def box_qp(
     H: np.ndarray,
     q: np.ndarray,
@@ -385,6 +404,15 @@ class ActiveSetAllocator(WLSAllocator):
         n_t = self._tri_r.size
         self._iws = np.concatenate([self._tri_r, self._tri_c]).astype(np.int64)
         self._tri_r, self._tri_c = self._iws[:n_t], self._iws[n_t:]
+        # allocate_trusted's kernel arguments: the limits as rows of one array (``u_min``,
+        # ``u_max`` and ``rate_limit`` become views of it) and the command buffer
+        rate = self.rate_limit
+        self._cst = np.stack([self.u_min, self.u_max,
+                              self._zeros_u if rate is None else rate]).astype(F64)
+        self.u_min, self.u_max = self._cst[0], self._cst[1]
+        if rate is not None:
+            self.rate_limit = self._cst[2]
+        self._ubuf = np.zeros(n_u)
 
     def allocate(
         self,
@@ -446,6 +474,72 @@ class ActiveSetAllocator(WLSAllocator):
         u = self._fallback(v, B, lo, hi, pref, u)
         return self._finish(u, v, B, ST_FALLBACK, it, t_solve, t0, "active set not converged",
                             False)
+
+    def allocate_trusted(self, v: np.ndarray, B: np.ndarray, u_max: np.ndarray,
+                         u_pref: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        """:meth:`allocate` for a caller whose arguments are already of the kernel's types
+        (the autopilot's output stage, every control step): no argument checks and, on a
+        converged step, no :class:`AllocationResult`.
+
+        Parameters
+        ----------
+        v : numpy.ndarray
+            Virtual command (n_v,) [N, N m], float64, C-contiguous.
+        B : numpy.ndarray
+            Effectiveness (n_v, n_u) [N or N m per normalised unit], float64, C-contiguous.
+        u_max, u_pref : numpy.ndarray
+            This step's upper position limits and preferred command (n_u,), float64,
+            C-contiguous (lower limits: the construction ones).
+
+        Returns
+        -------
+        tuple
+            ``(u, v_achieved, status)``: the ``u``, ``v_achieved`` and ``status`` (an
+            ``AllocationStatus`` value) that ``allocate(v, B, u_max=u_max, u_pref=u_pref)``
+            returns, bit for bit: the same compiled kernels on the same numbers
+            (:func:`_allocate_step_trusted`), the same ``B @ u`` in numpy, the same
+            statistics (the non-converged branches are :meth:`allocate`'s own code). On a
+            converged step ``u`` is the allocator's own buffer, overwritten by the next call:
+            copy it, do not keep it.
+        """
+        t0 = _perf_counter()
+        if B is self._bk_of:
+            Bk = self._bk
+        else:
+            Bk = _readonly_c(B) if B.flags.writeable or not B.flags.c_contiguous else B
+            if B.flags.c_contiguous:
+                self._bk_of, self._bk = B, Bk
+        last = self._u_last
+        u = self._ubuf
+        if last is not None and last is not u:  # after reset(u0) or allocate(): its array
+            u[:] = last
+        code, ok, it = _allocate_step_trusted(
+            v, Bk, u_pref, u_max, self._cst, last is not None, self.rate_limit is not None,
+            self.dt, self._ws, self._iws, u, self.max_iter, self.tol)
+        if code < 0:
+            hold = last if last is not None else self.u_pref
+            res = self._finish(np.clip(hold, self._lo, self._hi), v, B, ST_INVALID_INPUT, 0,
+                               0.0, t0, "non-finite input", False)
+            return res.u, res.v_achieved, ST_INVALID_INPUT
+        if not ok:
+            u = self._fallback(v, B, self._lo, self._hi, u_pref, u)
+            res = self._finish(u, v, B, ST_FALLBACK, it, 0.0, t0, "active set not converged",
+                               False)
+            return res.u, res.v_achieved, ST_FALLBACK
+        # _solved's bookkeeping, without the result object
+        va = B @ u
+        self._u_last = u
+        st = self.stats
+        st.calls += 1
+        st.counts[ST_SOLVED] += 1
+        st.total_iterations += it
+        if it > st.max_iterations:
+            st.max_iterations = it
+        t_wall = _perf_counter() - t0
+        st.total_wall_time_s += t_wall
+        if t_wall > st.max_wall_time_s:
+            st.max_wall_time_s = t_wall
+        return u, va, ST_SOLVED
 
     def _solved(self, u: np.ndarray, v: np.ndarray, B: np.ndarray, it: int, t_solve: float,
                 t0: float) -> AllocationResult:

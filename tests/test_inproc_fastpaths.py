@@ -1,0 +1,266 @@
+"""The per-step fast paths of the autopilot (issue 24) against the Python they replace, equal
+to the last bit on random inputs: a changed operation order or a dropped branch fails here
+before it changes a flight (``benchmarks/command_digest.py`` checks three whole flights)."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from vtolftc.base.rotation import quat_to_euler
+from vtolftc.firmware_sim.autopilot.allocation import ActiveSetAllocator, AllocationStatus
+from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
+from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
+from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
+from vtolftc.firmware_sim.autopilot.interface import FlightMode, NavState
+
+
+def _bits(a: np.ndarray) -> bytes:
+    return np.ascontiguousarray(a, dtype=np.float64).tobytes()
+
+
+def test_allocate_trusted_equals_allocate_bit_for_bit(ds1):
+    """The same sequence of problems (airspeed grid points, reserve rows, rate and position
+    limits, infeasible commands, a non-finite command) through ``allocate`` and
+    ``allocate_trusted`` of two identical allocators: same ``u``, ``B u``, status, warm start
+    and statistics, step after step."""
+    ap = Autopilot(ds1)
+    ref: ActiveSetAllocator = ap.output.allocator
+    fast: ActiveSetAllocator = Autopilot(ds1).output.allocator  # (a deep copy's workspace
+    # views would be copies of their own: the kernel writes the bounds into the workspace)
+    eff = EffectivenessModel(ds1)
+    rng = np.random.default_rng(24)
+    n_u = ref.n_u
+    statuses = set()
+    for k in range(400):
+        V = float(rng.choice([0.0, 3.0, 7.3, 12.0, 17.9]))
+        B = eff.matrix_on_grid(V, 0.1)
+        if k % 7 == 3:  # the output stage's reserve matrix: a writable copy, Fz row zeroed
+            B = B.copy()
+            B[0, :] = 0.0
+        v = np.array([-ds1.weight_N, 5.0, 0.0, 0.0, 0.0]) + rng.normal(0, 1, 5) * [
+            60.0, 20.0, 15.0, 15.0, 5.0] * (4.0 if k % 11 == 5 else 1.0)
+        if k == 200:
+            v[3] = np.nan  # INVALID_INPUT: previous command held
+        hi = np.ones(n_u)
+        hi[: ap.n_rotors] = float(rng.choice([1.0, 0.6, 0.0]))
+        pref = ap.u_pref_mc if k % 2 else ap.u_pref_fw
+        if k in (100, 300):  # a hand-over: warm start from a given command
+            u0 = rng.uniform(0.0, 1.0, n_u)
+            ref.reset(u0)
+            fast.reset(u0)
+        res = ref.allocate(v, B, u_max=hi, u_pref=pref)
+        if k % 50 == 25:  # the public call in between: its own array becomes the warm start
+            r2 = fast.allocate(v, B, u_max=hi, u_pref=pref)
+            u, va, st = r2.u, r2.v_achieved, r2.status
+        else:
+            u, va, st = fast.allocate_trusted(v, B, hi, pref)
+        statuses.add(st)
+        assert st == res.status, k
+        assert _bits(u) == _bits(res.u), k
+        assert _bits(va) == _bits(res.v_achieved), k
+        assert _bits(fast._u_last) == _bits(ref._u_last), k
+        assert _bits(fast._ws) == _bits(ref._ws), k
+    assert AllocationStatus.INVALID_INPUT in statuses and AllocationStatus.SOLVED in statuses
+    a, b = ref.stats.as_dict(), fast.stats.as_dict()
+    for d in (a, b):
+        d.pop("max_wall_time_s"), d.pop("mean_wall_time_s")
+    assert a == b
+
+
+def test_output_stage_saturation_flags_equal_the_reference(ds1):
+    """``OutputStage.allocate``'s inlined saturation tracking gives what
+    ``_track_saturation(v, B u)`` gives (flags, the Fz pair, the count of saturated steps)
+    on commands inside and far outside what the actuators can do."""
+    ap = Autopilot(ds1)
+    out = ap.output
+    ref = copy.deepcopy(out)
+    rng = np.random.default_rng(7)
+    for k in range(300):
+        V = float(rng.uniform(0.0, 20.0))
+        tau = rng.normal(0, 1, 3) * [20.0, 20.0, 8.0] * (5.0 if k % 5 == 0 else 1.0)
+        out.sp.v[0] = -ds1.weight_N * float(rng.uniform(0.5, 1.6))
+        out.sp.v[1] = float(rng.uniform(0.0, 30.0))
+        reserve = k % 9 == 4
+        u = out.allocate(V, tau, reserve, 1.0, 1.0, ap.u_pref_mc)
+        B = out._B if reserve else out._B_grid
+        ref._track_saturation(out.sp.v, B @ u)
+        assert (out.sat_hi, out.sat_lo) == (ref.sat_hi, ref.sat_lo), k
+        assert (out.fz_cmd, out.fz_achieved) == (ref.fz_cmd, ref.fz_achieved), k
+        assert out.saturated_steps == ref.saturated_steps, k
+    assert 0 < out.saturated_steps < 300
+
+
+
+def _nav(q: np.ndarray, rates: np.ndarray, t_usec: int = 4000) -> NavState:
+    return NavState(t_usec, q, rates, np.array([1.0, -2.0, -30.0]), np.array([12.0, 0.5, -0.3]),
+                    13.0)
+
+
+def test_estimate_euler_equals_quat_to_euler(ds1):
+    """``StateEstimate.update``'s inlined Euler angles are ``quat_to_euler``'s, bit for bit,
+    on random attitudes and at the gimbal lock (pitch clipped at +-pi/2); a non-finite rate
+    still rejects the sample."""
+    est = StateEstimate()
+    rng = np.random.default_rng(5)
+    qs = list(rng.normal(size=(500, 4)))
+    h = np.sqrt(0.5)
+    qs += [np.array([h, 0.0, h, 0.0]), np.array([h, 0.0, -h, 0.0]),
+           np.array([h * (1 + 1e-16), 1e-9, h, 0.0]), np.array([0.5, -0.5, 0.5, -0.5])]
+    for eps in (1e-3, 1e-5, 1e-7):  # pitch just short of +-90 deg: sin(pitch) near +-1
+        a = np.pi / 4 - eps
+        qs += [np.array([np.cos(a), 0.0, np.sin(a), 0.0]),
+               np.array([np.cos(a), 0.0, -np.sin(a), 0.0])]
+    for q in qs:
+        q = q / np.linalg.norm(q) if abs(np.linalg.norm(q) - 1.0) > 1e-6 else q
+        got = est.update(_nav(q, rng.normal(size=3)))
+        want = quat_to_euler(q)
+        assert got is not None
+        assert np.array([got]).tobytes() == np.array([want]).tobytes(), q
+        assert est.att.tobytes() == np.array(want).tobytes()
+    assert est.update(_nav(qs[0], np.array([0.0, np.inf, 0.0]))) is None
+
+
+@pytest.mark.parametrize("controller", ["gs-shif", "shif"])
+def test_attitude_stage_direct_kernel_equals_controller_update(ds1, controller):
+    """The attitude stage's direct call of the compiled scheduled step gives, step after
+    step, the moments and controller state that ``ScheduledPPIDController.update`` gives
+    (two controllers fed the same random references, attitudes, rates, airspeeds and
+    saturation flags)."""
+    fast = Autopilot(ds1, controller=controller).attitude_stage
+    ref_ctrl = Autopilot(ds1, controller=controller).attitude_stage.controller
+    rng = np.random.default_rng(11)
+    v_sched = np.nan
+    for k in range(300):
+        V = float(rng.uniform(-1.0, 22.0))
+        ref = rng.normal(0, 0.3, 3)
+        att = rng.normal(0, 0.3, 3)
+        att[2] = rng.uniform(-np.pi, np.pi)
+        rates = rng.normal(0, 0.5, 3)
+        sat_hi = [bool(b) for b in rng.random(3) < 0.2]
+        sat_lo = [bool(b) for b in rng.random(3) < 0.2]
+        tau = fast.update(FlightMode.HOVER, 30.0, V, ref, att, rates, sat_hi, sat_lo).copy()
+        tc = 0.5  # FTC_SCHED_TAU: the stage's low-pass, written out
+        v_sched = V if k == 0 else v_sched + min(1.0, 0.004 / tc) * (V - v_sched)
+        want = ref_ctrl.update(ref, att, rates, v_sched, sat_hi, sat_lo)
+        assert fast.v_sched == v_sched
+        assert tau.tobytes() == want.tobytes(), k
+        assert fast.controller.kernel_arrays[1].tobytes() == ref_ctrl.kernel_arrays[1].tobytes()
+
+
+def test_arming_check_skipped_in_flight_changes_nothing():
+    """The commander skips ``ArmingMonitor.check`` while ``airborne`` and still armed out of
+    IDLE: a monitor checked every step and one skipped that way end every step in the same
+    state and say the same thing, on random arm / disarm / mode sequences (takeoffs,
+    landings, re-arming, both disarm timers)."""
+    from vtolftc.firmware_sim.autopilot.arming import ArmingMonitor
+    from vtolftc.firmware_sim.autopilot.parameters import default_parameters
+
+    ref, fast = ArmingMonitor(default_parameters()), ArmingMonitor(default_parameters())
+    rng = np.random.default_rng(3)
+    modes = [FlightMode.IDLE, FlightMode.TAKEOFF, FlightMode.HOVER, FlightMode.FIXED_WING]
+    armed, mode, skipped = False, FlightMode.IDLE, 0
+    for k in range(4000):
+        t = 4000 * k
+        r = rng.random()
+        if r < 0.01:
+            armed = not armed
+        elif r < 0.03:
+            mode = modes[int(rng.integers(len(modes)))]
+        want = ref.check(t, armed, mode)
+        if armed and fast.armed and fast.airborne and mode != FlightMode.IDLE:
+            got = ""
+            skipped += 1
+        else:
+            got = fast.check(t, armed, mode)
+        assert got == want, k
+        assert vars(fast) == vars(ref), k
+    assert 500 < skipped < 3500
+
+
+def test_metrics_add_step_returns_crashed():
+    """``MetricsAccumulator.add_step`` returns ``crashed`` (the in-process runner stops on
+    it): False in level flight, True from the first sample tilted past the crash limit on."""
+    from vtolftc.telemetry.metrics import MetricsAccumulator
+
+    acc = MetricsAccumulator(window_start_s=0.0)
+    nav = NavState(0, np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), np.array([0.0, 0.0, -30.0]),
+                   np.zeros(3), 0.0)
+    seen = []
+    for k in range(20):
+        roll = 1.5 if k >= 12 else 0.0  # 86 deg: past the 60 deg crash limit
+        got = acc.add_step(4000 * k, nav, FlightMode.HOVER, True, np.zeros(3), 30.0,
+                           (roll, 0.0, 0.0))
+        assert got is acc.crashed
+        seen.append(got)
+    assert seen == [False] * 12 + [True] * 8
+
+
+def test_vehicle_step_one_kernel_equals_take_commands_and_step_n_flat(ds1):
+    """``Vehicle.step``'s fused call (``_take_and_step``) flies what its two kernels flew
+    one after the other, bit for bit, over random commands, through a fault injection (the
+    pending-fault path) and on; a non-finite command raises and changes nothing."""
+    from vtolftc.firmware_sim.vehicle import dynamics as dyn
+    from vtolftc.firmware_sim.vehicle import model as vm
+    from vtolftc.firmware_sim.vehicle.faults import case_faults
+
+    fast, ref = vm.Vehicle(ds1), vm.Vehicle(ds1)
+    fault = case_faults("1", ds1.actuator_names)[0]
+    rng = np.random.default_rng(2)
+    u_min = np.r_[np.zeros(10), -np.ones(5)]
+    for k in range(400):
+        cmds = rng.uniform(u_min, 1.0).astype(np.float32).astype(np.float64)
+        if k == 150:
+            fast.inject(fault)
+            ref.inject(fault)
+        fast.step(cmds, 4)
+        if ref._pending or ref._packed_args[0] is not ref.packed:
+            ref.step(cmds, 4)  # (the same branch in both: nothing fused there)
+        else:  # the two kernels the fused call replaces, as Vehicle.step called them
+            assert vm._take_commands(cmds, ref.u)
+            pa = ref._packed_args
+            dyn.step_n_flat(ref.x, ref.u, ref.eff, ref.stuck, 4, ref.dt_usec * 1e-6, pa[1],
+                            pa[2], ref.wind, ref.physics, ref.fm)
+            ref.time_usec += 4 * ref.dt_usec
+        assert fast.time_usec == ref.time_usec
+        for name in ("x", "u", "eff", "stuck", "fm"):
+            assert getattr(fast, name).tobytes() == getattr(ref, name).tobytes(), (k, name)
+    x0 = fast.x.copy()
+    bad = cmds.copy()
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match="NaN or inf"):
+        fast.step(bad, 4)
+    assert fast.x.tobytes() == x0.tobytes() and fast.u.tobytes() == ref.u.tobytes()
+
+
+def test_a_replaced_allocate_or_update_is_still_the_one_called(ds1):
+    """The fast paths step aside for an ``allocate`` or ``update`` replaced on the instance
+    (a benchmark's or a test's spy): the output stage and the attitude stage call them."""
+    from vtolftc.firmware_sim.autopilot.autopilot import CMD_COMPONENT_ARM_DISARM
+
+    def nav(t_s: float, alt: float) -> NavState:
+        return NavState(round(t_s * 1e6), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3),
+                        np.array([0.0, 0.0, -alt]), np.zeros(3), 0.0)
+
+    ap = Autopilot(ds1)
+    calls: list[str] = []
+    alloc, ctrl = ap.allocator, ap.attitude
+    a0, u0 = alloc.allocate, ctrl.update
+
+    def spy_allocate(*a, **kw):
+        calls.append("allocate")
+        return a0(*a, **kw)
+
+    def spy_update(*a, **kw):
+        calls.append("update")
+        return u0(*a, **kw)
+
+    alloc.allocate = spy_allocate
+    ctrl.update = spy_update
+    ap.step(nav(0.0, 0.29))
+    assert ap.command(CMD_COMPONENT_ARM_DISARM, [1.0] + [np.nan] * 6).name == "ACCEPTED"
+    ap.modes.set_mode(FlightMode.HOVER, "test")
+    ap.step(nav(0.004, 10.0))
+    assert calls == ["update", "allocate"]
