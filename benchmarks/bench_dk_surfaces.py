@@ -122,21 +122,38 @@ def _surface_dict(sf: Any) -> dict[str, Any]:
             "coefficients": {k: sf.coefficients[i].tolist() for i, k in enumerate(PARAM_NAMES)}}
 
 
-def _fly(results: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    """Case 1 with the shipped gains and with the D-K surfaces (SHIF and GS-SHIF)."""
+def _fly_job(args: tuple[str, str]) -> dict[str, Any]:
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
+
+    ctl, gdir = args
+    m = run_scenario(paper_scenario(1), ctl, airframe=load_airframe(), gains_dir=gdir).metrics
+    return {k: v for k, v in m.items() if isinstance(v, (int, float, bool))}
+
+
+def _fly(results: dict[str, Any], jobs: int) -> dict[str, dict[str, Any]]:
+    """Case 1 with the D-K surfaces (SHIF and GS-SHIF, ``jobs`` processes), beside the
+    shipped gains' case 1 from ``docs/ds1-claims/robust.json`` (stamped against the shipped
+    gain files; the flights are deterministic, ``benchmarks/command_digest.py``)."""
     import shutil
 
     from vtolftc.airframe.loader import load_airframe
-    from vtolftc.runners.scenario import paper_scenario, run_scenario
     from vtolftc.synthesis.export import write_json
+    from vtolftc.synthesis.loops import PARAM_NAMES
     from vtolftc.synthesis.surfaces import GainSurface, SurfaceBasis, schedule_from_surfaces
 
+    if set(results) != {"roll", "pitch", "yaw"}:
+        print("  (not flown: the D-K gain files need all three axes)")
+        return {}
     af = load_airframe()
     out: dict[str, dict[str, Any]] = {}
+    recs = json.loads((ROOT / "docs" / "ds1-claims" / "robust.json").read_text())
+    for ctl, label in (("shif", "SHIF shipped"), ("gs-shif", "GS-SHIF shipped")):
+        r = next(x for x in recs if x["label"] == "case 1" and x["controller"] == ctl)
+        out[label + " (docs/ds1-claims/robust.json)"] = {
+            k: v for k, v in r.items() if isinstance(v, (int, float, bool))}
 
     def surf(d: dict[str, Any]) -> GainSurface:
-        from vtolftc.synthesis.loops import PARAM_NAMES
-
         b = SurfaceBasis(d["degree"], d["v_lo_m_s"], d["v_hi_m_s"])
         C = np.array([d["coefficients"][k] for k in PARAM_NAMES])
         return GainSurface(b, C, np.array(d["lower"]), np.array(d["upper"]))
@@ -145,23 +162,23 @@ def _fly(results: dict[str, Any]) -> dict[str, dict[str, Any]]:
     with tempfile.TemporaryDirectory(prefix="vtolftc-dksurf-") as tmp:
         for ctl, key in (("gs-shif", "gs"), ("shif", "shif")):
             sfs = {ax: surf(r["surfaces"][key]) for ax, r in results.items()}
-            for ax in ("roll", "pitch", "yaw"):   # axes not iterated fly the shipped gains
-                if ax not in sfs:
-                    print(f"  (axis {ax} not iterated: the D-K gain files need all three)")
-                    return out
             write_json(Path(tmp) / f"{ctl}.json", schedule_from_surfaces(
                 af, sfs, bps, ctl, {"synthesis_method": "surface D-K "
                                                          "(synthesis/dk_surfaces.py)"}))
         shutil.copy(SHIPPED / "lqr.json", Path(tmp) / "lqr.json")
-        for label, ctl, gdir in (("SHIF shipped", "shif", None),
-                                 ("GS-SHIF shipped", "gs-shif", None),
-                                 ("SHIF D-K surface", "shif", tmp),
-                                 ("GS-SHIF D-K surface", "gs-shif", tmp)):
-            m = run_scenario(paper_scenario(1), ctl, airframe=af, gains_dir=gdir).metrics
-            out[label] = {k: v for k, v in m.items() if isinstance(v, (int, float, bool))}
-            print(f"  case 1 {label:20} RMSE roll / pitch / yaw {m['rmse_roll_deg']:.3f} / "
-                  f"{m['rmse_pitch_deg']:.3f} / {m['rmse_yaw_deg']:.3f} deg, "
-                  f"crashed={m.get('crashed')}", flush=True)
+        runs = (("SHIF D-K surface", "shif"), ("GS-SHIF D-K surface", "gs-shif"))
+        args = [(ctl, tmp) for _, ctl in runs]
+        if jobs > 1:
+            with ProcessPoolExecutor(min(jobs, 2)) as ex:
+                ms = list(ex.map(_fly_job, args))
+        else:
+            ms = [_fly_job(x) for x in args]
+        for (label, _), m in zip(runs, ms, strict=True):
+            out[label] = m
+    for label, m in out.items():
+        print(f"  case 1 {label:45} RMSE roll / pitch / yaw {m['rmse_roll_deg']:.3f} / "
+              f"{m['rmse_pitch_deg']:.3f} / {m['rmse_yaw_deg']:.3f} deg, "
+              f"crashed={m.get('crashed')}", flush=True)
     return out
 
 
@@ -222,7 +239,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.doc:   # written before the flights, again with them
         (DOC_DIR / name).write_text(json.dumps(doc, indent=1) + "\n")
     if a.fly:
-        doc["case1"] = _fly(results)
+        doc["case1"] = _fly(results, a.jobs)
     if a.doc:
         (DOC_DIR / name).write_text(json.dumps(doc, indent=1) + "\n")
         print(f"wrote {DOC_DIR / name}")
