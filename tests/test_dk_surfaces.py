@@ -5,12 +5,15 @@ effectiveness cover Wt, Ws and Wr as in the robust design (no airframe, so it is
 How each test can fail (each was checked by breaking the code):
 
 - the K-step test recomputes max_i ||D_i N_i D_i^-1|| / f_i with :func:`scaled_system`
-  independently and fails if a K step ends above its start (e.g. a K step that starts from
-  the gain parameters' classical initial values instead of the current surface: 1.08 -> 1.19);
+  independently and fails if a K step ends above its start or does not start from the
+  current surface (checked: a K step started from the parameters' initial gains reports
+  12.49 where the current surface gives 1.64, and the test fails);
 - the GS-SHIF test fails if GS-SHIF does not start from the SHIF result bit for bit (its
-  iteration 0 must measure exactly SHIF's M) or ends above it;
+  iteration 0 must measure exactly SHIF's M) or ends above it (checked: GS-SHIF started from
+  the starting constant instead fails on its iteration-0 gains);
 - the D-scaling test fails if the D scaling is dropped (every D_i = 1: the K step then
-  minimises the unscaled ||N_i||, and M equals the unscaled run's instead of falling below it).
+  minimises the unscaled ||N_i||, and M equals the unscaled run's, 3.002, instead of 1.64:
+  checked, the test fails).
 """
 
 from __future__ import annotations
