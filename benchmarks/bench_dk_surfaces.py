@@ -17,7 +17,15 @@ gains directory) with the D-K surfaces beside the shipped gains. ``--doc`` write
 
 ``--unscaled`` drops the D scaling (the K step minimises ||N_i|| / f_i: what D buys).
 
-Measured: see the wall time, jobs and load average recorded in DK-SURFACES.json / .md.
+Measured (2026-12-02, 2 cores shared with other sessions, load average 16-25): ``--jobs 3
+--degree 1 --density 1 --order 2 --max-iter 2 --tune-iter 8 --fly --doc``: 1050 s wall for
+the three axes (864-987 s per axis, about 8-13 % of a core each), then two case-1 flights.
+M = max over the grid of mu_RP / max(1, |Wt(0)|): roll 1.698 -> 1.462 (SHIF D-K) -> 1.414
+(GS-SHIF D-K), pitch 2.460 -> 2.352 -> 1.685, yaw 6.447 -> 6.403 -> 3.199. Case 1 RMSE roll /
+pitch / yaw [deg]: GS-SHIF D-K 0.148 / 0.469 / 0.308 (shipped GS-SHIF 0.232 / 0.676 / 0.305),
+SHIF D-K 0.147 / 0.398 / 0.151 (shipped SHIF 0.157 / 0.405 / 0.138). The 13-point grid
+(density 2) with 3 K steps of 12 iterations did not finish in 15 minutes at load 20 (about
+12 % of a core per axis): 2-4 times the work of the run above.
 """
 
 from __future__ import annotations

@@ -51,6 +51,7 @@ def render(doc_dir: Path) -> None:
         L.append(f"| {ax} | {m0:.3f} | {m1:.3f} | **{m2:.3f}** | {'yes' if m2 <= m1 else 'NO'} | "
                  + " / ".join(f"{x:.3f}" for x in worst) + f" | {u} | {r['time_dk_s']:.0f} |")
     L.append(SUMMARY_TAIL)
+    L.append(FINDINGS)
     L.append("## Table 3 over the grid (independent analysis: `robustness.analyse`)\n")
     L.append("| axis | V [m/s] | f | mu_RS SHIF shipped / SHIF D-K / GS-SHIF D-K | mu_RP SHIF "
              "shipped | mu_RP GS-SHIF shipped | mu_RP SHIF D-K | mu_RP GS-SHIF D-K | lower | "
@@ -182,4 +183,34 @@ cruise pitch authority); "perturbation" where the nominal loop meets its weights
 fault set's effectiveness variation pushes it over. A surface adds one constraint the point
 design does not have: one smooth gain function for all airspeeds, so each grid airspeed's
 mu_RP is at least its point-design D-K value (DK.md) up to the local nature of both tunes.
+"""
+
+FINDINGS = """
+### What it buys (this run: density 1, degree 1, 2 K steps of 8 tuner iterations per design)
+
+- **M lowered on every axis**: roll 1.698 -> 1.414, pitch 2.460 -> 1.685, yaw 6.447 -> 3.199
+  (shipped SHIF -> GS-SHIF D-K). The constant (SHIF) D-K alone moves little (pitch 2.352,
+  yaw 6.403): one P-PID cannot serve 0-18 m/s; the degree-1 surface buys most of it.
+- **Against the shipped point design** (GS-SHIF, each point tuned alone): the surface's worst
+  mu_RP is lower on roll (1.428 vs 1.549) and pitch (1.699 vs 1.888), though at single points
+  it can be higher (pitch 7 m/s 1.607 vs 1.346): a min-max over the grid trades the best
+  points for the worst. Yaw is worse than the point design from 4 m/s up (18 m/s: 3.199 vs
+  2.050): the yaw plant's weathercock stiffness grows as V^2 and a gain surface linear in V
+  cannot follow it, and the yaw GS-SHIF D-K stopped at max_iter (not converged). Degree 2,
+  more K steps and the 13-point grid are the levers, not run here (2 cores at load
+  16-25: 1050 s wall for this run).
+- **mu_RP < 1 nowhere**, for the measured reasons below: the hover floors (pitch 1.469, yaw
+  3.889 = |Wt(0)|, met exactly by yaw hover), mu_RS > 1 at pitch 1-4 m/s and yaw 1-10 and
+  18 m/s (the cover of each point's airspeed range), a nominal low-frequency |Ws S| > 1 (roll
+  0-10 m/s, where the plateau omega_b / kp_angle of the proportional outer loop is
+  1.23-1.43; pitch 10-13 and yaw 10-18 m/s, |Ws S| 1.09-2.56 at 0.02-0.08 rad/s where Ws is
+  large), the nominal loop near crossover (roll 13-18, pitch 18, yaw 1-7 m/s) and the pitch
+  effort at high frequency (7 m/s: |Wr R| 1.47).
+- **Requirements kept**: delay margin >= 53 ms at every grid airspeed (roll 1 m/s), rotor-out
+  channel Wd*Sd <= 0.94.
+- **Case 1** (table 4): GS-SHIF D-K flies roll / pitch 0.148 / 0.469 deg against the shipped
+  GS-SHIF's 0.232 / 0.676 (-36 %, -31 %), yaw unchanged (0.308 vs 0.305); SHIF D-K
+  0.147 / 0.398 / 0.151 against 0.157 / 0.405 / 0.138. GS-SHIF is still not below SHIF on
+  pitch and yaw: mu_RP measures reference tracking under the fault set, not the rejection of
+  the fault's moment step that case 1's RMSE is made of (issue 23 item 2).
 """
