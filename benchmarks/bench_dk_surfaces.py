@@ -24,8 +24,8 @@ M = max over the grid of mu_RP / max(1, |Wt(0)|): roll 1.698 -> 1.462 (SHIF D-K)
 (GS-SHIF D-K), pitch 2.460 -> 2.352 -> 1.685, yaw 6.447 -> 6.403 -> 3.199. Case 1 RMSE roll /
 pitch / yaw [deg]: GS-SHIF D-K 0.148 / 0.469 / 0.308 (shipped GS-SHIF 0.232 / 0.676 / 0.305),
 SHIF D-K 0.147 / 0.398 / 0.151 (shipped SHIF 0.157 / 0.405 / 0.138). The 13-point grid
-(density 2) with 3 K steps of 12 iterations did not finish in 15 minutes at load 20 (about
-12 % of a core per axis): 2-4 times the work of the run above.
+(density 2) with 3 K steps of 12 iterations was stopped unfinished after 13 minutes at load 20
+(93 s of CPU per axis by then; estimated 2-4 times the work of the run above).
 """
 
 from __future__ import annotations
