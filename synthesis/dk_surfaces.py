@@ -112,7 +112,13 @@ class SurfaceDKSettings:
     scaled: bool = True
 
     def omegas(self) -> NDArray[np.float64]:
-        """The D step's frequency grid [rad/s]."""
+        """The D step's frequency grid.
+
+        Returns
+        -------
+        ndarray of float, shape (n_omegas,)
+            Log-spaced over 1e-3..1e3 rad/s.
+        """
         return np.logspace(-3, 3, self.n_omegas)
 
     def to_dict(self) -> dict[str, Any]:
