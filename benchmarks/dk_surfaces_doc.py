@@ -191,6 +191,10 @@ FINDINGS = """
 - **M lowered on every axis**: roll 1.698 -> 1.414, pitch 2.460 -> 1.685, yaw 6.447 -> 3.199
   (shipped SHIF -> GS-SHIF D-K). The constant (SHIF) D-K alone moves little (pitch 2.352,
   yaw 6.403): one P-PID cannot serve 0-18 m/s; the degree-1 surface buys most of it.
+- **What the D scaling buys**: the same iteration with every D_i = 1 (`--unscaled`, K steps on
+  max_i ||N_i|| / f_i, `DK-SURFACES-unscaled.json`, 419 s wall) ends at GS-SHIF M roll
+  1.586, pitch 2.385, yaw 4.193 (against 1.414, 1.685, 3.199 with D): the unscaled norm
+  bounds mu loosely and the tuner spends its steps on the wrong frequencies.
 - **Against the shipped point design** (GS-SHIF, each point tuned alone): the surface's worst
   mu_RP is lower on roll (1.428 vs 1.549) and pitch (1.699 vs 1.888), though at single points
   it can be higher (pitch 7 m/s 1.607 vs 1.346): a min-max over the grid trades the best
