@@ -207,17 +207,7 @@ def render() -> None:
         nom = (g["WsS"] ** 2 + g["WrR"] ** 2) ** 0.5
         mu, rs = g["mu_rp"], r["after"]["mu_rs"]
         plateau = g["omega_b"] / r["gains_after"]["kp_angle"]
-        parts = []
-        if rs >= 0.97 * mu:
-            parts.append("= mu_RS floor")
-        elif rs >= 1:
-            parts.append("mu_RS > 1")
-        if nom >= 1:
-            band = ("low frequency" if g["w_peak"] < 0.5 * g["omega_b"] else
-                    "high-frequency effort" if g["w_peak"] > 50 * g["omega_b"]
-                    else "near crossover")
-            parts.append(f"nominal > 1 ({band})")
-        why = ", ".join(parts) or "perturbation (nominal < 1, mu_RS < 1)"
+        why = reason_class(mu, rs, nom, g["w_peak"], g["omega_b"])
         L.append(f"| {r['axis']} | {r['point']} | {g['w_peak']:.3g} | {g['Wt0']:.3f} | "
                  f"{rs:.3f} | {nom:.3f} | {g['WsS']:.3f} | {g['WrR']:.3f} | {g['Wt']:.3f} | "
                  f"{plateau:.3f} | {mu:.3f} | {why} |")
@@ -257,6 +247,25 @@ def render() -> None:
     (DOC_DIR / "DK.md").write_text("\n".join(L) + "\n")
     _stamp("DK.md", "python benchmarks/bench_dk.py --render (from DK.json and DK-pure.json)")
     print(f"wrote {DOC_DIR / 'DK.md'}")
+
+
+def reason_class(mu_rp: float, mu_rs: float, nominal: float, w_peak: float,
+                 omega_b: float) -> str:
+    """What holds mu_RP above 1 at one axis-point, from its two lower bounds: mu_RS (the
+    uncertainty block alone; "= mu_RS floor" when it is within 3 % of mu_RP) and the nominal
+    ||[Ws S; Wr R](j w_peak)|| (the performance block alone), the band of the peak
+    frequency w_peak against Ws' bandwidth omega_b [rad/s]; "perturbation" when both are
+    below 1."""
+    parts = []
+    if mu_rs >= 0.97 * mu_rp:
+        parts.append("= mu_RS floor")
+    elif mu_rs >= 1:
+        parts.append("mu_RS > 1")
+    if nominal >= 1:
+        band = ("low frequency" if w_peak < 0.5 * omega_b else
+                "high-frequency effort" if w_peak > 50 * omega_b else "near crossover")
+        parts.append(f"nominal > 1 ({band})")
+    return ", ".join(parts) or "perturbation (nominal < 1, mu_RS < 1)"
 
 
 def _stamp(name: str, command: str) -> None:

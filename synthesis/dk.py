@@ -62,11 +62,14 @@ __all__ = [
     "CascadeRP",
     "DKResult",
     "DKStep",
+    "MuProfile",
+    "Normalised",
     "RationalScaling",
     "ScaledChannel",
     "cascade_rp",
     "dk_iterate",
     "fit_scaling",
+    "mu_profile",
     "optimal_scalings",
     "refine_scaling",
     "scaled_system",
@@ -523,8 +526,18 @@ class ScaledChannel:
 
 
 @dataclass
-class _Normalised:
-    """A channel divided by a constant (the requirement channels of the K step)."""
+class Normalised:
+    """theta -> channel(theta) / norm: a requirement channel of the K step, divided by
+    max(1, its norm at the start) so a requirement met there stays met and an unmet one
+    does not get worse (picklable when ``channel`` is).
+
+    Parameters
+    ----------
+    channel : callable
+        theta -> (A, B, C, D) (or any LTI :func:`as_state_space` takes).
+    norm : float
+        The divisor, > 0.
+    """
 
     channel: Callable[[NDArray[np.float64]], Any]
     norm: float
@@ -617,12 +630,77 @@ class DKResult:
         return self.steps[0].mu_peak
 
 
-def _mu_profile(rp: Callable[[NDArray[np.float64]], StateSpaceData], theta: NDArray[np.float64],
-                omegas: NDArray[np.float64],
-                ) -> tuple[NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64],
-                           NDArray[np.bool_]]:
-    F = frequency_response(rp(theta), omegas)
-    return (F, *optimal_scalings(F))
+@dataclass(frozen=True)
+class MuProfile:
+    """The D step of one interconnection at one set of gains (:func:`mu_profile`).
+
+    Parameters
+    ----------
+    omegas : ndarray of float, shape (nw,)
+        The frequency grid [rad/s].
+    F : ndarray of complex, shape (nw, p, m)
+        N(j w), uncertainty channel first.
+    d, mu_hat, free : ndarray, shape (nw,)
+        :func:`optimal_scalings` of ``F``.
+    """
+
+    omegas: NDArray[np.float64]
+    F: NDArray[np.complex128]
+    d: NDArray[np.float64]
+    mu_hat: NDArray[np.float64]
+    free: NDArray[np.bool_]
+
+    @property
+    def peak(self) -> tuple[float, float]:
+        """(peak mu_hat over the grid, its frequency [rad/s])."""
+        k = int(np.argmax(self.mu_hat))
+        return float(self.mu_hat[k]), float(self.omegas[k])
+
+    def scaling(self, order: int, refine: bool = True) -> RationalScaling:
+        """The D(s) of the K step: :func:`fit_scaling` of d(w) (weights
+        (mu_hat/peak)^4, zero where d is free), refined for the grid peak
+        (:func:`refine_scaling`) when ``refine`` and ``order`` > 0.
+
+        Parameters
+        ----------
+        order : {0, 1, 2}
+            Order of D(s).
+        refine : bool, optional
+            Refine the fit for the grid peak of the scaled N.
+
+        Returns
+        -------
+        RationalScaling
+            Stable, minimum-phase D(s).
+        """
+        D = fit_scaling(self.omegas, self.d, order, _fit_weights(self.mu_hat, self.free))
+        if refine and order > 0:
+            D = refine_scaling(D, self.F, self.omegas)
+        return D
+
+
+def mu_profile(rp: Callable[[NDArray[np.float64]], StateSpaceData], theta: NDArray[np.float64],
+               omegas: NDArray[np.float64]) -> MuProfile:
+    """The exact D step of ``rp(theta)`` on ``omegas`` (:func:`optimal_scalings` of its
+    frequency response).
+
+    Parameters
+    ----------
+    rp : callable
+        theta -> (A, B, C, D) of N, uncertainty channel first.
+    theta : ndarray of float
+        The gains.
+    omegas : ndarray of float, shape (nw,)
+        Frequencies [rad/s].
+
+    Returns
+    -------
+    MuProfile
+        Response, scalings, mu_hat and the free mask.
+    """
+    w = np.asarray(omegas, float)
+    F = frequency_response(rp(theta), w)
+    return MuProfile(w, F, *optimal_scalings(F))
 
 
 def _fit_weights(mu: NDArray[np.float64], free: NDArray[np.bool_]) -> NDArray[np.float64]:
@@ -690,21 +768,17 @@ def dk_iterate(rp: Callable[[NDArray[np.float64]], StateSpaceData],
     if A0.size and float(np.max(np.linalg.eigvals(A0).real)) >= 0:
         raise ValueError("N(theta0) is unstable: D-K iteration starts from stabilising gains")
     req_norm = [max(1.0, hinf_norm(r(theta)).value) for r in requirements]
-    reqs = [_Normalised(r, n) for r, n in zip(requirements, req_norm, strict=True)]
+    reqs = [Normalised(r, n) for r, n in zip(requirements, req_norm, strict=True)]
 
     def req_values(th: NDArray[np.float64]) -> tuple[float, ...]:
         return tuple(hinf_norm(r(th)).value for r in requirements)
 
-    F, d, mu, free = _mu_profile(rp, theta, w)
-    k = int(np.argmax(mu))
-    steps = [DKStep(0, theta, float(mu[k]), float(w[k]), None, math.nan, math.nan,
-                    req_values(theta))]
+    prof = mu_profile(rp, theta, w)
+    steps = [DKStep(0, theta, *prof.peak, None, math.nan, math.nan, req_values(theta))]
     best = steps[0]
     stop = f"max_iter ({max_iter}) reached"
     for it in range(1, max_iter + 1):
-        D = fit_scaling(w, d, order, _fit_weights(mu, free))
-        if refine and order > 0:
-            D = refine_scaling(D, F, w)
+        D = prof.scaling(order, refine)
         ch = ScaledChannel(rp, D)
         before = hinf_norm(ch(theta)).value
         ch = ScaledChannel(rp, D, before)
@@ -714,10 +788,8 @@ def dk_iterate(rp: Callable[[NDArray[np.float64]], StateSpaceData],
         res = tune(pb, n_starts=0, max_iter=tune_iter)
         th = np.asarray(res.theta, float)
         after = hinf_norm(ScaledChannel(rp, D)(th)).value
-        F, d, mu, free = _mu_profile(rp, th, w)
-        k = int(np.argmax(mu))
-        step = DKStep(it, th, float(mu[k]), float(w[k]), D, before, after, req_values(th),
-                      res.message)
+        prof = mu_profile(rp, th, w)
+        step = DKStep(it, th, *prof.peak, D, before, after, req_values(th), res.message)
         steps.append(step)
         theta = th
         if step.mu_peak < best.mu_peak * (1.0 - rel_tol):

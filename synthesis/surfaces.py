@@ -69,6 +69,7 @@ __all__ = [
     "SurfaceChannel",
     "SurfaceDesign",
     "SurfaceProblem",
+    "coefficient_parameters",
     "design_surfaces",
     "legendre_basis",
     "schedule_from_surfaces",
@@ -561,10 +562,43 @@ def surface_problem(method: DesignMethod, af: Airframe, axis: Axis,
             chans.append(SurfaceChannel(c, Phi[i].copy(), lo, hi))
             names.append(f"{nm} @ {vs[i]:g} m/s")
             owner.append(i)
-    if start is not None and start.basis.degree > degree:
-        raise ValueError(f"start of degree {start.basis.degree} above the problem's {degree}")
+    pb = TuningProblem(coefficient_parameters(gp, basis, start), chans, names)
+    return SurfaceProblem(pb, basis, grid, owner, lo, hi, gp)
+
+
+def coefficient_parameters(gain_parameters: Sequence[Parameter], basis: SurfaceBasis,
+                           start: GainSurface | None = None) -> list[Parameter]:
+    """The tunable coefficients of a gain surface (gain-major: c_0 .. c_d of each gain).
+
+    c_0 takes the gain's initial value (or ``start``'s c_0), bounds and scale; c_j (j >= 1)
+    start at 0 (or ``start``'s, embedded into ``basis``' degree), bounded by
+    +-(upper - lower) (by +-10 scales where a bound is infinite), scale a third of the gain's.
+
+    Parameters
+    ----------
+    gain_parameters : sequence of Parameter
+        The point design's five gain parameters (:data:`PARAM_NAMES` order).
+    basis : SurfaceBasis
+        The surface's basis.
+    start : GainSurface, optional
+        Initial coefficients (degree at most ``basis``'; clipped into the bounds).
+
+    Returns
+    -------
+    list of Parameter
+        5 (d + 1) parameters named ``"kp_angle[0]"`` ...
+
+    Raises
+    ------
+    ValueError
+        For a start of higher degree than ``basis``.
+    """
+    gp = list(gain_parameters)
+    if start is not None and start.basis.degree > basis.degree:
+        raise ValueError(f"start of degree {start.basis.degree} above the problem's "
+                         f"{basis.degree}")
     C0 = (_embedded(np.array([[p.initial] for p in gp]), basis.size) if start is None
-          else start.embed(degree).coefficients)
+          else start.embed(basis.degree).coefficients)
     params: list[Parameter] = []
     for k, p in enumerate(gp):
         for j in range(basis.size):
@@ -576,8 +610,7 @@ def surface_problem(method: DesignMethod, af: Airframe, axis: Axis,
             r = span if math.isfinite(span) else 10.0 * p.typical
             x = float(np.clip(C0[k, j], -r, r))
             params.append(Parameter(f"{p.name}[{j}]", x, -r, r, scale=p.typical / 3.0))
-    pb = TuningProblem(params, chans, names)
-    return SurfaceProblem(pb, basis, grid, owner, lo, hi, gp)
+    return params
 
 
 # ------------------------------------------------------------------------------------------
