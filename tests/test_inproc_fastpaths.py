@@ -28,8 +28,7 @@ def test_allocate_trusted_equals_allocate_bit_for_bit(ds1):
     and statistics, step after step."""
     ap = Autopilot(ds1)
     ref: ActiveSetAllocator = ap.output.allocator
-    fast: ActiveSetAllocator = Autopilot(ds1).output.allocator  # (a deep copy's workspace
-    # views would be copies of their own: the kernel writes the bounds into the workspace)
+    fast: ActiveSetAllocator = Autopilot(ds1).output.allocator
     eff = EffectivenessModel(ds1)
     rng = np.random.default_rng(24)
     n_u = ref.n_u
@@ -68,6 +67,41 @@ def test_allocate_trusted_equals_allocate_bit_for_bit(ds1):
     for d in (a, b):
         d.pop("max_wall_time_s"), d.pop("mean_wall_time_s")
     assert a == b
+
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+def test_a_copied_allocator_keeps_its_workspace_views(ds1, how):
+    """A deep copy or an unpickled allocator (numpy copies each array on its own) links its
+    bounds, QP arrays, limits and triangle indices to its own workspace again, so it goes on
+    exactly as the original: same ``u`` and workspace bits through solved, infeasible,
+    invalid-input (held command, bounds from the workspace) and fallback steps."""
+    import pickle
+
+    eff = EffectivenessModel(ds1)
+    orig: ActiveSetAllocator = Autopilot(ds1).output.allocator
+    B = eff.matrix_on_grid(7.3, 0.1)
+    v0 = np.array([-ds1.weight_N, 5.0, 0.0, 0.0, 0.0])
+    for _ in range(5):
+        orig.allocate(v0, B)
+    twin = copy.deepcopy(orig) if how == "deepcopy" else pickle.loads(pickle.dumps(orig))
+    for name in (*ActiveSetAllocator._WS_PARTS, "_tri_r", "_tri_c", "u_min", "u_max"):
+        base = {"_tri_r": twin._iws, "_tri_c": twin._iws, "u_min": twin._cst,
+                "u_max": twin._cst}.get(name, twin._ws)
+        assert np.shares_memory(getattr(twin, name), base), name
+    rng = np.random.default_rng(5)
+    for k in range(60):
+        v = v0 + rng.normal(0, 1, 5) * [60.0, 20.0, 15.0, 15.0, 5.0] * (6.0 if k % 9 == 4
+                                                                          else 1.0)
+        if k == 30:
+            v[2] = np.inf
+        hi = np.ones(orig.n_u)
+        hi[: k % 4] = 0.0
+        a = orig.allocate(v, B, u_max=hi)
+        b = twin.allocate(v, B, u_max=hi)
+        assert a.status == b.status, k
+        assert _bits(a.u) == _bits(b.u), k
+        assert _bits(orig._ws) == _bits(twin._ws), k
+        assert _bits(orig._lo) == _bits(twin._lo) and _bits(orig._hi) == _bits(twin._hi), k
 
 
 def test_output_stage_saturation_flags_equal_the_reference(ds1):

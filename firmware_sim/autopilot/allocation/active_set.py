@@ -388,31 +388,45 @@ class ActiveSetAllocator(WLSAllocator):
         in the order :func:`_allocate_step_packed` reads them; ``_lo``/``_hi``: the step's
         bounds."""
         n_u = self.n_u
-        parts = [np.empty(n_u), np.empty(n_u), self._B_last, self._w_v2, self._reg, self._Hn,
+        self._lo, self._hi = np.empty(n_u), np.empty(n_u)
+        parts = [self._lo, self._hi, self._B_last, self._w_v2, self._reg, self._Hn,
                  self._Px, self._BtW2s, self._scale, self._qn]
         if self._tri_r.size != n_u * (n_u + 1) // 2:  # the layout the kernel assumes
             raise AssertionError("upper triangle of unexpected size")
-        ws = np.concatenate([np.ravel(a) for a in parts]).astype(F64)
-        views = []
-        o = 0
-        for a in parts:
-            views.append(ws[o:o + a.size].reshape(a.shape))
-            o += a.size
-        (self._lo, self._hi, self._B_last, self._w_v2, self._reg, self._Hn, self._Px,
-         self._BtW2s, self._scale, self._qn) = views
-        self._ws = ws
-        n_t = self._tri_r.size
+        self._ws = np.concatenate([np.ravel(a) for a in parts]).astype(F64)
         self._iws = np.concatenate([self._tri_r, self._tri_c]).astype(np.int64)
-        self._tri_r, self._tri_c = self._iws[:n_t], self._iws[n_t:]
         # allocate_trusted's kernel arguments: the limits as rows of one array (``u_min``,
         # ``u_max`` and ``rate_limit`` become views of it) and the command buffer
         rate = self.rate_limit
         self._cst = np.stack([self.u_min, self.u_max,
                               self._zeros_u if rate is None else rate]).astype(F64)
-        self.u_min, self.u_max = self._cst[0], self._cst[1]
-        if rate is not None:
-            self.rate_limit = self._cst[2]
         self._ubuf = np.zeros(n_u)
+        self._link_views()
+
+    _WS_PARTS = ("_lo", "_hi", "_B_last", "_w_v2", "_reg", "_Hn", "_Px", "_BtW2s", "_scale",
+                 "_qn")
+    """The attributes that are views of ``_ws``, in the kernel's order."""
+
+    def _link_views(self) -> None:
+        """Make the ``_WS_PARTS`` attributes views of ``_ws`` (each keeps its shape), the
+        upper-triangle indices views of ``_iws`` and the limits views of ``_cst``."""
+        o = 0
+        for name in self._WS_PARTS:
+            a = getattr(self, name)
+            setattr(self, name, self._ws[o:o + a.size].reshape(a.shape))
+            o += a.size
+        n_t = self._tri_r.size
+        self._tri_r, self._tri_c = self._iws[:n_t], self._iws[n_t:]
+        self.u_min, self.u_max = self._cst[0], self._cst[1]
+        if self.rate_limit is not None:
+            self.rate_limit = self._cst[2]
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        """A copy or unpickled allocator (``copy.deepcopy``, ``pickle``): numpy copies every
+        array on its own, so the views of the workspace are linked again (else the copy's
+        ``_lo``/``_hi`` and limits would no longer be what its kernel writes and reads)."""
+        self.__dict__.update(state)
+        self._link_views()
 
     def allocate(
         self,
