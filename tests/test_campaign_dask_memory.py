@@ -54,14 +54,15 @@ def test_dask_campaign_releases_results_and_workers_stay_flat():
     - Results released: the results the workers hold never exceed the tasks not yet
       consumed (a finished task's rows wait on its worker until the client takes them, then
       its future is released); after the campaign no worker holds a result or a task and
-      the scheduler no task. Kept futures fail both (every consumed task's rows stay on its
-      worker: 30 of 36 tasks held with 6 left, measured). The rows are ~1 KB each, so kept
+      the scheduler no task. Checked to fail with the futures kept in ``run_dask`` instead of
+      released (19 results held with 18 tasks left). The rows are ~1 KB each, so kept
       results grow a worker's RSS by ~0.5 KB per campaign scenario, which RSS cannot tell
-      from its noise (0-2 KB per scenario with or without the leak, measured): Dask's
+      from its noise (0-2 KB per scenario with or without that leak, measured): Dask's
       holdings are the check for them.
     - Memory flat: each worker's Theil-Sen RSS slope over the last three quarters, times
-      2000 scenarios, < 50 MB (issue 24), which fails on a worker that keeps what a flight
-      computes (e.g. each flight's ``RunResult``, measured below in the report).
+      2000 scenarios, < 50 MB (issue 24), i.e. < 50 KB per flight of a worker. Checked to
+      fail with each flight's autopilot (~166 KB traced) kept in the worker: +114 MB per
+      2000. (Each flight's ``RunResult`` kept, a few KB, passes: below the bound.)
 
     Counts only (rows, tasks, samples against the scenario count): no timing.
     """
