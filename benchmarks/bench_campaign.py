@@ -28,7 +28,8 @@ CLI does, samples the resident memory of the parent and of each worker (by pid) 
 row (:mod:`vtolftc.runners.campaign.memwatch`) and prints the parent's robust slope after the
 first quarter and, for the workers (each replaced after ``WORKER_SCENARIOS``), the largest
 growth in a worker's life and the slope of the largest worker's RSS, extrapolated to 2000
-scenarios (target of issue 24: < 50 MB).
+scenarios (target of issue 24: < 50 MB). It is ``bench_campaign_memory.py --backends pool``;
+that benchmark also measures every process of fresh Dask clusters (LocalCluster, tcp://).
 
 Targets (issue 24): >= 300 scenarios/min on 2 cores, overhead < 5 % of a scenario, Dask
 within 0.9x of the local pool; memory of a 2000-scenario campaign < 50 MB per process.
@@ -320,65 +321,19 @@ def dask_runs(kind: str, scen: list[Any], jobs: int, t_oracle: float, pool_rate:
             client.close()
 
 
-def memory_spec(n: int, duration_s: float) -> str:
-    """A spec of at least ``n`` short scenarios: each lift rotor's loss at ceil(n / 24)
-    magnitudes, the three controllers, injected at half the duration."""
-    k = max(1, -(-n // 24))
-    mags = ", ".join(f"{0.02 + 0.6 * i / k:.5f}" for i in range(k))
-    return (f'[campaign]\nname = "memory"\nduration_s = {duration_s:g}\n'
-            f'controllers = ["gs-shif", "shif", "lqr"]\nphases = [{duration_s / 2:g}]\n'
-            '[[faults]]\nfamily = "rotor-loss"\ngenerate = "each"\n'
-            f'actuators = ["lift_rotors"]\nkinds = ["loss"]\nmagnitudes = [{mags}]\n')
-
-
 def memory_run(n: int, duration_s: float, jobs: int) -> None:
-    """Fly ``n`` short scenarios on the local pool and print the RSS growth per process."""
-    from vtolftc.runners.campaign.execute import WORKER_SCENARIOS, run_local
-    from vtolftc.runners.campaign.memwatch import RssWatch
-    from vtolftc.runners.campaign.results import PartWriter
+    """Fly ``n`` short scenarios on the local pool and print the RSS growth per process
+    (``bench_campaign_memory.py --backends pool``, which also measures the Dask clusters)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_campaign_memory import memory_spec, pool_run
+
     from vtolftc.runners.campaign.scenarios import expand
     from vtolftc.runners.campaign.spec import parse_spec
 
     scen = expand(parse_spec(memory_spec(n, duration_s)))[:n]
     print(f"load average at start: {os.getloadavg()[0]:.2f}; memory run: {len(scen)} "
           f"scenarios of {duration_s:g} s on {jobs} processes")
-    watch = RssWatch()
-    every = max(1, len(scen) // 500)
-    t = time.perf_counter()
-    with tempfile.TemporaryDirectory() as d:
-        w = PartWriter(Path(d))
-        done = 0
-        watch.sample(0)
-        for r in run_local(scen, jobs):
-            w.add(r)
-            done += 1
-            if done % every == 0 or done == len(scen):
-                watch.sample(done)
-        w.close()
-    wall = time.perf_counter() - t
-    print(f"{done} scenarios in {wall:.1f} s = {60.0 * done / wall:.1f} scenarios/min")
-    from vtolftc.runners.campaign.memwatch import robust_slope
-
-    mb = 2.0 ** 20
-    g = watch.growth(len(scen))[watch.parent]
-    slope = g["slope_b_per_scenario"]
-    print(f"  parent: RSS {g['rss_first_b'] / mb:.1f} -> {g['rss_last_b'] / mb:.1f} MB; "
-          f"robust slope {slope / 1024:+.2f} KB per scenario -> {slope * 2000 / mb:+.2f} MB "
-          "per 2000 (target < 50 MB)")
-    workers = {p: s for p, s in watch.samples.items() if p != watch.parent and len(s) >= 2}
-    life = [s[-1][1] - s[0][1] for s in workers.values()]
-    largest: dict[int, int] = {}
-    for s in workers.values():
-        for k, rss in s:
-            largest[k] = max(largest.get(k, 0), rss)
-    ks = sorted(k for k in largest if k >= len(scen) // 4)
-    wslope = robust_slope(ks, [largest[k] for k in ks])
-    print(f"  workers: {len(workers)} processes in all (each replaced after "
-          f"{WORKER_SCENARIOS} scenarios); RSS {min(s[0][1] for s in workers.values()) / mb:.1f}"
-          f"-{max(largest.values()) / mb:.1f} MB; largest growth in a worker's life "
-          f"{max(life) / mb:+.1f} MB; robust slope of the largest worker's RSS "
-          f"{wslope / 1024:+.2f} KB per scenario -> {wslope * 2000 / mb:+.2f} MB per 2000 "
-          "(target < 50 MB)")
+    pool_run(scen, jobs)
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 
