@@ -105,9 +105,15 @@ def main() -> None:
     ap.add_argument("--memory", type=int, default=0, metavar="N",
                     help="memory run: N short scenarios, RSS growth per process")
     ap.add_argument("--duration", type=float, default=4.0, help="memory run: s per scenario")
+    ap.add_argument("--whole", action="store_true",
+                    help="whole `vtolftc campaign` runs: pool, fresh LocalCluster, fresh "
+                         "tcp:// cluster, pool again")
     args = ap.parse_args()
     if args.memory:
         memory_run(args.memory, args.duration, args.jobs)
+        return
+    if args.whole:
+        whole_runs(args.scenarios, args.jobs)
         return
 
     from vtolftc.runners.campaign.execute import fly_scenario, run_local
@@ -319,6 +325,65 @@ def dask_runs(kind: str, scen: list[Any], jobs: int, t_oracle: float, pool_rate:
                 print(f"  Dask / local pool: {rate / pool_rate:.2f}x (target >= 0.9x)")
         finally:
             client.close()
+
+
+def whole_runs(n: int, jobs: int) -> None:
+    """Whole campaigns as a user runs them, each a fresh ``vtolftc campaign`` process timed
+    from start to exit (start-up, oracle, flights, Parquet, report): the local pool, then a
+    fresh LocalCluster's and a fresh ``tcp://`` cluster's (cluster start not included: the
+    clock starts once its workers have registered), then the pool again, so that a load
+    drifting during the run shows as the two pools' spread. Ratios: the mean pool wall time
+    over each Dask one (target >= 0.9x). An untimed campaign of 2 s flights first loads the
+    file and numba caches."""
+    spec = SPEC.replace('name = "bench"', f'name = "whole{n}"')
+    vtolftc = str(Path(sys.executable).parent / "vtolftc")
+    with tempfile.TemporaryDirectory() as d:
+        (Path(d) / "spec.toml").write_text(spec)
+        from vtolftc.runners.campaign.scenarios import expand
+        from vtolftc.runners.campaign.spec import parse_spec
+
+        m = len(expand(parse_spec(spec)))
+        if m > n:  # the first n scenarios: the spec's rotors cut down
+            rotors = ["rotor_1a", "rotor_1b", "rotor_2a", "rotor_2b", "rotor_3a", "rotor_3b",
+                      "rotor_4a", "rotor_4b"][: max(1, n // 3)]
+            spec = spec.replace('actuators = ["lift_rotors"]', f"actuators = {rotors!r}"
+                                .replace("'", '"'))
+            (Path(d) / "spec.toml").write_text(spec)
+        k = len(expand(parse_spec(spec)))
+        print(f"load average at start: {os.getloadavg()[0]:.2f}; whole campaigns of {k} "
+              f"scenarios of 60 s, {jobs} workers; {time.strftime('%H:%M:%S', time.gmtime())}"
+              " UTC")
+
+        def campaign(tag: str, *extra: str) -> float:
+            t = time.perf_counter()
+            subprocess.run([vtolftc, "campaign", str(Path(d) / "spec.toml"), "--out",
+                            str(Path(d) / tag), "--no-progress", *extra], check=True,
+                           stdout=subprocess.DEVNULL, timeout=3600)
+            wall = time.perf_counter() - t
+            print(f"  {tag}: {wall:.1f} s (load {os.getloadavg()[0]:.2f})", flush=True)
+            return wall
+
+        (Path(d) / "warm.toml").write_text(spec.replace("duration_s = 60.0", "duration_s = 2.0"))
+        subprocess.run([vtolftc, "campaign", str(Path(d) / "warm.toml"), "--out",  # caches
+                        str(Path(d) / "warm"), "--no-progress", "--jobs", str(jobs)],
+                       check=True, stdout=subprocess.DEVNULL, timeout=3600)
+        walls = {"pool": [campaign("pool-1", "--jobs", str(jobs))]}
+        for kind in ("LocalCluster", "tcp"):
+            with fresh_cluster(kind, jobs) as address:
+                from distributed import Client
+
+                with Client(address, set_as_default=False, timeout="60s") as c:
+                    c.wait_for_workers(jobs, timeout=300)
+                walls[kind] = [campaign(f"dask-{kind}", "--scheduler", address)]
+        walls["pool"].append(campaign("pool-2", "--jobs", str(jobs)))
+    pool = statistics.mean(walls["pool"])
+    for kind in ("LocalCluster", "tcp"):
+        w = walls[kind][0]
+        print(f"whole campaign, Dask fresh {kind} / pool: {pool / w:.2f}x (pool {pool:.1f} s, "
+              f"mean of {walls['pool'][0]:.1f} and {walls['pool'][1]:.1f}; Dask {w:.1f} s; "
+              "target >= 0.9x)")
+    print(f"load average at end: {os.getloadavg()[0]:.2f}; "
+          f"{time.strftime('%H:%M:%S', time.gmtime())} UTC")
 
 
 def memory_run(n: int, duration_s: float, jobs: int) -> None:
