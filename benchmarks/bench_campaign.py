@@ -363,7 +363,8 @@ def whole_runs(n: int, jobs: int) -> None:
             print(f"  {tag}: {wall:.1f} s (load {os.getloadavg()[0]:.2f})", flush=True)
             return wall
 
-        (Path(d) / "warm.toml").write_text(spec.replace("duration_s = 60.0", "duration_s = 2.0"))
+        (Path(d) / "warm.toml").write_text(spec.replace("duration_s = 60.0", "duration_s = 2.0")
+                                           .replace('phases = ["cruise"]', "phases = [1.0]"))
         subprocess.run([vtolftc, "campaign", str(Path(d) / "warm.toml"), "--out",  # caches
                         str(Path(d) / "warm"), "--no-progress", "--jobs", str(jobs)],
                        check=True, stdout=subprocess.DEVNULL, timeout=3600)
