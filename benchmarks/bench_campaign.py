@@ -64,7 +64,15 @@ a core before and 7.9 % after (profiler, ticks and the nannies' system monitor p
 memory check every 1 s; alternated in one run at load 19-20). The breakdown:
 ``bench_campaign_dask.py``.
 
+``--whole`` instead times whole ``vtolftc campaign`` processes of the first ``--scenarios``
+(start-up, oracle, flights, Parquet, report): the local pool, a fresh LocalCluster, a fresh
+``tcp://`` cluster (its start not included), the pool again, and prints each Dask campaign's
+ratio to the two pools' mean. Round 11 (2026-12-02, load 16.9-17.8, the author's memory
+benchmark running beside it throughout): 12 scenarios, pool 45.5 and 53.2 s, fresh
+LocalCluster 50.6 s (0.97x), fresh tcp:// 46.2 s (1.07x); WHOLE24.
+
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
+    .venv/bin/python benchmarks/bench_campaign.py --whole [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --memory 2000 [--duration 4]
 """
 
