@@ -69,7 +69,10 @@ memory check every 1 s; alternated in one run at load 19-20). The breakdown:
 ``tcp://`` cluster (its start not included), the pool again, and prints each Dask campaign's
 ratio to the two pools' mean. Round 11 (2026-12-02, load 16.9-17.8, the author's memory
 benchmark running beside it throughout): 12 scenarios, pool 45.5 and 53.2 s, fresh
-LocalCluster 50.6 s (0.97x), fresh tcp:// 46.2 s (1.07x); WHOLE24.
+LocalCluster 50.6 s (0.97x), fresh tcp:// 46.2 s (1.07x); 24 scenarios at load 8.1 falling
+to 6.2: pool 41.4 and 39.6 s, LocalCluster 29.3 s (1.38x), tcp:// 26.4 s (1.53x), Dask's
+extra processes taking a larger share of the loaded cores (not an idle figure); a run whose
+load halved during it (15.3 -> 9.7) gave pools of 71.1 and 31.4 s and means nothing.
 
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --whole [--scenarios 24]
