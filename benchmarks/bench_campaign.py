@@ -72,7 +72,10 @@ benchmark running beside it throughout): 12 scenarios, pool 45.5 and 53.2 s, fre
 LocalCluster 50.6 s (0.97x), fresh tcp:// 46.2 s (1.07x); 24 scenarios at load 8.1 falling
 to 6.2: pool 41.4 and 39.6 s, LocalCluster 29.3 s (1.38x), tcp:// 26.4 s (1.53x), Dask's
 extra processes taking a larger share of the loaded cores (not an idle figure); a run whose
-load halved during it (15.3 -> 9.7) gave pools of 71.1 and 31.4 s and means nothing.
+load halved during it (15.3 -> 9.7) gave pools of 71.1 and 31.4 s (adjacent pairs: 1.12x
+LocalCluster, 0.98x tcp://); at load 4.9-6.5 (16:54): pools 23.9 and 33.4 s, LocalCluster
+22.5 s (1.06x the adjacent pool), tcp:// 34.2 s (0.98x). Every fresh cluster's whole campaign
+was >= 0.90x its adjacent pool.
 
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --whole [--scenarios 24]
