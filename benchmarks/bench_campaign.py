@@ -28,7 +28,8 @@ CLI does, samples the resident memory of the parent and of each worker (by pid) 
 row (:mod:`vtolftc.runners.campaign.memwatch`) and prints the parent's robust slope after the
 first quarter and, for the workers (each replaced after ``WORKER_SCENARIOS``), the largest
 growth in a worker's life and the slope of the largest worker's RSS, extrapolated to 2000
-scenarios (target of issue 24: < 50 MB).
+scenarios (target of issue 24: < 50 MB). It is ``bench_campaign_memory.py --backends pool``;
+that benchmark also measures every process of fresh Dask clusters (LocalCluster, tcp://).
 
 Targets (issue 24): >= 300 scenarios/min on 2 cores, overhead < 5 % of a scenario, Dask
 within 0.9x of the local pool; memory of a 2000-scenario campaign < 50 MB per process.
@@ -63,7 +64,21 @@ a core before and 7.9 % after (profiler, ticks and the nannies' system monitor p
 memory check every 1 s; alternated in one run at load 19-20). The breakdown:
 ``bench_campaign_dask.py``.
 
+``--whole`` instead times whole ``vtolftc campaign`` processes of the first ``--scenarios``
+(start-up, oracle, flights, Parquet, report): the local pool, a fresh LocalCluster, a fresh
+``tcp://`` cluster (its start not included), the pool again, and prints each Dask campaign's
+ratio to the two pools' mean. Round 11 (2026-12-02, load 16.9-17.8, the author's memory
+benchmark running beside it throughout): 12 scenarios, pool 45.5 and 53.2 s, fresh
+LocalCluster 50.6 s (0.97x), fresh tcp:// 46.2 s (1.07x); 24 scenarios at load 8.1 falling
+to 6.2: pool 41.4 and 39.6 s, LocalCluster 29.3 s (1.38x), tcp:// 26.4 s (1.53x), Dask's
+extra processes taking a larger share of the loaded cores (not an idle figure); a run whose
+load halved during it (15.3 -> 9.7) gave pools of 71.1 and 31.4 s (adjacent pairs: 1.12x
+LocalCluster, 0.98x tcp://); at load 4.9-6.5 (16:54): pools 23.9 and 33.4 s, LocalCluster
+22.5 s (1.06x the adjacent pool), tcp:// 34.2 s (0.98x). Every fresh cluster's whole campaign
+was >= 0.90x its adjacent pool.
+
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
+    .venv/bin/python benchmarks/bench_campaign.py --whole [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --memory 2000 [--duration 4]
 """
 
@@ -104,9 +119,15 @@ def main() -> None:
     ap.add_argument("--memory", type=int, default=0, metavar="N",
                     help="memory run: N short scenarios, RSS growth per process")
     ap.add_argument("--duration", type=float, default=4.0, help="memory run: s per scenario")
+    ap.add_argument("--whole", action="store_true",
+                    help="whole `vtolftc campaign` runs: pool, fresh LocalCluster, fresh "
+                         "tcp:// cluster, pool again")
     args = ap.parse_args()
     if args.memory:
         memory_run(args.memory, args.duration, args.jobs)
+        return
+    if args.whole:
+        whole_runs(args.scenarios, args.jobs)
         return
 
     from vtolftc.runners.campaign.execute import fly_scenario, run_local
@@ -320,65 +341,79 @@ def dask_runs(kind: str, scen: list[Any], jobs: int, t_oracle: float, pool_rate:
             client.close()
 
 
-def memory_spec(n: int, duration_s: float) -> str:
-    """A spec of at least ``n`` short scenarios: each lift rotor's loss at ceil(n / 24)
-    magnitudes, the three controllers, injected at half the duration."""
-    k = max(1, -(-n // 24))
-    mags = ", ".join(f"{0.02 + 0.6 * i / k:.5f}" for i in range(k))
-    return (f'[campaign]\nname = "memory"\nduration_s = {duration_s:g}\n'
-            f'controllers = ["gs-shif", "shif", "lqr"]\nphases = [{duration_s / 2:g}]\n'
-            '[[faults]]\nfamily = "rotor-loss"\ngenerate = "each"\n'
-            f'actuators = ["lift_rotors"]\nkinds = ["loss"]\nmagnitudes = [{mags}]\n')
+def whole_runs(n: int, jobs: int) -> None:
+    """Whole campaigns as a user runs them, each a fresh ``vtolftc campaign`` process timed
+    from start to exit (start-up, oracle, flights, Parquet, report): the local pool, then a
+    fresh LocalCluster's and a fresh ``tcp://`` cluster's (cluster start not included: the
+    clock starts once its workers have registered), then the pool again, so that a load
+    drifting during the run shows as the two pools' spread. Ratios: the mean pool wall time
+    over each Dask one (target >= 0.9x). An untimed campaign of 2 s flights first loads the
+    file and numba caches."""
+    spec = SPEC.replace('name = "bench"', f'name = "whole{n}"')
+    vtolftc = str(Path(sys.executable).parent / "vtolftc")
+    with tempfile.TemporaryDirectory() as d:
+        (Path(d) / "spec.toml").write_text(spec)
+        from vtolftc.runners.campaign.scenarios import expand
+        from vtolftc.runners.campaign.spec import parse_spec
+
+        m = len(expand(parse_spec(spec)))
+        if m > n:  # the first n scenarios: the spec's rotors cut down
+            rotors = ["rotor_1a", "rotor_1b", "rotor_2a", "rotor_2b", "rotor_3a", "rotor_3b",
+                      "rotor_4a", "rotor_4b"][: max(1, n // 3)]
+            spec = spec.replace('actuators = ["lift_rotors"]', f"actuators = {rotors!r}"
+                                .replace("'", '"'))
+            (Path(d) / "spec.toml").write_text(spec)
+        k = len(expand(parse_spec(spec)))
+        print(f"load average at start: {os.getloadavg()[0]:.2f}; whole campaigns of {k} "
+              f"scenarios of 60 s, {jobs} workers; {time.strftime('%H:%M:%S', time.gmtime())}"
+              " UTC")
+
+        def campaign(tag: str, *extra: str) -> float:
+            t = time.perf_counter()
+            subprocess.run([vtolftc, "campaign", str(Path(d) / "spec.toml"), "--out",
+                            str(Path(d) / tag), "--no-progress", *extra], check=True,
+                           stdout=subprocess.DEVNULL, timeout=3600)
+            wall = time.perf_counter() - t
+            print(f"  {tag}: {wall:.1f} s (load {os.getloadavg()[0]:.2f})", flush=True)
+            return wall
+
+        (Path(d) / "warm.toml").write_text(spec.replace("duration_s = 60.0", "duration_s = 2.0")
+                                           .replace('phases = ["cruise"]', "phases = [1.0]"))
+        subprocess.run([vtolftc, "campaign", str(Path(d) / "warm.toml"), "--out",  # caches
+                        str(Path(d) / "warm"), "--no-progress", "--jobs", str(jobs)],
+                       check=True, stdout=subprocess.DEVNULL, timeout=3600)
+        walls = {"pool": [campaign("pool-1", "--jobs", str(jobs))]}
+        for kind in ("LocalCluster", "tcp"):
+            with fresh_cluster(kind, jobs) as address:
+                from distributed import Client
+
+                with Client(address, set_as_default=False, timeout="60s") as c:
+                    c.wait_for_workers(jobs, timeout=300)
+                walls[kind] = [campaign(f"dask-{kind}", "--scheduler", address)]
+        walls["pool"].append(campaign("pool-2", "--jobs", str(jobs)))
+    pool = statistics.mean(walls["pool"])
+    for kind in ("LocalCluster", "tcp"):
+        w = walls[kind][0]
+        print(f"whole campaign, Dask fresh {kind} / pool: {pool / w:.2f}x (pool {pool:.1f} s, "
+              f"mean of {walls['pool'][0]:.1f} and {walls['pool'][1]:.1f}; Dask {w:.1f} s; "
+              "target >= 0.9x)")
+    print(f"load average at end: {os.getloadavg()[0]:.2f}; "
+          f"{time.strftime('%H:%M:%S', time.gmtime())} UTC")
 
 
 def memory_run(n: int, duration_s: float, jobs: int) -> None:
-    """Fly ``n`` short scenarios on the local pool and print the RSS growth per process."""
-    from vtolftc.runners.campaign.execute import WORKER_SCENARIOS, run_local
-    from vtolftc.runners.campaign.memwatch import RssWatch
-    from vtolftc.runners.campaign.results import PartWriter
+    """Fly ``n`` short scenarios on the local pool and print the RSS growth per process
+    (``bench_campaign_memory.py --backends pool``, which also measures the Dask clusters)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_campaign_memory import memory_spec, pool_run
+
     from vtolftc.runners.campaign.scenarios import expand
     from vtolftc.runners.campaign.spec import parse_spec
 
     scen = expand(parse_spec(memory_spec(n, duration_s)))[:n]
     print(f"load average at start: {os.getloadavg()[0]:.2f}; memory run: {len(scen)} "
           f"scenarios of {duration_s:g} s on {jobs} processes")
-    watch = RssWatch()
-    every = max(1, len(scen) // 500)
-    t = time.perf_counter()
-    with tempfile.TemporaryDirectory() as d:
-        w = PartWriter(Path(d))
-        done = 0
-        watch.sample(0)
-        for r in run_local(scen, jobs):
-            w.add(r)
-            done += 1
-            if done % every == 0 or done == len(scen):
-                watch.sample(done)
-        w.close()
-    wall = time.perf_counter() - t
-    print(f"{done} scenarios in {wall:.1f} s = {60.0 * done / wall:.1f} scenarios/min")
-    from vtolftc.runners.campaign.memwatch import robust_slope
-
-    mb = 2.0 ** 20
-    g = watch.growth(len(scen))[watch.parent]
-    slope = g["slope_b_per_scenario"]
-    print(f"  parent: RSS {g['rss_first_b'] / mb:.1f} -> {g['rss_last_b'] / mb:.1f} MB; "
-          f"robust slope {slope / 1024:+.2f} KB per scenario -> {slope * 2000 / mb:+.2f} MB "
-          "per 2000 (target < 50 MB)")
-    workers = {p: s for p, s in watch.samples.items() if p != watch.parent and len(s) >= 2}
-    life = [s[-1][1] - s[0][1] for s in workers.values()]
-    largest: dict[int, int] = {}
-    for s in workers.values():
-        for k, rss in s:
-            largest[k] = max(largest.get(k, 0), rss)
-    ks = sorted(k for k in largest if k >= len(scen) // 4)
-    wslope = robust_slope(ks, [largest[k] for k in ks])
-    print(f"  workers: {len(workers)} processes in all (each replaced after "
-          f"{WORKER_SCENARIOS} scenarios); RSS {min(s[0][1] for s in workers.values()) / mb:.1f}"
-          f"-{max(largest.values()) / mb:.1f} MB; largest growth in a worker's life "
-          f"{max(life) / mb:+.1f} MB; robust slope of the largest worker's RSS "
-          f"{wslope / 1024:+.2f} KB per scenario -> {wslope * 2000 / mb:+.2f} MB per 2000 "
-          "(target < 50 MB)")
+    pool_run(scen, jobs)
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 

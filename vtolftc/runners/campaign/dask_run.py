@@ -9,7 +9,10 @@ ticks (and its nanny's). ``vtolftc campaign``
 calls it before it computes the recoverability oracle, so a fresh cluster's workers import
 the flight code and load their kernels meanwhile, as the local pool's workers inherit them
 from the campaign process. :func:`vtolftc.runners.campaign.execute.run_dask` submits the
-scenarios in batches of :func:`dask_batch_size`. This module never imports the flight code.
+scenarios in batches of :func:`dask_batch_size`. :func:`cluster_pids` and
+:func:`cluster_holdings` say which processes make up a cluster and what Dask holds in them
+(the memory runs of ``benchmarks/bench_campaign_memory.py`` and the tests). This module never
+imports the flight code.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ from typing import Any
 __all__ = [
     "TASKS_PER_WORKER",
     "TASK_SIM_S",
+    "cluster_holdings",
+    "cluster_pids",
     "connect",
     "dask_batch_size",
     "prepare_workers",
@@ -103,3 +108,45 @@ def release_workers(client: Any) -> None:
 def _plugin_names(dask_scheduler: Any) -> tuple[list[str], list[str]]:
     """The worker and nanny plugins the scheduler holds (run on the scheduler)."""
     return list(dask_scheduler.worker_plugins), list(dask_scheduler.nanny_plugins)
+
+
+def cluster_pids(client: Any) -> dict[int, str]:
+    """The processes of ``client``'s cluster: ``{pid: role}``, the role ``"scheduler"``,
+    ``"nanny"`` or ``"worker"`` (joined by ``+`` where they share a process, as a
+    ``LocalCluster``'s scheduler and nannies share the process that started it, or the
+    nannies of one ``dask worker --nworkers N``)."""
+    import os
+
+    roles: dict[int, set[str]] = {}
+    roles.setdefault(int(client.run_on_scheduler(os.getpid)), set()).add("scheduler")
+    for role, nanny in (("worker", False), ("nanny", True)):
+        with contextlib.suppress(Exception):  # a cluster without nannies
+            for pid in client.run(os.getpid, nanny=nanny, on_error="ignore").values():
+                roles.setdefault(int(pid), set()).add(role)
+    return {pid: "+".join(sorted(r)) for pid, r in roles.items()}
+
+
+def _worker_holdings(dask_worker: Any) -> dict[str, int]:
+    """What a worker holds for its tasks (run on the worker)."""
+    st = dask_worker.state
+    return {"data": len(dask_worker.data), "tasks": len(st.tasks), "log": len(st.log),
+            "stimulus_log": len(st.stimulus_log)}
+
+
+def _scheduler_holdings(dask_scheduler: Any) -> dict[str, int]:
+    """What the scheduler holds for the tasks (run on the scheduler)."""
+    s = dask_scheduler
+    return {"tasks": len(s.tasks), "task_groups": len(s.task_groups),
+            "task_prefixes": len(s.task_prefixes), "transition_log": len(s.transition_log),
+            "computations": len(s.computations)}
+
+
+def cluster_holdings(client: Any) -> dict[str, dict[str, int]]:
+    """Dask's own bookkeeping of the campaign's tasks: per worker address, the results it
+    keeps (``data``), the tasks it knows and its state machine's logs; under
+    ``"scheduler"``, its tasks, task groups and prefixes, transition log and computations.
+    After a campaign whose futures were all released, ``data`` and ``tasks`` are 0
+    everywhere; the logs are bounded by ``distributed.admin.low-level-log-length``."""
+    out: dict[str, dict[str, int]] = dict(client.run(_worker_holdings))
+    out["scheduler"] = client.run_on_scheduler(_scheduler_holdings)
+    return out

@@ -4,15 +4,18 @@ A campaign must not grow with its length: issue 24 asks that a 2000-scenario cam
 the parent's and each worker's resident set by < 50 MB. :class:`RssWatch` samples the
 resident set size (``VmRSS`` of ``/proc/PID/status``, Linux) of the parent and of each of its
 child processes (the pool's workers, by pid) each time a row arrives, i.e. against the
-scenario count, never against the wall clock; :func:`robust_slope` (Theil-Sen: the median of
-the pairwise slopes, which a few jumps of the allocator's arenas do not move) gives the
-growth per scenario, and :meth:`RssWatch.growth` its extrapolation to a campaign length.
+scenario count, never against the wall clock (or, with ``pids``, of given processes: a
+Dask cluster's scheduler, nannies and workers, by pid, which need not descend from the
+client; :func:`vtolftc.runners.campaign.dask_run.cluster_pids` finds them);
+:func:`robust_slope` (Theil-Sen: the median of the pairwise slopes, which a few jumps of the
+allocator's arenas do not move) gives the growth per scenario, and :meth:`RssWatch.growth`
+its extrapolation to a campaign length.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -76,20 +79,26 @@ class RssWatch:
     """RSS samples (scenario count, bytes) of the parent and of each descendant by pid.
 
     Call :meth:`sample` with the number of scenarios finished so far (e.g. after each row);
-    children are looked up on every sample, so workers that start late are caught."""
+    children are looked up on every sample, so workers that start late are caught.
+    ``labels`` names processes (pid -> e.g. ``"dask worker"``) for :meth:`label`."""
 
     parent: int = field(default_factory=os.getpid)
     samples: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
+    labels: dict[int, str] = field(default_factory=dict)
 
-    def sample(self, n_done: int) -> None:
-        """Record the RSS of the parent and its live children at ``n_done`` scenarios."""
-        for pid in (self.parent, *child_pids(self.parent)):
+    def sample(self, n_done: int, pids: Iterable[int] | None = None) -> None:
+        """Record the RSS of the parent and its live children at ``n_done`` scenarios, or
+        with ``pids``, of the parent and those processes (no scan of ``/proc``)."""
+        others = child_pids(self.parent) if pids is None else pids
+        for pid in dict.fromkeys((self.parent, *others)):
             rss = rss_bytes(pid)
             if rss is not None:
                 self.samples.setdefault(pid, []).append((int(n_done), rss))
 
     def label(self, pid: int) -> str:
-        """``parent`` or ``worker PID``."""
+        """Its name in ``labels``, else ``parent`` or ``worker PID``."""
+        if pid in self.labels:
+            return f"{self.labels[pid]} {pid}"
         return "parent" if pid == self.parent else f"worker {pid}"
 
     def growth(self, scenarios: int, skip: float = 0.25) -> dict[int, dict[str, float]]:
