@@ -82,6 +82,9 @@ hundreds of iterations per start. At 5-15 % of a core (this session's share) the
 had not finished after 70 min wall; it was not re-measured.
 (e) with the new polish, the AC10 polish test from the stall point passes (<= 13.45, slycot
 checked; 18.8 s CPU, 386 s wall at load ~20) and the HE3 target test 24.7 s CPU (489 s wall).
+``_polish`` from HE3 start 0's record (0.82254 after 84 iterations, the start that is best of
+the five without the polish): 0.80696 (slycot 0.80696), 1010 iterations in all, 72 s CPU
+(970 s wall at load ~20): the BFGS stage from K = 0 gives it, the restarts after it no more.
 """
 
 from __future__ import annotations
