@@ -33,7 +33,7 @@ AC8      2.00501    2.00501       2.00501         2.00501         5/5         61
 AC15     15.16871   15.16871      15.16871        15.16871        5/5         142 s / 161 s
 HE1      0.15391    0.15391       0.15391         0.15391         5/5         10 s / 16 s
 BDT1     0.26621    0.26621       0.26621         0.26621         5/5         34 s / 39 s
-AC10     <= 13.45   14.554        13.23651 (a)    see (c)         5/5         3221 s / (c)
+AC10     <= 13.45   14.554        13.23651 (a)    13.23651 (c)    5/5         3221 s / (c)
 HE3      <= 0.8157  0.82254 (b)   0.81716 (b)     0.80696 (b)     see (b)     see (b)
 HE4      22.83817   see (d)       see (d)         see (d)         see (d)     see (d)
 =======  =========  ============  ==============  ==============  ==========  ===============
@@ -70,12 +70,12 @@ design. The 5-start polished run
 of HE3 was not measured (start 0 alone takes 1000 s wall at this load, each random start as
 much); the polish from start 0's record (``_polish``: BFGS from K = 0, then the restarts):
 see (e).
-(c) AC10 with the new polish: the 5-start run was not measured in this session (the old
-polish's took 54 min wall at this load; the starts are the same, only the polish differs).
-The new polish's
-first stage, BFGS from start 0's stabilised K = 0 on a 55-state loop, costs up to 2000
-iterations; from the stall point 14.554 BFGS alone reaches 13.23652 (slycot) in 541
-iterations, 330 s wall at load 22. The slow test from the stall point
+(c) AC10 with the new polish: 13.23651 (slycot 13.23651; 13.236510 against the old polish's
+13.236515), 5/5 stabilising, measured in two parts: the five starts are the new polish's too
+(``start_jobs`` is unchanged: 14.554, 18.231, 18.448, 20.588, 25.874 in (a)), and ``_polish``
+of the best one's record (start 0, K = 0 -> 14.554) takes 324 iterations in all, 17.8 s CPU
+(70 s wall at load 5). From the stall point alone, BFGS reaches 13.23652 in 541 iterations
+(330 s wall at load 22); the slow test from there
 (``test_ac10_polish_reaches_the_published_value_from_where_the_starts_stall``) passes with
 the new polish: see (e).
 (d) HE4 (8 states, 8 disturbance inputs, 12 outputs, 24 gains) is slow because each trust-region
