@@ -73,7 +73,7 @@ see (e).
 (c) AC10 with the new polish: 13.23651 (slycot 13.23651; 13.236510 against the old polish's
 13.236515), 5/5 stabilising, measured in two parts: the five starts are the new polish's too
 (``start_jobs`` is unchanged: 14.554, 18.231, 18.448, 20.588, 25.874 in (a)), and ``_polish``
-of the best one's record (start 0, K = 0 -> 14.554) takes 324 iterations in all, 17.8 s CPU
+of the best one's record (start 0, K = 0 -> 14.554) takes 240 iterations, 17.8 s CPU
 (70 s wall at load 5). From the stall point alone, BFGS reaches 13.23652 in 541 iterations
 (330 s wall at load 22); the slow test from there
 (``test_ac10_polish_reaches_the_published_value_from_where_the_starts_stall``) passes with
