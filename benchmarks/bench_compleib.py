@@ -35,7 +35,7 @@ HE1      0.15391    0.15391       0.15391         0.15391         5/5         10
 BDT1     0.26621    0.26621       0.26621         0.26621         5/5         34 s / 39 s
 AC10     <= 13.45   14.554        13.23651 (a)    13.23651 (c)    5/5         3221 s / (c)
 HE3      <= 0.8157  0.82254 (b)   0.81716 (b)     0.80696 (b)     see (b)     see (b)
-HE4      22.83817   see (d)       see (d)         see (d)         see (d)     see (d)
+HE4      22.83817   22.83817      22.83817        see (d)         5/5         4248 s / (d)
 =======  =========  ============  ==============  ==============  ==========  ===============
 
 The "new" column of the eight quick problems is ``bench_compleib.py AC2 AC4 AC7 HE1 BDT1 AC6
@@ -83,8 +83,11 @@ iteration costs about 1.05 s of CPU (cProfile of start 0, 3 iterations: 3.2 s CP
 SLSQP's Fortran (24 + 1 variables against up to 40 frequencies x 12 x 8 constraints), 38 % in
 the central differences of the channel (48 realisations per point: an 8-input channel cannot
 use the compiled single-input kernel nor ``realize_batch``); to convergence that is some
-hundreds of iterations per start. At 5-15 % of a core (this session's share) the 5-start run
-had not finished after 70 min wall; it was not re-measured.
+hundreds of iterations per start. The 5-start run with the old polish (this session, 4248 s
+wall at load 1-28, 13-14 min of CPU): starts 24.14511 (560 iterations), 22.83817 (398),
+22.83817 (303), 22.83817 (477), 24.12702 (561), all stabilising; best 22.83817 (slycot
+22.83817), the reference; the polish found nothing strictly better. The new polish (same
+starts, keeps only a strictly better point) was not run on HE4: <= 22.83817 by construction.
 (e) with the new polish, the AC10 polish test from the stall point passes (<= 13.45, slycot
 checked; 18.8 s CPU, 386 s wall at load ~20) and the HE3 target test 24.7 s CPU (489 s wall).
 ``_polish`` from HE3 start 0's record (0.82254 after 84 iterations, the start that is best of
