@@ -237,6 +237,32 @@ def disturbance_loop(G: object, K: StateSpaceData) -> StateSpaceData:
     A, B, C, D : ndarray
         d [N m] -> angle [rad], states [plant; controller].
     """
+    A, (_, Bg, Cg), (Ak, _, _, _) = feedback_state_matrix(G, K)
+    nk = Ak.shape[0]
+    B = np.vstack([Bg, np.zeros((nk, 1))])
+    C = np.hstack([Cg[[1], :], np.zeros((1, nk))])
+    return A, B, C, np.zeros((1, 1))
+
+
+def feedback_state_matrix(G: object, K: StateSpaceData) -> tuple[
+        NDArray[np.float64], tuple[NDArray[np.float64], ...], tuple[NDArray[np.float64], ...]]:
+    """The state matrix of the plant G in negative feedback u = K y (sign in K), states
+    [plant; controller], with the plant's (A, B, C) and the controller's (A, B, C, D).
+
+    Parameters
+    ----------
+    G : state-space system
+        The plant, moment [N m] -> [rate rad/s; angle rad], strictly proper.
+    K : tuple of ndarray
+        The feedback [rate; angle] -> moment.
+
+    Returns
+    -------
+    A : ndarray
+        The closed loop's state matrix.
+    plant, controller : tuple of ndarray
+        (Ag, Bg, Cg) and (Ak, Bk, Ck, Dk), as arrays.
+    """
     Ag, Bg, Cg, Dg = as_state_space(G)
     if np.any(Dg != 0):
         raise ValueError("the plant must be strictly proper")
@@ -247,9 +273,7 @@ def disturbance_loop(G: object, K: StateSpaceData) -> StateSpaceData:
     A[:ng, ng:] = Bg @ Ck
     A[ng:, :ng] = Bk @ Cg
     A[ng:, ng:] = Ak
-    B = np.vstack([Bg, np.zeros((nk, 1))])
-    C = np.hstack([Cg[[1], :], np.zeros((1, nk))])
-    return A, B, C, np.zeros((1, 1))
+    return A, (Ag, Bg, Cg), (Ak, Bk, Ck, Dk)
 
 
 def step_ise(sys: StateSpaceData, d: float, horizon_s: float) -> float:

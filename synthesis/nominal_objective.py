@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vtolftc.airframe.loader import Airframe
-from vtolftc.synthesis.fault_objective import step_ise
+from vtolftc.synthesis.fault_objective import feedback_state_matrix, step_ise
 from vtolftc.synthesis.hinfnorm import StateSpaceData, as_state_space
 from vtolftc.synthesis.models import Axis
 
@@ -88,16 +88,8 @@ def reference_loop(G: object, K: StateSpaceData) -> StateSpaceData:
     A, B, C, D : ndarray
         r [rad] -> e [rad], states [plant; controller].
     """
-    Ag, Bg, Cg, Dg = as_state_space(G)
-    if np.any(Dg != 0):
-        raise ValueError("the plant must be strictly proper")
-    Ak, Bk, Ck, Dk = (np.asarray(m, float) for m in K)
-    ng, nk = Ag.shape[0], Ak.shape[0]
-    A = np.zeros((ng + nk, ng + nk))
-    A[:ng, :ng] = Ag + Bg @ Dk @ Cg
-    A[:ng, ng:] = Bg @ Ck
-    A[ng:, :ng] = Bk @ Cg
-    A[ng:, ng:] = Ak
+    A, (_, Bg, Cg), (Ak, Bk, _, Dk) = feedback_state_matrix(G, K)
+    nk = Ak.shape[0]
     e2 = np.array([[0.0], [1.0]])                    # r enters the angle input with a minus
     B = np.vstack([-Bg @ Dk @ e2, -Bk @ e2])
     C = np.hstack([-Cg[[1], :], np.zeros((1, nk))])
