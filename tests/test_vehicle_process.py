@@ -357,3 +357,35 @@ def test_truth_log_writes_what_savetxt_writes(tmp_path):
     np.savetxt(want, np.vstack(rows), delimiter=",", fmt="%.9g")
     lines = (tmp_path / "vehicle_truth.csv").read_text().splitlines(keepends=True)
     assert "".join(lines[1:]) == want.getvalue()
+
+
+_WARM_SCRIPT = """
+import json, types
+import numpy as np
+from vtolftc.airframe.loader import load_airframe
+from vtolftc.firmware_sim.autopilot.warmup import compiled_specialisations, new_specialisations
+from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.firmware_sim.vehicle.process import VehicleProcess
+
+af = load_airframe()
+VehicleProcess.warm_up(types.SimpleNamespace(airframe=af))
+before = compiled_specialisations("vtolftc.firmware_sim.vehicle")
+v = Vehicle(af)
+u = np.zeros(af.n_actuators)
+u[:8] = 0.55
+for _ in range(25):                 # control steps as the process flies them
+    v.step(u, 4)
+    v.sensors()
+print(json.dumps(new_specialisations(before, compiled_specialisations(
+    "vtolftc.firmware_sim.vehicle"))))
+"""
+
+
+def test_warm_up_compiles_every_kernel_a_control_step_flies():
+    """A fresh interpreter: after the vehicle process's warm-up, flying control steps as the
+    process does loads or compiles no further numba specialisation (on a fresh install one
+    would compile for seconds inside the first real-time steps, and the autopilot's HIL-loss
+    failsafe would trip before take-off)."""
+    out = subprocess.run([sys.executable, "-c", _WARM_SCRIPT], capture_output=True, text=True,
+                         timeout=600, check=True)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == {}
