@@ -288,11 +288,8 @@ class VehicleProcess:
         vehicle before the autopilot is pinned, so that a real-time run does not stall at its
         first step on a fresh install."""
         v = Vehicle(self.airframe)
-        n = CONTROL_PERIOD_USEC // v.dt_usec
-        # two control steps: the first packs the aerodynamic tables (the general path), the
-        # second takes the one-call path every later control step flies (``_take_and_step``)
-        v.step(np.zeros(self.airframe.n_actuators), n)
-        v.step(np.zeros(self.airframe.n_actuators), n)
+        for _ in range(2):  # the 1st packs the aero tables, the 2nd flies _take_and_step
+            v.step(np.zeros(self.airframe.n_actuators), CONTROL_PERIOD_USEC // v.dt_usec)
         v.sensors()
 
     def _apply_due(self) -> None:
