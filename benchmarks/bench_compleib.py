@@ -35,7 +35,7 @@ HE1      0.15391    0.15391       0.15391         0.15391         5/5         10
 BDT1     0.26621    0.26621       0.26621         0.26621         5/5         34 s / 39 s
 AC10     <= 13.45   14.554        13.23651 (a)    13.23651 (c)    5/5         3221 s / (c)
 HE3      <= 0.8157  0.82254 (b)   0.81716 (b)     0.80696 (b)     see (b)     see (b)
-HE4      22.83817   22.83817      22.83817        see (d)         5/5         4248 s / (d)
+HE4      22.83817   22.83817      22.83817        22.83817 (d)    5/5         4248 s / 1269 s
 =======  =========  ============  ==============  ==============  ==========  ===============
 
 The "new" column of the eight quick problems is ``bench_compleib.py AC2 AC4 AC7 HE1 BDT1 AC6
@@ -87,7 +87,11 @@ hundreds of iterations per start. The 5-start run with the old polish (this sess
 wall at load 1-28, 13-14 min of CPU): starts 24.14511 (560 iterations), 22.83817 (398),
 22.83817 (303), 22.83817 (477), 24.12702 (561), all stabilising; best 22.83817 (slycot
 22.83817), the reference; the polish found nothing strictly better. The new polish (same
-starts, keeps only a strictly better point) was not run on HE4: <= 22.83817 by construction.
+starts, keeps only a strictly better point), session 12 (22:19-22:40 UTC 2026-12-02, nice 19
+beside four other jobs, load 7-10; 1268.5 s wall): starts 24.14511 (560 iterations),
+22.83817 (1416 with the polish's BFGS and restarts: "polished from 22.8382 to 22.8382"),
+22.83817 (303), 22.83817 (477), 24.12702 (561), 5/5 stabilising; best 22.83817 (slycot
+22.83817), equal to the reference: no regression, and no better point either.
 (e) with the new polish, the AC10 polish test from the stall point passes (<= 13.45, slycot
 checked; 18.8 s CPU, 386 s wall at load ~20) and the HE3 target test 24.7 s CPU (489 s wall).
 ``_polish`` from HE3 start 0's record (0.82254 after 84 iterations, the start that is best of
