@@ -3,20 +3,25 @@
 Flies the paper's cases 1 and 2 in-process with gain sets that differ only in yaw: the
 surface2 GS-SHIF (``firmware_sim/autopilot/gains/surface2/gs-shif.json``) with its yaw gains
 replaced by the constant yaw gains of the paper, shipped robust, surface and surface2 SHIFs,
-and scaled (ki_rate, kp_angle, kp_rate with kd_rate, all together); and two cross sets (the
-paper SHIF's roll and pitch with surface2's GS-SHIF yaw, and surface2's roll and pitch with
-the paper SHIF's yaw) that show where the paper's flown yaw error comes from. Prints, per
-case, the predicted yaw RMSE (:func:`~vtolftc.synthesis.fault_objective.predicted_rmse` at
+and scaled (ki_rate, kp_angle, kp_rate with kd_rate, all together); and a cross set (the
+paper SHIF's roll and pitch with surface2's GS-SHIF yaw; with "yaw of paper SHIF", surface2's
+roll and pitch with the paper SHIF's yaw, it shows where the paper's flown yaw error comes
+from). Prints, per
+flight, the predicted yaw RMSE, single-axis
+(:func:`~vtolftc.synthesis.fault_objective.predicted_rmse`) and with the roll-sideslip-yaw
+coupling (:func:`~vtolftc.synthesis.lateral_objective.lateral_yaw_rmse`), each at
 :data:`~vtolftc.synthesis.fault_objective.CASE_AIRSPEEDS` and at
-:data:`~vtolftc.synthesis.fault_objective.FLOWN_CASE_AIRSPEEDS`) against the flown one,
-Spearman's rank correlation over the yaw-only sets, the share of the squared yaw error per
-time window and the flown airspeed after the fault; writes
+:data:`~vtolftc.synthesis.fault_objective.FLOWN_CASE_AIRSPEEDS`, against the flown one;
+Spearman's rank correlation over the yaw-only sets per case and over every flight (with the
+14 flights of the 7 controllers of ``docs/ds1-surfaces/results.json``); the share of the
+squared yaw error per time window and the flown airspeed after the fault go to the file;
+writes
 ``docs/ds1-surfaces/surface2/yaw.json``::
 
     python benchmarks/yaw_ranking.py [--jobs 2]
 
-Each flight takes ~1 s CPU once numba's cache is warm (40 s wall for the 28 flights, 2
-workers, load ~5).
+Each flight takes ~1 s CPU once numba's cache is warm (40 s wall for the 26 flights, 2
+workers, load ~7).
 """
 
 from __future__ import annotations
@@ -95,9 +100,6 @@ def gain_sets(tmp: Path) -> dict[str, tuple[str, bool]]:
             cross["axes"][ax][k] = [paper["axes"][ax][k][0]] * len(
                 cross["airspeed_breakpoints_m_s"])
     sets["paper SHIF roll/pitch, surface2 GS-SHIF yaw"] = (write("cross", cross), False)
-    psh = copy.deepcopy(paper)
-    psh["controller"] = base.get("controller", "gs-shif")
-    sets["paper SHIF"] = (write("paper", psh), False)
     return sets
 
 
@@ -141,8 +143,16 @@ def fly(args: tuple[str, str, int]) -> dict[str, Any]:
                              for x in (22.0, 22.5, 23.5, 24.5, 25.5)}}
 
 
-def predict(gdir: str, case: int) -> dict[str, float]:
-    """Predicted yaw RMSE [deg] at both airspeed sets."""
+#: The controllers of ``docs/ds1-surfaces/results.json`` (flown with the same code) and
+#: their gain files.
+EARLIER = {"robust GS-SHIF": "gs-shif.json", "robust SHIF": "shif.json", "LQR": "lqr.json",
+           "paper GS-SHIF": "paper/gs-shif.json", "paper SHIF": "paper/shif.json",
+           "surface GS-SHIF": "surface/gs-shif.json", "surface SHIF": "surface/shif.json"}
+
+
+def predict(gfile: str, case: int) -> dict[str, float]:
+    """Predicted yaw RMSE [deg]: single-axis (fault_objective) and roll-sideslip-yaw
+    (lateral_objective), each at the design and at the flown airspeeds."""
     from vtolftc.airframe.loader import load_airframe
     from vtolftc.synthesis.fault_objective import (
         CASE_AIRSPEEDS,
@@ -151,11 +161,31 @@ def predict(gdir: str, case: int) -> dict[str, float]:
         paper_cases,
         predicted_rmse,
     )
+    from vtolftc.synthesis.lateral_objective import lateral_yaw_rmse
 
     af = load_airframe()
-    ctl = controller_from_document(_doc(Path(gdir) / "gs-shif.json"), "yaw")
-    return {label: math.degrees(predicted_rmse(af, "yaw", ctl, paper_cases(v)[str(case)]))
-            for label, v in (("design", CASE_AIRSPEEDS), ("flown", FLOWN_CASE_AIRSPEEDS))}
+    doc = _doc(Path(gfile))
+    yaw = controller_from_document(doc, "yaw")
+    roll = controller_from_document(doc, "roll")
+    out = {}
+    for label, v in (("design", CASE_AIRSPEEDS), ("flown", FLOWN_CASE_AIRSPEEDS)):
+        c = paper_cases(v)[str(case)]
+        out[f"single {label}"] = math.degrees(predicted_rmse(af, "yaw", yaw, c))
+        out[f"lateral {label}"] = math.degrees(lateral_yaw_rmse(af, roll, yaw, c))
+    return out
+
+
+def _spearman(rows: list[dict[str, Any]], key: str) -> dict[str, Any]:
+    """Spearman's rho of predicted (``key``) against flown yaw RMSE, all and finite only
+    (a loop the linear model calls unstable predicts inf: ranked worst in "all")."""
+    from scipy.stats import spearmanr
+
+    pred = [r["pred_yaw_deg"][key] for r in rows]
+    flown = [r["rmse_yaw_deg"] for r in rows]
+    fin = [i for i, p in enumerate(pred) if math.isfinite(p)]
+    return {"all": float(spearmanr(pred, flown)[0]),
+            "finite": float(spearmanr([pred[i] for i in fin], [flown[i] for i in fin])[0]),
+            "n": len(rows), "n_finite": len(fin)}
 
 
 def _finite(x: Any) -> Any:
@@ -171,8 +201,6 @@ def _finite(x: Any) -> Any:
 
 def main(argv: list[str] | None = None) -> int:
     """Fly, predict, rank, print and write ``yaw.json``; returns the exit status."""
-    from scipy.stats import spearmanr
-
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=2)
     a = ap.parse_args(argv)
@@ -185,25 +213,28 @@ def main(argv: list[str] | None = None) -> int:
         with ProcessPoolExecutor(a.jobs) as ex:
             rows = list(ex.map(fly, jobs))
         for r in rows:
-            r["pred_yaw_deg"] = predict(sets[r["set"]][0], r["case"])
+            r["pred_yaw_deg"] = predict(str(Path(sets[r["set"]][0]) / "gs-shif.json"),
+                                        r["case"])
             r["yaw_only"] = sets[r["set"]][1]
+    earlier = _doc(ROOT / "docs" / "ds1-surfaces" / "results.json")["rows"]
+    for e in earlier:
+        rows.append({"set": e["controller"], "case": int(e["case"]),
+                     "rmse_roll_deg": e["rmse_roll_deg"], "rmse_yaw_deg": e["rmse_yaw_deg"],
+                     "source": "docs/ds1-surfaces/results.json", "yaw_only": False,
+                     "pred_yaw_deg": predict(str(GAINS / EARLIER[e["controller"]]),
+                                             int(e["case"]))})
+    keys = ("single design", "single flown", "lateral design", "lateral flown")
     out: dict[str, Any] = {"rows": rows, "spearman": {}}
     for c in (1, 2):
-        rs = [r for r in rows if r["case"] == c and r["yaw_only"]]
-        flown = [r["rmse_yaw_deg"] for r in rs]
-        for label in ("design", "flown"):
-            pred = [r["pred_yaw_deg"][label] for r in rs]
-            fin = [i for i, p in enumerate(pred) if math.isfinite(p)]
-            out["spearman"][f"case {c} {label} airspeeds"] = {
-                "all": float(spearmanr(pred, flown)[0]),
-                "finite": float(spearmanr([pred[i] for i in fin], [flown[i] for i in fin])[0]),
-                "n": len(rs), "n_finite": len(fin)}
+        yo = [r for r in rows if r["case"] == c and r["yaw_only"]]
+        for k in keys:
+            out["spearman"][f"case {c}, yaw-only sets, {k}"] = _spearman(yo, k)
+    for k in keys:
+        out["spearman"][f"every flight, {k}"] = _spearman(rows, k)
     for r in rows:
         p = r["pred_yaw_deg"]
-        early = r["yaw_share"]["22-23 s"] + r["yaw_share"]["23-24 s"]
         print(f"case {r['case']} {r['set']:45s} flown yaw {r['rmse_yaw_deg']:.3f} roll "
-              f"{r['rmse_roll_deg']:.3f} pred design {p['design']:.3f} flown-V "
-              f"{p['flown']:.3f}  22-24 s share {early:.2f}")
+              f"{r['rmse_roll_deg']:.3f} pred " + " ".join(f"{p[k]:.3f}" for k in keys))
     print(json.dumps(out["spearman"], indent=1))
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps(_finite(out), indent=1) + "\n", encoding="utf-8")
