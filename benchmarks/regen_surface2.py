@@ -6,6 +6,8 @@
    on J = sqrt(RMSE_fault^2 + RMSE_nominal^2) + rho (cap violations + margin violations)
    (:func:`vtolftc.synthesis.fault_surfaces.design_fault_surfaces` with ``margins``,
    ``nominal``, ``lazy``, ``max_degree``; caps and start from the shipped robust SHIF).
+   Yaw: the fault term at the flown airspeeds (``FLOWN_CASE_AIRSPEEDS``) and SHIF started
+   also from :data:`YAW_START_SCALES` (:func:`design_axis`; README "Yaw").
    Writes ``gs-shif.json``, ``shif.json``, ``surfaces.json`` and ``lqr.json`` (the shipped
    LQR copied).
 2. Flies the paper's cases 1 and 2 with that GS-SHIF and SHIF (``--no-fly`` skips); LQR's
