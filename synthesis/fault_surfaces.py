@@ -67,6 +67,7 @@ from vtolftc.synthesis.fault_objective import (
 )
 from vtolftc.synthesis.hinfnorm import as_state_space, hinf_norm
 from vtolftc.synthesis.lazy_simplex import lazy_nelder_mead
+from vtolftc.synthesis.loops import PARAM_NAMES
 from vtolftc.synthesis.margin_constraints import MarginConstraints
 from vtolftc.synthesis.models import Axis
 from vtolftc.synthesis.nominal_objective import (
@@ -393,6 +394,7 @@ def design_fault_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
                           reference: Mapping[str, float] | None = None,
                           margins: bool = False, nominal: bool = False, lazy: bool = False,
                           max_degree: int | None = None, degree_gain: float = 0.01,
+                          constant_starts: Sequence[Mapping[str, float]] = (),
                           ) -> FaultSurfaceDesign:
     """H-infinity SHIF (the caps and the start), then SHIF and GS-SHIF on J.
 
@@ -441,6 +443,11 @@ def design_fault_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
         ``surface.basis.degree``; ``degree_J`` records J per degree tried.
     degree_gain : float
         The relative decrease of J a higher degree must bring.
+    constant_starts : sequence of mapping of str to float, optional
+        Further starts of the SHIF stage (P-PID gains, :data:`~vtolftc.synthesis.loops.
+        PARAM_NAMES`), each minimised with the same budget after the reference's; SHIF is
+        the lowest J of all (a local simplex started where the constraints fail can stall
+        there: a start inside them lets SHIF meet what GS-SHIF meets).
 
     Returns
     -------
@@ -476,7 +483,14 @@ def design_fault_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
         return FaultObjective(sp, af, axis, caps, cs, margins=mc, nominal_steps=steps)
 
     f0 = objective(sp0)
-    th0, _, n0 = minimise(f0, th_ref, max_evals)
+    th0, J0, n0 = minimise(f0, th_ref, max_evals)
+    for g in constant_starts:
+        th_s = np.clip(np.array([float(g[k]) for k in PARAM_NAMES]), sp0.problem.lower,
+                       sp0.problem.upper)
+        th_k, J_k, n_k = minimise(f0, th_s, max_evals)
+        n0 += n_k
+        if J_k < J0:
+            th0, J0 = th_k, J_k
     const = sp0.surface(th0)
     t2 = time.perf_counter()
     evals = {"constant": n0}

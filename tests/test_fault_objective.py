@@ -82,3 +82,38 @@ def test_predicted_rmse_ranks_a_loop_without_integral_action_last() -> None:
     no_int = dict(GAINS, ki_rate=1e-6)
     bad = predicted_rmse(af, "roll", lambda v: ppid_controller(no_int), PAPER_CASES["1"])
     assert 0.0 < good < bad
+
+
+@pytest.mark.slow
+def test_flown_case_airspeeds_are_the_flights_airspeeds_after_the_fault() -> None:
+    """FLOWN_CASE_AIRSPEEDS against the in-process flights of case 1 and 2 (shipped robust
+    SHIF): the airspeed at 22.5, 23.5, 24.5 and 25.5 s, within 0.4 m/s; and the fault acts
+    below the first of them (at 22.0 s, under 2 m/s)."""
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
+    from vtolftc.synthesis.fault_objective import FLOWN_CASE_AIRSPEEDS, paper_cases
+
+    class Airspeeds:
+        def __init__(self) -> None:
+            self.rows: list[tuple[float, float]] = []
+
+        def on_start(self, info: dict) -> None:
+            pass
+
+        def on_event(self, t: int, kind: str, text: str) -> None:
+            pass
+
+        def on_finish(self, m: dict) -> None:
+            pass
+
+        def on_sample(self, s) -> None:  # type: ignore[no-untyped-def]
+            self.rows.append((s.time_usec * 1e-6, s.status.airspeed_m_s))
+
+    for case in (1, 2):
+        obs = Airspeeds()
+        run_scenario(paper_scenario(case, duration_s=26.0), "shif", observers=[obs])
+        t, v = np.array(obs.rows).T
+        flown = np.interp([22.5, 23.5, 24.5, 25.5], t, v)
+        assert flown == pytest.approx(FLOWN_CASE_AIRSPEEDS, abs=0.4)
+        assert float(np.interp(22.0, t, v)) < 2.0
+        assert paper_cases(FLOWN_CASE_AIRSPEEDS)[str(case)].airspeeds_m_s == \
+            FLOWN_CASE_AIRSPEEDS

@@ -84,3 +84,32 @@ def test_a_worse_optimiser_result_keeps_the_constant_start(monkeypatch: pytest.M
     assert d.surface_J == d.constant_J
     for v in (4.0, 7.0, 10.0):
         assert d.surface.gains_at(v) == pytest.approx(d.constant.gains_at(v), rel=1e-12)
+
+
+def test_constant_starts_shif_is_the_lowest_J_of_all_starts(monkeypatch: pytest.MonkeyPatch,
+                                                            ) -> None:
+    """Every start of the SHIF stage is minimised (here: a minimiser that returns its start)
+    and SHIF is the one of lowest J, whatever the order of the starts."""
+    af = load_airframe()
+    grid = surface_grid(robust_points(af), 1)
+    f0 = _objective(af, grid, 0, 0.05)
+    names = ("kp_angle", "kp_rate", "ki_rate", "kd_rate", "tf_rate_s")
+    better = {**REF, "ki_rate": 1.1 * REF["ki_rate"]}
+    worse = {**REF, "ki_rate": 0.9 * REF["ki_rate"]}
+    J = {k: f0(np.array([g[n] for n in names]))
+         for k, g in (("ref", REF), ("better", better), ("worse", worse))}
+    assert J["better"] < J["ref"] < J["worse"]        # the premise of the test
+    starts: list[np.ndarray] = []
+
+    def stay(f, theta0, max_evals):  # type: ignore[no-untyped-def]
+        starts.append(np.array(theta0))
+        return theta0, f(theta0), 1
+
+    monkeypatch.setattr(fs, "_minimise", stay)
+    for extra, want in (([worse, better], better), ([worse], REF), ([better, worse], better)):
+        starts.clear()
+        d = design_fault_surfaces(RobustMethod(), af, "roll", grid, 1, max_evals=5,
+                                  reference=REF, constant_starts=extra)
+        assert len(starts) == 2 + len(extra)          # reference, extra starts, surface
+        assert d.constant.gains_at(5.0) == pytest.approx(want, rel=1e-12)
+        assert d.surface_J <= d.constant_J
