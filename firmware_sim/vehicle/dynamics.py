@@ -190,17 +190,23 @@ def perturb(pk: Packed, mass_scale: float = 1.0,
 
 
 @njit(cache=True, fastmath=False)
+def quat_to_dcm_entries(q0: float, q1: float, q2: float,
+                        q3: float) -> tuple[float, float, float, float, float, float, float,
+                                            float, float]:
+    """Rotation matrix body -> NED of a unit quaternion (w, x, y, z) as its nine entries
+    ``(R00, R01, R02, R10, R11, R12, R20, R21, R22)`` (row-major): no array to allocate."""
+    return (1.0 - 2.0 * (q2 * q2 + q3 * q3), 2.0 * (q1 * q2 - q0 * q3),
+            2.0 * (q1 * q3 + q0 * q2), 2.0 * (q1 * q2 + q0 * q3),
+            1.0 - 2.0 * (q1 * q1 + q3 * q3), 2.0 * (q2 * q3 - q0 * q1),
+            2.0 * (q1 * q3 - q0 * q2), 2.0 * (q2 * q3 + q0 * q1),
+            1.0 - 2.0 * (q1 * q1 + q2 * q2))
+
+
+@njit(cache=True, fastmath=False)
 def quat_to_dcm(q0: float, q1: float, q2: float, q3: float, R: np.ndarray) -> None:
     """Rotation matrix body -> NED of a unit quaternion (w, x, y, z), written into R."""
-    R[0, 0] = 1.0 - 2.0 * (q2 * q2 + q3 * q3)
-    R[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
-    R[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
-    R[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
-    R[1, 1] = 1.0 - 2.0 * (q1 * q1 + q3 * q3)
-    R[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
-    R[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
-    R[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
-    R[2, 2] = 1.0 - 2.0 * (q1 * q1 + q2 * q2)
+    (R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2], R[2, 0], R[2, 1],
+     R[2, 2]) = quat_to_dcm_entries(q0, q1, q2, q3)
 
 
 @njit(cache=True)
@@ -276,16 +282,16 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
     na = atau.shape[0]
     q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
     p, q, r = x[10], x[11], x[12]
-    R = np.empty((3, 3))
-    quat_to_dcm(q0, q1, q2, q3, R)
+    # the rotation's entries as scalars (no 3x3 array allocated 17 times per control step)
+    R00, R01, R02, R10, R11, R12, R20, R21, R22 = quat_to_dcm_entries(q0, q1, q2, q3)
 
     # Air-relative velocity in body axes.
     vr0 = x[3] - wind[0]
     vr1 = x[4] - wind[1]
     vr2 = x[5] - wind[2]
-    ub = R[0, 0] * vr0 + R[1, 0] * vr1 + R[2, 0] * vr2
-    vb = R[0, 1] * vr0 + R[1, 1] * vr1 + R[2, 1] * vr2
-    wb = R[0, 2] * vr0 + R[1, 2] * vr1 + R[2, 2] * vr2
+    ub = R00 * vr0 + R10 * vr1 + R20 * vr2
+    vb = R01 * vr0 + R11 * vr1 + R21 * vr2
+    wb = R02 * vr0 + R12 * vr1 + R22 * vr2
     Va = math.sqrt(ub * ub + vb * vb + wb * wb)
 
     Fx = 0.0
@@ -396,15 +402,15 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
             gx = gear[i, 0]
             gy = gear[i, 1]
             gz = gear[i, 2]
-            pz = x[2] + R[2, 0] * gx + R[2, 1] * gy + R[2, 2] * gz
+            pz = x[2] + R20 * gx + R21 * gy + R22 * gz
             if pz > 0.0:
                 # Velocity of the contact point in NED: v + R (omega x r).
                 cx = q * gz - r * gy
                 cy = r * gx - p * gz
                 cz = p * gy - q * gx
-                pv0 = x[3] + R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz
-                pv1 = x[4] + R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
-                pv2 = x[5] + R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz
+                pv0 = x[3] + R00 * cx + R01 * cy + R02 * cz
+                pv1 = x[4] + R10 * cx + R11 * cy + R12 * cz
+                pv2 = x[5] + R20 * cx + R21 * cy + R22 * cz
                 normal = P[P_GK] * pz + P[P_GC] * pv2
                 if normal < 0.0:
                     normal = 0.0
@@ -417,9 +423,9 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
                     fn1 *= fmax / fh
                 fn2 = -normal
                 # To body axes.
-                fbx = R[0, 0] * fn0 + R[1, 0] * fn1 + R[2, 0] * fn2
-                fby = R[0, 1] * fn0 + R[1, 1] * fn1 + R[2, 1] * fn2
-                fbz = R[0, 2] * fn0 + R[1, 2] * fn1 + R[2, 2] * fn2
+                fbx = R00 * fn0 + R10 * fn1 + R20 * fn2
+                fby = R01 * fn0 + R11 * fn1 + R21 * fn2
+                fbz = R02 * fn0 + R12 * fn1 + R22 * fn2
                 Fx += fbx
                 Fy += fby
                 Fz += fbz
@@ -432,9 +438,9 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
     dx[0] = x[3]
     dx[1] = x[4]
     dx[2] = x[5]
-    dx[3] = (R[0, 0] * Fx + R[0, 1] * Fy + R[0, 2] * Fz) / m
-    dx[4] = (R[1, 0] * Fx + R[1, 1] * Fy + R[1, 2] * Fz) / m
-    dx[5] = (R[2, 0] * Fx + R[2, 1] * Fy + R[2, 2] * Fz) / m + gdown
+    dx[3] = (R00 * Fx + R01 * Fy + R02 * Fz) / m
+    dx[4] = (R10 * Fx + R11 * Fy + R12 * Fz) / m
+    dx[5] = (R20 * Fx + R21 * Fy + R22 * Fz) / m + gdown
     dx[6] = 0.5 * (-q1 * p - q2 * q - q3 * r)
     dx[7] = 0.5 * (q0 * p + q2 * r - q3 * q)
     dx[8] = 0.5 * (q0 * q - q1 * r + q3 * p)
