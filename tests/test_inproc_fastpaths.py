@@ -298,3 +298,69 @@ def test_a_replaced_allocate_or_update_is_still_the_one_called(ds1):
     ap.modes.set_mode(FlightMode.HOVER, "test")
     ap.step(nav(0.004, 10.0))
     assert calls == ["update", "allocate"]
+
+
+def test_derivatives_rotation_entries_against_numpy(ds1):
+    """The vehicle's derivatives with the rotation as nine scalars
+    (``quat_to_dcm_entries``, no array) against numpy and ``base.rotation.dcm`` on random
+    states with wind: the air-relative velocity in body axes (airspeed, alpha, beta), the
+    translational acceleration ``R F / m + g``, and the landing gear's contact forces and
+    moments (gravity, aerodynamics and propulsion off, gear points below the ground):
+    an entry of R read at the wrong place fails here."""
+    from vtolftc.base.rotation import dcm
+    from vtolftc.firmware_sim.vehicle import dynamics as dyn
+    from vtolftc.firmware_sim.vehicle.model import Vehicle
+
+    rng = np.random.default_rng(12)
+    veh = Vehicle(ds1, wind_ned_m_s=(3.0, -2.0, 0.5))
+    pk = veh.packed
+    P = pk.P
+    n_x = veh.x.size
+    contacts = 0
+    for k in range(300):
+        x = np.zeros(n_x)
+        x[0:3] = rng.normal(0.0, 5.0, 3)
+        x[3:6] = rng.normal(0.0, 8.0, 3)
+        q = rng.normal(0.0, 1.0, 4)
+        q = 0.1 * q + np.array([1.0, 0.0, 0.0, 0.0]) if k % 2 else q
+        x[6:10] = q / np.linalg.norm(q)
+        x[10:13] = rng.normal(0.0, 1.0, 3)
+        x[dyn.N_RIGID:] = rng.uniform(0.0, 1.0, n_x - dyn.N_RIGID)
+        ground = k % 3 == 0
+        if ground:
+            x[2] = 0.5  # below the ground: the gear points that reach it in contact
+            veh.physics = dyn.GROUND
+        else:
+            veh.physics = dyn.ALL_PHYSICS
+        dx, fm = veh.derivatives(x, np.zeros(n_x - dyn.N_RIGID))
+        R = dcm(x[6:10])
+        vb = R.T @ (x[3:6] - veh.wind)
+        Va = float(np.linalg.norm(vb))
+        assert fm[6] == pytest.approx(Va, rel=1e-12)
+        assert fm[7] == pytest.approx(np.arctan2(vb[2], vb[0]), abs=1e-12)
+        assert fm[8] == pytest.approx(np.arcsin(vb[1] / Va), abs=1e-12)
+        g = P[dyn.P_G] if veh.physics & dyn.GRAVITY else 0.0
+        np.testing.assert_allclose(dx[3:6], R @ fm[0:3] / P[dyn.P_MASS] + [0.0, 0.0, g],
+                                   rtol=1e-11, atol=1e-9)
+        np.testing.assert_array_equal(dx[0:3], x[3:6])
+        if ground:
+            w = x[10:13]
+            F = np.zeros(3)
+            Mo = np.zeros(3)
+            for r in pk.gear:
+                pz = x[2] + (R @ r)[2]
+                if pz <= 0.0:
+                    continue
+                contacts += 1
+                pv = x[3:6] + R @ np.cross(w, r)
+                normal = max(0.0, P[dyn.P_GK] * pz + P[dyn.P_GC] * pv[2])
+                fh = -P[dyn.P_GF] * pv[0:2]
+                nh = float(np.linalg.norm(fh))
+                if nh > P[dyn.P_GMU] * normal and nh > 0.0:
+                    fh *= P[dyn.P_GMU] * normal / nh
+                fb = R.T @ np.array([fh[0], fh[1], -normal])
+                F += fb
+                Mo += np.cross(r, fb)
+            np.testing.assert_allclose(fm[0:3], F, rtol=1e-11, atol=1e-8)
+            np.testing.assert_allclose(fm[3:6], Mo, rtol=1e-11, atol=1e-8)
+    assert contacts > 200
