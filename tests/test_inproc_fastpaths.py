@@ -364,3 +364,56 @@ def test_derivatives_rotation_entries_against_numpy(ds1):
             np.testing.assert_allclose(fm[0:3], F, rtol=1e-11, atol=1e-8)
             np.testing.assert_allclose(fm[3:6], Mo, rtol=1e-11, atol=1e-8)
     assert contacts > 200
+
+
+def test_vehicle_step_memo_equals_full_evaluation_bit_for_bit(ds1):
+    """The fused control step reusing the last step's final derivative evaluation
+    (``dynamics.step_n_memo``) flies what ``step_n_flat`` (every stage evaluated) flies, bit
+    for bit, over random commands, with the effectiveness, the wind, the physics switches
+    and the state changed between steps (each must invalidate the memo), through a fault
+    injection (the pending-fault path) and another airframe at the same state."""
+    from vtolftc.firmware_sim.vehicle import dynamics as dyn
+    from vtolftc.firmware_sim.vehicle import model as vm
+    from vtolftc.firmware_sim.vehicle.faults import case_faults
+
+    fast, ref = vm.Vehicle(ds1), vm.Vehicle(ds1)
+    fault = case_faults("1", ds1.actuator_names)[0]
+    rng = np.random.default_rng(5)
+    u_min = np.r_[np.zeros(10), -np.ones(5)]
+    hits = 0
+    for k in range(400):
+        cmds = rng.uniform(u_min, 1.0).astype(np.float32).astype(np.float64)
+        for v in (fast, ref):
+            if k == 60:
+                v.eff[3] = 0.7
+            elif k == 90:
+                v.wind[:] = (4.0, -1.0, 0.2)
+            elif k == 120:
+                v.physics = dyn.ALL_PHYSICS & ~dyn.AERODYNAMICS
+            elif k == 150:
+                v.physics = dyn.ALL_PHYSICS
+            elif k == 200:
+                s = v.state
+                s[3] += 1.0
+                v.set_state(s)
+            elif k == 250:  # another airframe, the state unchanged (a step of length 0)
+                v.packed = dyn.perturb(dyn.pack(ds1), 1.1)
+                v.step(None, 0)
+            elif k == 320:
+                v.inject(fault)  # pending to the end (no memo on that path)
+        fast_path = not fast._pending and fast._packed_args[0] is fast.packed
+        if fast_path:
+            hits += bool(dyn._memo_valid(fast._memo, fast.x, fast.eff, fast.wind,
+                                         fast.physics))
+        fast.step(cmds, 4)
+        if not fast_path:
+            ref.step(cmds, 4)  # (the same branch in both: no memo there)
+        else:  # every stage evaluated
+            assert vm._take_commands(cmds, ref.u)
+            pa = ref._packed_args
+            dyn.step_n_flat(ref.x, ref.u, ref.eff, ref.stuck, 4, ref.dt_usec * 1e-6, pa[1],
+                            pa[2], ref.wind, ref.physics, ref.fm)
+            ref.time_usec += 4 * ref.dt_usec
+        assert _bits(fast.x) == _bits(ref.x), k
+        assert _bits(fast.fm) == _bits(ref.fm), k
+    assert hits > 300  # the memo was used
