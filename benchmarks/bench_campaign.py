@@ -44,6 +44,17 @@ Second round (P-PID axes and LQR law one compiled call each): attitude update 11
 per step; whole flights ~0.92 of the first round's CPU time (old mean 2.13 s, new 1.96 s at
 load 9-11), ~31-41x on an idle core, ~62-82 scenarios/min on 2 cores before overhead.
 
+Branch inproc-12 (2026-12-02 22:43-22:46 UTC, ``--jobs 2 --scenarios 24 --no-dask``, main's
+tree then this branch's, load 7.1-8.9 on the 2 shared cores): warm 60 s flight 1.30 s
+(main) and 1.85 s (branch) wall, the load's doing; the load-robust figure, the CPU of every
+process of the campaign per scenario, 0.64 s (main) and 0.63 s (branch); local pool 29.8
+and 33.6 scenarios/min, overhead +3.1 % and +1.2 %. The branch's gain is in the physics
+kernel (10.99 -> 9.62 us per control step, same bits, ``bench_inproc.py``'s docstring),
+~4 % of a step, within this noise. At 0.63 s CPU per scenario the 2 cores give ~190
+scenarios/min at this load's CPU speed; 300/min needs 0.40 s per flight, i.e. the 26.7 us
+per control step of the in-process target (the pool adds only 1-3 %): see
+``bench_inproc.py`` for where the step's time goes and what would reach it.
+
 Round 10 (Dask on a fresh cluster; one run of ``--scenarios 24`` at 13:13-13:36 UTC 2026-12-02,
 load 17 rising to 32 on the 2 cores shared with 7 other engineers). The load moved the flight
 itself from 8.3 s (pool) to 12.1, 16.9 and 21.4 s (the Dask campaigns run after it), so the

@@ -105,6 +105,68 @@ whose every branch must be re-proved bit-identical. One trap measured on this ma
 CPython's bits (both call the C library), ``math.hypot`` differs in 1,129 of them (CPython
 3.11 computes it with its own algorithm), so the position hold's ``hypot`` would need a port
 of CPython's to stay bit-identical.
+
+Issue 24, branch inproc-12 (2026-12-02, 2 cores shared with 3-4 other engineers, load 4-10).
+
+Where a control step goes (py-spy, 2,000 samples/s, four 60 s flights of case 1 gs-shif,
+the samples of the flights only, a compiled kernel's time counted on its calling line;
+load ~4-6), share of the step: ``Vehicle.step`` 29.6 % (its RK4 kernel 28.3 %);
+``OutputStage.allocate`` 24.0 %, of which ``allocate_trusted`` 16.7 % (the active-set
+kernel's call 12.1 %, ``B @ u`` 2.7 %) and the output stage's own Python 7.3 %;
+``OuterLoops.update`` 15.0 % (``_outer_mc`` 4.6, ``_outer_fw`` 4.1, ``_position_hold``
+2.4, the altitude holds 2.2, ``pusher_max_force`` 1.1, ``aero_estimate`` 0.8, degraded
+lift 0.7); ``AttitudeStage.update`` 6.6 % (the P-PID kernel's call 5.0 %); metrics
+``add_step`` 4.4 %; ``HilRoundTrip`` 4.3 %; ``Commander.update_mode`` 3.7 % (with
+``ModeMachine.update`` 0.6, ``Navigator.update`` 1.0); ``StateEstimate.update`` 3.7 %;
+``wire_commands`` 2.2 %; ``metrics_inputs`` 0.8 %; the runner loop's own lines ~3 %. The
+compiled numerical work (physics, QP, P-PID, metrics, HIL codec kernels) is about half of
+the step, the Python around it the other half, spread over ~20 functions none above 7 %.
+This run's per-stage wall time (load 8.6, 60 s, 68.9 us per step): physics 21.2 us,
+autopilot 36.6, metrics 5.9, HIL codec 3.6, runner 0.7.
+
+Built (every flight bit-identical, ``command_digest.py`` dbd91a71..., 121a7434...,
+e937b801... after each commit; tests in ``tests/test_inproc_fastpaths.py``):
+
+- ``dynamics.derivatives`` reads the rotation as nine scalars (``quat_to_dcm_entries``)
+  instead of allocating a 3x3 array at each of its 17 evaluations per control step;
+- the first RK4 stage of a control step takes the rigid-body rows of the previous step's
+  final evaluation (the one that leaves ``fm`` on the final state; those rows do not depend
+  on the commands) and computes only the actuator rows (``actuator_rates``): 16
+  evaluations per step instead of 17 (``step_n_memo``; the memo is used only when the
+  state, effectiveness, wind and physics switches are bit for bit those of that
+  evaluation, cleared on a new airframe; hit on 9,996 of 9,998 fused steps of case 1).
+
+Measured: the physics kernel on the 14,998 commands of one recorded 60 s case-1 flight,
+main's kernel and this branch's in one process (copies compiled without cache), 15
+interleaved pairs, thread CPU time, load 8.8: 10.99 -> 9.62 us per control step (medians;
+pair ratio median 0.860, range 0.72-1.02), the same bits. Whole flights (60 s case 1, main
+and branch processes alternated, 8 pairs, thread CPU per step, load 6.5-7.5): main
+35.7-47.2 us, branch 32.5-46.7 us, pair ratios 0.70-1.17 (median ~0.99): the ~1.4 us gained
+(~4 % of a step) is below this machine's whole-flight noise at that load. Tried and
+dropped: ``derivatives`` inlined into ``step_n`` by numba (``inline='always'``): another
+~4 % of the kernel (12.7 -> 12.1 us, same bits) but its compilation 6 -> 19 s CPU on a
+fresh cache (the SITL vehicle's warm-up compiles it); the five RK4 work arrays of a call
+preallocated: no measurable change.
+
+Why 150x (26.7 us per step) is not reached, and the decision. Main measured 32.9 us of
+thread CPU per step at load 3.8 (121x; the lead's idle figure 36 us wall): the step must
+lose ~6-7 us, ~20 %. The physics gains here are ~1.4 us. What is left is (a) compiled
+numerical work that a bit-identical flight must keep (the RK4 model ~9.6 us, the QP ~4 us,
+the P-PID, metrics and codec kernels ~3 us) and (b) ~15 us of Python and dispatch spread
+thin: the outer loops (~5 us), the output stage's bookkeeping (~2.5 us), estimate,
+commander, navigator, metrics and codec wrappers (~1-1.5 us each). Reaching 26 us takes (b)
+down to ~8 us, i.e. the outer loops with their altitude and airspeed holds, the position
+hold, the estimate and the output stage's bookkeeping compiled into the existing kernels
+(one call per step on one flat state array), Python left with the mode logic, commands and
+the navigator's decisions. Of the two routes, compiling the autopilot's continuous part is
+the simpler one: a batched campaign engine (many scenarios stepped together) needs the same
+per-step code in array form anyway, and its scenarios leave each other at the first
+diverging mode change or fault (different times per scenario), so each batch lane would
+still need the per-scenario Python it was meant to remove; the campaign's overhead is
+already ~2 % (the pool's rate is the flight's rate), so the 300 scenarios/min target is the
+per-core target again (0.40 s per 60 s flight = 26.7 us per step). Not done this session:
+that rewrite (~1,000 lines whose every branch must be re-proved bit-identical, including a
+port of CPython's ``math.hypot`` for the position hold, see above).
 """
 
 from __future__ import annotations

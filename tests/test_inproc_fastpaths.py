@@ -298,3 +298,122 @@ def test_a_replaced_allocate_or_update_is_still_the_one_called(ds1):
     ap.modes.set_mode(FlightMode.HOVER, "test")
     ap.step(nav(0.004, 10.0))
     assert calls == ["update", "allocate"]
+
+
+def test_derivatives_rotation_entries_against_numpy(ds1):
+    """The vehicle's derivatives with the rotation as nine scalars
+    (``quat_to_dcm_entries``, no array) against numpy and ``base.rotation.dcm`` on random
+    states with wind: the air-relative velocity in body axes (airspeed, alpha, beta), the
+    translational acceleration ``R F / m + g``, and the landing gear's contact forces and
+    moments (gravity, aerodynamics and propulsion off, gear points below the ground):
+    an entry of R read at the wrong place fails here."""
+    from vtolftc.base.rotation import dcm
+    from vtolftc.firmware_sim.vehicle import dynamics as dyn
+    from vtolftc.firmware_sim.vehicle.model import Vehicle
+
+    rng = np.random.default_rng(12)
+    veh = Vehicle(ds1, wind_ned_m_s=(3.0, -2.0, 0.5))
+    pk = veh.packed
+    P = pk.P
+    n_x = veh.x.size
+    contacts = 0
+    for k in range(300):
+        x = np.zeros(n_x)
+        x[0:3] = rng.normal(0.0, 5.0, 3)
+        x[3:6] = rng.normal(0.0, 8.0, 3)
+        q = rng.normal(0.0, 1.0, 4)
+        q = 0.1 * q + np.array([1.0, 0.0, 0.0, 0.0]) if k % 2 else q
+        x[6:10] = q / np.linalg.norm(q)
+        x[10:13] = rng.normal(0.0, 1.0, 3)
+        x[dyn.N_RIGID:] = rng.uniform(0.0, 1.0, n_x - dyn.N_RIGID)
+        ground = k % 3 == 0
+        if ground:
+            x[2] = 0.5  # below the ground: the gear points that reach it in contact
+            veh.physics = dyn.GROUND
+        else:
+            veh.physics = dyn.ALL_PHYSICS
+        dx, fm = veh.derivatives(x, np.zeros(n_x - dyn.N_RIGID))
+        R = dcm(x[6:10])
+        vb = R.T @ (x[3:6] - veh.wind)
+        Va = float(np.linalg.norm(vb))
+        assert fm[6] == pytest.approx(Va, rel=1e-12)
+        assert fm[7] == pytest.approx(np.arctan2(vb[2], vb[0]), abs=1e-12)
+        assert fm[8] == pytest.approx(np.arcsin(vb[1] / Va), abs=1e-12)
+        g = P[dyn.P_G] if veh.physics & dyn.GRAVITY else 0.0
+        np.testing.assert_allclose(dx[3:6], R @ fm[0:3] / P[dyn.P_MASS] + [0.0, 0.0, g],
+                                   rtol=1e-11, atol=1e-9)
+        np.testing.assert_array_equal(dx[0:3], x[3:6])
+        if ground:
+            w = x[10:13]
+            F = np.zeros(3)
+            Mo = np.zeros(3)
+            for r in pk.gear:
+                pz = x[2] + (R @ r)[2]
+                if pz <= 0.0:
+                    continue
+                contacts += 1
+                pv = x[3:6] + R @ np.cross(w, r)
+                normal = max(0.0, P[dyn.P_GK] * pz + P[dyn.P_GC] * pv[2])
+                fh = -P[dyn.P_GF] * pv[0:2]
+                nh = float(np.linalg.norm(fh))
+                if nh > P[dyn.P_GMU] * normal and nh > 0.0:
+                    fh *= P[dyn.P_GMU] * normal / nh
+                fb = R.T @ np.array([fh[0], fh[1], -normal])
+                F += fb
+                Mo += np.cross(r, fb)
+            np.testing.assert_allclose(fm[0:3], F, rtol=1e-11, atol=1e-8)
+            np.testing.assert_allclose(fm[3:6], Mo, rtol=1e-11, atol=1e-8)
+    assert contacts > 200
+
+
+def test_vehicle_step_memo_equals_full_evaluation_bit_for_bit(ds1):
+    """The fused control step reusing the last step's final derivative evaluation
+    (``dynamics.step_n_memo``) flies what ``step_n_flat`` (every stage evaluated) flies, bit
+    for bit, over random commands, with the effectiveness, the wind, the physics switches
+    and the state changed between steps (each must invalidate the memo), through a fault
+    injection (the pending-fault path) and another airframe at the same state."""
+    from vtolftc.firmware_sim.vehicle import dynamics as dyn
+    from vtolftc.firmware_sim.vehicle import model as vm
+    from vtolftc.firmware_sim.vehicle.faults import case_faults
+
+    fast, ref = vm.Vehicle(ds1), vm.Vehicle(ds1)
+    fault = case_faults("1", ds1.actuator_names)[0]
+    rng = np.random.default_rng(5)
+    u_min = np.r_[np.zeros(10), -np.ones(5)]
+    hits = 0
+    for k in range(400):
+        cmds = rng.uniform(u_min, 1.0).astype(np.float32).astype(np.float64)
+        for v in (fast, ref):
+            if k == 60:
+                v.eff[3] = 0.7
+            elif k == 90:
+                v.wind[:] = (4.0, -1.0, 0.2)
+            elif k == 120:
+                v.physics = dyn.ALL_PHYSICS & ~dyn.AERODYNAMICS
+            elif k == 150:
+                v.physics = dyn.ALL_PHYSICS
+            elif k == 200:
+                s = v.state
+                s[3] += 1.0
+                v.set_state(s)
+            elif k == 250:  # another airframe, the state unchanged (a step of length 0)
+                v.packed = dyn.perturb(dyn.pack(ds1), 1.1)
+                v.step(None, 0)
+            elif k == 320:
+                v.inject(fault)  # pending to the end (no memo on that path)
+        fast_path = not fast._pending and fast._packed_args[0] is fast.packed
+        if fast_path:
+            hits += bool(dyn._memo_valid(fast._memo, fast.x, fast.eff, fast.wind,
+                                         fast.physics))
+        fast.step(cmds, 4)
+        if not fast_path:
+            ref.step(cmds, 4)  # (the same branch in both: no memo there)
+        else:  # every stage evaluated
+            assert vm._take_commands(cmds, ref.u)
+            pa = ref._packed_args
+            dyn.step_n_flat(ref.x, ref.u, ref.eff, ref.stuck, 4, ref.dt_usec * 1e-6, pa[1],
+                            pa[2], ref.wind, ref.physics, ref.fm)
+            ref.time_usec += 4 * ref.dt_usec
+        assert _bits(fast.x) == _bits(ref.x), k
+        assert _bits(fast.fm) == _bits(ref.fm), k
+    assert hits > 300  # the memo was used

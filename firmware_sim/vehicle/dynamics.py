@@ -190,17 +190,23 @@ def perturb(pk: Packed, mass_scale: float = 1.0,
 
 
 @njit(cache=True, fastmath=False)
+def quat_to_dcm_entries(q0: float, q1: float, q2: float,
+                        q3: float) -> tuple[float, float, float, float, float, float, float,
+                                            float, float]:
+    """Rotation matrix body -> NED of a unit quaternion (w, x, y, z) as its nine entries
+    ``(R00, R01, R02, R10, R11, R12, R20, R21, R22)`` (row-major): no array to allocate."""
+    return (1.0 - 2.0 * (q2 * q2 + q3 * q3), 2.0 * (q1 * q2 - q0 * q3),
+            2.0 * (q1 * q3 + q0 * q2), 2.0 * (q1 * q2 + q0 * q3),
+            1.0 - 2.0 * (q1 * q1 + q3 * q3), 2.0 * (q2 * q3 - q0 * q1),
+            2.0 * (q1 * q3 - q0 * q2), 2.0 * (q2 * q3 + q0 * q1),
+            1.0 - 2.0 * (q1 * q1 + q2 * q2))
+
+
+@njit(cache=True, fastmath=False)
 def quat_to_dcm(q0: float, q1: float, q2: float, q3: float, R: np.ndarray) -> None:
     """Rotation matrix body -> NED of a unit quaternion (w, x, y, z), written into R."""
-    R[0, 0] = 1.0 - 2.0 * (q2 * q2 + q3 * q3)
-    R[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
-    R[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
-    R[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
-    R[1, 1] = 1.0 - 2.0 * (q1 * q1 + q3 * q3)
-    R[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
-    R[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
-    R[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
-    R[2, 2] = 1.0 - 2.0 * (q1 * q1 + q2 * q2)
+    (R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2], R[2, 0], R[2, 1],
+     R[2, 2]) = quat_to_dcm_entries(q0, q1, q2, q3)
 
 
 @njit(cache=True)
@@ -265,6 +271,21 @@ def lift_drag_coefficients(alpha: float, P: np.ndarray) -> tuple[float, float]:
 
 
 @njit(cache=True)
+def actuator_rates(x, u, stuck, atau, arate, amin, amax, dx):  # pragma: no cover - compiled
+    """The actuator rows of :func:`derivatives` (``dx[N_RIGID:]``): first-order actuators
+    with rate and position limits; stuck ones hold their position. The only rows that
+    depend on the commands ``u``."""
+    for i in range(atau.shape[0]):
+        k = N_RIGID + i
+        if stuck[i]:
+            dx[k] = 0.0
+        else:
+            target = min(amax[i], max(amin[i], u[i]))
+            rate = (target - x[k]) / atau[i]
+            dx[k] = min(arate[i], max(-arate[i], rate))
+
+
+@njit(cache=True)
 def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
                 atau, arate, amin, amax, tab_v, tab, gear, wind, flags, dx, fm):
     """Time derivative of the state ``x`` under actuator commands ``u``, written into ``dx``.
@@ -273,19 +294,18 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
     plus airspeed (6), alpha (7) and beta (8): what the sensors and tests need.
     """
     nr = rtmax.shape[0]
-    na = atau.shape[0]
     q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
     p, q, r = x[10], x[11], x[12]
-    R = np.empty((3, 3))
-    quat_to_dcm(q0, q1, q2, q3, R)
+    # the rotation's entries as scalars (no 3x3 array allocated 17 times per control step)
+    R00, R01, R02, R10, R11, R12, R20, R21, R22 = quat_to_dcm_entries(q0, q1, q2, q3)
 
     # Air-relative velocity in body axes.
     vr0 = x[3] - wind[0]
     vr1 = x[4] - wind[1]
     vr2 = x[5] - wind[2]
-    ub = R[0, 0] * vr0 + R[1, 0] * vr1 + R[2, 0] * vr2
-    vb = R[0, 1] * vr0 + R[1, 1] * vr1 + R[2, 1] * vr2
-    wb = R[0, 2] * vr0 + R[1, 2] * vr1 + R[2, 2] * vr2
+    ub = R00 * vr0 + R10 * vr1 + R20 * vr2
+    vb = R01 * vr0 + R11 * vr1 + R21 * vr2
+    wb = R02 * vr0 + R12 * vr1 + R22 * vr2
     Va = math.sqrt(ub * ub + vb * vb + wb * wb)
 
     Fx = 0.0
@@ -396,15 +416,15 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
             gx = gear[i, 0]
             gy = gear[i, 1]
             gz = gear[i, 2]
-            pz = x[2] + R[2, 0] * gx + R[2, 1] * gy + R[2, 2] * gz
+            pz = x[2] + R20 * gx + R21 * gy + R22 * gz
             if pz > 0.0:
                 # Velocity of the contact point in NED: v + R (omega x r).
                 cx = q * gz - r * gy
                 cy = r * gx - p * gz
                 cz = p * gy - q * gx
-                pv0 = x[3] + R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz
-                pv1 = x[4] + R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
-                pv2 = x[5] + R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz
+                pv0 = x[3] + R00 * cx + R01 * cy + R02 * cz
+                pv1 = x[4] + R10 * cx + R11 * cy + R12 * cz
+                pv2 = x[5] + R20 * cx + R21 * cy + R22 * cz
                 normal = P[P_GK] * pz + P[P_GC] * pv2
                 if normal < 0.0:
                     normal = 0.0
@@ -417,9 +437,9 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
                     fn1 *= fmax / fh
                 fn2 = -normal
                 # To body axes.
-                fbx = R[0, 0] * fn0 + R[1, 0] * fn1 + R[2, 0] * fn2
-                fby = R[0, 1] * fn0 + R[1, 1] * fn1 + R[2, 1] * fn2
-                fbz = R[0, 2] * fn0 + R[1, 2] * fn1 + R[2, 2] * fn2
+                fbx = R00 * fn0 + R10 * fn1 + R20 * fn2
+                fby = R01 * fn0 + R11 * fn1 + R21 * fn2
+                fbz = R02 * fn0 + R12 * fn1 + R22 * fn2
                 Fx += fbx
                 Fy += fby
                 Fz += fbz
@@ -432,9 +452,9 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
     dx[0] = x[3]
     dx[1] = x[4]
     dx[2] = x[5]
-    dx[3] = (R[0, 0] * Fx + R[0, 1] * Fy + R[0, 2] * Fz) / m
-    dx[4] = (R[1, 0] * Fx + R[1, 1] * Fy + R[1, 2] * Fz) / m
-    dx[5] = (R[2, 0] * Fx + R[2, 1] * Fy + R[2, 2] * Fz) / m + gdown
+    dx[3] = (R00 * Fx + R01 * Fy + R02 * Fz) / m
+    dx[4] = (R10 * Fx + R11 * Fy + R12 * Fz) / m
+    dx[5] = (R20 * Fx + R21 * Fy + R22 * Fz) / m + gdown
     dx[6] = 0.5 * (-q1 * p - q2 * q - q3 * r)
     dx[7] = 0.5 * (q0 * p + q2 * r - q3 * q)
     dx[8] = 0.5 * (q0 * q - q1 * r + q3 * p)
@@ -450,15 +470,7 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
     dx[11] = Jinv[1, 0] * t0 + Jinv[1, 1] * t1 + Jinv[1, 2] * t2
     dx[12] = Jinv[2, 0] * t0 + Jinv[2, 1] * t1 + Jinv[2, 2] * t2
 
-    # First-order actuators with rate and position limits; stuck ones hold their position.
-    for i in range(na):
-        k = N_RIGID + i
-        if stuck[i]:
-            dx[k] = 0.0
-        else:
-            target = min(amax[i], max(amin[i], u[i]))
-            rate = (target - x[k]) / atau[i]
-            dx[k] = min(arate[i], max(-arate[i], rate))
+    actuator_rates(x, u, stuck, atau, arate, amin, amax, dx)
 
     fm[0] = Fx
     fm[1] = Fy
@@ -471,10 +483,71 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
     fm[8] = beta
 
 
+def memo_size(nx: int, na: int) -> int:
+    """Length of :func:`step_n_memo`'s memo array for ``nx`` states and ``na`` actuators."""
+    return 2 + 2 * nx + na + 3
+
+
+
 @njit(cache=True)
-def step_n(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
-           atau, arate, amin, amax, tab_v, tab, gear, wind, flags, fm):
-    """Advance ``x`` in place by ``n`` RK4 steps of ``dt`` seconds with commands ``u`` held."""
+def _memo_valid(memo, x, eff, wind, flags):  # pragma: no cover - compiled
+    """True when ``memo`` holds the rigid-body rows of ``derivatives`` at exactly (bit for
+    bit) this ``x``, ``eff``, ``wind`` and ``flags`` (what those rows depend on besides the
+    airframe)."""
+    if memo[0] != 1.0 or memo[1] != flags:
+        return False
+    nx = x.shape[0]
+    na = eff.shape[0]
+    mb = memo.view(np.int64)
+    xb = x.view(np.int64)
+    for i in range(nx):
+        if mb[2 + i] != xb[i]:
+            return False
+    o = 2 + 2 * nx
+    eb = eff.view(np.int64)
+    for i in range(na):
+        if mb[o + i] != eb[i]:
+            return False
+    wb = wind.view(np.int64)
+    for i in range(3):  # noqa: SIM110 (a loop, not a generator, in compiled code)
+        if mb[o + na + i] != wb[i]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _memo_store(memo, x, dx, eff, wind, flags):  # pragma: no cover - compiled
+    """Keep ``x``, its derivative's rigid-body rows ``dx[:N_RIGID]``, ``eff``, ``wind`` and
+    ``flags`` in ``memo`` (layout: valid, flags, x (nx), dx rows (nx), eff (na), wind (3))."""
+    nx = x.shape[0]
+    na = eff.shape[0]
+    memo[1] = flags
+    for i in range(nx):
+        memo[2 + i] = x[i]
+    for i in range(N_RIGID):
+        memo[2 + nx + i] = dx[i]
+    o = 2 + 2 * nx
+    for i in range(na):
+        memo[o + i] = eff[i]
+    for i in range(3):
+        memo[o + na + i] = wind[i]
+    memo[0] = 1.0
+
+
+@njit(cache=True)
+def step_n_memo(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
+                atau, arate, amin, amax, tab_v, tab, gear, wind, flags, fm, memo):
+    """Advance ``x`` in place by ``n`` RK4 steps of ``dt`` seconds with commands ``u`` held.
+
+    ``memo`` (length :func:`memo_size`, or empty: none) carries the last call's final
+    evaluation of :func:`derivatives` (the one that leaves ``fm`` describing the final
+    state) to the next call: its rigid-body rows do not depend on the commands, so when
+    ``x``, ``eff``, ``wind`` and ``flags`` are bit for bit those of that evaluation (and the
+    airframe the same: the caller's to guarantee, e.g. by clearing ``memo[0]`` when it
+    changes) the first stage of the next step takes them and computes only the actuator
+    rows (:func:`actuator_rates`) for the new commands: one evaluation of 4n + 1 fewer,
+    the same numbers (the same bits).
+    """
     nx = x.shape[0]
     k1 = np.empty(nx)
     k2 = np.empty(nx)
@@ -482,9 +555,15 @@ def step_n(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax, rin
     k4 = np.empty(nx)
     xt = np.empty(nx)
     na = atau.shape[0]
-    for _ in range(n):
-        derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
-                    atau, arate, amin, amax, tab_v, tab, gear, wind, flags, k1, fm)
+    use_memo = memo.shape[0] > 0
+    for j in range(n):
+        if j == 0 and use_memo and _memo_valid(memo, x, eff, wind, flags):
+            for i in range(N_RIGID):
+                k1[i] = memo[2 + nx + i]
+            actuator_rates(x, u, stuck, atau, arate, amin, amax, k1)
+        else:
+            derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
+                        atau, arate, amin, amax, tab_v, tab, gear, wind, flags, k1, fm)
         for i in range(nx):
             xt[i] = x[i] + 0.5 * dt * k1[i]
         derivatives(xt, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
@@ -508,6 +587,17 @@ def step_n(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax, rin
     # Leave fm describing the final state.
     derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
                 atau, arate, amin, amax, tab_v, tab, gear, wind, flags, k1, fm)
+    if use_memo:
+        _memo_store(memo, x, k1, eff, wind, flags)
+
+
+@njit(cache=True)
+def step_n(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
+           atau, arate, amin, amax, tab_v, tab, gear, wind, flags, fm):
+    """Advance ``x`` in place by ``n`` RK4 steps of ``dt`` seconds with commands ``u`` held
+    (:func:`step_n_memo` without a memo)."""
+    step_n_memo(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
+                atau, arate, amin, amax, tab_v, tab, gear, wind, flags, fm, np.empty(0))
 
 
 def flatten_packed(pk: Packed) -> tuple[np.ndarray, np.ndarray]:
@@ -547,16 +637,23 @@ def _mat(buf, layout, k):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def step_n_flat_memo(x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm,
+                     memo):  # pragma: no cover - compiled
+    """:func:`step_n_memo` on the airframe as :func:`flatten_packed`'s ``(buf, layout)``: the
+    same arithmetic (the same bits), with 12 arguments to pass from Python instead of 25
+    (each array argument costs a fraction of a microsecond per call)."""
+    step_n_memo(x, u, eff, stuck, n, dt, _vec(buf, layout, 0), _mat(buf, layout, 1),
+                _mat(buf, layout, 2), _mat(buf, layout, 3), _mat(buf, layout, 4),
+                _mat(buf, layout, 5), _vec(buf, layout, 6), _vec(buf, layout, 7),
+                _vec(buf, layout, 8), _vec(buf, layout, 9), _vec(buf, layout, 10),
+                _vec(buf, layout, 11), _vec(buf, layout, 12), _mat(buf, layout, 13),
+                _mat(buf, layout, 14), wind, flags, fm, memo)
+
+
+@njit(cache=True)
 def step_n_flat(x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm):  # pragma: no cover
-    """:func:`step_n` on the airframe as :func:`flatten_packed`'s ``(buf, layout)``: the same
-    arithmetic (the same bits), with 11 arguments to pass from Python instead of 24 (each
-    array argument costs a fraction of a microsecond per call)."""
-    step_n(x, u, eff, stuck, n, dt, _vec(buf, layout, 0), _mat(buf, layout, 1),
-           _mat(buf, layout, 2), _mat(buf, layout, 3), _mat(buf, layout, 4),
-           _mat(buf, layout, 5), _vec(buf, layout, 6), _vec(buf, layout, 7),
-           _vec(buf, layout, 8), _vec(buf, layout, 9), _vec(buf, layout, 10),
-           _vec(buf, layout, 11), _vec(buf, layout, 12), _mat(buf, layout, 13),
-           _mat(buf, layout, 14), wind, flags, fm)
+    """:func:`step_n_flat_memo` without a memo (:func:`step_n` on the flat airframe)."""
+    step_n_flat_memo(x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm, np.empty(0))
 
 
 # --------------------------------------------------------------------------------------------

@@ -50,15 +50,15 @@ def _take_commands(src: np.ndarray, dst: np.ndarray) -> bool:
 
 
 @numba.njit(cache=True)
-def _take_and_step(src, x, u, eff, stuck, n, dt, buf, layout, wind, flags,
-                   fm):  # pragma: no cover - compiled
-    """``_take_commands(src, u)`` then, when it took them, ``dynamics.step_n_flat(x, u, eff,
-    stuck, n, dt, buf, layout, wind, flags, fm)``, in one compiled call (one dispatch and
-    one unboxing of the arrays fewer per control step; the same kernels, the same bits).
-    Returns False, nothing changed, when ``src`` has a non-finite entry."""
+def _take_and_step(src, x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm,
+                   memo):  # pragma: no cover - compiled
+    """``_take_commands(src, u)`` then, when it took them, ``dynamics.step_n_flat_memo(x, u,
+    eff, stuck, n, dt, buf, layout, wind, flags, fm, memo)``, in one compiled call (one
+    dispatch and one unboxing of the arrays fewer per control step; the same kernels, the
+    same bits). Returns False, nothing changed, when ``src`` has a non-finite entry."""
     if not _take_commands(src, u):
         return False
-    dyn.step_n_flat(x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm)
+    dyn.step_n_flat_memo(x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm, memo)
     return True
 
 
@@ -146,6 +146,9 @@ class Vehicle:
                                 if state_noise is not None else None)
         self.fm = np.zeros(9)
         self._packed_args: tuple = (None,)  # (packed, flatten_packed(packed)...)
+        # the last control step's final derivative evaluation, for the next one's first
+        # stage (dynamics.step_n_memo; memo[0] = 0: none): cleared when the airframe changes
+        self._memo = np.zeros(dyn.memo_size(self.x.size, self.n_actuators))
         self._pending: list[ActiveFault] = []
         self.active_faults: list[ActiveFault] = []
         self.sensor_model = SensorModel(home, noise, seed, self.airframe.air_density_kg_m3)
@@ -299,7 +302,7 @@ class Vehicle:
             # flown in one compiled call (the branches below, the same kernels)
             if not _take_and_step(commands, self.x, self.u, self.eff, self.stuck, int(n),
                                   self.dt_usec * 1e-6, pa[1], pa[2], self.wind, self.physics,
-                                  self.fm):
+                                  self.fm, self._memo):
                 raise ValueError("commands contain NaN or inf: expected finite values")
             self.time_usec += int(n) * self.dt_usec
             return
@@ -319,6 +322,7 @@ class Vehicle:
         pa = self._packed_args
         if pa[0] is not pk:
             pa = self._packed_args = (pk, *dyn.flatten_packed(pk))
+            self._memo[0] = 0.0  # another airframe: the memo's derivative is not its own
         buf, lay = pa[1], pa[2]
         if self._gusty:
             self._step_gusty(remaining, dt, buf, lay)
