@@ -43,6 +43,7 @@ class _UdpBase(Transport):
 
     def __init__(self, sock: socket.socket) -> None:
         self._sock = sock
+        self._sock_list = [sock]
         self._closed = False
         sock.setblocking(False)
 
@@ -62,12 +63,15 @@ class _UdpBase(Transport):
         out: list[tuple[bytes, object]] = []
         n = 0
         try:
-            try:
-                data, addr = sock.recvfrom(_MAX_DATAGRAM)
-            except BlockingIOError:
-                if timeout_s is not None and timeout_s <= 0.0:
+            if timeout_s is not None and timeout_s <= 0.0:
+                try:
+                    data, addr = sock.recvfrom(_MAX_DATAGRAM)
+                except BlockingIOError:
                     return out
-                ready, _, _ = select.select([sock], [], [], timeout_s)
+            else:
+                # a wait: select first (what a lockstep peer does every step, the datagram not
+                # there yet), sparing the failed read and its exception
+                ready, _, _ = select.select(self._sock_list, [], [], timeout_s)
                 if not ready:
                     return out
                 data, addr = sock.recvfrom(_MAX_DATAGRAM)
@@ -84,7 +88,7 @@ class _UdpBase(Transport):
         except ConnectionRefusedError:
             # ICMP port-unreachable from an earlier send (peer not up yet): not an error here
             pass
-        except OSError:
+        except (OSError, ValueError):  # ValueError: select on a socket closed meanwhile
             if not self._closed:
                 raise
         return out
