@@ -43,7 +43,6 @@ class _UdpBase(Transport):
 
     def __init__(self, sock: socket.socket) -> None:
         self._sock = sock
-        self._sock_list = [sock]
         self._closed = False
         sock.setblocking(False)
 
@@ -63,15 +62,12 @@ class _UdpBase(Transport):
         out: list[tuple[bytes, object]] = []
         n = 0
         try:
-            if timeout_s is not None and timeout_s <= 0.0:
-                try:
-                    data, addr = sock.recvfrom(_MAX_DATAGRAM)
-                except BlockingIOError:
+            try:
+                data, addr = sock.recvfrom(_MAX_DATAGRAM)
+            except BlockingIOError:
+                if timeout_s is not None and timeout_s <= 0.0:
                     return out
-            else:
-                # a wait: select first (what a lockstep peer does every step, the datagram not
-                # there yet), sparing the failed read and its exception
-                ready, _, _ = select.select(self._sock_list, [], [], timeout_s)
+                ready, _, _ = select.select([sock], [], [], timeout_s)
                 if not ready:
                     return out
                 data, addr = sock.recvfrom(_MAX_DATAGRAM)
@@ -88,7 +84,7 @@ class _UdpBase(Transport):
         except ConnectionRefusedError:
             # ICMP port-unreachable from an earlier send (peer not up yet): not an error here
             pass
-        except (OSError, ValueError):  # ValueError: select on a socket closed meanwhile
+        except OSError:
             if not self._closed:
                 raise
         return out
