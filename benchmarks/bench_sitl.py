@@ -98,7 +98,8 @@ every measurement below, so the wall figures are again the load's):
   494 -> 380 / 515 / 286 us, 3.2 / 4.9 / 3.7 -> 6.1 / 2.7 / 5.1x: one pair the other way).
   UDP: sensors + encode 85 / 127 / 87 -> 62 / 65 / 79 us; CPU per step autopilot 404 /
   661 / 433 -> 395 / 369 / 479 us, vehicle 306 / 466 / 284 -> 285 / 258 / 303 us;
-  real-time factor 5.9 / 1.8 / 4.1 -> 4.0 / 4.1 / 2.9x: at this load one UDP pair's ratio swings both ways by 2x, the CPU figures' by 1.5x.
+  real-time factor 5.9 / 1.8 / 4.1 -> 4.0 / 4.1 / 2.9x: at this load one UDP pair's ratio swings
+  both ways by 2x, the CPU figures' by 1.5x.
 - Not reached: 20x / 15x. Where the time goes (UDP, the lead's idle-machine figures and the
   profile): a step is two hops, each a loopback ``sendto`` whose wall time carries the
   receiver's wake-up (35-365 us measured here, depending on who else runs), plus the two
