@@ -1,6 +1,7 @@
 """SITL benchmark: real-time factor of the 40 s case in lockstep, and the HIL step round trip.
 
     python benchmarks/bench_sitl.py [--transport udp|zenoh|both] [--duration 40] [--case 1]
+    python benchmarks/bench_sitl.py --parts   # the HIL codec pieces only, CPU per call
 
 For each transport it flies the case with ``vtolftc.runners.sitl.run_sitl`` (vehicle and autopilot
 as separate processes, ground-station commands, no plots) and reports:
@@ -65,6 +66,52 @@ so every wall figure below is the load's more than the code's):
   processes' Python per step, run on caches the other process emptied, is what stands between
   them and 20x, not the link.
 
+Session 12 (issue 24; 2 cores shared with 3-4 other engineers' jobs, load average 5-11 through
+every measurement below, so the wall figures are again the load's):
+
+- Profile of both process mains per step (cProfile, warm numba cache, 10 s UDP flight): in
+  the autopilot's control thread the socket ``send`` of the answer (the receiver's wake-up
+  runs in the sender), ``Autopilot.step``, the link's read and parse, the generated
+  HIL_ACTUATOR_CONTROLS encoding (message, header and signature objects, CRC and SHA-256 in
+  Python calls), then the observers (ULog, rerun, run folder: already decimated to their
+  rates), metrics, failsafe and ground-station hand-over; no per-step class building, no
+  numba dispatch. The other threads of the autopilot process (``/proc`` per-thread CPU): the
+  ground-station worker about 48 us per step, rerun's threads about 16 us, the rest ~0. In the
+  vehicle: the state datagram (sensors, two generated encodings, signing), the send, the
+  truth snapshot and physics; after the send the truth-log formatting and the battery.
+- Changes: HIL_ACTUATOR_CONTROLS, HIL_SENSOR and HIL_STATE_QUATERNION packed by one
+  ``protocols.fastpack.FramePacker`` each (``struct.pack_into`` a buffer made once + one numba
+  call for header, zero-tail truncation and CRC, SHA-256 signing from a copied key hash; the
+  generated encoding's bytes, tested over 181 message classes, signed and unsigned); the
+  autopilot answers straight after ``Autopilot.step`` (armed from ``metrics_inputs``, the
+  status snapshot after the send) and no longer reads the link once more after each step;
+  the noise-free sensors stop making zero arrays and a projection per call (same bits).
+- ``--parts`` (warm, thread CPU, interleaved in one run, load 8): answer 6.2 -> 2.7 us (min;
+  median 9.0 -> 4.1), HIL_SENSOR 7.5 -> 2.2 us; the vehicle's whole state datagram
+  (sensors + the two encodings) 25.4-26.6 -> 17.3-17.4 us (min of 5, main's tree against this
+  one, 2 interleaved pairs at load 11).
+- In flight, pairwise against main (interleaved, 20 s of case 1, 3 pairs per transport, load
+  8-11). zenoh: CPU per step autopilot process 719 / 832 / 727 -> 527 / 587 / 468 us, vehicle
+  517 / 606 / 519 -> 412 / 448 / 389 us, sensors + encode 120 / 153 / 95 -> 79 / 80 / 66 us,
+  real-time factor 3.1 / 2.1 / 3.8 -> 3.3 / 2.3 / 4.1x (a second set of 3 pairs with the
+  last commit, load 9: autopilot 638 / 567 / 642 -> 496 / 809 / 398 us, vehicle 414 / 442 /
+  494 -> 380 / 515 / 286 us, 3.2 / 4.9 / 3.7 -> 6.1 / 2.7 / 5.1x: one pair the other way).
+  UDP: sensors + encode 85 / 127 / 87 -> 62 / 65 / 79 us; CPU per step autopilot 404 /
+  661 / 433 -> 395 / 369 / 479 us, vehicle 306 / 466 / 284 -> 285 / 258 / 303 us;
+  real-time factor 5.9 / 1.8 / 4.1 -> 4.0 / 4.1 / 2.9x: at this load one UDP pair's ratio swings
+  both ways by 2x, the CPU figures' by 1.5x.
+- Not reached: 20x / 15x. Where the time goes (UDP, the lead's idle-machine figures and the
+  profile): a step is two hops, each a loopback ``sendto`` whose wall time carries the
+  receiver's wake-up (35-365 us measured here, depending on who else runs), plus the two
+  processes' Python between the waits: autopilot ~60-80 us of ``Autopilot.step`` (another
+  engineer's code), ~120-150 us after the answer (metrics, observers, failsafe, ground-station
+  hand-over: on the critical path whenever the vehicle's ~100 us step is shorter), the read
+  and parse ~30 us; vehicle ~30 us physics, ~60-80 us sensors + datagram, ~60 us after the
+  send (truth-log formatting ~30 us, battery ~20 us). With ~400 + ~300 us of CPU per step in
+  the two processes on two shared cores, 200 us of wall per step is out of reach of these
+  per-step savings (tens of us each); it needs the autopilot step and the after-answer work
+  compiled, or both ends in one process.
+
 In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
 control step): measured at 57-61x on an idle machine (about 66 us per step: autopilot ~25 us,
 physics ~13 us, HIL codec, metrics and the runner the rest; thread CPU time ~62-85 us per
@@ -108,6 +155,72 @@ def _in_process_step_cpu_us(scenario: object, controller: str) -> float:
     return 1e6 * acc[0] / max(1, acc[1])
 
 
+def _parts(n: int = 3000, reps: int = 5) -> None:
+    """Thread CPU per call of the lockstep's per-step codec pieces, the compiled frame packer
+    against the generated encoding in the same run, interleaved (warm caches: a lower bound
+    of what they cost between two waits)."""
+    import numpy as np
+
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.firmware_sim.vehicle.battery import BatteryModel
+    from vtolftc.firmware_sim.vehicle.model import Vehicle
+    from vtolftc.firmware_sim.vehicle.state_encoder import StateEncoder
+    from vtolftc.protocols.fastpack import FramePacker
+    from vtolftc.protocols.hil import wire_commands
+    from vtolftc.protocols.mavlink import SigningConfig, dialect, make_codec
+
+    signing = SigningConfig(secret_key=bytes(range(32)))  # the SITL's HIL link is signed
+    af = load_airframe()
+    v = Vehicle(af)
+    for _ in range(300):
+        v.step(np.full(af.n_actuators, 0.3), 4)
+    codec = make_codec(1, 191, signing=signing)
+    enc = StateEncoder(v, BatteryModel(rho=af.air_density_kg_m3), codec, 10.0,
+                       lambda: codec.heartbeat_encode(0, 0, 0, 0, 0), resign=True)
+    ap = make_codec(1, 1, signing=signing)
+    packer = FramePacker(ap, dialect().MAVLink_hil_actuator_controls_message)
+    cmd = np.random.default_rng(0).uniform(-1.0, 1.0, af.n_actuators)
+    u32 = np.zeros(16, dtype=np.float32)
+
+    def answer_generated() -> None:
+        u = wire_commands(cmd).tolist()
+        u += [0.0] * (16 - len(u))
+        ap.hil_actuator_controls_encode(123456, u, 128, 1).pack(ap)
+        ap.seq = (ap.seq + 1) & 0xFF
+
+    def answer_packer() -> None:
+        u32[:cmd.size] = cmd
+        packer.pack(123456, 1, *u32.tolist(), 128)
+
+    s = v.sensors()
+
+    def sensor_generated() -> None:
+        a, g, m = s.accel_m_s2, s.gyro_rad_s, s.mag_gauss
+        codec.hil_sensor_encode(4000, a[0], a[1], a[2], g[0], g[1], g[2], m[0], m[1], m[2],
+                                s.abs_pressure_hpa, s.diff_pressure_hpa, s.pressure_alt_m,
+                                s.temperature_c, 0x1FFF, 0).pack(codec)
+
+    sensor_packer = FramePacker(codec, dialect().MAVLink_hil_sensor_message)
+
+    def sensor_packed() -> None:
+        sensor_packer.pack(4000, *s.accel_m_s2.tolist(), *s.gyro_rad_s.tolist(),
+                           *s.mag_gauss.tolist(), s.abs_pressure_hpa, s.diff_pressure_hpa,
+                           s.pressure_alt_m, s.temperature_c, 0x1FFF, 0)
+
+    fns = (answer_generated, answer_packer, sensor_generated, sensor_packed, v.sensors,
+           enc.datagram)
+    res: dict[str, list[float]] = {f.__name__: [] for f in fns}
+    for _ in range(reps):
+        for f in fns:
+            c0 = time.thread_time()
+            for _ in range(n):
+                f()
+            res[f.__name__].append(1e6 * (time.thread_time() - c0) / n)
+    print(f"per call, thread CPU, min / median of {reps} x {n} (load "
+          f"{os.getloadavg()[0]:.1f}): " + ", ".join(
+              f"{k} {min(x):.1f} / {sorted(x)[len(x) // 2]:.1f} us" for k, x in res.items()))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--transport", default="both", choices=("udp", "zenoh", "both"))
@@ -116,7 +229,12 @@ def main() -> None:
     ap.add_argument("--controller", default="gs-shif")
     ap.add_argument("--spin-us", type=float, default=0.0,
                     help="busy-poll time of both processes before sleeping (default 0)")
+    ap.add_argument("--parts", action="store_true",
+                    help="only the per-call CPU of the HIL codec pieces (packer vs generated)")
     args = ap.parse_args()
+    if args.parts:
+        _parts()
+        return
     scenario = paper_scenario(args.case, args.duration)
 
     t0 = time.perf_counter()

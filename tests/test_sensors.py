@@ -60,3 +60,27 @@ def test_noise_is_seeded_and_has_the_requested_spread(ds1, hover_trim):
     assert np.array_equal(a, b)
     assert not np.array_equal(a, c)
     assert np.std(a) == pytest.approx(SensorNoise.typical().gyro_rad_s, rel=0.05)
+
+
+def test_noise_free_sample_has_the_bits_of_adding_zero_arrays() -> None:
+    """Without noise, every field is the truth plus a zero, bit for bit (-0.0 becomes +0.0,
+    as adding an array of zeros does), and the projection follows a changed home."""
+    from vtolftc.base.geodesy import FlatEarth
+    from vtolftc.firmware_sim.vehicle.sensors import Home, SensorModel
+
+    m = SensorModel()
+    sf = np.array([-0.0, 1.5, -9.81])
+    om = np.array([0.1, -0.0, 0.0])
+    vel = np.array([-0.0, 2.0, -1.0])
+    pos = np.array([12.0, -0.0, -30.0])
+    s = m.sample(4000, pos, vel, np.eye(3), om, sf, 17.0)
+    z = np.zeros(3)
+    assert s.accel_m_s2.tobytes() == (sf + z).tobytes()
+    assert s.gyro_rad_s.tobytes() == (om + z).tobytes()
+    assert s.gps_vel_ned_m_s.tobytes() == (vel + z).tobytes()
+    assert s.mag_gauss.tobytes() == (np.eye(3).T @ np.array(m.home.mag_ned_gauss) + z).tobytes()
+    h = m.home
+    assert (s.gps_lat_deg, s.gps_lon_deg) == FlatEarth(h.lat_deg, h.lon_deg).to_global(12.0, 0.0)
+    m.home = Home(lat_deg=10.0, lon_deg=20.0, alt_m=h.alt_m)
+    s2 = m.sample(4000, pos, vel, np.eye(3), om, sf, 17.0)
+    assert (s2.gps_lat_deg, s2.gps_lon_deg) == FlatEarth(10.0, 20.0).to_global(12.0, 0.0)

@@ -39,15 +39,16 @@ from vtolftc.firmware_sim.autopilot.interface import (
     NavState,
     wire_commands,
 )
+from vtolftc.protocols.fastpack import FramePacker
 from vtolftc.protocols.generated import constants as mav
-from vtolftc.protocols.hil import HilStateDecoder
+from vtolftc.protocols.hil import HIL_OUTPUTS, HilStateDecoder
 from vtolftc.protocols.link import Link
+from vtolftc.protocols.mavlink import dialect
 
 __all__ = ["HilBridge"]
 
 MAV_MODE_FLAG_SAFETY_ARMED = mav.MAV_MODE_FLAG_SAFETY_ARMED
 _HEARTBEAT_PERIOD_S = 1.0
-_ZEROS16 = [0.0] * 16
 
 
 class HilBridge:
@@ -77,6 +78,10 @@ class HilBridge:
         self.decode_errors = 0
         self._decode: HilStateDecoder | None = None
         """Decodes HIL_STATE_QUATERNION about :attr:`home` (made when home is known)."""
+        self._controls_packer = FramePacker(link.codec,
+                                            dialect().MAVLink_hil_actuator_controls_message)
+        self._u32 = np.zeros(HIL_OUTPUTS, dtype=np.float32)
+        """The 16 output slots as the wire carries them (the unused ones stay 0)."""
 
     @property
     def home(self) -> tuple[float, float, float] | None:
@@ -178,14 +183,18 @@ class HilBridge:
 
     # ------------------------------------------------------------------ output
     def send_controls(self, time_usec: int, commands: NDArray[np.float64], armed: bool) -> None:
-        """HIL_ACTUATOR_CONTROLS answering the step at ``time_usec``."""
-        u = wire_commands(commands).tolist()
-        u += _ZEROS16[len(u):]  # 16 slots, the unused ones 0
-        codec = self.link.codec
-        data = codec.hil_actuator_controls_encode(
-            int(time_usec), u, MAV_MODE_FLAG_SAFETY_ARMED if armed else 0,
-            1 if self.lockstep else 0).pack(codec)
-        codec.seq = (codec.seq + 1) & 0xFF
+        """HIL_ACTUATOR_CONTROLS answering the step at ``time_usec``: slot ``i`` =
+        ``wire_commands(commands)[i]``, the unused slots 0, packed by one
+        :class:`~vtolftc.protocols.fastpack.FramePacker` (the generated encoding's bytes)."""
+        u = self._u32
+        n = len(commands)
+        if n > HIL_OUTPUTS:
+            wire_commands(commands)  # raises its error
+        u[:n] = commands  # float32 rounding, as wire_commands
+        u[n:] = 0.0
+        data = self._controls_packer.pack(int(time_usec), 1 if self.lockstep else 0,
+                                          *u.tolist(),
+                                          MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
         self._last_answer = (int(time_usec), data)
         self.link.send(data)
         self.steps_answered += 1

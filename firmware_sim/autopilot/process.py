@@ -162,9 +162,10 @@ class AutopilotProcess:
         waited for the vehicle (``benchmarks/bench_sitl.py``)."""
         self.part_wall_s = {"autopilot_step": 0.0, "status_and_answer": 0.0,
                             "after_answer": 0.0}
-        """Wall time summed over the steps [s]: ``Autopilot.step``; status + encoding and
-        sending HIL_ACTUATOR_CONTROLS; after the answer (metrics, observers, failsafe checks,
-        publishing to the ground-station worker), which overlaps with the vehicle's work."""
+        """Wall time summed over the steps [s]: ``Autopilot.step``; encoding and sending
+        HIL_ACTUATOR_CONTROLS, then the status snapshot; after the answer (metrics,
+        observers, failsafe checks, publishing to the ground-station worker), which overlaps
+        with the vehicle's work."""
         self.failsafe_events: list[dict[str, Any]] = []
         self._finished = False
         self._sim_usec = 0
@@ -255,6 +256,8 @@ class AutopilotProcess:
         next_duty = 0.0
         last_step_start = None
         failsafe = self.failsafe
+        armed_of = getattr(ap, "metrics_inputs", None)
+        # Autopilot.metrics_inputs: (mode, armed, ...) without the status snapshot
         while self.running:
             nav = hil.peek()
             hold = gcs.hold_usec() if nav is not None else None
@@ -285,8 +288,12 @@ class AutopilotProcess:
                     last_step_start = t0
                     u = ap.step(nav)
                     t1 = pc()
+                    # answer first: the armed flag without building the status snapshot
+                    # (made right after the send, from the same unchanged state)
+                    armed = (armed_of(nav)[1] if armed_of is not None
+                             else ap.status().armed)
+                    hil.send_controls(nav.time_usec, u, armed)
                     st = ap.status()
-                    hil.send_controls(nav.time_usec, u, st.armed)
                     t2 = pc()
                     cpu = thread_time() - c0
                     self.step_cpu_s += cpu
@@ -312,7 +319,8 @@ class AutopilotProcess:
                     part["autopilot_step"] += t1 - t0
                     part["status_and_answer"] += t2 - t1
                     part["after_answer"] += pc() - t2
-                hil.drain(0.0)
+                # (no read here: the next pass reads what came meanwhile, one select and
+                # one read when the vehicle's next step is there)
             now = time.monotonic()
             if now < next_duty:
                 continue

@@ -88,11 +88,23 @@ class SensorModel:
         self.rng = np.random.default_rng(seed)
         self.rho = air_density_kg_m3
         self._mag_ned = np.array(self.home.mag_ned_gauss)
+        self._proj: FlatEarth | None = None
 
     def _n(self, sigma: float, size: int | None = None) -> np.ndarray | float:
+        """Noise of one-sigma ``sigma`` (``size`` draws, or a scalar); for ``sigma == 0`` the
+        scalar 0.0 (added to an array it gives the bits an array of zeros gives, -0.0 + 0.0
+        included, without making one: the noise-free SITL vehicle draws nothing)."""
         if sigma == 0.0:
-            return np.zeros(size) if size else 0.0
+            return 0.0
         return self.rng.normal(0.0, sigma, size)
+
+    def _projection(self) -> FlatEarth:
+        """The flat-earth projection about :attr:`home` (made again if home changed)."""
+        h = self.home
+        proj = self._proj
+        if proj is None or proj.lat0_deg != h.lat_deg or proj.lon0_deg != h.lon_deg:
+            proj = self._proj = FlatEarth(h.lat_deg, h.lon_deg)
+        return proj
 
     def sample(self, time_usec: int, pos_ned: np.ndarray, vel_ned: np.ndarray,
                R_body_to_ned: np.ndarray, omega_body: np.ndarray,
@@ -127,7 +139,7 @@ class SensorModel:
         pn = float(pos_ned[0]) + float(self._n(n.gps_pos_m))
         pe = float(pos_ned[1]) + float(self._n(n.gps_pos_m))
         pd = float(pos_ned[2]) + float(self._n(n.gps_pos_m))
-        lat, lon = FlatEarth(self.home.lat_deg, self.home.lon_deg).to_global(pn, pe)
+        lat, lon = self._projection().to_global(pn, pe)
         return SensorSample(
             time_usec=int(time_usec),
             accel_m_s2=np.asarray(specific_force_body, dtype=float) + self._n(n.accel_m_s2, 3),

@@ -2,7 +2,10 @@
 
 HIL_SENSOR + HIL_STATE_QUATERNION every step, HIL_GPS at the GPS rate, GPS_GLOBAL_ORIGIN and
 FAULT_INJECTION_STATUS at 1 Hz, BATTERY_STATUS (the power module) at 5 Hz, packed back to back
-in one datagram (the link parses several frames per datagram).
+in one datagram (the link parses several frames per datagram). The two messages of every
+step are packed by :class:`~vtolftc.protocols.fastpack.FramePacker` (the generated encoding's
+bytes, signed or not, without its per-message objects); the occasional ones by the generated
+code.
 """
 
 from __future__ import annotations
@@ -13,7 +16,9 @@ from typing import Any
 
 from vtolftc.firmware_sim.vehicle.battery import BatteryModel
 from vtolftc.firmware_sim.vehicle.model import Vehicle
+from vtolftc.protocols.fastpack import FramePacker
 from vtolftc.protocols.hil import HilStateEncoder
+from vtolftc.protocols.mavlink import dialect
 
 __all__ = ["StateEncoder"]
 
@@ -50,25 +55,35 @@ class StateEncoder:
         self.gps_period_usec = round(1e6 / gps_rate_hz) if gps_rate_hz > 0 else 0
         self._status_msg = status_msg
         self._resign = resign
-        self._msgs: list[Any] = []  # the messages of the last state datagram
+        self._parts: list[tuple[Callable[..., bytes], tuple[Any, ...]]] = []
+        """How the frames of the last state datagram were packed (packer, arguments)."""
+        mod = dialect()
+        self._sensor = FramePacker(codec, mod.MAVLink_hil_sensor_message)
+        self._state = FramePacker(codec, mod.MAVLink_hil_state_quaternion_message)
         self._next_gps = 0
         self._next_origin = 0
         self._next_status = 0
         self._next_battery = 0
 
-    def _pack(self, msg: Any) -> bytes:
-        data = msg.pack(self.codec)
+    def _pack_msg(self, msg: Any) -> bytes:
+        data: bytes = msg.pack(self.codec)
         self.codec.seq = (self.codec.seq + 1) & 0xFF
-        self._msgs.append(msg)
         return data
+
+    def _pack(self, msg: Any) -> bytes:
+        self._parts.append((self._pack_msg, (msg,)))
+        return self._pack_msg(msg)
+
+    def _pack_fast(self, packer: FramePacker, *values: Any) -> bytes:
+        self._parts.append((packer.pack, values))
+        return packer.pack(*values)
 
     def again(self, datagram: bytes) -> bytes:
         """The last state datagram, to send again: the same bytes; on a signed link the same
         messages signed anew (the same bytes are a replay, which the autopilot drops)."""
         if not self._resign:
             return datagram
-        msgs, self._msgs = self._msgs, []
-        return b"".join(self._pack(m) for m in msgs)
+        return b"".join(pack(*args) for pack, args in self._parts)
 
     def battery_due(self) -> bool:
         """True if the next :meth:`datagram` (at the vehicle's current time) carries
@@ -82,17 +97,17 @@ class StateEncoder:
         t = v.time_usec
         c = self.codec
         parts: list[bytes] = []
-        self._msgs = []
+        self._parts = []
         if t >= self._next_origin:
             self._next_origin = t + 1_000_000
             h = self.home
             parts.append(self._pack(c.gps_global_origin_encode(
                 round(h.lat_deg * 1e7), round(h.lon_deg * 1e7), round(h.alt_m * 1e3), t)))
         s = v.sensors()
-        a, g, m = s.accel_m_s2, s.gyro_rad_s, s.mag_gauss
-        parts.append(self._pack(c.hil_sensor_encode(
-            t, a[0], a[1], a[2], g[0], g[1], g[2], m[0], m[1], m[2], s.abs_pressure_hpa,
-            s.diff_pressure_hpa, s.pressure_alt_m, s.temperature_c, FIELDS_ALL, 0)))
+        parts.append(self._pack_fast(
+            self._sensor, t, *s.accel_m_s2.tolist(), *s.gyro_rad_s.tolist(),
+            *s.mag_gauss.tolist(), s.abs_pressure_hpa, s.diff_pressure_hpa, s.pressure_alt_m,
+            s.temperature_c, FIELDS_ALL, 0))
         if self.gps_period_usec and t >= self._next_gps:
             self._next_gps = t + self.gps_period_usec
             vn, ve, vd = (float(x) for x in s.gps_vel_ned_m_s)
@@ -102,10 +117,10 @@ class StateEncoder:
                 round(s.gps_alt_m * 1e3), 100, 100, min(65535, round(100 * math.hypot(vn, ve))),
                 round(100 * vn), round(100 * ve), round(100 * vd), cog, 12, 0, 0)))
         hs = self._encode(t, v.x, float(v.fm[6]))  # = encode_hil_state, bit for bit
-        parts.append(self._pack(c.hil_state_quaternion_encode(
-            hs.time_usec, hs.attitude_quaternion, hs.rollspeed, hs.pitchspeed, hs.yawspeed,
-            hs.lat, hs.lon, hs.alt, hs.vx, hs.vy, hs.vz, hs.ind_airspeed, hs.true_airspeed,
-            hs.xacc, hs.yacc, hs.zacc)))
+        parts.append(self._pack_fast(
+            self._state, hs.time_usec, *hs.attitude_quaternion, hs.rollspeed, hs.pitchspeed,
+            hs.yawspeed, hs.lat, hs.lon, hs.alt, hs.vx, hs.vy, hs.vz, hs.ind_airspeed,
+            hs.true_airspeed, hs.xacc, hs.yacc, hs.zacc))
         if t >= self._next_status:
             self._next_status = t + 1_000_000
             parts.append(self._pack(self._status_msg()))
