@@ -52,6 +52,20 @@ evaluations per stage): 460 s wall at load average ~20 (per axis roll 350, pitch
 134 s; three stages of 250 evaluations each). Per evaluation, pairwise at load 24
 (``benchmarks/bench_surface_eval.py``): predictor 16.6 ms (matrix-exponential ISE 428 ms),
 margins 76 ms, cap norms 173 ms. The < 90 s target is not shown on this machine.
+
+Session 12, on the idle machine (load 1-1.5): this requirements design (``--objective
+requirements --degree 2 --max-evals 250 --no-fly --jobs 2``) 27.4 s wall, the same J to the
+last digit as ``gains/surface2``; with its 2x-grid validation and plots
+(``regen_surface2.py --no-fly``) 69.7 s. The CLI's surface design with the 4x-grid
+validation, the mixed-mu certificate and the report (``vtolftc synth --method surface``):
+203 s in one run (design 150, validation 49, report 3; a nice-19 job started beside it), and
+122.2 s wall / 235.7 s CPU in another session's idle run (designs done at 86 s). Its CPU is
+the bound: ~240 s on 2 cores is >= 120 s even with perfect balance (a task pool over tuner
+starts and validation points was built and measured 127.1 s, CPU 247 s: not kept). Per
+tuner (roll, cProfile, 144 s CPU): frequency kernel 61 s, SLSQP 55 s, eigenpairs 40 s,
+central differences 61 s, channel realisations 62 s (nested), slycot AB13DD 6 s; per
+validation point ~1 s CPU: mixed-mu sweeps 55 %, lumped mu_RS 27 %. Under 90 s needs a
+third less CPU (a cheaper tuner iteration, or fewer iterations, which moves the gains).
 """
 
 from __future__ import annotations

@@ -375,7 +375,7 @@ class _Evaluator:
         self._dcache: dict[bytes, list[list[StateSpaceData]]] = {}
         # the same derivatives stacked over the parameters, (p, ., .) per channel (when the
         # channels realise in batches), for the gradients' batched products
-        self._dstack: dict[bytes, list[tuple[NDArray[np.float64], ...]]] = {}
+        self._dstack: dict[bytes, list[tuple[NDArray[np.float64], ...]] | None] = {}
         self.shapes: list[tuple[int, ...]] | None = None
         # SLSQP asks for the constraints and their Jacobian at the same point (in either
         # order): the frequency responses, SVDs and eigen-decompositions of the last few
@@ -408,7 +408,7 @@ class _Evaluator:
         r = self._dcache.get(key)
         if r is not None:
             return r
-        stacks = self._derivatives_batch(theta)
+        stacks = self.derivative_stacks(theta)
         if stacks is None:
             out = self._derivatives_loop(theta)
         else:
@@ -416,18 +416,23 @@ class _Evaluator:
                    for st in stacks]
         if len(self._dcache) > 1024:
             self._dcache.clear()
-            self._dstack.clear()
         self._dcache[key] = out
-        if stacks is not None:
-            self._dstack[key] = stacks
         return out
 
     def derivative_stacks(self, theta: NDArray[np.float64],
                           ) -> list[tuple[NDArray[np.float64], ...]] | None:
         """:meth:`derivatives` stacked over the parameters: per channel (dA, dB, dC, dD),
-        each (p, ., .); None when the channels were differentiated one point at a time."""
-        self.derivatives(theta)
-        return self._dstack.get(theta.tobytes())
+        each (p, ., .); None when the channels are differentiated one point at a time
+        (no ``realize_batch``, or a perturbed realisation not finite). The per-parameter
+        lists of :meth:`derivatives` are only built when asked for (the same arrays)."""
+        key = theta.tobytes()
+        if key in self._dstack:
+            return self._dstack[key]
+        stacks = self._derivatives_batch(theta)
+        if len(self._dstack) > 1024:
+            self._dstack.clear()
+        self._dstack[key] = stacks
+        return stacks
 
     def _derivatives_batch(self, theta: NDArray[np.float64],
                            ) -> list[tuple[NDArray[np.float64], ...]] | None:
@@ -569,8 +574,8 @@ class _Evaluator:
         dT_k products (any number of inputs)."""
         sys = self.realize(theta)
         resp = self._responses(theta, omegas)
-        dsys = self.derivatives(theta) if grad else None
         dstk = self.derivative_stacks(theta) if grad else None
+        dsys = self.derivatives(theta) if grad and dstk is None else None
         sig_all, grad_all = [], []
         for i, (A, _, C, _) in enumerate(sys):
             ri = resp[i]
@@ -582,7 +587,6 @@ class _Evaluator:
             sig_all.append(s[:, 0])
             if not grad:
                 continue
-            assert dsys is not None
             u = U[:, :, 0]
             v = Vh[:, 0, :].conj()
             g = np.zeros((w.size, self.p))
@@ -610,6 +614,7 @@ class _Evaluator:
                     g[:, k] = np.real(np.einsum("wi,wij,wj->w", uc, dTs[k], v))
                 grad_all.append(g)
                 continue
+            assert dsys is not None
             for k in range(self.p):
                 dA, dB, dC, dD = dsys[i][k]
                 dT = np.broadcast_to(dD.astype(complex), T.shape).copy()
@@ -644,8 +649,8 @@ class _Evaluator:
                 vals[i] = e[0].real
         if not grad:
             return vals, None
-        dsys = self.derivatives(theta)
         dstk = self.derivative_stacks(theta)
+        dsys = self.derivatives(theta) if dstk is None else None
         grads = np.zeros((len(sys), self.p))
         for i, e in enumerate(eigs):
             if e is None:
@@ -655,8 +660,8 @@ class _Evaluator:
             if abs(den) < 1e-14:
                 continue
             # dA_k x for every k: one stacked product when the derivatives are stacked
-            dAx = dstk[i][0] @ x if dstk is not None else [dsys[i][k][0] @ x
-                                                           for k in range(self.p)]
+            dAx = (dstk[i][0] @ x if dstk is not None
+                   else [dsys[i][k][0] @ x for k in range(self.p)])  # type: ignore[index]
             for k in range(self.p):
                 grads[i, k] = float(np.real(np.vdot(y, dAx[k]) / den))
         return vals, grads
