@@ -29,6 +29,8 @@ def test_allocate_trusted_equals_allocate_bit_for_bit(ds1):
     ap = Autopilot(ds1)
     ref: ActiveSetAllocator = ap.output.allocator
     fast: ActiveSetAllocator = Autopilot(ds1).output.allocator
+    tracked: ActiveSetAllocator = Autopilot(ds1).output.allocator
+    u_out = np.empty(ref.n_u)
     eff = EffectivenessModel(ds1)
     rng = np.random.default_rng(24)
     n_u = ref.n_u
@@ -50,12 +52,25 @@ def test_allocate_trusted_equals_allocate_bit_for_bit(ds1):
             u0 = rng.uniform(0.0, 1.0, n_u)
             ref.reset(u0)
             fast.reset(u0)
+            tracked.reset(u0)
         res = ref.allocate(v, B, u_max=hi, u_pref=pref)
         if k % 50 == 25:  # the public call in between: its own array becomes the warm start
             r2 = fast.allocate(v, B, u_max=hi, u_pref=pref)
             u, va, st = r2.u, r2.v_achieved, r2.status
         else:
             u, va, st = fast.allocate_trusted(v, B, hi, pref)
+        if k % 50 == 25:
+            tracked.allocate(v, B, u_max=hi, u_pref=pref)
+            u_out[:] = res.u
+        else:  # allocate_tracked: u into u_out, the shortfall mask of B u, (B u)[0]
+            u_out.fill(np.nan)
+            st_t, mask, fz = tracked.allocate_tracked(v, B, hi, pref, u_out, 2, 0.02, 0.03)
+            assert st_t == res.status, k
+            assert mask == _shortfall_mask_py(v, res.v_achieved, 0.02, 0.03), k
+            assert np.array([fz]).tobytes() == res.v_achieved[:1].tobytes(), k
+        assert _bits(u_out) == _bits(res.u), k
+        assert _bits(tracked._ws) == _bits(ref._ws), k
+        assert _bits(tracked._u_last) == _bits(ref._u_last), k
         statuses.add(st)
         assert st == res.status, k
         assert _bits(u) == _bits(res.u), k
@@ -63,10 +78,21 @@ def test_allocate_trusted_equals_allocate_bit_for_bit(ds1):
         assert _bits(fast._u_last) == _bits(ref._u_last), k
         assert _bits(fast._ws) == _bits(ref._ws), k
     assert AllocationStatus.INVALID_INPUT in statuses and AllocationStatus.SOLVED in statuses
-    a, b = ref.stats.as_dict(), fast.stats.as_dict()
-    for d in (a, b):
+    a, b, c = ref.stats.as_dict(), fast.stats.as_dict(), tracked.stats.as_dict()
+    for d in (a, b, c):
         d.pop("max_wall_time_s"), d.pop("mean_wall_time_s")
-    assert a == b
+    assert a == b == c
+
+
+def _shortfall_mask_py(v: np.ndarray, va: np.ndarray, atol: float, rtol: float) -> int:
+    """The output stage's saturation test of the three moment axes written out in Python
+    (as it was before ``shortfall_mask``): bit i short upwards, bit 3 + i downwards."""
+    mask = 0
+    for i, (w, g) in enumerate(zip(v[2:].tolist(), va[2:].tolist(), strict=True)):
+        tol = atol + rtol * abs(w)
+        mask |= (1 << i) if w > g + tol else 0
+        mask |= (8 << i) if w < g - tol else 0
+    return mask
 
 
 @pytest.mark.parametrize("how", ["deepcopy", "pickle"])
@@ -104,28 +130,46 @@ def test_a_copied_allocator_keeps_its_workspace_views(ds1, how):
         assert _bits(orig._lo) == _bits(twin._lo) and _bits(orig._hi) == _bits(twin._hi), k
 
 
-def test_output_stage_saturation_flags_equal_the_reference(ds1):
-    """``OutputStage.allocate``'s inlined saturation tracking gives what
-    ``_track_saturation(v, B u)`` gives (flags, the Fz pair, the count of saturated steps)
-    on commands inside and far outside what the actuators can do."""
+@pytest.mark.parametrize("path", ["tracked", "allocate"])
+def test_output_stage_saturation_flags_equal_the_reference(ds1, path):
+    """The output stage's saturation tracking (``allocate_tracked``'s compiled mask, or
+    ``_track_saturation`` after a replaced ``allocate``) gives what the Python expressions
+    give on ``v`` and ``B u`` (flags, the Fz pair, the count of saturated steps), on
+    commands inside and far outside what the actuators can do; the commands are
+    ``allocate``'s."""
     ap = Autopilot(ds1)
     out = ap.output
-    ref = copy.deepcopy(out)
+    twin = copy.deepcopy(out)  # fed the same problems through the public allocate
+    if path == "allocate":  # the fast path steps aside for an allocate set on the instance
+        for alloc in (out.allocator, out.allocator_fw):
+            alloc.allocate = alloc.allocate
     rng = np.random.default_rng(7)
+    n_sat = 0
     for k in range(300):
         V = float(rng.uniform(0.0, 20.0))
         tau = rng.normal(0, 1, 3) * [20.0, 20.0, 8.0] * (5.0 if k % 5 == 0 else 1.0)
-        out.sp.v[0] = -ds1.weight_N * float(rng.uniform(0.5, 1.6))
-        out.sp.v[1] = float(rng.uniform(0.0, 30.0))
+        fz = -ds1.weight_N * float(rng.uniform(0.5, 1.6))
+        fx = float(rng.uniform(0.0, 30.0))
         reserve = k % 9 == 4
+        out.sp.v[0], out.sp.v[1] = fz, fx
         u = out.allocate(V, tau, reserve, 1.0, 1.0, ap.u_pref_mc)
+        twin.sp.v[0], twin.sp.v[1] = fz, fx
+        twin.sp.v[2:] = tau
+        if reserve != twin._fw_reserve:
+            (twin.allocator_fw if reserve else twin.allocator).reset(twin.u)
+            twin._fw_reserve = reserve
         B = out._B if reserve else out._B_grid
-        ref._track_saturation(out.sp.v, B @ u)
-        assert (out.sat_hi, out.sat_lo) == (ref.sat_hi, ref.sat_lo), k
-        assert (out.fz_cmd, out.fz_achieved) == (ref.fz_cmd, ref.fz_achieved), k
-        assert out.saturated_steps == ref.saturated_steps, k
+        res = (twin.allocator_fw if reserve else twin.allocator).allocate(
+            twin.sp.v, B, u_max=np.ones(twin.n_u), u_pref=ap.u_pref_mc)
+        twin.u[:] = res.u
+        assert _bits(u) == _bits(res.u) and _bits(out.u) == _bits(res.u), k
+        mask = _shortfall_mask_py(twin.sp.v, res.v_achieved, 0.02, 0.02)
+        assert out.sat_hi == [bool(mask & 1), bool(mask & 2), bool(mask & 4)], k
+        assert out.sat_lo == [bool(mask & 8), bool(mask & 16), bool(mask & 32)], k
+        assert (out.fz_cmd, out.fz_achieved) == (fz, float(res.v_achieved[0])), k
+        n_sat += mask != 0
+        assert out.saturated_steps == n_sat, k
     assert 0 < out.saturated_steps < 300
-
 
 
 def _nav(q: np.ndarray, rates: np.ndarray, t_usec: int = 4000) -> NavState:

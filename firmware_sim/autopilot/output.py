@@ -13,9 +13,11 @@ It also tracks which moment axes the allocation could not achieve (the attitude
 controller's anti-windup) and produces the disarmed/idle output.
 
 Per control step (issue 24: Python calls cost as much as the arithmetic here) the shipped
-``ActiveSetAllocator`` is called through ``allocate_trusted`` (one compiled call, no argument
-checks, no result object; the same kernels, the same bits as ``allocate``) and the saturation
-tracking is inlined; any other allocator assigned to ``allocator`` goes through ``allocate``.
+``ActiveSetAllocator`` is called through ``allocate_tracked``: one compiled call, no argument
+checks, no result object, that also writes the command into ``u`` and returns the
+saturation tracking's mask (the same kernels, the same bits as ``allocate`` and
+``_track_saturation``); any other allocator assigned to ``allocator`` goes through
+``allocate``.
 """
 
 from __future__ import annotations
@@ -26,7 +28,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.airframe.loader import Airframe
-from vtolftc.firmware_sim.autopilot.allocation import ActiveSetAllocator, AllocationStatus
+from vtolftc.firmware_sim.autopilot.allocation import (
+    ActiveSetAllocator,
+    AllocationStatus,
+    shortfall_mask,
+)
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
 from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
 
@@ -41,6 +47,14 @@ ALLOCATION_WEIGHTS = np.array([1.0, 0.5, 10.0, 10.0, 5.0])
 #: pushers 1): the rotors are a reserve the QP reaches for only when the surfaces cannot
 #: deliver (the primary, tracking, objective is ~1e5 times heavier per N m).
 FW_ROTOR_RESERVE_WEIGHT = 30.0
+#: A moment axis counts as saturated when the allocation misses its command by more than
+#: ``_SAT_ATOL + _SAT_RTOL |command|`` [N m] (``shortfall_mask``'s tolerances).
+_SAT_ATOL = 0.02
+_SAT_RTOL = 0.02
+#: ``(sat_hi, sat_lo)`` of each shortfall mask of the three moment axes (bits 0-2 short
+#: upwards, 3-5 downwards): shared lists, read and never mutated.
+_SAT_FLAGS = tuple(([bool(m & 1), bool(m & 2), bool(m & 4)],
+                    [bool(m & 8), bool(m & 16), bool(m & 32)]) for m in range(64))
 
 
 class OutputStage:
@@ -173,46 +187,28 @@ class OutputStage:
             self._fw_reserve = reserve
         alloc = self.allocator_fw if reserve else self.allocator
         if type(alloc) is ActiveSetAllocator and "allocate" not in alloc.__dict__:
-            # allocate(v, B, u_max=hi, u_pref=u_pref) without its checks and result object
-            # (the arrays here are the kernel's types by construction), bit for bit the same
-            u_new, achieved, status = alloc.allocate_trusted(v, B, hi, u_pref)
+            # allocate(v, B, u_max=hi, u_pref=u_pref) and _track_saturation(v, B u) in one
+            # compiled call, the command written into u (the arrays here are the kernel's
+            # types by construction); bit for bit the same
+            status, mask, self.fz_achieved = alloc.allocate_tracked(
+                v, B, hi, u_pref, u, 2, _SAT_ATOL, _SAT_RTOL)
+            self.fz_cmd = v.item(0)
+            self.sat_hi, self.sat_lo = _SAT_FLAGS[mask]
+            if mask:
+                self.saturated_steps += 1
         else:  # an allocator (or its allocate) replaced by a benchmark or a test
             res = alloc.allocate(v, B, u_max=hi, u_pref=u_pref)
-            u_new, achieved, status = res.u, res.v_achieved, res.status
+            status = res.status
+            self._track_saturation(v, res.v_achieved)
+            u[:] = res.u
         self.status_text = _STATUS_NAMES[status]
-        # _track_saturation(v, achieved), inlined (the same expressions, the same order)
-        self.fz_cmd, _, w0, w1, w2 = v.tolist()
-        self.fz_achieved, _, g0, g1, g2 = achieved.tolist()
-        tol = 0.02 + 0.02 * abs(w0)
-        h0 = w0 > g0 + tol
-        l0 = w0 < g0 - tol
-        tol = 0.02 + 0.02 * abs(w1)
-        h1 = w1 > g1 + tol
-        l1 = w1 < g1 - tol
-        tol = 0.02 + 0.02 * abs(w2)
-        h2 = w2 > g2 + tol
-        l2 = w2 < g2 - tol
-        self.sat_hi = [h0, h1, h2]
-        self.sat_lo = [l0, l1, l2]
-        if h0 or l0 or h1 or l1 or h2 or l2:
-            self.saturated_steps += 1
-        u[:] = u_new
         return u.copy()
 
     def _track_saturation(self, v: NDArray[np.float64], achieved: NDArray[np.float64]) -> None:
         """Which moment axes the allocation could not achieve, and in which direction."""
-        self.fz_cmd, _, w0, w1, w2 = v.tolist()
-        self.fz_achieved, _, g0, g1, g2 = achieved.tolist()
-        tol = 0.02 + 0.02 * abs(w0)
-        h0 = w0 > g0 + tol
-        l0 = w0 < g0 - tol
-        tol = 0.02 + 0.02 * abs(w1)
-        h1 = w1 > g1 + tol
-        l1 = w1 < g1 - tol
-        tol = 0.02 + 0.02 * abs(w2)
-        h2 = w2 > g2 + tol
-        l2 = w2 < g2 - tol
-        self.sat_hi = [h0, h1, h2]
-        self.sat_lo = [l0, l1, l2]
-        if h0 or l0 or h1 or l1 or h2 or l2:
+        mask = shortfall_mask(v, achieved, 2, _SAT_ATOL, _SAT_RTOL)
+        self.fz_cmd = v.item(0)
+        self.fz_achieved = achieved.item(0)
+        self.sat_hi, self.sat_lo = _SAT_FLAGS[mask]
+        if mask:
             self.saturated_steps += 1

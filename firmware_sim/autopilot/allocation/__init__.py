@@ -24,6 +24,7 @@ from vtolftc.firmware_sim.autopilot.allocation.interface import (
     AllocationStatus,
     Allocator,
     AllocatorStats,
+    shortfall_mask,
     step_bounds,
 )
 from vtolftc.firmware_sim.autopilot.allocation.pseudo_inverse import PseudoInverseAllocator
@@ -41,5 +42,6 @@ __all__ = [
     "QPAllocator",
     "WLSAllocator",
     "box_qp",
+    "shortfall_mask",
     "step_bounds",
 ]

@@ -50,6 +50,7 @@ import numpy as np
 from vtolftc.firmware_sim.autopilot.allocation.interface import (
     AllocationResult,
     new_result,
+    shortfall_mask,
     step_bounds,
     vec_arg,
 )
@@ -304,6 +305,24 @@ def _allocate_step_trusted(v, B, pref, umax_in, cst, has_prev, has_rate, dt, ws,
                                  has_rate, dt, ws, iws, u0, max_iter, tol, ubuf)
 
 
+@numba.njit(cache=True)
+def _allocate_step_tracked(v, B, pref, umax_in, cst, has_prev, has_rate, dt, ws, iws, ubuf,
+                           max_iter, tol, u_out, first, atol, rtol):
+    """:func:`_allocate_step_trusted` and, on a converged step, what the output stage reads
+    of it (``ActiveSetAllocator.allocate_tracked``): the achieved command ``B @ u``
+    (``np.dot``, the BLAS ``dgemv`` that numpy's ``@`` calls: the same bits, checked in
+    ``tests/test_inproc_fastpaths.py``), its :func:`shortfall_mask` against ``v`` and the
+    command copied into ``u_out``. Returns ``(code, ok, iterations, mask, va[0])``;
+    ``u_out`` is untouched and the mask 0 unless ``code >= 0 and ok``."""
+    code, ok, it = _allocate_step_trusted(v, B, pref, umax_in, cst, has_prev, has_rate, dt, ws,
+                                          iws, ubuf, max_iter, tol)
+    if code < 0 or not ok:
+        return code, ok, it, 0, 0.0
+    va = np.dot(B, ubuf)
+    u_out[:] = ubuf
+    return code, ok, it, shortfall_mask(v, va, first, atol, rtol), va[0]
+
+
 def box_qp(
     H: np.ndarray,
     q: np.ndarray,
@@ -454,12 +473,7 @@ class ActiveSetAllocator(WLSAllocator):
         # one argument type for the kernel (warmup.py compiles it); B itself stays for B @ u.
         # The read-only view of a C-contiguous B shares its memory: kept while B is the same
         # object (the output stage passes the same few matrices step after step)
-        if B is self._bk_of:
-            Bk = self._bk
-        else:
-            Bk = _readonly_c(B) if B.flags.writeable or not B.flags.c_contiguous else B
-            if B.flags.c_contiguous:
-                self._bk_of, self._bk = B, Bk
+        Bk = self._bk if B is self._bk_of else self._kernel_matrix(B)
         if not v.flags.c_contiguous:
             v = np.ascontiguousarray(v)
         umin_in = self.u_min if u_min is None else vec_arg(u_min, n_u, "u_min")
@@ -517,12 +531,7 @@ class ActiveSetAllocator(WLSAllocator):
             copy it, do not keep it.
         """
         t0 = _perf_counter()
-        if B is self._bk_of:
-            Bk = self._bk
-        else:
-            Bk = _readonly_c(B) if B.flags.writeable or not B.flags.c_contiguous else B
-            if B.flags.c_contiguous:
-                self._bk_of, self._bk = B, Bk
+        Bk = self._bk if B is self._bk_of else self._kernel_matrix(B)
         last = self._u_last
         u = self._ubuf
         if last is not None and last is not u:  # after reset(u0) or allocate(): its array
@@ -530,19 +539,80 @@ class ActiveSetAllocator(WLSAllocator):
         code, ok, it = _allocate_step_trusted(
             v, Bk, u_pref, u_max, self._cst, last is not None, self.rate_limit is not None,
             self.dt, self._ws, self._iws, u, self.max_iter, self.tol)
+        if code < 0 or not ok:
+            return self._unconverged(code, it, v, B, u_pref, last, t0)
+        # _solved's bookkeeping, without the result object
+        va = B @ u
+        self._u_last = u
+        self._count_solved(it, t0)
+        return u, va, ST_SOLVED
+
+    def allocate_tracked(self, v: np.ndarray, B: np.ndarray, u_max: np.ndarray,
+                         u_pref: np.ndarray, u_out: np.ndarray, first: int, atol: float,
+                         rtol: float) -> tuple[int, int, float]:
+        """:meth:`allocate_trusted` with the command written into ``u_out`` and, instead of
+        ``B u``, what the output stage reads of it: one compiled call
+        (:func:`_allocate_step_tracked`) on a converged step.
+
+        Parameters
+        ----------
+        v, B, u_max, u_pref
+            As :meth:`allocate_trusted` (the kernel's types, no checks).
+        u_out : numpy.ndarray
+            (n_u,) float64: receives the command ``u`` (normalised units).
+        first, atol, rtol
+            :func:`~.interface.shortfall_mask`'s, applied to ``v`` and ``B u``.
+
+        Returns
+        -------
+        tuple
+            ``(status, mask, fz_achieved)``: ``allocate_trusted``'s status, the shortfall
+            mask of ``v`` against its ``B u`` and ``(B u)[0]`` [N]; ``u_out`` and the
+            allocator's state exactly as after ``allocate_trusted`` (the same kernels, the
+            same ``dgemv``: the same bits).
+        """
+        t0 = _perf_counter()
+        Bk = self._bk if B is self._bk_of else self._kernel_matrix(B)
+        last = self._u_last
+        u = self._ubuf
+        if last is not None and last is not u:
+            u[:] = last
+        code, ok, it, mask, fz = _allocate_step_tracked(
+            v, Bk, u_pref, u_max, self._cst, last is not None, self.rate_limit is not None,
+            self.dt, self._ws, self._iws, u, self.max_iter, self.tol, u_out, first, atol, rtol)
+        if code < 0 or not ok:
+            u_res, va, status = self._unconverged(code, it, v, B, u_pref, last, t0)
+            u_out[:] = u_res
+            return status, shortfall_mask(v, va, first, atol, rtol), float(va[0])
+        self._u_last = u
+        self._count_solved(it, t0)
+        return ST_SOLVED, mask, fz
+
+    def _kernel_matrix(self, B: np.ndarray) -> np.ndarray:
+        """``B`` as the kernels take it (read-only, C-contiguous), kept while ``B`` is the
+        same C-contiguous object."""
+        Bk = _readonly_c(B) if B.flags.writeable or not B.flags.c_contiguous else B
+        if B.flags.c_contiguous:
+            self._bk_of, self._bk = B, Bk
+        return Bk
+
+    def _unconverged(self, code: int, it: int, v: np.ndarray, B: np.ndarray,
+                     u_pref: np.ndarray, last: np.ndarray | None,
+                     t0: float) -> tuple[np.ndarray, np.ndarray, int]:
+        """The trusted calls' answer when the kernel found a non-finite input (``code < 0``:
+        the previous command held) or did not converge (the fallback)."""
         if code < 0:
             hold = last if last is not None else self.u_pref
             res = self._finish(np.clip(hold, self._lo, self._hi), v, B, ST_INVALID_INPUT, 0,
                                0.0, t0, "non-finite input", False)
             return res.u, res.v_achieved, ST_INVALID_INPUT
-        if not ok:
-            u = self._fallback(v, B, self._lo, self._hi, u_pref, u)
-            res = self._finish(u, v, B, ST_FALLBACK, it, 0.0, t0, "active set not converged",
-                               False)
-            return res.u, res.v_achieved, ST_FALLBACK
-        # _solved's bookkeeping, without the result object
-        va = B @ u
-        self._u_last = u
+        u = self._fallback(v, B, self._lo, self._hi, u_pref, self._ubuf)
+        res = self._finish(u, v, B, ST_FALLBACK, it, 0.0, t0, "active set not converged",
+                           False)
+        return res.u, res.v_achieved, ST_FALLBACK
+
+    def _count_solved(self, it: int, t0: float) -> None:
+        """The statistics of a converged trusted step (``_solved``'s, no result object)."""
         st = self.stats
         st.calls += 1
         st.counts[ST_SOLVED] += 1
@@ -553,7 +623,6 @@ class ActiveSetAllocator(WLSAllocator):
         st.total_wall_time_s += t_wall
         if t_wall > st.max_wall_time_s:
             st.max_wall_time_s = t_wall
-        return u, va, ST_SOLVED
 
     def _solved(self, u: np.ndarray, v: np.ndarray, B: np.ndarray, it: int, t_solve: float,
                 t0: float) -> AllocationResult:

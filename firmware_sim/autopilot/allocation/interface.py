@@ -29,6 +29,7 @@ __all__ = [
     "AllocationStatus",
     "Allocator",
     "AllocatorStats",
+    "shortfall_mask",
     "step_bounds",
 ]
 
@@ -268,6 +269,42 @@ def step_bounds(umin_def, umax_def, umin_in, umax_in, prev, has_prev, rate, has_
         lo[j] = a
         hi[j] = b
     return prev_ok
+
+
+@numba.njit(cache=True)
+def shortfall_mask(v, va, first, atol, rtol):
+    """Which components of a command an allocation fell short of, as a bit mask (compiled;
+    the same expressions in Python give the same bits).
+
+    Component ``i`` of the ``m`` from ``first`` on (``v[first + i]``, ``i < m``) is short
+    upwards when ``v > va + tol`` (bit ``i``) and downwards when ``v < va - tol`` (bit
+    ``m + i``), with ``tol = atol + rtol |v|``.
+
+    Parameters
+    ----------
+    v, va : numpy.ndarray
+        Commanded and achieved virtual command (n_v,) [N, N m].
+    first : int
+        Index of the first component checked; the rest of ``v`` from there is checked.
+    atol, rtol : float
+        Absolute [units of ``v``] and relative tolerance.
+
+    Returns
+    -------
+    int
+        The mask (0: nothing short).
+    """
+    m = v.shape[0] - first
+    mask = 0
+    for i in range(m):
+        w = v[first + i]
+        g = va[first + i]
+        tol = atol + rtol * abs(w)
+        if w > g + tol:
+            mask |= 1 << i
+        if w < g - tol:
+            mask |= 1 << (m + i)
+    return mask
 
 
 _AR_FIELDS = ("u", "v_achieved", "residual", "status", "iterations", "solve_time_s",
