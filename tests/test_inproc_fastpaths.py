@@ -461,3 +461,33 @@ def test_vehicle_step_memo_equals_full_evaluation_bit_for_bit(ds1):
         assert _bits(fast.x) == _bits(ref.x), k
         assert _bits(fast.fm) == _bits(ref.fm), k
     assert hits > 300  # the memo was used
+
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+def test_a_copied_vehicle_keeps_its_workspace_views(ds1, how):
+    """The vehicle's state arrays are views of one workspace (``Vehicle._pack``, the packed
+    control-step kernel reads that): a deep copy or an unpickled vehicle links them to its
+    own workspace again and flies on exactly as the original, with the wind changed through
+    its attribute in between (a stale view would not reach the kernel)."""
+    import pickle
+
+    from vtolftc.firmware_sim.vehicle.model import Vehicle
+
+    orig = Vehicle(ds1)
+    rng = np.random.default_rng(8)
+    u_min = np.r_[np.zeros(10), -np.ones(5)]
+    for _ in range(5):
+        orig.step(rng.uniform(u_min, 1.0), 4)
+    twin = copy.deepcopy(orig) if how == "deepcopy" else pickle.loads(pickle.dumps(orig))
+    for name in Vehicle._WS_PARTS:
+        assert np.shares_memory(getattr(twin, name), twin._vws), name
+        assert not np.shares_memory(getattr(twin, name), orig._vws), name
+    for k in range(40):
+        cmds = rng.uniform(u_min, 1.0)
+        if k == 20:
+            for v in (orig, twin):
+                v.wind[:] = (5.0, -3.0, 0.5)
+        orig.step(cmds, 4)
+        twin.step(cmds, 4)
+        assert _bits(twin._vws) == _bits(orig._vws), k
+    assert orig.fm[6] != 0.0 and _bits(twin.x) == _bits(orig.x)
