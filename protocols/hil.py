@@ -44,6 +44,7 @@ __all__ = [
     "decode_hil_state",
     "encode_hil_state",
     "wire_commands",
+    "wire_round",
 ]
 
 HIL_OUTPUTS = 16
@@ -476,3 +477,16 @@ def wire_commands(u: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float6
         raise ValueError(f"commands of shape {arr.shape}: HIL_ACTUATOR_CONTROLS carries at "
                          f"most {HIL_OUTPUTS} actuators")
     return arr.astype(np.float32).astype(np.float64)
+
+
+@numba.njit(cache=True)
+def wire_round(u):  # pragma: no cover - compiled
+    """:func:`wire_commands` inside a compiled caller (the in-process vehicle's control
+    step): a new float64 array of ``u``'s values each rounded to the float32 the wire
+    carries (the same IEEE round-to-nearest-even cast as numpy's ``astype``, so the same
+    bits, ``tests/test_inproc_fastpaths.py``). No shape check: the caller's ``u`` is the
+    airframe's ``n <= HIL_OUTPUTS`` commands."""
+    out = np.empty(u.size)
+    for i in range(u.size):
+        out[i] = np.float64(np.float32(u[i]))
+    return out

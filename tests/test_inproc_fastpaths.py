@@ -491,3 +491,44 @@ def test_a_copied_vehicle_keeps_its_workspace_views(ds1, how):
         twin.step(cmds, 4)
         assert _bits(twin._vws) == _bits(orig._vws), k
     assert orig.fm[6] != 0.0 and _bits(twin.x) == _bits(orig.x)
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered in cast:RuntimeWarning")
+def test_wire_round_equals_wire_commands_and_the_vehicle_flies_it(ds1):
+    """``wire_round`` (compiled) rounds as ``wire_commands`` (numpy's float32 cast), bit for
+    bit, on random commands and at the edges (ties, subnormals, float32 overflow, inf, NaN);
+    ``Vehicle.step(u, wire=True)`` flies what ``Vehicle.step(wire_commands(u))`` flies, on
+    the fused path and through a fault injection (the other path); a command that only the
+    rounding makes infinite is refused as the vehicle refuses ``wire_commands``'s inf."""
+    from vtolftc.firmware_sim.vehicle import model as vm
+    from vtolftc.firmware_sim.vehicle.faults import case_faults
+    from vtolftc.protocols.hil import wire_commands, wire_round
+
+    rng = np.random.default_rng(13)
+    f32 = np.finfo(np.float32)
+    edge = np.array([1.0 + 2.0**-24, 1.0 + 3 * 2.0**-24, -(1.0 + 2.0**-24), 1e-40, -1e-45,
+                     float(f32.max) * (1 + 2.0**-25), float(f32.max) * (1 + 2.0**-23), 1e39,
+                     -1e39, np.inf, -np.inf, np.nan, 0.0, -0.0, 5e-324, 0.1])
+    for k in range(2000):
+        u = rng.uniform(-1.0, 1.0, 15) * 10.0 ** rng.integers(-8, 3)
+        if k == 0:
+            u = edge
+        assert _bits(wire_round(u)) == _bits(wire_commands(u)), k
+    fast, ref = vm.Vehicle(ds1), vm.Vehicle(ds1)
+    fault = case_faults("1", ds1.actuator_names)[0]
+    u_min = np.r_[np.zeros(10), -np.ones(5)]
+    for k in range(200):
+        u = rng.uniform(u_min, 1.0)
+        if k == 100:
+            fast.inject(fault)
+            ref.inject(fault)
+        fast.step(u, 4, wire=True)
+        ref.step(wire_commands(u), 4)
+        assert _bits(fast._vws) == _bits(ref._vws), k
+    bad = u.copy()
+    bad[3] = 1e39  # finite, beyond float32: inf on the wire
+    with pytest.raises(ValueError, match="NaN or inf"):
+        fast.step(bad, 4, wire=True)
+    with pytest.raises(ValueError, match="NaN or inf"):
+        ref.step(wire_commands(bad), 4)
+    assert _bits(fast._vws) == _bits(ref._vws)

@@ -33,6 +33,7 @@ from vtolftc.firmware_sim.vehicle.sensors import (
     StateNoise,
 )
 from vtolftc.firmware_sim.vehicle.wind import WindField
+from vtolftc.protocols.hil import wire_commands, wire_round
 
 _F64 = np.dtype(np.float64)
 
@@ -63,12 +64,17 @@ def _take_and_step(src, x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm,
 
 
 @numba.njit(cache=True)
-def _take_and_step_packed(src, ws, stuck, n, dt, buf, layout, flags):  # pragma: no cover
+def _take_and_step_packed(src, ws, stuck, n, dt, buf, layout, flags,
+                          wire):  # pragma: no cover - compiled
     """:func:`_take_and_step` on the vehicle's own float arrays packed into one workspace
     ``ws`` (``Vehicle._pack``: ``x``, ``u``, ``eff``, ``wind``, ``fm``, then ``memo``; ``x``
     has ``N_RIGID + n`` entries for the ``n = src.size`` actuators): 5 array arguments
-    instead of 12 (each costs its own type check and unboxing, ~0.15-0.2 us a call). The
-    same kernels on the same numbers: the same bits."""
+    instead of 12 (each costs its own type check and unboxing, ~0.15-0.2 us a call). With
+    ``wire`` the commands are first rounded as the HIL link carries them
+    (:func:`~vtolftc.protocols.hil.wire_round`, then checked). The same kernels on the same
+    numbers: the same bits."""
+    if wire:
+        src = wire_round(src)
     na = src.size
     ie = dyn.N_RIGID + 2 * na  # eff
     iw = ie + na  # wind
@@ -335,8 +341,11 @@ class Vehicle:
     # Integration
     # ----------------------------------------------------------------------------------------
 
-    def step(self, commands: np.ndarray | Sequence[float] | None = None, n: int = 1) -> None:
-        """Hold ``commands`` (or the previous ones if None) for ``n`` physics steps."""
+    def step(self, commands: np.ndarray | Sequence[float] | None = None, n: int = 1, *,
+             wire: bool = False) -> None:
+        """Hold ``commands`` (or the previous ones if None) for ``n`` physics steps; with
+        ``wire`` the commands as HIL_ACTUATOR_CONTROLS carries them
+        (:func:`~vtolftc.protocols.hil.wire_commands` of them, float32)."""
         pa = self._packed_args
         if (type(commands) is np.ndarray and commands.dtype is _F64
                 and commands.shape == self.u.shape and not self._gusty and not self._pending
@@ -344,10 +353,13 @@ class Vehicle:
             # the common case of a control step: the commands taken and the whole batch
             # flown in one compiled call (the branches below, the same kernels)
             if not _take_and_step_packed(commands, self._vws, self.stuck, int(n),
-                                         self.dt_usec * 1e-6, pa[1], pa[2], self.physics):
+                                         self.dt_usec * 1e-6, pa[1], pa[2], self.physics,
+                                         wire):
                 raise ValueError("commands contain NaN or inf: expected finite values")
             self.time_usec += int(n) * self.dt_usec
             return
+        if wire and commands is not None:
+            commands = wire_commands(commands)
         if commands is not None:
             u = commands
             if type(u) is not np.ndarray or u.dtype != _F64:

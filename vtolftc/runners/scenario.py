@@ -13,8 +13,9 @@ The in-process runner is deterministic: vehicle at 1 kHz (RK4), autopilot at 250
 physics steps per control step), the autopilot fed ``decode_hil_state(encode_hil_state(...))``
 (fused into one call, ``HilRoundTrip``) of the vehicle truth (bit-identical to what it
 receives over MAVLink HIL_STATE_QUATERNION),
-its output passed through ``wire_commands`` (float32) before the vehicle: the very functions
-of the SITL processes (:mod:`vtolftc.protocols.hil`). ``hil_delay_s`` adds a one-way
+its output rounded as ``wire_commands`` rounds it (float32) before the vehicle (inside the
+vehicle's compiled step, ``Vehicle.step(..., wire=True)``, ``wire_round``): the very
+arithmetic of the SITL processes (:mod:`vtolftc.protocols.hil`). ``hil_delay_s`` adds a one-way
 transport delay on the HIL state path: the autopilot gets the state of
 ceil(hil_delay_s x control rate) control steps earlier (a FIFO; 25 ms at 250 Hz = 7 steps =
 28 ms; the first steps of the run see the oldest state there is; telemetry and metrics keep
@@ -45,7 +46,6 @@ from vtolftc.firmware_sim.autopilot.autopilot import (
 from vtolftc.firmware_sim.autopilot.interface import (
     CommandResult,
     NavState,
-    wire_commands,
 )
 from vtolftc.firmware_sim.vehicle.faults import Fault, case_description, case_faults
 from vtolftc.firmware_sim.vehicle.model import Vehicle
@@ -266,7 +266,6 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                 n_events += 1
                 warn = "quad-chute" in text or "denied" in text or "forced" in text
                 event(te, "warning" if warn else "mode", text)
-            cmds = wire_commands(u)
             if obs:
                 st = ap.status()
                 truth = VehicleTruth(x[0:3].copy(), x[3:6].copy(), x[6:10].copy(),
@@ -281,7 +280,7 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
             else:  # nobody reads the status: the metrics take its fields directly
                 crashed = acc.add_step(now, nav, *ap.metrics_inputs(nav))
             t3 = pc()
-            veh.step(cmds, n_sub)
+            veh.step(u, n_sub, wire=True)  # the commands as wire_commands(u) carries them
             t4 = pc()
             t_enc += t1 - t0
             t_ap += t2 - t1
