@@ -167,6 +167,71 @@ already ~2 % (the pool's rate is the flight's rate), so the 300 scenarios/min ta
 per-core target again (0.40 s per 60 s flight = 26.7 us per step). Not done this session:
 that rewrite (~1,000 lines whose every branch must be re-proved bit-identical, including a
 port of CPython's ``math.hypot`` for the position hold, see above).
+
+Issue 24, branch inproc-13 (2026-12-03, 2 cores shared with 4 other engineers, load 11-20).
+
+Case 1 and the campaign's 60 s scenario, step for step (one process, the runs interleaved,
+thread CPU time per control step, 3 runs each, load 12.7): case 1 gs-shif 40 s 37.5 us
+(median; 32.6-38.1), the campaign's first three scenarios (10 % loss of rotor 1a at 40 s in
+cruise, gs-shif / shif / lqr) 37.9, 35.1 and 36.5 us. The campaign's step is not slower:
+active-set iterations per step 1.015-1.018 (case 1: 1.019), saturated steps 0.1 % (case 1:
+0.2 %), the degraded-lift monitor 0.13 calls per step (case 1: 0.20); what differs is the mix
+(cProfile, calls per step): 54 % of its steps are fixed-wing (``_outer_fw``, the fixed-wing
+altitude hold, ``pusher_max_force``, the reserve allocator) against 30 % in 40 s of case 1,
+whose multicopter steps cost ``_outer_mc`` + ``_position_hold`` + the multicopter altitude
+hold instead, about the same. The lead's 130x vs 136-141x (0.46 s per 60 s) is
+``bench_campaign``'s mean over the three controllers' wall times, within the +-10 % spread of
+single runs; the campaign needs the same per-step cut as case 1.
+
+Built (every flight bit-identical, ``command_digest.py`` dbd91a71..., 121a7434...,
+e937b801... after each commit; tests in ``tests/test_inproc_fastpaths.py``, each checked to
+fail under mutations of the new code):
+
+- the output stage's ``allocate -> allocate_trusted -> kernel`` with numpy's ``B @ u``, two
+  ``tolist``, the flag lists and the command copy in Python became one compiled call
+  (``ActiveSetAllocator.allocate_tracked``, kernel ``_allocate_step_tracked``): the solve,
+  ``B u`` by ``np.dot`` (the BLAS ``dgemv`` numpy's ``@`` calls: equal bits on 20,000
+  random products here, where a plain loop differs in 19,596: the test pins it), the
+  saturation mask (``allocation.shortfall_mask``, now also the non-trusted path's) and the
+  command written into the output stage's array; the flag lists come from a table;
+- the vehicle's ``x``, ``u``, ``eff``, ``wind``, ``fm`` and RK4 memo are views of one float
+  workspace (copy and pickle relink them): its control-step call takes 5 arrays instead of
+  10 (``_take_and_step_packed``);
+- the wire's float32 rounding of the commands happens in that same call
+  (``Vehicle.step(u, n, wire=True)``, ``protocols.hil.wire_round``) instead of
+  ``wire_commands``' numpy round trip (``timeit`` at load 13: 3-6 us a call against 0.4-0.7
+  us for a plain ``u.copy()``).
+
+Python function calls per control step (cProfile, ``--profile``): 96 -> 90; array arguments
+of the compiled calls per step: vehicle 10 -> 5, allocation 8 -> 9 (``u_out``).
+
+Measured A/B (case 1 gs-shif 40 s; main = /work/main's tree, branch = this one; processes
+alternated main/branch, each a warm-up flight then 2 flights, the faster one's thread CPU
+time per control step; 8 pairs at load 17-20): main 29.4-39.6 us (median 32.2), branch
+27.4-35.4 us (median 29.9); ratio branch/main per pair 0.76-1.03, median 0.935. The
+campaign's first scenario (``bench_campaign``'s spec, 60 s, gs-shif, the same way, 6 pairs at
+load 14-20): main 32.3-36.6 us (median 34.2), branch 29.7-35.0 us (median 31.6), ratio
+0.84-1.04, median 0.93: on the lead's idle figures ~0.43 s per 60 s scenario (~140x), a
+2-core pool at ~265 scenarios/min (248.8 / 0.93; not run through ``bench_campaign`` here).
+
+Why 150x (26.7 us per step) and 300 scenarios/min (~22-24 us per step) are not reached: the
+cut here is ~7 % (~2 us of the lead's idle 28.3-29.4 us: ~26.5-27.5 us per step at idle by
+that ratio, around the 150x line but not the campaign's 22-24 us). What is left per step
+(cProfile calls above, the py-spy shares of inproc-12): the physics kernel (~8 us idle, 4 RK4
+steps; a cheaper integrator changes the bits), the QP (~3-4 us), the P-PID, metrics and codec
+kernels (~2-3 us), and ~12-13 us of Python spread over ~20 functions none above ~7 % of the
+step: ``StateEstimate.update`` (four ``tolist``, 13 ``isfinite``), the outer loops
+(``update``, ``_outer_mc`` / ``_outer_fw``, ``_position_hold``, an altitude hold,
+``aero_estimate``, ``pusher_max_force``: ~5 us), ``Autopilot.step``, ``Commander.update_mode``
+with the mode machine and the navigator (~2 us), the attitude stage's wrapper, the output
+stage's bookkeeping (grid key, hand-over, limits key, status), ``metrics_inputs`` +
+``add_step``, ``HilRoundTrip`` and the runner loop. The next ~5-7 us are only in compiling
+that continuous part (estimate, outer loops with the altitude and airspeed holds, position
+hold, attitude and allocation) into one call on one flat state, Python keeping the mode
+logic, commands and the navigator's decisions: the route the previous rounds chose, over a
+batched campaign engine (its lanes would still run each scenario's Python between diverging
+mode changes and faults). Not done this session: that rewrite, with a port of CPython's
+``math.hypot`` for the position hold.
 """
 
 from __future__ import annotations

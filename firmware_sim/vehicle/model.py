@@ -69,7 +69,7 @@ def _take_and_step_packed(src, ws, stuck, n, dt, buf, layout, flags,
     """:func:`_take_and_step` on the vehicle's own float arrays packed into one workspace
     ``ws`` (``Vehicle._pack``: ``x``, ``u``, ``eff``, ``wind``, ``fm``, then ``memo``; ``x``
     has ``N_RIGID + n`` entries for the ``n = src.size`` actuators): 5 array arguments
-    instead of 12 (each costs its own type check and unboxing, ~0.15-0.2 us a call). With
+    instead of 10 (each costs its own type check and unboxing, ~0.15-0.2 us a call). With
     ``wire`` the commands are first rounded as the HIL link carries them
     (:func:`~vtolftc.protocols.hil.wire_round`, then checked). The same kernels on the same
     numbers: the same bits."""
