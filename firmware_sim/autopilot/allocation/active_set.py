@@ -505,9 +505,10 @@ class ActiveSetAllocator(WLSAllocator):
 
     def allocate_trusted(self, v: np.ndarray, B: np.ndarray, u_max: np.ndarray,
                          u_pref: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-        """:meth:`allocate` for a caller whose arguments are already of the kernel's types
-        (the autopilot's output stage, every control step): no argument checks and, on a
-        converged step, no :class:`AllocationResult`.
+        """:meth:`allocate` for a caller whose arguments are already of the kernel's types:
+        no argument checks and, on a converged step, no :class:`AllocationResult` (the
+        output stage calls :meth:`allocate_tracked`: this and what it reads of ``B u`` in
+        one compiled call).
 
         Parameters
         ----------
