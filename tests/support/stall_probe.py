@@ -11,8 +11,8 @@ still for ``stall_s`` it writes a report while the stall lasts: the samples of t
 the progress resumes it adds how long the stall lasted. Linux only (``/proc``); elsewhere it
 samples the progress alone.
 
-The probe reads and never writes the processes it watches (``py-spy dump`` stops a process for
-the few milliseconds of the read, and only during a stall).
+The probe reads and never writes the processes it watches (``py-spy dump --nonblocking``: it
+does not stop the process it reads, so a false alarm cannot make a stall).
 """
 
 from __future__ import annotations
@@ -89,13 +89,14 @@ def _machine() -> str:
 
 
 def pyspy_dump(pid: int, timeout_s: float = 20.0) -> str:
-    """Python stacks of every thread of ``pid`` (``py-spy dump``), or why there are none."""
+    """Python stacks of every thread of ``pid`` (``py-spy dump --nonblocking``: the process
+    is not stopped, a stack may be torn), or why there are none."""
     exe = shutil.which("py-spy") or str(Path(sys.executable).with_name("py-spy"))
     if not Path(exe).exists():
         return "(py-spy not installed: no Python stacks)"
     try:
-        r = subprocess.run([exe, "dump", "--pid", str(pid)], capture_output=True, text=True,
-                           timeout=timeout_s, check=False)
+        r = subprocess.run([exe, "dump", "--nonblocking", "--pid", str(pid)],
+                           capture_output=True, text=True, timeout=timeout_s, check=False)
     except subprocess.TimeoutExpired:
         return f"(py-spy dump of {pid} did not finish in {timeout_s:g} s)"
     return (r.stdout + r.stderr).strip()
