@@ -201,9 +201,13 @@ def test_fresh_cache_sitl_flight_through_every_mode_never_stalls(tmp_path, monke
     numba specialisation compiled after STANDBY.
 
     A stall probe watches the flight from outside (:mod:`support.stall_probe`): if the
-    simulated time stops for 2 s (a watchdog cut comes at 5 s), it writes what both processes'
-    threads were doing (scheduler state, CPU, kernel wait channel, Python stacks by py-spy)
-    and the machine's load to ``run/stall_probe/``, and the failure message says so."""
+    simulated time stops for 0.4 s (the vehicle's output watchdog cuts at 0.5 s), it writes
+    what both processes' threads were doing (scheduler state, CPU, kernel wait channel,
+    Python stacks by py-spy) and the machine's load to ``run/stall_probe/``, and the failure
+    message says so. Seen under load (session 13, load 11-16 on 2 cores): one loop gap of
+    1014 ms (step CPU max 1.0 ms, nothing compiled after ready) at t = 7.9 s, watchdog cut;
+    a plain Python process sleeping 50 ms in a loop beside it overslept by up to 1.02 s in
+    150 s: the processes were not scheduled, the autopilot's code did not stall."""
     from pymavlink import mavutil
     from support.stall_probe import StallProbe
 
@@ -249,7 +253,7 @@ def test_fresh_cache_sitl_flight_through_every_mode_never_stalls(tmp_path, monke
             gs = run.gs
             probe = StallProbe(lambda: gs.snapshot().sim_time_s,
                                {n: p.pid for n, p in run.procs.items()},
-                               out / "stall_probe").start()
+                               out / "stall_probe", stall_s=0.4, period_s=0.1).start()
             gs.wait_for(lambda s: s.connected and s.landed_state == 1
                         and math.isfinite(s.home_amsl_m), 300.0)
             home = _recv(conn, ["HOME_POSITION"], 30.0)
