@@ -32,6 +32,30 @@ Measured (session 13, 2026-12-03, 2 cores shared with 4 other helpers):
 - The abscissa constraint's values without eigenvectors (``structured._rightmost_real``,
   same eigenvalues bit for bit): yaw degree-2 tune, 4 iterations, pairwise main / branch at
   load ~12: CPU 9.77 / 8.91 s and 11.03 / 10.31 s (-9 %, -7 %), the same theta bit for bit.
+- End to end (not paired: one run each, one after the other, the machine at load 12-20):
+  main (``/usr/bin/time vtolftc synth --method surface``, 03:43-03:56 UTC, load 2.6 -> 13.8)
+  752 s wall, 259.5 s CPU (user 254.4 + system 5.0); designs 393.6 s, validation 344.6 s,
+  report 13.8 s wall. This branch (this benchmark, 04:02-04:25 UTC, load 11.9 -> 15-17)
+  1350 s wall, 245.8 s CPU (``/usr/bin/time``; the benchmark's own count 244.1 s): designs
+  766 s wall / 162.6 s CPU, validation 564 s / 78.6 s, report 19.5 s / 2.8 s. CPU -5 %;
+  the objectives (roll 1.5196 -> 1.4877, pitch 1.9934 -> 1.4589, yaw 5.8548 -> 2.2389),
+  ``gs-shif.json``, ``shif.json`` and every row of ``validation.json`` are main's, bit for
+  bit. The wall times say only how loaded the machine was (18-34 % of a core per process).
+- Target not met. With perfect balance the branch's ~245 s of CPU is >= 122 s on 2 cores;
+  under 90 s needs < ~170 s, i.e. another 30 % off. The designs are two thirds of the CPU
+  (162.6 s) and the tuner's cost is per point SLSQP visits (above), so the levers left all
+  move the gains, and were not tried here for lack of time to check them per axis: fewer
+  SLSQP line-search points (an active-set reduction of the ~39 x up to 40 frequency
+  constraints, a cheaper local model between exact re-verifications), derivatives by the
+  chain rule through the 5 gains of each grid point (the 15 coefficients of a degree-2
+  surface enter each channel only through ``clip(C phi)``: 10 perturbed realisations
+  instead of 30, gradients of p = 5 in the kernel; different finite-difference round-off,
+  so not bit for bit). The validation (78.6 s CPU, 147 axis-points, ~0.5 s each) spends
+  most in the mixed-mu sweeps (``certificate.mu_real_sweep``); none of its quantities is
+  computed twice (the cell-end sweeps use the neighbours' gains on this cell's pieces).
+- A fresh checkout pays numba's first compile of ``dg_kernel.dg_objective`` (30 s of CPU at
+  load ~12, measured with cProfile) in the validation's first point; later runs load it
+  from ``__pycache__`` (``cache=True``). Time a second run, not the first.
 """
 
 from __future__ import annotations
