@@ -30,8 +30,12 @@ Measured (session 13, 2026-12-03, 2 cores shared with 4 other helpers):
   central differences 31 s, SLSQP 27 s, frequency kernel 23 s. So the time is per point
   SLSQP visits, and SLSQP visits about three points for every Jacobian it asks for.
 - The abscissa constraint's values without eigenvectors (``structured._rightmost_real``,
-  same eigenvalues bit for bit): yaw degree-2 tune, 4 iterations, pairwise main / branch at
-  load ~12: CPU 9.77 / 8.91 s and 11.03 / 10.31 s (-9 %, -7 %), the same theta bit for bit.
+  same eigenvalues bit for bit), ``time.process_time`` of ``tune`` after a warm-up, pairwise
+  branch / main in alternating order at load 7-12, the same theta bit for bit in every run:
+  yaw degree-2 surface, 4 iterations, 5 pairs: 8.91 / 9.77, 10.31 / 11.03, 10.21 / 10.63,
+  10.28 / 11.81, 14.88 / 13.81 s (ratios 0.91, 0.93, 0.96, 0.87, 1.08; median 0.93);
+  pitch, 3 and 6 iterations, 3 pairs: 4.59 / 4.41, 4.56 / 4.82, 5.54 / 5.17 s (1.04, 0.95,
+  1.07: within the noise of runs this short).
 - End to end (not paired: one run each, one after the other, the machine at load 12-20):
   main (``/usr/bin/time vtolftc synth --method surface``, 03:43-03:56 UTC, load 2.6 -> 13.8)
   752 s wall, 259.5 s CPU (user 254.4 + system 5.0); designs 393.6 s, validation 344.6 s,
