@@ -66,6 +66,10 @@ tuner (roll, cProfile, 144 s CPU): frequency kernel 61 s, SLSQP 55 s, eigenpairs
 central differences 61 s, channel realisations 62 s (nested), slycot AB13DD 6 s; per
 validation point ~1 s CPU: mixed-mu sweeps 55 %, lumped mu_RS 27 %. Under 90 s needs a
 third less CPU (a cheaper tuner iteration, or fewer iterations, which moves the gains).
+
+Session 13: the CLI's surface design end to end, wall and CPU per stage, is timed by
+``benchmarks/bench_synth_surface.py`` (its docstring: the process-time profile, -5 % CPU with
+the same bits, why < 90 s is still not reached).
 """
 
 from __future__ import annotations

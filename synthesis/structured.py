@@ -383,6 +383,7 @@ class _Evaluator:
         self._fcache: dict[bytes, list[tuple[Any, ...] | None]] = {}
         self.compiled = True
         self._ecache: dict[bytes, list[tuple[Any, ...] | None]] = {}
+        self._vcache: dict[bytes, NDArray[np.float64]] = {}
 
     def realize(self, theta: NDArray[np.float64]) -> list[StateSpaceData]:
         key = theta.tobytes()
@@ -633,6 +634,17 @@ class _Evaluator:
         sys = self.realize(theta)
         key = theta.tobytes()
         eigs = self._ecache.get(key)
+        if eigs is None and not grad:
+            # the values alone: no eigenvectors (LAPACK gives the same eigenvalues, bit for
+            # bit); SLSQP asks for the constraints at about three times as many points as
+            # for their Jacobian
+            vals = self._vcache.get(key)
+            if vals is None:
+                vals = np.array([_rightmost_real(A) if A.size else -1e6 for A, _, _, _ in sys])
+                if len(self._vcache) >= 4:
+                    self._vcache.clear()
+                self._vcache[key] = vals
+            return vals.copy(), None
         if eigs is None:
             eigs = []
             for A, _, _, _ in sys:
@@ -670,6 +682,27 @@ class _Evaluator:
 _GEEV_LWORK: dict[int, int] = {}
 
 
+def _geev_lwork(n: int) -> int:
+    lwork = _GEEV_LWORK.get(n)
+    if lwork is None:
+        lwork = _GEEV_LWORK[n] = int(lapack.dgeev_lwork(n, compute_vl=1, compute_vr=1)[0])
+    return lwork
+
+
+def _rightmost_real(A: NDArray[np.float64]) -> float:
+    """The largest real part of the eigenvalues of A (the spectral abscissa): the real part
+    of :func:`_rightmost_eig`'s eigenvalue, bit for bit (the same LAPACK dgeev with the same
+    workspace, without the eigenvectors: the Hessenberg QR iteration does the same
+    arithmetic on the active block either way, tested)."""
+    if not np.isfinite(A).all():
+        raise ValueError("array must not contain infs or NaNs")
+    wr, _, _, _, info = lapack.dgeev(A, compute_vl=0, compute_vr=0,
+                                     lwork=_geev_lwork(A.shape[0]))
+    if info > 0:
+        raise np.linalg.LinAlgError("eig algorithm (geev) did not converge")
+    return max(wr.tolist())
+
+
 def _rightmost_eig(A: NDArray[np.float64]) -> tuple[complex, NDArray[Any], NDArray[Any]]:
     """(lambda, left eigenvector, right eigenvector) of the eigenvalue of A with the largest
     real part: what ``scipy.linalg.eig(A, left=True, right=True)`` gives for that column, bit
@@ -679,10 +712,7 @@ def _rightmost_eig(A: NDArray[np.float64]) -> tuple[complex, NDArray[Any], NDArr
     if not np.isfinite(A).all():
         raise ValueError("array must not contain infs or NaNs")
     n = A.shape[0]
-    lwork = _GEEV_LWORK.get(n)
-    if lwork is None:
-        lwork = _GEEV_LWORK[n] = int(lapack.dgeev_lwork(n, compute_vl=1, compute_vr=1)[0])
-    wr, wi, vl, vr, info = lapack.dgeev(A, compute_vl=1, compute_vr=1, lwork=lwork)
+    wr, wi, vl, vr, info = lapack.dgeev(A, compute_vl=1, compute_vr=1, lwork=_geev_lwork(n))
     if info > 0:
         raise np.linalg.LinAlgError("eig algorithm (geev) did not converge")
     # python scalars from here: numpy's per-call overhead on 13-vectors is most of the time

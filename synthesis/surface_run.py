@@ -48,12 +48,25 @@ class SurfaceRun:
         Files written, by name.
     times : dict of str to float
         Wall time per stage [s].
+    cpu_times : dict of str to float
+        CPU time per stage [s]: user + system of this process and of its worker processes
+        (counted when a stage's pool has shut down, so each stage's own).
     """
 
     designs: dict[str, SurfaceDesign]
     validation: ValidationResult | None
     files: dict[str, Path] = field(default_factory=dict)
     times: dict[str, float] = field(default_factory=dict)
+    cpu_times: dict[str, float] = field(default_factory=dict)
+
+
+def _cpu_s() -> float:
+    """User + system CPU seconds of this process and its finished (waited-for) children."""
+    import resource
+
+    s = resource.getrusage(resource.RUSAGE_SELF)
+    c = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime
 
 
 def _design_job(args: tuple[Any, ...]) -> SurfaceDesign:
@@ -110,7 +123,8 @@ def run_surface_synthesis(af: Airframe, out_dir: str | Path, *, degree: int = 2,
     out.mkdir(parents=True, exist_ok=True)
     grid = surface_grid(robust_points(af), 2)
     times: dict[str, float] = {}
-    t0 = time.perf_counter()
+    cpu: dict[str, float] = {}
+    t0, c0 = time.perf_counter(), _cpu_s()
     args = [(af, ax, grid, degree, n_starts, seed, max_iter) for ax in AXES]
     designs: dict[str, SurfaceDesign] = {}
     if jobs > 1:
@@ -123,6 +137,7 @@ def run_surface_synthesis(af: Airframe, out_dir: str | Path, *, degree: int = 2,
             designs[ax] = _design_job(a)
             tick(f"surface {ax}", 1)
     times["surface designs"] = time.perf_counter() - t0
+    cpu["surface designs"] = _cpu_s() - c0
     meta = {"design_points": [{"number": p.number, "airspeed_m_s": p.airspeed_m_s,
                                "v_min_m_s": p.v_min_m_s, "v_max_m_s": p.v_max_m_s}
                               for p in grid],
@@ -132,20 +147,22 @@ def run_surface_synthesis(af: Airframe, out_dir: str | Path, *, degree: int = 2,
                       "airspeed grid, gains as Legendre polynomials of the airspeed tuned "
                       "as one design (synthesis/surfaces.py)"}
     files = dict(write_surface_gains_all(af, designs, out, meta))
-    t1 = time.perf_counter()
+    t1, c1 = time.perf_counter(), _cpu_s()
     doc = json.loads(files["gs-shif"].read_text(encoding="utf-8"))
     val = validate_schedule(af, doc, density=density, mu=mu, certificate=mu, seed=seed,
                             jobs=jobs, progress=lambda label: tick(label, 1))
     files["validation"] = val.write(out / "validation.json")
     times["validation"] = time.perf_counter() - t1
-    run = SurfaceRun(designs, val, files, times)
+    cpu["validation"] = _cpu_s() - c1
+    run = SurfaceRun(designs, val, files, times, cpu)
     if report:
-        t2 = time.perf_counter()
+        t2, c2 = time.perf_counter(), _cpu_s()
         from vtolftc.synthesis.validation_report import write_validation_report
 
         files["validation report"] = write_validation_report(doc, val, out / "report")
         files["report"] = _write_readme(af, run, out / "report")
         times["report"] = time.perf_counter() - t2
+        cpu["report"] = _cpu_s() - c2
         tick("report", 1)
     return run
 

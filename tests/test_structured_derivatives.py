@@ -38,3 +38,31 @@ def test_lazy_derivative_lists_are_the_stacks_and_the_loop_bit_for_bit() -> None
     for a, b in zip(ev2.derivative_stacks(theta) or [], stacks, strict=True):
         for x, y in zip(a, b, strict=True):
             np.testing.assert_array_equal(x, y)
+
+
+def test_abscissa_values_alone_are_the_eigenpairs_bit_for_bit() -> None:
+    """The constraint values (no eigenvectors) equal the real part of the rightmost eigenpair's
+    eigenvalue: on random matrices and on the surface problem's channels, either order."""
+    from vtolftc.synthesis.structured import _rightmost_eig, _rightmost_real
+
+    rng = np.random.default_rng(5)
+    for t in range(600):
+        n = int(rng.integers(1, 16))
+        A = rng.standard_normal((n, n)) * 10.0 ** rng.uniform(-3, 3, (n, n))
+        if t % 3 == 0:
+            A = A + A.T
+        if t % 5 == 0:
+            A = np.triu(A)
+        assert _rightmost_real(A) == _rightmost_eig(A)[0].real
+    af = load_airframe()
+    sp = surface_problem(RobustMethod(), af, "roll", _small_grid(), 2)
+    base = sp.problem.initial
+    for scale in (0.7, 1.0, 1.3):
+        theta = base * np.linspace(scale, 1.0 / scale, base.size)
+        ev = _Evaluator(sp.problem)
+        alone, g0 = ev.abscissa_and_grad(theta, grad=False)     # values only, first
+        full, g = ev.abscissa_and_grad(theta)                   # then with the gradient
+        again, _ = _Evaluator(sp.problem).abscissa_and_grad(theta)
+        assert g0 is None and g is not None
+        assert alone.tobytes() == full.tobytes() == again.tobytes()
+        assert ev.abscissa_and_grad(theta, grad=False)[0].tobytes() == full.tobytes()
