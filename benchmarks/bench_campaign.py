@@ -229,10 +229,11 @@ def main() -> None:
                        args.jobs, got)
 
     if not args.no_dask:
-        for kind, early, second in (("LocalCluster", False, False),
-                                    ("LocalCluster", True, True), ("tcp", True, True)):
+        for kind, early, second, preload in (
+                ("LocalCluster", False, False, False), ("LocalCluster", True, True, False),
+                ("tcp", True, True, False), ("tcp", True, True, True)):
             dask_runs(kind, scen, args.jobs, t_oracle, pool_rate, report, fly, early=early,
-                      second=second)
+                      second=second, preload=preload)
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 
@@ -263,11 +264,13 @@ def cpu_s() -> float:
 
 
 @contextlib.contextmanager
-def fresh_cluster(kind: str, jobs: int) -> Iterator[str]:
+def fresh_cluster(kind: str, jobs: int, preload: bool = True) -> Iterator[str]:
     """A fresh Dask cluster of ``jobs`` worker processes (one thread each) on 127.0.0.1:
     ``LocalCluster`` (started in this process, as a script or notebook does) or ``tcp`` (a
     ``dask scheduler`` and a ``dask worker --nworkers N --nthreads 1`` started as separate
-    processes, as a deployment is). Yields the scheduler's address; stops what it started."""
+    processes, as a deployment is: :func:`vtolftc.runners.campaign.dask_run.local_tcp_cluster`,
+    with ``preload`` its workers started with ``--preload`` of the flight code). Yields the
+    scheduler's address; stops what it started."""
     if kind == "LocalCluster":
         from distributed import LocalCluster
 
@@ -275,38 +278,15 @@ def fresh_cluster(kind: str, jobs: int) -> Iterator[str]:
                           host="127.0.0.1", dashboard_address=None) as cluster:
             yield cluster.scheduler_address
         return
-    import json
-    import signal
+    from vtolftc.runners.campaign.dask_run import local_tcp_cluster
 
-    dask = str(Path(sys.executable).parent / "dask")
-    with tempfile.TemporaryDirectory() as d:
-        sfile = Path(d) / "scheduler.json"
-        procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
-                                   "--no-dashboard", "--scheduler-file", str(sfile)],
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-        try:
-            deadline = time.monotonic() + 120
-            while not sfile.is_file():
-                if time.monotonic() > deadline or procs[0].poll() is not None:
-                    raise RuntimeError("dask scheduler did not start")
-                time.sleep(0.1)
-            procs.append(subprocess.Popen(
-                [dask, "worker", "--scheduler-file", str(sfile), "--nworkers", str(jobs),
-                 "--nthreads", "1", "--no-dashboard", "--host", "127.0.0.1"],
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-            yield json.loads(sfile.read_text())["address"]
-        finally:
-            for p in reversed(procs):
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(timeout=60)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait(timeout=30)
+    with local_tcp_cluster(jobs, preload=preload) as address:
+        yield address
 
 
 def dask_runs(kind: str, scen: list[Any], jobs: int, t_oracle: float, pool_rate: float,
-              report: Any, fly: Any, *, early: bool = True, second: bool = True) -> None:
+              report: Any, fly: Any, *, early: bool = True, second: bool = True,
+              preload: bool = False) -> None:
     """Campaigns on a fresh ``kind`` cluster, ratios to the local pool's rate.
 
     The first as ``vtolftc campaign --scheduler`` runs it: with ``early`` (since issue 24's
@@ -315,13 +295,14 @@ def dask_runs(kind: str, scen: list[Any], jobs: int, t_oracle: float, pool_rate:
     oracle first and the workers warm in front of their first flights. Compared with the
     pool's oracle + flights (its workers fork from the warm parent), and its flights alone.
     With ``second``, a second campaign on the same cluster (a long-lived one, as a
-    deployment is): the flights alone."""
+    deployment is): the flights alone. ``preload``: the ``tcp`` cluster's workers start with
+    ``--preload vtolftc.runners.campaign.dask_preload`` (warm before they register)."""
     from vtolftc.runners.campaign.dask_run import connect
     from vtolftc.runners.campaign.execute import prepare_dask, run_dask
     from vtolftc.runners.campaign.oracle import oracle_columns
 
     t0 = time.perf_counter()
-    with fresh_cluster(kind, jobs) as address:
+    with fresh_cluster(kind, jobs, preload) as address:
         client = connect(address)
         try:
             client.wait_for_workers(jobs, timeout=300)
@@ -334,7 +315,8 @@ def dask_runs(kind: str, scen: list[Any], jobs: int, t_oracle: float, pool_rate:
             wall, got = fly(run_dask(scen, client, tag="bench0"))
             how = ("workers warming during the oracle" if early else
                    "before the fix: the workers warm after the oracle")
-            label = f"Dask {kind} ({jobs} workers; cluster start {t_cluster:.1f} s not included)"
+            label = (f"Dask {kind}{' --preload' if preload else ''} ({jobs} workers; "
+                     f"cluster start {t_cluster:.1f} s not included)")
             rate = report(f"{label}, first campaign on the fresh cluster ({how}), flights",
                           wall, jobs, got)
             n = len(got)

@@ -44,6 +44,7 @@ took 1.023x the pool's flight time, the workers' other threads 1.3-1.4 % of thei
 
     python benchmarks/bench_campaign_dask.py [--jobs 2] [--scenarios 24] [--batch B]
         [--no-warm]   # leave the campaign's worker warm-up out (as before issue 24's fix)
+        [--cluster tcp [--preload]]   # `dask scheduler` + `dask worker` processes
 """
 
 from __future__ import annotations
@@ -114,6 +115,11 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=None, help="scenarios per Dask task")
     ap.add_argument("--no-warm", action="store_true",
                     help="no worker warm-up plugin (the harness before issue 24's fix)")
+    ap.add_argument("--cluster", choices=("LocalCluster", "tcp"), default="LocalCluster",
+                    help="a LocalCluster in this process, or `dask scheduler` + `dask worker` "
+                         "processes (local_tcp_cluster)")
+    ap.add_argument("--preload", action="store_true",
+                    help="tcp: workers started with --preload of the flight code")
     args = ap.parse_args()
     sys.path.insert(0, HERE)
     from bench_campaign import SPEC
@@ -162,21 +168,26 @@ def main() -> None:
 
 def dask_run(args: argparse.Namespace, scen: list[Any], pool_wall: float,
              pool_run: dict[str, float]) -> None:
-    """The same scenarios on a fresh LocalCluster, every task timed; prints the breakdown."""
-    from bench_campaign import proc_stat
-    from distributed import Client, LocalCluster, as_completed
+    """The same scenarios on a fresh cluster, every task timed; prints the breakdown."""
+    from bench_campaign import fresh_cluster, proc_stat
+    from distributed import Client, as_completed
 
     from vtolftc.runners.campaign import execute
     from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, PauseProfiler
+    from vtolftc.runners.campaign.dask_run import cluster_pids
 
     n = len(scen)
-    with LocalCluster(n_workers=args.jobs, threads_per_worker=1, processes=True,
-                      host="127.0.0.1", dashboard_address=None) as cluster, \
-            Client(cluster.scheduler_address, set_as_default=False) as client:
-        wpids = client.run(os.getpid)
-        procs = {"parent (scheduler, client)": [os.getpid()]}
-        procs["nannies"] = [proc_stat(p)[0] for p in wpids.values()]
-        procs["workers"] = list(wpids.values())
+    t_start = time.perf_counter()
+    with fresh_cluster(args.cluster, args.jobs, args.preload) as address, \
+            Client(address, set_as_default=False) as client:
+        client.wait_for_workers(args.jobs, timeout=300)
+        t_cluster = time.perf_counter() - t_start
+        roles = cluster_pids(client)
+        procs: dict[str, list[int]] = {
+            f"client+{roles.pop(os.getpid())} (this process)" if os.getpid() in roles
+            else "client (this process)": [os.getpid()]}
+        for pid, role in roles.items():
+            procs.setdefault(role, []).append(pid)
         cpu0 = {k: sum(proc_stat(p)[1] for p in v) for k, v in procs.items()}
         t0w = time.time()
         t0 = time.perf_counter()
@@ -198,7 +209,9 @@ def dask_run(args: argparse.Namespace, scen: list[Any], pool_wall: float,
     same = sorted(set(dask_run_s) & set(pool_run))
     ratio_flight = statistics.mean(dask_run_s[k] / pool_run[k] for k in same)
     how = "no warm-up plugin" if args.no_warm else "warmed by prepare_dask"
-    print(f"Dask fresh LocalCluster ({how}; batch {size}): {n} in {wall:.1f} s = "
+    how += ", workers --preload" if args.preload and args.cluster == "tcp" else ""
+    print(f"Dask fresh {args.cluster} (start {t_cluster:.1f} s, not included; {how}; batch "
+          f"{size}): {n} in {wall:.1f} s = "
           f"{60 * n / wall:.1f} "
           f"scenarios/min -> Dask / pool {pool_wall / wall:.2f}x")
     print(f"  flights: Dask / pool flight loop time, same scenarios: {ratio_flight:.3f}")

@@ -27,7 +27,6 @@ from vtolftc.firmware_sim.autopilot.allocation.interface import (
     step_bounds,
 )
 from vtolftc.firmware_sim.autopilot.allocation.pseudo_inverse import PseudoInverseAllocator
-from vtolftc.firmware_sim.autopilot.allocation.qp_osqp import QPAllocator
 from vtolftc.firmware_sim.autopilot.allocation.wls import WLSAllocator
 
 __all__ = [
@@ -43,3 +42,13 @@ __all__ = [
     "box_qp",
     "step_bounds",
 ]
+
+
+def __getattr__(name: str) -> object:
+    """``QPAllocator`` on first use (PEP 562): its module imports scipy.sparse (0.5-0.7 s of
+    a fresh process), which the flown allocator never needs."""
+    if name == "QPAllocator":
+        from vtolftc.firmware_sim.autopilot.allocation.qp_osqp import QPAllocator
+
+        return QPAllocator
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
