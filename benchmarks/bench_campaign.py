@@ -231,7 +231,8 @@ def main() -> None:
     if not args.no_dask:
         for kind, early, second, preload in (
                 ("LocalCluster", False, False, False), ("LocalCluster", True, True, False),
-                ("tcp", True, True, False), ("tcp", True, True, True)):
+                ("LocalCluster", True, False, True), ("tcp", True, True, False),
+                ("tcp", True, True, True)):
             dask_runs(kind, scen, args.jobs, t_oracle, pool_rate, report, fly, early=early,
                       second=second, preload=preload)
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
@@ -264,22 +265,24 @@ def cpu_s() -> float:
 
 
 @contextlib.contextmanager
-def fresh_cluster(kind: str, jobs: int, preload: bool = True) -> Iterator[str]:
+def fresh_cluster(kind: str, jobs: int, preload: bool = False) -> Iterator[str]:
     """A fresh Dask cluster of ``jobs`` worker processes (one thread each) on 127.0.0.1:
     ``LocalCluster`` (started in this process, as a script or notebook does) or ``tcp`` (a
     ``dask scheduler`` and a ``dask worker --nworkers N --nthreads 1`` started as separate
     processes, as a deployment is: :func:`vtolftc.runners.campaign.dask_run.local_tcp_cluster`,
-    with ``preload`` its workers started with ``--preload`` of the flight code). Yields the
+    with ``preload`` the workers of either start with the preload
+    :data:`vtolftc.runners.campaign.dask_run.PRELOAD`: warm before they register). Yields the
     scheduler's address; stops what it started."""
+    from vtolftc.runners.campaign.dask_run import PRELOAD, local_tcp_cluster
+
     if kind == "LocalCluster":
         from distributed import LocalCluster
 
         with LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
-                          host="127.0.0.1", dashboard_address=None) as cluster:
+                          host="127.0.0.1", dashboard_address=None,
+                          preload=[PRELOAD] if preload else None) as cluster:
             yield cluster.scheduler_address
         return
-    from vtolftc.runners.campaign.dask_run import local_tcp_cluster
-
     with local_tcp_cluster(jobs, preload=preload) as address:
         yield address
 
@@ -295,8 +298,9 @@ def dask_runs(kind: str, scen: list[Any], jobs: int, t_oracle: float, pool_rate:
     oracle first and the workers warm in front of their first flights. Compared with the
     pool's oracle + flights (its workers fork from the warm parent), and its flights alone.
     With ``second``, a second campaign on the same cluster (a long-lived one, as a
-    deployment is): the flights alone. ``preload``: the ``tcp`` cluster's workers start with
-    ``--preload vtolftc.runners.campaign.dask_preload`` (warm before they register)."""
+    deployment is): the flights alone. ``preload``: the cluster's workers start with the
+    preload ``vtolftc.runners.campaign.dask_preload`` (warm before they register; the
+    cluster start printed then includes their imports and warm-up)."""
     from vtolftc.runners.campaign.dask_run import connect
     from vtolftc.runners.campaign.execute import prepare_dask, run_dask
     from vtolftc.runners.campaign.oracle import oracle_columns
