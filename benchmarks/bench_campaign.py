@@ -271,16 +271,21 @@ def fresh_cluster(kind: str, jobs: int, preload: bool = False) -> Iterator[str]:
     ``dask scheduler`` and a ``dask worker --nworkers N --nthreads 1`` started as separate
     processes, as a deployment is: :func:`vtolftc.runners.campaign.dask_run.local_tcp_cluster`,
     with ``preload`` the workers of either start with the preload
-    :data:`vtolftc.runners.campaign.dask_run.PRELOAD`: warm before they register). Yields the
+    :data:`vtolftc.runners.campaign.dask_run.PRELOAD`, warm before they register; the
+    LocalCluster's then fork from a forkserver that imported the flight code:
+    :func:`~vtolftc.runners.campaign.dask_run.warm_local_cluster`). Yields the
     scheduler's address; stops what it started."""
-    from vtolftc.runners.campaign.dask_run import PRELOAD, local_tcp_cluster
+    from vtolftc.runners.campaign.dask_run import local_tcp_cluster, warm_local_cluster
 
+    if kind == "LocalCluster" and preload:
+        with warm_local_cluster(jobs) as cluster:
+            yield cluster.scheduler_address
+        return
     if kind == "LocalCluster":
         from distributed import LocalCluster
 
         with LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
-                          host="127.0.0.1", dashboard_address=None,
-                          preload=[PRELOAD] if preload else None) as cluster:
+                          host="127.0.0.1", dashboard_address=None) as cluster:
             yield cluster.scheduler_address
         return
     with local_tcp_cluster(jobs, preload=preload) as address:

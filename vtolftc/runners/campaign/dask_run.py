@@ -14,8 +14,9 @@ scenarios in batches of :func:`dask_batch_size`. :func:`cluster_pids` and
 (the memory runs of ``benchmarks/bench_campaign_memory.py`` and the tests).
 :func:`local_tcp_cluster` starts a ``dask scheduler`` and a ``dask worker`` as processes on
 127.0.0.1, their workers warmed by the preload :mod:`vtolftc.runners.campaign.dask_preload`
-(to try a deployment on one machine; the benchmarks and tests). This module never imports
-the flight code.
+(to try a deployment on one machine; the benchmarks and tests); :func:`warm_local_cluster`
+is a ``LocalCluster`` whose workers fork from a forkserver that has imported the flight
+code. This module never imports the flight code.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ __all__ = [
     "local_tcp_cluster",
     "prepare_workers",
     "release_workers",
+    "warm_local_cluster",
 ]
 
 TASK_SIM_S = 60.0
@@ -204,3 +206,37 @@ def local_tcp_cluster(n_workers: int, *, preload: bool = True, idle_timeout_s: f
                 except subprocess.TimeoutExpired:
                     p.kill()
                     p.wait(timeout=30)
+
+
+@contextlib.contextmanager
+def warm_local_cluster(n_workers: int, **kwargs: Any) -> Iterator[Any]:
+    """A :class:`distributed.LocalCluster` of ``n_workers`` processes (one thread each,
+    127.0.0.1, no dashboard; ``kwargs`` override) whose workers start warm.
+
+    Its workers are forked from a forkserver that has imported ``distributed`` and the
+    flight code (:data:`PRELOAD`) once, instead of each starting a fresh interpreter and
+    importing them (Dask's ``distributed.worker.multiprocessing-method`` = ``forkserver``
+    while the cluster lives, so a worker its nanny restarts forks too); then each runs the
+    preload's warm-up before it registers. A fork from the forkserver is safe whatever
+    threads this process runs (the client's event loop): the forkserver is a process of its
+    own, single-threaded. Where there is no forkserver (Windows), the workers are spawned
+    and the preload imports the flight code in each. The forkserver is this process's one
+    (:mod:`multiprocessing`'s): one already running keeps the modules it started with.
+    """
+    import multiprocessing
+
+    import dask
+    from distributed import LocalCluster
+    from distributed.utils import get_mp_context
+
+    opts: dict[str, Any] = {"n_workers": n_workers, "threads_per_worker": 1,
+                            "processes": True, "host": "127.0.0.1",
+                            "dashboard_address": None, "preload": [PRELOAD]}
+    opts.update(kwargs)
+    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else None
+    with dask.config.set({"distributed.worker.multiprocessing-method": method or "spawn"}):
+        if method:
+            ctx = get_mp_context()  # sets Dask's own forkserver preload, once per process
+            ctx.set_forkserver_preload(["distributed", PRELOAD])
+        with LocalCluster(**opts) as cluster:
+            yield cluster
