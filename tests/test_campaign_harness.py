@@ -4,6 +4,7 @@ Dask tasks that are released, and memory that does not grow with the number of s
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import threading
@@ -231,23 +232,25 @@ def test_the_flight_code_imports_without_scipy_sparse():
 
 
 @pytest.mark.slow
-def test_preloaded_tcp_worker_is_warm_before_a_task_and_flies_the_same_rows():
+def test_preloaded_workers_are_warm_before_a_task_and_fly_the_same_rows():
     """``dask worker --preload vtolftc.runners.campaign.dask_preload`` (a real scheduler and
     worker started as processes on 127.0.0.1): the worker has imported the flight code and
     warmed the shipped controllers before it registers, before any task; a worker started
     without the preload has not (the check tells them apart). The preloaded cluster flies the
-    rows of one process, bit for bit."""
+    rows of one process, bit for bit; so does :func:`warm_local_cluster`'s, whose workers
+    are forked from the forkserver."""
     from distributed import Client
 
     from vtolftc.runners.campaign.dask_preload import preload_keys
-    from vtolftc.runners.campaign.dask_run import local_tcp_cluster
+    from vtolftc.runners.campaign.dask_run import local_tcp_cluster, warm_local_cluster
 
     def worker_state(dask_worker):  # nested: pickled by value, it imports nothing on the worker
         ex = sys.modules.get("vtolftc.runners.campaign.execute")
         return {"flight_code": "vtolftc.runners.scenario" in sys.modules,
                 "numba": "numba" in sys.modules,
                 "warm": sorted(ex._WARM, key=repr) if ex is not None else [],
-                "preload_s": getattr(dask_worker, "vtolftc_preload_s", None)}
+                "preload_s": getattr(dask_worker, "vtolftc_preload_s", None),
+                "parent": os.getppid()}
 
     scen = expand(parse_spec(SHORT))
     serial = [execute.fly_scenario(sc) for sc in scen]
@@ -260,11 +263,20 @@ def test_preloaded_tcp_worker_is_warm_before_a_task_and_flies_the_same_rows():
             (state,) = c.run(worker_state).values()
             if not preload:
                 assert state == {"flight_code": False, "numba": False, "warm": [],
-                                 "preload_s": None}
+                                 "preload_s": None, "parent": state["parent"]}
                 continue
             assert state["flight_code"] and state["numba"]
             assert state["warm"] == want and state["preload_s"] > 0.0
             _same_rows(serial, list(execute.run_dask(scen, c, tag="preload", batch=2)))
+    # a LocalCluster whose workers fork from the forkserver (not spawned by this process,
+    # where the LocalCluster's nannies live), warm before a task, the same rows
+    with warm_local_cluster(2) as cluster, \
+            Client(cluster.scheduler_address, set_as_default=False) as c:
+        c.wait_for_workers(2, timeout=300)
+        states = list(c.run(worker_state).values())
+        assert all(st["parent"] != os.getpid() for st in states), states
+        assert all(st["flight_code"] and st["warm"] == want for st in states), states
+        _same_rows(serial, list(execute.run_dask(scen, c, tag="forkserver", batch=1)))
 
 
 MEMORY = """
