@@ -18,9 +18,13 @@ scenarios, 12 by default), so each one costs a full 60 s of simulation. Figures 
   the flights: fresh workers warm in front of their first flights), then as ``vtolftc
   campaign --scheduler`` runs it now (the worker plugins registered first, so the workers
   warm while the parent computes the oracle) followed by a second campaign on the same
-  cluster (a long-lived one); then the same two on a ``tcp://`` cluster started separately
-  (``dask scheduler`` and ``dask worker --nworkers N --nthreads 1`` processes). Ratios to the
-  local pool's rate: the flights alone, and oracle + flights (as the CLI runs them).
+  cluster (a long-lived one); then a first campaign on a warm LocalCluster
+  (``dask_run.warm_local_cluster``: workers forked from a forkserver that imported the flight
+  code, warmed by the preload before they register); then the same two as the second on a
+  ``tcp://`` cluster started separately (``dask scheduler`` and ``dask worker --nworkers N
+  --nthreads 1`` processes), its workers without and then with ``--preload
+  vtolftc.runners.campaign.dask_preload``. Ratios to the local pool's rate: the flights
+  alone, and oracle + flights (as the CLI runs them).
 
 ``--memory N [--duration S]`` instead flies N short scenarios (S s each, default 4; the rotor
 losses at N / 24 magnitudes) on the local pool with the parent writing Parquet parts as the

@@ -42,6 +42,24 @@ At load 2 (13:51, ``--scenarios 4``, a smoke run): a fresh worker's first task s
 between tasks 2-6 ms, a task's overhead over its flight 4.5 ms (0.3 %), the Dask flights
 took 1.023x the pool's flight time, the workers' other threads 1.3-1.4 % of their busy time.
 
+Round 13 (branch dask-13, 04:03-04:08 UTC 2026-12-03, load 11.5-13.6, ``--scenarios 8
+--cluster tcp`` without and with ``--preload``, interleaved, two pairs; a fresh ``dask
+scheduler`` + ``dask worker --nworkers 2`` each time, the campaign's plugins registered just
+before the tasks, so no oracle hides anything): without the preload a worker's first task
+started 5.2-6.9 s and 4.3-9.8 s after the submission (a fresh interpreter's imports of the
+flight code: 1.7-5.0 s at this load, warm-up 0.24-0.36 s) and the workers took 7.15 and
+6.55 s of CPU for the 8 flights; with ``--preload vtolftc.runners.campaign.dask_preload``
+the first tasks started 0.06-0.14 s after it and the workers took 4.89 and 4.87 s: the
+~2 s of imports and warm-up of the two workers moved into the cluster's start (5.1-6.0 s
+-> 13.6-18.7 s, not in the campaign). Dispatch did not change: gaps between tasks 6-24 ms
+median, a task's overhead over its flight 6-22 ms (0.2-0.5 %), the workers' other threads
+0.7-0.9 % of their busy time; the scheduler 0.33-0.46 s of CPU, the nannies 0.03 s, the
+client 0.05 s over the campaign. The importing itself: the flight code imported in 0.907 s
+of CPU on this branch against 1.006 s on main (4 interleaved pairs, load 7), the optional
+OSQP allocator's scipy.sparse now imported only when ``QPAllocator`` is used; the rest is
+numba (~0.45 s), the metrics kernels' cache load at import and scipy.linalg, all used by
+the flight.
+
     python benchmarks/bench_campaign_dask.py [--jobs 2] [--scenarios 24] [--batch B]
         [--no-warm]   # leave the campaign's worker warm-up out (as before issue 24's fix)
         [--cluster tcp [--preload]]   # `dask scheduler` + `dask worker` processes
