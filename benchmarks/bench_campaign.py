@@ -79,6 +79,30 @@ a core before and 7.9 % after (profiler, ticks and the nannies' system monitor p
 memory check every 1 s; alternated in one run at load 19-20). The breakdown:
 ``bench_campaign_dask.py``.
 
+Round 13 (branch dask-13: the worker preload ``vtolftc.runners.campaign.dask_preload``,
+``dask_run.warm_local_cluster``, the flight code without scipy.sparse). One run at
+03:54-04:03 UTC 2026-12-03, load 12 swinging between 8 and 14, the preloaded LocalCluster
+then a plain ``LocalCluster(preload=...)`` (spawned workers). The rates swung with the load
+(Dask / pool 0.77-1.59x, the in-process flight 2.1-4.5 s in the same run), so only the
+harness's share is comparable: overhead over the flights, first campaign on a fresh
+cluster: pool +2.5 %; LocalCluster, workers warming after the oracle (the old path)
++14.9 %, warming during the oracle (the CLI's path) +4.8 %, with the preload +1.7 %;
+tcp:// cluster without the preload +1.9 % (its 8.6 s oracle, slowed by the load, hid the
+workers' warm-up), with it +1.9 % behind a 2.5 s oracle; second campaigns +2.0 % (Local),
++5.2 % and +3.2 % (tcp). CPU of every process per scenario 0.52-0.70 s throughout, the pool
+0.56 s. The preload moves a worker's imports and warm-up into the cluster's start: 2.2-3.7
+s -> 13.3 s (LocalCluster, spawned) and 4.9 -> 17.5 s (tcp) at this load;
+``warm_local_cluster`` forks its workers from a forkserver that imported the flight code
+once: 2 preloaded workers up in 4.9-6.7 s with 1.5-1.6 s of CPU against 12.3-13.2 s and
+3.0-3.5 s spawned (two interleaved pairs at load 13.5), so the warm cluster starts in about
+the time of a plain one. Where the first campaign's gap comes from, when workers are not
+preloaded (``bench_campaign_dask.py``): the fresh worker's interpreter and the flight
+code's imports, 0.9 s of CPU each (1.0 s on main: scipy.sparse), numba, the metrics kernels'
+cache load and scipy.linalg, all needed by the flight; at the idle machine's 0.46 s flight,
+24 scenarios on 2 workers are ~5.5 s of flights, so ~1 s of start per worker is the 10-15 %
+the lead measured. With the preload (tcp) or ``warm_local_cluster`` the first campaign flies
+like the second (+1.7-1.9 % here, +1.9 % idle in the lead's second-campaign figure).
+
 ``--whole`` instead times whole ``vtolftc campaign`` processes of the first ``--scenarios``
 (start-up, oracle, flights, Parquet, report): the local pool, a fresh LocalCluster, a fresh
 ``tcp://`` cluster (its start not included), the pool again, and prints each Dask campaign's
