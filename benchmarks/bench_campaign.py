@@ -19,7 +19,7 @@ scenarios, 12 by default), so each one costs a full 60 s of simulation. Figures 
   campaign --scheduler`` runs it now (the worker plugins registered first, so the workers
   warm while the parent computes the oracle) followed by a second campaign on the same
   cluster (a long-lived one); then a first campaign on a warm LocalCluster
-  (``dask_run.warm_local_cluster``: workers forked from a forkserver that imported the flight
+  (``dask_clusters.warm_local_cluster``: workers forked from a forkserver that imported the flight
   code, warmed by the preload before they register); then the same two as the second on a
   ``tcp://`` cluster started separately (``dask scheduler`` and ``dask worker --nworkers N
   --nthreads 1`` processes), its workers without and then with ``--preload
@@ -80,7 +80,7 @@ memory check every 1 s; alternated in one run at load 19-20). The breakdown:
 ``bench_campaign_dask.py``.
 
 Round 13 (branch dask-13: the worker preload ``vtolftc.runners.campaign.dask_preload``,
-``dask_run.warm_local_cluster``, the flight code without scipy.sparse). One run at
+``dask_clusters.warm_local_cluster``, the flight code without scipy.sparse). One run at
 03:54-04:03 UTC 2026-12-03, load 12 swinging between 8 and 14, the preloaded LocalCluster
 then a plain ``LocalCluster(preload=...)`` (spawned workers). The rates swung with the load
 (Dask / pool 0.77-1.59x, the in-process flight 2.1-4.5 s in the same run), so only the
@@ -297,13 +297,13 @@ def fresh_cluster(kind: str, jobs: int, preload: bool = False) -> Iterator[str]:
     """A fresh Dask cluster of ``jobs`` worker processes (one thread each) on 127.0.0.1:
     ``LocalCluster`` (started in this process, as a script or notebook does) or ``tcp`` (a
     ``dask scheduler`` and a ``dask worker --nworkers N --nthreads 1`` started as separate
-    processes, as a deployment is: :func:`vtolftc.runners.campaign.dask_run.local_tcp_cluster`,
+    processes, as a deployment is: :func:`vtolftc.runners.campaign.dask_clusters.local_tcp_cluster`,
     with ``preload`` the workers of either start with the preload
-    :data:`vtolftc.runners.campaign.dask_run.PRELOAD`, warm before they register; the
+    :data:`vtolftc.runners.campaign.dask_clusters.PRELOAD`, warm before they register; the
     LocalCluster's then fork from a forkserver that imported the flight code:
-    :func:`~vtolftc.runners.campaign.dask_run.warm_local_cluster`). Yields the
+    :func:`~vtolftc.runners.campaign.dask_clusters.warm_local_cluster`). Yields the
     scheduler's address; stops what it started."""
-    from vtolftc.runners.campaign.dask_run import local_tcp_cluster, warm_local_cluster
+    from vtolftc.runners.campaign.dask_clusters import local_tcp_cluster, warm_local_cluster
 
     if kind == "LocalCluster" and preload:
         with warm_local_cluster(jobs) as cluster:

@@ -135,7 +135,7 @@ def main() -> None:
                     help="no worker warm-up plugin (the harness before issue 24's fix)")
     ap.add_argument("--cluster", choices=("LocalCluster", "tcp"), default="LocalCluster",
                     help="a LocalCluster in this process, or `dask scheduler` + `dask worker` "
-                         "processes (local_tcp_cluster)")
+                         "processes (dask_clusters.local_tcp_cluster)")
     ap.add_argument("--preload", action="store_true",
                     help="tcp: workers started with --preload of the flight code")
     args = ap.parse_args()

@@ -241,8 +241,8 @@ def test_preloaded_workers_are_warm_before_a_task_and_fly_the_same_rows():
     are forked from the forkserver."""
     from distributed import Client
 
+    from vtolftc.runners.campaign.dask_clusters import local_tcp_cluster, warm_local_cluster
     from vtolftc.runners.campaign.dask_preload import preload_keys
-    from vtolftc.runners.campaign.dask_run import local_tcp_cluster, warm_local_cluster
 
     def worker_state(dask_worker):  # nested: pickled by value, it imports nothing on the worker
         ex = sys.modules.get("vtolftc.runners.campaign.execute")

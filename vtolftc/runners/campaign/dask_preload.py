@@ -4,7 +4,7 @@ Pass it to the workers of a cluster that will fly campaigns::
 
     dask worker tcp://HOST:8786 --nthreads 1 --preload vtolftc.runners.campaign.dask_preload
 
-(or ``LocalCluster(..., preload=[dask_run.PRELOAD])``, or ``distributed.worker.preload`` in
+(or ``LocalCluster(..., preload=[dask_clusters.PRELOAD])``, or ``distributed.worker.preload`` in
 Dask's configuration). Dask imports this module when it builds the worker, which imports the
 flight code (:mod:`vtolftc.runners.scenario`, numba, scipy); then :func:`dask_setup`, still
 before the worker registers with its scheduler, flies the short warm-up flight of
