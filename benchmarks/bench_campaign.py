@@ -102,6 +102,12 @@ cache load and scipy.linalg, all needed by the flight; at the idle machine's 0.4
 24 scenarios on 2 workers are ~5.5 s of flights, so ~1 s of start per worker is the 10-15 %
 the lead measured. With the preload (tcp) or ``warm_local_cluster`` the first campaign flies
 like the second (+1.7-1.9 % here, +1.9 % idle in the lead's second-campaign figure).
+A second run (04:27-04:38, load 14 falling to 11, the flight between 1.6 and 9.1 s as the
+load swung, so again no rate ratio holds) with ``warm_local_cluster`` as the preloaded
+LocalCluster: pool +1.4 %; LocalCluster old path +15.8 %, CLI path +5.7 % (second campaign
++4.4 %); ``warm_local_cluster`` +1.8 %, its start 2.6 s against 5.9-7.2 s for the plain
+LocalClusters of the same run; tcp:// +2.7 % (second +2.2 %), with the preload +1.6 %
+(second +3.2 %). CPU of every process per scenario 0.61-0.86 s (pool 0.62 s).
 
 ``--whole`` instead times whole ``vtolftc campaign`` processes of the first ``--scenarios``
 (start-up, oracle, flights, Parquet, report): the local pool, a fresh LocalCluster, a fresh
