@@ -18,9 +18,13 @@ scenarios, 12 by default), so each one costs a full 60 s of simulation. Figures 
   the flights: fresh workers warm in front of their first flights), then as ``vtolftc
   campaign --scheduler`` runs it now (the worker plugins registered first, so the workers
   warm while the parent computes the oracle) followed by a second campaign on the same
-  cluster (a long-lived one); then the same two on a ``tcp://`` cluster started separately
-  (``dask scheduler`` and ``dask worker --nworkers N --nthreads 1`` processes). Ratios to the
-  local pool's rate: the flights alone, and oracle + flights (as the CLI runs them).
+  cluster (a long-lived one); then a first campaign on a warm LocalCluster
+  (``dask_clusters.warm_local_cluster``: workers forked from a forkserver that imported the flight
+  code, warmed by the preload before they register); then the same two as the second on a
+  ``tcp://`` cluster started separately (``dask scheduler`` and ``dask worker --nworkers N
+  --nthreads 1`` processes), its workers without and then with ``--preload
+  vtolftc.runners.campaign.dask_preload``. Ratios to the local pool's rate: the flights
+  alone, and oracle + flights (as the CLI runs them).
 
 ``--memory N [--duration S]`` instead flies N short scenarios (S s each, default 4; the rotor
 losses at N / 24 magnitudes) on the local pool with the parent writing Parquet parts as the
@@ -74,6 +78,36 @@ background CPU (it slows the flights): an idle LocalCluster of 2 workers took 13
 a core before and 7.9 % after (profiler, ticks and the nannies' system monitor paused, their
 memory check every 1 s; alternated in one run at load 19-20). The breakdown:
 ``bench_campaign_dask.py``.
+
+Round 13 (branch dask-13: the worker preload ``vtolftc.runners.campaign.dask_preload``,
+``dask_clusters.warm_local_cluster``, the flight code without scipy.sparse). One run at
+03:54-04:03 UTC 2026-12-03, load 12 swinging between 8 and 14, the preloaded LocalCluster
+then a plain ``LocalCluster(preload=...)`` (spawned workers). The rates swung with the load
+(Dask / pool 0.77-1.59x, the in-process flight 2.1-4.5 s in the same run), so only the
+harness's share is comparable: overhead over the flights, first campaign on a fresh
+cluster: pool +2.5 %; LocalCluster, workers warming after the oracle (the old path)
++14.9 %, warming during the oracle (the CLI's path) +4.8 %, with the preload +1.7 %;
+tcp:// cluster without the preload +1.9 % (its 8.6 s oracle, slowed by the load, hid the
+workers' warm-up), with it +1.9 % behind a 2.5 s oracle; second campaigns +2.0 % (Local),
++5.2 % and +3.2 % (tcp). CPU of every process per scenario 0.52-0.70 s throughout, the pool
+0.56 s. The preload moves a worker's imports and warm-up into the cluster's start: 2.2-3.7
+s -> 13.3 s (LocalCluster, spawned) and 4.9 -> 17.5 s (tcp) at this load;
+``warm_local_cluster`` forks its workers from a forkserver that imported the flight code
+once: 2 preloaded workers up in 4.9-6.7 s with 1.5-1.6 s of CPU against 12.3-13.2 s and
+3.0-3.5 s spawned (two interleaved pairs at load 13.5), so the warm cluster starts in about
+the time of a plain one. Where the first campaign's gap comes from, when workers are not
+preloaded (``bench_campaign_dask.py``): the fresh worker's interpreter and the flight
+code's imports, 0.9 s of CPU each (1.0 s on main: scipy.sparse), numba, the metrics kernels'
+cache load and scipy.linalg, all needed by the flight; at the idle machine's 0.46 s flight,
+24 scenarios on 2 workers are ~5.5 s of flights, so ~1 s of start per worker is the 10-15 %
+the lead measured. With the preload (tcp) or ``warm_local_cluster`` the first campaign flies
+like the second (+1.7-1.9 % here, +1.9 % idle in the lead's second-campaign figure).
+A second run (04:27-04:38, load 14 falling to 11, the flight between 1.6 and 9.1 s as the
+load swung, so again no rate ratio holds) with ``warm_local_cluster`` as the preloaded
+LocalCluster: pool +1.4 %; LocalCluster old path +15.8 %, CLI path +5.7 % (second campaign
++4.4 %); ``warm_local_cluster`` +1.8 %, its start 2.6 s against 5.9-7.2 s for the plain
+LocalClusters of the same run; tcp:// +2.7 % (second +2.2 %), with the preload +1.6 %
+(second +3.2 %). CPU of every process per scenario 0.61-0.86 s (pool 0.62 s).
 
 ``--whole`` instead times whole ``vtolftc campaign`` processes of the first ``--scenarios``
 (start-up, oracle, flights, Parquet, report): the local pool, a fresh LocalCluster, a fresh
@@ -229,10 +263,12 @@ def main() -> None:
                        args.jobs, got)
 
     if not args.no_dask:
-        for kind, early, second in (("LocalCluster", False, False),
-                                    ("LocalCluster", True, True), ("tcp", True, True)):
+        for kind, early, second, preload in (
+                ("LocalCluster", False, False, False), ("LocalCluster", True, True, False),
+                ("LocalCluster", True, False, True), ("tcp", True, True, False),
+                ("tcp", True, True, True)):
             dask_runs(kind, scen, args.jobs, t_oracle, pool_rate, report, fly, early=early,
-                      second=second)
+                      second=second, preload=preload)
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 
@@ -263,11 +299,22 @@ def cpu_s() -> float:
 
 
 @contextlib.contextmanager
-def fresh_cluster(kind: str, jobs: int) -> Iterator[str]:
+def fresh_cluster(kind: str, jobs: int, preload: bool = False) -> Iterator[str]:
     """A fresh Dask cluster of ``jobs`` worker processes (one thread each) on 127.0.0.1:
     ``LocalCluster`` (started in this process, as a script or notebook does) or ``tcp`` (a
     ``dask scheduler`` and a ``dask worker --nworkers N --nthreads 1`` started as separate
-    processes, as a deployment is). Yields the scheduler's address; stops what it started."""
+    processes, as a deployment is: :func:`vtolftc.runners.campaign.dask_clusters.local_tcp_cluster`,
+    with ``preload`` the workers of either start with the preload
+    :data:`vtolftc.runners.campaign.dask_clusters.PRELOAD`, warm before they register; the
+    LocalCluster's then fork from a forkserver that imported the flight code:
+    :func:`~vtolftc.runners.campaign.dask_clusters.warm_local_cluster`). Yields the
+    scheduler's address; stops what it started."""
+    from vtolftc.runners.campaign.dask_clusters import local_tcp_cluster, warm_local_cluster
+
+    if kind == "LocalCluster" and preload:
+        with warm_local_cluster(jobs) as cluster:
+            yield cluster.scheduler_address
+        return
     if kind == "LocalCluster":
         from distributed import LocalCluster
 
@@ -275,38 +322,13 @@ def fresh_cluster(kind: str, jobs: int) -> Iterator[str]:
                           host="127.0.0.1", dashboard_address=None) as cluster:
             yield cluster.scheduler_address
         return
-    import json
-    import signal
-
-    dask = str(Path(sys.executable).parent / "dask")
-    with tempfile.TemporaryDirectory() as d:
-        sfile = Path(d) / "scheduler.json"
-        procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
-                                   "--no-dashboard", "--scheduler-file", str(sfile)],
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-        try:
-            deadline = time.monotonic() + 120
-            while not sfile.is_file():
-                if time.monotonic() > deadline or procs[0].poll() is not None:
-                    raise RuntimeError("dask scheduler did not start")
-                time.sleep(0.1)
-            procs.append(subprocess.Popen(
-                [dask, "worker", "--scheduler-file", str(sfile), "--nworkers", str(jobs),
-                 "--nthreads", "1", "--no-dashboard", "--host", "127.0.0.1"],
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-            yield json.loads(sfile.read_text())["address"]
-        finally:
-            for p in reversed(procs):
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(timeout=60)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait(timeout=30)
+    with local_tcp_cluster(jobs, preload=preload) as address:
+        yield address
 
 
 def dask_runs(kind: str, scen: list[Any], jobs: int, t_oracle: float, pool_rate: float,
-              report: Any, fly: Any, *, early: bool = True, second: bool = True) -> None:
+              report: Any, fly: Any, *, early: bool = True, second: bool = True,
+              preload: bool = False) -> None:
     """Campaigns on a fresh ``kind`` cluster, ratios to the local pool's rate.
 
     The first as ``vtolftc campaign --scheduler`` runs it: with ``early`` (since issue 24's
@@ -315,13 +337,15 @@ def dask_runs(kind: str, scen: list[Any], jobs: int, t_oracle: float, pool_rate:
     oracle first and the workers warm in front of their first flights. Compared with the
     pool's oracle + flights (its workers fork from the warm parent), and its flights alone.
     With ``second``, a second campaign on the same cluster (a long-lived one, as a
-    deployment is): the flights alone."""
+    deployment is): the flights alone. ``preload``: the cluster's workers start with the
+    preload ``vtolftc.runners.campaign.dask_preload`` (warm before they register; the
+    cluster start printed then includes their imports and warm-up)."""
     from vtolftc.runners.campaign.dask_run import connect
     from vtolftc.runners.campaign.execute import prepare_dask, run_dask
     from vtolftc.runners.campaign.oracle import oracle_columns
 
     t0 = time.perf_counter()
-    with fresh_cluster(kind, jobs) as address:
+    with fresh_cluster(kind, jobs, preload) as address:
         client = connect(address)
         try:
             client.wait_for_workers(jobs, timeout=300)
@@ -334,7 +358,8 @@ def dask_runs(kind: str, scen: list[Any], jobs: int, t_oracle: float, pool_rate:
             wall, got = fly(run_dask(scen, client, tag="bench0"))
             how = ("workers warming during the oracle" if early else
                    "before the fix: the workers warm after the oracle")
-            label = f"Dask {kind} ({jobs} workers; cluster start {t_cluster:.1f} s not included)"
+            label = (f"Dask {kind}{' --preload' if preload else ''} ({jobs} workers; "
+                     f"cluster start {t_cluster:.1f} s not included)")
             rate = report(f"{label}, first campaign on the fresh cluster ({how}), flights",
                           wall, jobs, got)
             n = len(got)

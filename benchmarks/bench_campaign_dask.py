@@ -42,8 +42,27 @@ At load 2 (13:51, ``--scenarios 4``, a smoke run): a fresh worker's first task s
 between tasks 2-6 ms, a task's overhead over its flight 4.5 ms (0.3 %), the Dask flights
 took 1.023x the pool's flight time, the workers' other threads 1.3-1.4 % of their busy time.
 
+Round 13 (branch dask-13, 04:03-04:08 UTC 2026-12-03, load 11.5-13.6, ``--scenarios 8
+--cluster tcp`` without and with ``--preload``, interleaved, two pairs; a fresh ``dask
+scheduler`` + ``dask worker --nworkers 2`` each time, the campaign's plugins registered just
+before the tasks, so no oracle hides anything): without the preload a worker's first task
+started 5.2-6.9 s and 4.3-9.8 s after the submission (a fresh interpreter's imports of the
+flight code: 1.7-5.0 s at this load, warm-up 0.24-0.36 s) and the workers took 7.15 and
+6.55 s of CPU for the 8 flights; with ``--preload vtolftc.runners.campaign.dask_preload``
+the first tasks started 0.06-0.14 s after it and the workers took 4.89 and 4.87 s: the
+~2 s of imports and warm-up of the two workers moved into the cluster's start (5.1-6.0 s
+-> 13.6-18.7 s, not in the campaign). Dispatch did not change: gaps between tasks 6-24 ms
+median, a task's overhead over its flight 6-22 ms (0.2-0.5 %), the workers' other threads
+0.7-0.9 % of their busy time; the scheduler 0.33-0.46 s of CPU, the nannies 0.03 s, the
+client 0.05 s over the campaign. The importing itself: the flight code imported in 0.907 s
+of CPU on this branch against 1.006 s on main (4 interleaved pairs, load 7), the optional
+OSQP allocator's scipy.sparse now imported only when ``QPAllocator`` is used; the rest is
+numba (~0.45 s), the metrics kernels' cache load at import and scipy.linalg, all used by
+the flight.
+
     python benchmarks/bench_campaign_dask.py [--jobs 2] [--scenarios 24] [--batch B]
         [--no-warm]   # leave the campaign's worker warm-up out (as before issue 24's fix)
+        [--cluster tcp [--preload]]   # `dask scheduler` + `dask worker` processes
 """
 
 from __future__ import annotations
@@ -114,6 +133,11 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=None, help="scenarios per Dask task")
     ap.add_argument("--no-warm", action="store_true",
                     help="no worker warm-up plugin (the harness before issue 24's fix)")
+    ap.add_argument("--cluster", choices=("LocalCluster", "tcp"), default="LocalCluster",
+                    help="a LocalCluster in this process, or `dask scheduler` + `dask worker` "
+                         "processes (dask_clusters.local_tcp_cluster)")
+    ap.add_argument("--preload", action="store_true",
+                    help="tcp: workers started with --preload of the flight code")
     args = ap.parse_args()
     sys.path.insert(0, HERE)
     from bench_campaign import SPEC
@@ -162,21 +186,26 @@ def main() -> None:
 
 def dask_run(args: argparse.Namespace, scen: list[Any], pool_wall: float,
              pool_run: dict[str, float]) -> None:
-    """The same scenarios on a fresh LocalCluster, every task timed; prints the breakdown."""
-    from bench_campaign import proc_stat
-    from distributed import Client, LocalCluster, as_completed
+    """The same scenarios on a fresh cluster, every task timed; prints the breakdown."""
+    from bench_campaign import fresh_cluster, proc_stat
+    from distributed import Client, as_completed
 
     from vtolftc.runners.campaign import execute
     from vtolftc.runners.campaign.dask_plugin import PLUGIN_NAME, PauseProfiler
+    from vtolftc.runners.campaign.dask_run import cluster_pids
 
     n = len(scen)
-    with LocalCluster(n_workers=args.jobs, threads_per_worker=1, processes=True,
-                      host="127.0.0.1", dashboard_address=None) as cluster, \
-            Client(cluster.scheduler_address, set_as_default=False) as client:
-        wpids = client.run(os.getpid)
-        procs = {"parent (scheduler, client)": [os.getpid()]}
-        procs["nannies"] = [proc_stat(p)[0] for p in wpids.values()]
-        procs["workers"] = list(wpids.values())
+    t_start = time.perf_counter()
+    with fresh_cluster(args.cluster, args.jobs, args.preload) as address, \
+            Client(address, set_as_default=False) as client:
+        client.wait_for_workers(args.jobs, timeout=300)
+        t_cluster = time.perf_counter() - t_start
+        roles = cluster_pids(client)
+        procs: dict[str, list[int]] = {
+            f"client+{roles.pop(os.getpid())} (this process)" if os.getpid() in roles
+            else "client (this process)": [os.getpid()]}
+        for pid, role in roles.items():
+            procs.setdefault(role, []).append(pid)
         cpu0 = {k: sum(proc_stat(p)[1] for p in v) for k, v in procs.items()}
         t0w = time.time()
         t0 = time.perf_counter()
@@ -198,7 +227,9 @@ def dask_run(args: argparse.Namespace, scen: list[Any], pool_wall: float,
     same = sorted(set(dask_run_s) & set(pool_run))
     ratio_flight = statistics.mean(dask_run_s[k] / pool_run[k] for k in same)
     how = "no warm-up plugin" if args.no_warm else "warmed by prepare_dask"
-    print(f"Dask fresh LocalCluster ({how}; batch {size}): {n} in {wall:.1f} s = "
+    how += ", workers --preload" if args.preload and args.cluster == "tcp" else ""
+    print(f"Dask fresh {args.cluster} (start {t_cluster:.1f} s, not included; {how}; batch "
+          f"{size}): {n} in {wall:.1f} s = "
           f"{60 * n / wall:.1f} "
           f"scenarios/min -> Dask / pool {pool_wall / wall:.2f}x")
     print(f"  flights: Dask / pool flight loop time, same scenarios: {ratio_flight:.3f}")

@@ -258,7 +258,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jobs", type=int, default=None,
                    help="local processes (default: all cores)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run on the Dask scheduler at ADDRESS (tcp://HOST:PORT)")
+                   help="run on the Dask scheduler at ADDRESS (tcp://HOST:PORT); start its "
+                        "workers warm with `dask worker ADDRESS --nthreads 1 --preload "
+                        "vtolftc.runners.campaign.dask_preload`")
     p.add_argument("--resume", action="store_true",
                    help="continue a campaign in --out: fly only the missing scenarios")
     p.add_argument("--compare", nargs=2, metavar=("A", "B"), default=None,

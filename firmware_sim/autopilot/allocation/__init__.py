@@ -28,7 +28,6 @@ from vtolftc.firmware_sim.autopilot.allocation.interface import (
     step_bounds,
 )
 from vtolftc.firmware_sim.autopilot.allocation.pseudo_inverse import PseudoInverseAllocator
-from vtolftc.firmware_sim.autopilot.allocation.qp_osqp import QPAllocator
 from vtolftc.firmware_sim.autopilot.allocation.wls import WLSAllocator
 
 __all__ = [
@@ -45,3 +44,13 @@ __all__ = [
     "shortfall_mask",
     "step_bounds",
 ]
+
+
+def __getattr__(name: str) -> object:
+    """``QPAllocator`` on first use (PEP 562): its module imports scipy.sparse (0.5-0.7 s of
+    a fresh process), which the flown allocator never needs."""
+    if name == "QPAllocator":
+        from vtolftc.firmware_sim.autopilot.allocation.qp_osqp import QPAllocator
+
+        return QPAllocator
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

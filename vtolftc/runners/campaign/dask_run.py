@@ -11,8 +11,9 @@ the flight code and load their kernels meanwhile, as the local pool's workers in
 from the campaign process. :func:`vtolftc.runners.campaign.execute.run_dask` submits the
 scenarios in batches of :func:`dask_batch_size`. :func:`cluster_pids` and
 :func:`cluster_holdings` say which processes make up a cluster and what Dask holds in them
-(the memory runs of ``benchmarks/bench_campaign_memory.py`` and the tests). This module never
-imports the flight code.
+(the memory runs of ``benchmarks/bench_campaign_memory.py`` and the tests).
+Clusters on this machine whose workers start warm:
+:mod:`vtolftc.runners.campaign.dask_clusters`. This module never imports the flight code.
 """
 
 from __future__ import annotations
@@ -150,3 +151,4 @@ def cluster_holdings(client: Any) -> dict[str, dict[str, int]]:
     out: dict[str, dict[str, int]] = dict(client.run(_worker_holdings))
     out["scheduler"] = client.run_on_scheduler(_scheduler_holdings)
     return out
+
