@@ -276,13 +276,15 @@ def main() -> None:
                   f"{res.autopilot_summary.get('cpu_per_step_us', nan):.0f} us, vehicle "
                   f"process {res.vehicle_summary.get('cpu_per_step_us', nan):.0f} us; load "
                   f"average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-            ap_parts = res.autopilot_summary.get("part_mean_us", {})
-            veh_parts = res.vehicle_summary.get("part_mean_us", {})
             step_wall = 1e6 * res.flight_wall_s / steps
-            print(f"    per step ({step_wall:.0f} us of wall time each): autopilot process "
-                  + ", ".join(f"{k} {x:.0f} us" for k, x in ap_parts.items())
-                  + "; vehicle process " + ", ".join(f"{k} {x:.0f} us"
-                                                     for k, x in veh_parts.items()))
+            print(f"    per step ({step_wall:.0f} us of wall time each), wall / thread CPU:")
+            for who, summ in (("autopilot", res.autopilot_summary),
+                              ("vehicle", res.vehicle_summary)):
+                wall_parts = summ.get("part_mean_us", {})
+                cpu_parts = summ.get("part_cpu_mean_us", {})
+                print(f"      {who}: " + ", ".join(
+                    f"{k} {x:.0f} / {cpu_parts.get(k, nan):.0f} us"
+                    for k, x in wall_parts.items()))
 
 
 if __name__ == "__main__":

@@ -160,12 +160,17 @@ class AutopilotProcess:
         answer), summed [s]: near the wall time, and some 3-5 times the same step's CPU time
         in-process, the code running on caches the other processes emptied while this one
         waited for the vehicle (``benchmarks/bench_sitl.py``)."""
-        self.part_wall_s = {"autopilot_step": 0.0, "status_and_answer": 0.0,
-                            "after_answer": 0.0}
-        """Wall time summed over the steps [s]: ``Autopilot.step``; encoding and sending
+        self.part_wall_s = {"wait_and_read": 0.0, "autopilot_step": 0.0,
+                            "status_and_answer": 0.0, "after_answer": 0.0}
+        """Wall time summed over the steps [s]: waiting for the vehicle's next state and
+        reading, parsing and decoding it (from the end of the previous step's work; the
+        optional spin included); ``Autopilot.step``; encoding and sending
         HIL_ACTUATOR_CONTROLS, then the status snapshot; after the answer (metrics,
         observers, failsafe checks, publishing to the ground-station worker), which overlaps
         with the vehicle's work."""
+        self.part_cpu_s = dict.fromkeys(self.part_wall_s, 0.0)
+        """The control thread's CPU time in the same parts [s] (thread clock): wall minus CPU
+        is time this thread did not run (blocked waiting, or preempted)."""
         self.failsafe_events: list[dict[str, Any]] = []
         self._finished = False
         self._sim_usec = 0
@@ -266,6 +271,7 @@ class AutopilotProcess:
             if nav is None or held:
                 # nothing to step on: wait for the vehicle (or, held, poll the ground
                 # stations often: their commands are what the hold waits for)
+                w0, wc0 = pc(), thread_time()
                 wait = 0.002 if (held or gcs.has_pending()) else 0.01
                 if self.spin_s > 0 and not held:
                     end = pc() + self.spin_s
@@ -276,6 +282,9 @@ class AutopilotProcess:
                 gcs.poll()
                 if held:
                     gcs.announce_hold(nav.time_usec)
+                elif last_step_start is not None:
+                    self.part_wall_s["wait_and_read"] += pc() - w0
+                    self.part_cpu_s["wait_and_read"] += thread_time() - wc0
             else:
                 ever_connected = True
                 gcs.poll()  # commands that arrived meanwhile act at this step
@@ -288,6 +297,7 @@ class AutopilotProcess:
                     last_step_start = t0
                     u = ap.step(nav)
                     t1 = pc()
+                    c1 = thread_time()
                     # answer first: the armed flag without building the status snapshot
                     # (made right after the send, from the same unchanged state)
                     armed = (armed_of(nav)[1] if armed_of is not None
@@ -295,7 +305,8 @@ class AutopilotProcess:
                     hil.send_controls(nav.time_usec, u, armed)
                     st = ap.status()
                     t2 = pc()
-                    cpu = thread_time() - c0
+                    c2 = thread_time()
+                    cpu = c2 - c0
                     self.step_cpu_s += cpu
                     if cpu > self.step_cpu_max_s:
                         self.step_cpu_max_s = cpu
@@ -319,6 +330,10 @@ class AutopilotProcess:
                     part["autopilot_step"] += t1 - t0
                     part["status_and_answer"] += t2 - t1
                     part["after_answer"] += pc() - t2
+                    part = self.part_cpu_s
+                    part["autopilot_step"] += c1 - c0
+                    part["status_and_answer"] += c2 - c1
+                    part["after_answer"] += thread_time() - c2
                 # (no read here: the next pass reads what came meanwhile, one select and
                 # one read when the vehicle's next step is there)
             now = time.monotonic()
@@ -370,6 +385,8 @@ class AutopilotProcess:
             out["step_cpu_mean_us"] = 1e6 * self.step_cpu_s / self.step_wall_s.n
             out["part_mean_us"] = {k: 1e6 * v / self.step_wall_s.n
                                    for k, v in self.part_wall_s.items()}
+            out["part_cpu_mean_us"] = {k: 1e6 * v / self.step_wall_s.n
+                                       for k, v in self.part_cpu_s.items()}
         if self.compiled_at_ready is not None:
             now = compiled_specialisations()
             out["numba"] = {
