@@ -141,7 +141,8 @@ class VehicleProcess:
         """MAVLink 2 signing of the HIL link (None: unsigned, the first autopilot wins)."""
         self.link = open_link(link_url, system_id=VEHICLE_SYSTEM_ID,
                               component_id=VEHICLE_COMPONENT_ID, allow_remote=allow_remote,
-                              track_source=True, signing=signing)
+                              track_source=True, signing=signing,
+                              zenoh_receive="channel")
         self.pinned: object = None
         """Source of the autopilot's first heartbeat (address, or "ids" on zenoh)."""
         self.rejected = {"not_pinned": 0, "foreign_ids": 0, "stale_controls": 0,
