@@ -127,6 +127,7 @@ import os
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from vtolftc.runners.scenario import paper_scenario, run_scenario
 from vtolftc.runners.sitl import SitlConfig, run_sitl
@@ -221,6 +222,147 @@ def _parts(n: int = 3000, reps: int = 5) -> None:
               f"{k} {min(x):.1f} / {sorted(x)[len(x) // 2]:.1f} us" for k, x in res.items()))
 
 
+_FLOOR_MODES = ("zenoh-callback", "zenoh-channel", "ours-callback", "ours-channel", "udp")
+
+
+def _floor_end(role: str, port: int, mode: str) -> tuple[Any, Any, Any]:
+    """One end of the ping-pong: ``send(bytes)``, ``recv(timeout_s | None) -> bytes | None``
+    (None: blocking), ``close()`` for ``mode`` (see :func:`_floor`)."""
+    import queue
+
+    if mode == "udp":
+        import socket
+
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind(("127.0.0.1", port if role == "ping" else port + 1))
+        dest = ("127.0.0.1", port + 1 if role == "ping" else port)
+
+        def recv_udp(timeout_s: float | None) -> bytes | None:
+            sock.settimeout(timeout_s)
+            try:
+                return sock.recvfrom(2048)[0]
+            except TimeoutError:
+                return None
+
+        return (lambda d: sock.sendto(d, dest)), recv_udp, sock.close
+    ends = {"listen": [f"tcp/127.0.0.1:{port}"]} if role == "ping" else {
+        "connect": [f"tcp/127.0.0.1:{port}"]}
+    direction = "up" if role == "ping" else "down"
+    if mode.startswith("ours-"):
+        from vtolftc.protocols.zenoh_transport import ZenohTransport
+
+        t = ZenohTransport("floor", "hil", direction, receive=mode[5:],
+                           **ends)  # type: ignore[arg-type]
+
+        def recv_ours(timeout_s: float | None) -> bytes | None:
+            deadline = time.monotonic() + (5.0 if timeout_s is None else timeout_s)
+            while time.monotonic() < deadline:
+                got = t.recv_datagrams(max(0.0, deadline - time.monotonic()))
+                if got:
+                    return got[0]
+            return None
+
+        return t.send_bytes, recv_ours, t.close
+    import zenoh
+
+    from vtolftc.protocols.zenoh_transport import key_expr, zenoh_config
+
+    session = zenoh.open(zenoh_config(**ends))  # type: ignore[arg-type]
+    pub = session.declare_publisher(key_expr("floor", "hil", direction),
+                                    congestion_control=zenoh.CongestionControl.BLOCK,
+                                    reliability=zenoh.Reliability.RELIABLE, express=True)
+    sub_key = key_expr("floor", "hil", "down" if role == "ping" else "up")
+    if mode == "zenoh-callback":
+        q: queue.SimpleQueue[bytes] = queue.SimpleQueue()
+        session.declare_subscriber(sub_key, lambda smp: q.put(smp.payload.to_bytes()))
+
+        def recv_cb(timeout_s: float | None) -> bytes | None:
+            try:
+                return q.get(timeout=5.0 if timeout_s is None else timeout_s)
+            except queue.Empty:
+                return None
+
+        return pub.put, recv_cb, session.close
+    sub = session.declare_subscriber(sub_key, zenoh.handlers.FifoChannel(256))
+
+    def recv_channel(timeout_s: float | None) -> bytes | None:
+        if timeout_s is None:
+            return bytes(sub.recv().payload.to_bytes())
+        deadline = time.monotonic() + timeout_s  # the hand-shake only: poll
+        while time.monotonic() < deadline:
+            smp = sub.try_recv()
+            if smp is not None:
+                return bytes(smp.payload.to_bytes())
+            time.sleep(0.001)
+        return None
+
+    return pub.put, recv_channel, session.close
+
+
+def _floor(n: int = 3000, port: int = 17550) -> None:
+    """The links' floor: a ping-pong of 100-byte payloads between this process and a child
+    (two processes as in SITL, loopback; zenoh in peer mode without scouting): raw zenoh with a
+    Python callback + queue or with zenoh's FIFO channel, our ``ZenohTransport`` in either
+    receive mode, raw UDP sockets (blocking). Round trip wall time and this process's CPU per
+    round trip (every thread)."""
+    import subprocess
+    import sys
+
+    for mode in _FLOOR_MODES:
+        send, recv, close = _floor_end("ping", port, mode)
+        child = subprocess.Popen([sys.executable, __file__, "--floor-pong", mode,
+                                  "--floor-port", str(port)])
+        try:
+            payload = b"p" * 100
+            deadline = time.monotonic() + 30.0
+            while time.monotonic() < deadline:  # until the child answers
+                send(payload)
+                if recv(0.2) is not None:
+                    break
+            time.sleep(0.3)
+            while recv(0.05) is not None:  # answers to the hand-shake's repeats
+                pass
+            rtt = []
+            c0 = time.process_time()
+            for _ in range(n):
+                t0 = time.perf_counter()
+                send(payload)
+                recv(None)
+                rtt.append(time.perf_counter() - t0)
+            cpu = time.process_time() - c0
+        finally:
+            send(b"x")
+            try:
+                child.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                child.kill()
+            close()
+        r = sorted(rtt[n // 10:])
+        print(f"{mode}: round trip median {1e6 * r[len(r) // 2]:.0f} us, p90 "
+              f"{1e6 * r[int(0.9 * len(r))]:.0f} us, mean {1e6 * sum(r) / len(r):.0f} us; CPU "
+              f"per round trip (this end) {1e6 * cpu / n:.0f} us; load "
+              f"{os.getloadavg()[0]:.1f}", flush=True)
+        port += 2
+
+
+def _floor_pong(mode: str, port: int) -> None:
+    """The child of :func:`_floor`: echo every payload until ``x`` (at most 120 s)."""
+    import threading
+
+    timer = threading.Timer(120.0, os._exit, (1,))  # never outlive a dead parent for long
+    timer.daemon = True
+    timer.start()
+    send, recv, close = _floor_end("pong", port, mode)
+    try:
+        data = recv(30.0)
+        while data is not None and data[:1] != b"x":
+            send(data)
+            data = recv(None)  # blocking, as in the ping's timed loop
+    finally:
+        time.sleep(0.2)
+        close()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--transport", default="both", choices=("udp", "zenoh", "both"))
@@ -231,7 +373,17 @@ def main() -> None:
                     help="busy-poll time of both processes before sleeping (default 0)")
     ap.add_argument("--parts", action="store_true",
                     help="only the per-call CPU of the HIL codec pieces (packer vs generated)")
+    ap.add_argument("--floor", action="store_true",
+                    help="only the links' floor: a 100-byte ping-pong between two processes")
+    ap.add_argument("--floor-pong", choices=_FLOOR_MODES, help=argparse.SUPPRESS)
+    ap.add_argument("--floor-port", type=int, default=17550, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.floor_pong:
+        _floor_pong(args.floor_pong, args.floor_port)
+        return
+    if args.floor:
+        _floor(port=args.floor_port)
+        return
     if args.parts:
         _parts()
         return
