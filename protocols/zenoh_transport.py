@@ -370,9 +370,7 @@ class ZenohTransport(Transport):
         if self._closed:
             return
         self._closed = True
-        if self._watchdog is not None:  # wake a receiver blocked in the channel
-            with contextlib.suppress(Exception):
-                self._waker.put(b"")
+        if self._watchdog is not None:  # (undeclaring the subscriber wakes its receiver)
             self._watchdog.join(timeout=1.0)
         for entity in (self._sub, self._pub):
             with contextlib.suppress(Exception):
