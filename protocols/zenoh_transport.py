@@ -63,8 +63,10 @@ MAX_BATCH = 256
 DEFAULT_QUEUE_MAX = 4096
 RECEIVE_MODES = ("callback", "channel")
 _WATCH_S = 0.005
-"""Channel mode: the watchdog looks at the receiver's deadline this often [s] (a wait ends at
-most this much after its timeout; an idle watchdog costs ~200 short wake-ups a second)."""
+"""Channel mode: the watchdog looks at the receiver's deadline at least this often [s] (an
+idle watchdog costs ~200 short wake-ups a second); a wait whose deadline comes sooner than the
+watchdog's next look wakes it (one thread hand-off), so a wait never ends late by more than a
+wake-up (the lockstep's long timeouts never wake it)."""
 
 _NAME_RE = re.compile(r"^[A-Za-z0-9_\-]+$")
 _ENDPOINT_RE = re.compile(r"^(tcp|udp|tls|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})$")
@@ -256,6 +258,9 @@ class ZenohTransport(Transport):
             raise OSError(f"cannot open zenoh session ({self.describe()}): {exc}") from exc
         self._wake_at = math.inf
         """Channel mode: monotonic time at which the watchdog ends the receiver's wait."""
+        self._watch_next = math.inf
+        """Channel mode: monotonic time of the watchdog's next look at :attr:`_wake_at`."""
+        self._kick = threading.Event()
         self._watchdog: threading.Thread | None = None
         try:
             channel = receive == "channel"
@@ -282,16 +287,19 @@ class ZenohTransport(Transport):
     def _watch(self) -> None:
         """Channel mode, watchdog thread: end a wait that reached its deadline (an empty
         payload to this session's own subscriber)."""
-        stop = threading.Event()
+        kick = self._kick
         while not self._closed:
-            wake_at = self._wake_at
             now = time.monotonic()
+            self._watch_next = now + _WATCH_S  # before reading the deadline: see _recv_channel
+            wake_at = self._wake_at
             if now >= wake_at:
                 self._wake_at = math.inf
                 with contextlib.suppress(Exception):
                     self._waker.put(b"")
                 continue
-            stop.wait(min(wake_at - now, _WATCH_S))
+            self._watch_next = look = min(wake_at, now + _WATCH_S)
+            kick.wait(look - now)
+            kick.clear()
 
     def _on_sample(self, sample: Any) -> None:
         """zenoh callback thread: queue the payload (bounded)."""
@@ -342,7 +350,10 @@ class ZenohTransport(Transport):
             if sample is None:
                 if timeout_s is not None and timeout_s <= 0.0:
                     return out
-                self._wake_at = time.monotonic() + (0.25 if timeout_s is None else timeout_s)
+                self._wake_at = wake_at = time.monotonic() + (
+                    0.25 if timeout_s is None else timeout_s)
+                if wake_at < self._watch_next:  # the watchdog would look too late: wake it
+                    self._kick.set()
                 try:
                     sample = sub.recv()
                 finally:
@@ -371,6 +382,7 @@ class ZenohTransport(Transport):
             return
         self._closed = True
         if self._watchdog is not None:  # (undeclaring the subscriber wakes its receiver)
+            self._kick.set()
             self._watchdog.join(timeout=1.0)
         for entity in (self._sub, self._pub):
             with contextlib.suppress(Exception):

@@ -80,6 +80,26 @@ def test_channel_timed_wait_ends_at_its_timeout(pair):
     assert 0.19 <= took < 1.0  # the watchdog ends it within _WATCH_S (5 ms) of the timeout
 
 
+def test_channel_short_waits_wake_the_watchdog(pair):
+    """A deadline sooner than the watchdog's next look (it looks every 5 ms) wakes it, so a
+    1 ms wait is not a 5 ms one (the vehicle's real-time loop waits in slices of at most
+    2 ms); the lockstep's long waits never do (no thread hand-off per step)."""
+    _up, down = pair
+    kicks = []
+    real = down._kick
+
+    class Spy:
+        def set(self) -> None:
+            kicks.append(time.monotonic())
+            real.set()
+
+    down._kick = Spy()
+    _in_thread(lambda: [down.recv_datagrams(0.2) for _ in range(2)])
+    assert kicks == []  # 200 ms waits: the watchdog's own 5 ms looks are soon enough
+    _in_thread(lambda: [down.recv_datagrams(0.001) for _ in range(20)])
+    assert kicks  # 1 ms waits: it is woken
+
+
 def test_channel_wakes_a_waiting_receiver_when_data_comes(pair):
     up, down = pair
     threading.Timer(0.1, up.send_bytes, (b"late",)).start()
