@@ -2,6 +2,7 @@
 
     python benchmarks/bench_sitl.py [--transport udp|zenoh|both] [--duration 40] [--case 1]
     python benchmarks/bench_sitl.py --parts   # the HIL codec pieces only, CPU per call
+    python benchmarks/bench_sitl.py --floor   # the links' floor: 100-byte ping-pong, 2 processes
 
 For each transport it flies the case with ``vtolftc.runners.sitl.run_sitl`` (vehicle and autopilot
 as separate processes, ground-station commands, no plots) and reports:
@@ -111,6 +112,69 @@ every measurement below, so the wall figures are again the load's):
   the two processes on two shared cores, 200 us of wall per step is out of reach of these
   per-step savings (tens of us each); it needs the autopilot step and the after-answer work
   compiled, or both ends in one process.
+
+Session 13 (issue 24; 2 cores shared with 4 other helpers, load average 7-13 through every
+measurement below; the lead's idle figures of the issue: UDP 14.3x, zenoh 6.9x):
+
+- Profile per part, wall / thread CPU (``part_mean_us`` / ``part_cpu_mean_us`` in both
+  summaries, :class:`vtolftc.telemetry.step_parts.StepParts`; new parts ``wait_and_read`` and
+  the vehicle's ``after_send``). UDP, 10-20 s of case 1, 6 flights at load 11-13, us per step:
+  autopilot wait_and_read 514-2034 / 73-117 (the wait for the vehicle, then read, parse and
+  decode), ``Autopilot.step`` 50-74 / 49-70, status + answer 120-179 / 26-38 (the wall is the
+  vehicle's wake-up run in the sender), after the answer 139-182 / 75-100; vehicle
+  wait_and_read 734-2140 / 50-84, truth snapshot + physics 25-38 / 23-33, sensors + encode
+  60-93 / 49-69, send 83-287 / 15-21, after the send 53-75 / 48-67. The CPU on the critical
+  path is therefore ~75-115 (read) + ~55 (step) + ~30 (answer) in the autopilot and ~50-80
+  (read) + ~25 (physics) + ~55 (sensors, encode) + ~17 (send) in the vehicle: 300-380 us of
+  CPU per step, before any waiting. 20x is 200 us of wall time per step.
+- Warm, one process, loopback (the same pieces called back to back, thread CPU, min / median
+  of 5 x 2000, load 11-12): vehicle datagram 27-31 us, autopilot read + parse 24-25 us and
+  decode 6 us, answer 10-11 us, vehicle read + parse 14-15 us. The flights' figures are 2-4x
+  these: each process runs on caches the other one (and the other jobs) emptied while it
+  waited; that, not the link, is most of the gap.
+- The links' floor (``--floor``; 100-byte ping-pong between two processes, loopback, 3 runs at
+  load 12-12.7, median round trip / CPU per round trip of one end): UDP sockets 15-17 / 9-23 us;
+  raw zenoh (peer mode, scouting off) with a Python callback + queue 104-154 / 51-88 us, with
+  zenoh's FIFO channel 94-112 / 61-65 us; our ``ZenohTransport`` with the callback 94-146 /
+  52-96 us, with the channel 90-93 / 52-64 us. So zenoh's own floor is ~80-90 us per round trip
+  above UDP's, and our transport adds nothing measurable on top of it; the zenoh flights'
+  extra (median round trip 366-539 against UDP's 309-613 us here, 424 against 190 us idle) is
+  that floor plus zenoh's threads competing for the two cores.
+- Change: the HIL link over zenoh receives through zenoh's FIFO channel (``receive="channel"``,
+  :mod:`vtolftc.protocols.zenoh_transport`): no Python callback and no GIL in zenoh's thread,
+  the sample read in the waiting thread; timed waits are ended by a watchdog thread (an empty
+  payload to the session itself). Ground-station links keep the callback (bounded queue that
+  drops and counts: a GCS that stops reading must not block the autopilot's publisher).
+  In flight, pairwise against main (6 interleaved pairs, 10 and 20 s, load 11-13.7): CPU per
+  step of the autopilot process 397 / 397 / 449 / 461 / 449 / 343 -> 445 / 406 / 415 / 379 /
+  435 / 384 us (mean 416 -> 411), vehicle 255 / 289 / 338 / 372 / 330 / 248 -> 338 / 302 /
+  337 / 276 / 309 / 290 us (305 -> 309), real-time factor 3.5 / 3.6 / 3.1 / 2.6 / 2.1 / 4.9 ->
+  4.7 / 4.2 / 2.6 / 2.7 / 3.1 / 3.5x: no difference the load lets one see; kept for the floor's
+  lower and steadier round trip.
+- Change: ``FastParser`` builds messages without arrays or chars through one precomputed
+  ``itemgetter`` and those with arrays through one comprehension (same objects, tested over the
+  dialect): autopilot read + parse 26.7 -> 24.8 us warm (min), 2-4 us per step.
+- UDP in flight, pairwise against main (3 interleaved pairs, 20 s, load 12.9-13.7): CPU per
+  step autopilot 357 / 507 / 384 -> 407 / 272 / 323 us, vehicle 248 / 339 / 271 -> 276 / 187 /
+  231 us, real-time factor 2.7 / 1.8 / 2.5 -> 2.5 / 4.1 / 3.1x: within the load's noise, as
+  expected of a 2-4 us saving.
+- Bounded busy-poll (``--spin-us``, both processes; kept opt-in): UDP, 4 pairs at load 7-8
+  (20 s) and 2 at load 11-12 under ``nice -10`` (10 s). The median round trip falls (338 ->
+  162, 274 -> 170 us at load 7) but the mean and p99 rise (p99 5-7 ms); CPU per step mostly
+  +30-160 us per process (one pair -40 us); real-time factor without / with 5.9 / 5.8 / 5.7 /
+  6.1 / 1.6 / 4.2 against 6.1 (300 us) / 6.3 (100) / 5.3 (300) / 2.6 (100) / 1.7 (150) /
+  2.6x (150). With more runnable
+  jobs than cores a spinning process loses its sleeper credit and is preempted for whole
+  slices, and the spin takes the core the peer needs; it can only pay with an idle core,
+  which this machine did not have during the session, so it is not the default.
+- Not reached: 20x / 15x. Where the time goes (above): ~300-380 us of CPU per step on the
+  critical path at this load, of which reads and parses ~130-190 us, the two processes' Python
+  step work ~165 us; every wait is a sleep and a wake-up on a cold cache. On the idle machine
+  the lead measured 280 us per step (UDP) with 363 us of CPU per step in the two processes
+  together: 200 us needs both the critical-path CPU down by about a third (a compiled HIL
+  codec end to end: parse + decode and sensors + encode in one call each, ~100 us of today's
+  in-flight CPU) and the caches kept warm (a spin on an idle core), neither of which this
+  loaded machine can show.
 
 In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
 control step): measured at 57-61x on an idle machine (about 66 us per step: autopilot ~25 us,
