@@ -158,6 +158,15 @@ measurement below; the lead's idle figures of the issue: UDP 14.3x, zenoh 6.9x):
   step autopilot 357 / 507 / 384 -> 407 / 272 / 323 us, vehicle 248 / 339 / 271 -> 276 / 187 /
   231 us, real-time factor 2.7 / 1.8 / 2.5 -> 2.5 / 4.1 / 3.1x: within the load's noise, as
   expected of a 2-4 us saving.
+- At the session's end the machine went quiet (load 0.9-1.3): 2 interleaved pairs, 20 s,
+  ``--transport both``, main -> this tree, wall per step (real-time factor) and CPU per step
+  autopilot / vehicle process: UDP 356 (11.2x), 431 (9.3x) -> 448 (8.9x), 357 us (11.2x);
+  CPU 259 / 248, 331 / 240 -> 355 / 245, 277 / 196 us. zenoh 784 (5.1x), 759 (5.3x) -> 865
+  (4.6x), 642 us (6.2x); CPU 527 / 396, 507 / 394 -> 599 / 449, 443 / 335 us. The same
+  picture: no change beyond one pair's spread. In these idle flights the thread CPU of the
+  critical path was autopilot read 79-98 + step 43-54 + answer 38-47 us and vehicle read
+  59-72 + physics 22-26 + sensors and encode 44-58 + send 25-29 us (UDP): ~310-430 us of CPU
+  per step, still 2-3x the warm costs.
 - Bounded busy-poll (``--spin-us``, both processes; kept opt-in): UDP, 4 pairs at load 7-8
   (20 s) and 2 at load 11-12 under ``nice -10`` (10 s). The median round trip falls (338 ->
   162, 274 -> 170 us at load 7) but the mean and p99 rise (p99 5-7 ms); CPU per step mostly
