@@ -2,6 +2,7 @@
 
     python benchmarks/bench_sitl.py [--transport udp|zenoh|both] [--duration 40] [--case 1]
     python benchmarks/bench_sitl.py --parts   # the HIL codec pieces only, CPU per call
+    python benchmarks/bench_sitl.py --floor   # the links' floor: 100-byte ping-pong, 2 processes
 
 For each transport it flies the case with ``vtolftc.runners.sitl.run_sitl`` (vehicle and autopilot
 as separate processes, ground-station commands, no plots) and reports:
@@ -112,6 +113,78 @@ every measurement below, so the wall figures are again the load's):
   per-step savings (tens of us each); it needs the autopilot step and the after-answer work
   compiled, or both ends in one process.
 
+Session 13 (issue 24; 2 cores shared with 4 other helpers, load average 7-13 through every
+measurement below; the lead's idle figures of the issue: UDP 14.3x, zenoh 6.9x):
+
+- Profile per part, wall / thread CPU (``part_mean_us`` / ``part_cpu_mean_us`` in both
+  summaries, :class:`vtolftc.telemetry.step_parts.StepParts`; new parts ``wait_and_read`` and
+  the vehicle's ``after_send``). UDP, 10-20 s of case 1, 6 flights at load 11-13, us per step:
+  autopilot wait_and_read 514-2034 / 73-117 (the wait for the vehicle, then read, parse and
+  decode), ``Autopilot.step`` 50-74 / 49-70, status + answer 120-179 / 26-38 (the wall is the
+  vehicle's wake-up run in the sender), after the answer 139-182 / 75-100; vehicle
+  wait_and_read 734-2140 / 50-84, truth snapshot + physics 25-38 / 23-33, sensors + encode
+  60-93 / 49-69, send 83-287 / 15-21, after the send 53-75 / 48-67. The CPU on the critical
+  path is therefore ~75-115 (read) + ~55 (step) + ~30 (answer) in the autopilot and ~50-80
+  (read) + ~25 (physics) + ~55 (sensors, encode) + ~17 (send) in the vehicle: 300-380 us of
+  CPU per step, before any waiting. 20x is 200 us of wall time per step.
+- Warm, one process, loopback (the same pieces called back to back, thread CPU, min / median
+  of 5 x 2000, load 11-12): vehicle datagram 27-31 us, autopilot read + parse 24-25 us and
+  decode 6 us, answer 10-11 us, vehicle read + parse 14-15 us. The flights' figures are 2-4x
+  these: each process runs on caches the other one (and the other jobs) emptied while it
+  waited; that, not the link, is most of the gap.
+- The links' floor (``--floor``; 100-byte ping-pong between two processes, loopback, 3 runs at
+  load 12-12.7, median round trip / CPU per round trip of one end): UDP sockets 15-17 / 9-23 us;
+  raw zenoh (peer mode, scouting off) with a Python callback + queue 104-154 / 51-88 us, with
+  zenoh's FIFO channel 94-112 / 61-65 us; our ``ZenohTransport`` with the callback 94-146 /
+  52-96 us, with the channel 90-93 / 52-64 us. So zenoh's own floor is ~80-90 us per round trip
+  above UDP's, and our transport adds nothing measurable on top of it; the zenoh flights'
+  extra (median round trip 366-539 against UDP's 309-613 us here, 424 against 190 us idle) is
+  that floor plus zenoh's threads competing for the two cores.
+- Change: the HIL link over zenoh receives through zenoh's FIFO channel (``receive="channel"``,
+  :mod:`vtolftc.protocols.zenoh_transport`): no Python callback and no GIL in zenoh's thread,
+  the sample read in the waiting thread; timed waits are ended by a watchdog thread (an empty
+  payload to the session itself). Ground-station links keep the callback (bounded queue that
+  drops and counts: a GCS that stops reading must not block the autopilot's publisher).
+  In flight, pairwise against main (6 interleaved pairs, 10 and 20 s, load 11-13.7): CPU per
+  step of the autopilot process 397 / 397 / 449 / 461 / 449 / 343 -> 445 / 406 / 415 / 379 /
+  435 / 384 us (mean 416 -> 411), vehicle 255 / 289 / 338 / 372 / 330 / 248 -> 338 / 302 /
+  337 / 276 / 309 / 290 us (305 -> 309), real-time factor 3.5 / 3.6 / 3.1 / 2.6 / 2.1 / 4.9 ->
+  4.7 / 4.2 / 2.6 / 2.7 / 3.1 / 3.5x: no difference the load lets one see; kept for the floor's
+  lower and steadier round trip.
+- Change: ``FastParser`` builds messages without arrays or chars through one precomputed
+  ``itemgetter`` and those with arrays through one comprehension (same objects, tested over the
+  dialect): autopilot read + parse 26.7 -> 24.8 us warm (min), 2-4 us per step.
+- UDP in flight, pairwise against main (3 interleaved pairs, 20 s, load 12.9-13.7): CPU per
+  step autopilot 357 / 507 / 384 -> 407 / 272 / 323 us, vehicle 248 / 339 / 271 -> 276 / 187 /
+  231 us, real-time factor 2.7 / 1.8 / 2.5 -> 2.5 / 4.1 / 3.1x: within the load's noise, as
+  expected of a 2-4 us saving.
+- At the session's end the machine went quiet (load 0.9-1.3): 2 interleaved pairs, 20 s,
+  ``--transport both``, main -> this tree, wall per step (real-time factor) and CPU per step
+  autopilot / vehicle process: UDP 356 (11.2x), 431 (9.3x) -> 448 (8.9x), 357 us (11.2x);
+  CPU 259 / 248, 331 / 240 -> 355 / 245, 277 / 196 us. zenoh 784 (5.1x), 759 (5.3x) -> 865
+  (4.6x), 642 us (6.2x); CPU 527 / 396, 507 / 394 -> 599 / 449, 443 / 335 us. The same
+  picture: no change beyond one pair's spread. In these idle flights the thread CPU of the
+  critical path was autopilot read 79-98 + step 43-54 + answer 38-47 us and vehicle read
+  59-72 + physics 22-26 + sensors and encode 44-58 + send 25-29 us (UDP): ~310-430 us of CPU
+  per step, still 2-3x the warm costs.
+- Bounded busy-poll (``--spin-us``, both processes; kept opt-in): UDP, 4 pairs at load 7-8
+  (20 s) and 2 at load 11-12 under ``nice -10`` (10 s). The median round trip falls (338 ->
+  162, 274 -> 170 us at load 7) but the mean and p99 rise (p99 5-7 ms); CPU per step mostly
+  +30-160 us per process (one pair -40 us); real-time factor without / with 5.9 / 5.8 / 5.7 /
+  6.1 / 1.6 / 4.2 against 6.1 (300 us) / 6.3 (100) / 5.3 (300) / 2.6 (100) / 1.7 (150) /
+  2.6x (150). With more runnable
+  jobs than cores a spinning process loses its sleeper credit and is preempted for whole
+  slices, and the spin takes the core the peer needs; it can only pay with an idle core,
+  which this machine did not have during the session, so it is not the default.
+- Not reached: 20x / 15x. Where the time goes (above): ~300-380 us of CPU per step on the
+  critical path at this load, of which reads and parses ~130-190 us, the two processes' Python
+  step work ~165 us; every wait is a sleep and a wake-up on a cold cache. On the idle machine
+  the lead measured 280 us per step (UDP) with 363 us of CPU per step in the two processes
+  together: 200 us needs both the critical-path CPU down by about a third (a compiled HIL
+  codec end to end: parse + decode and sensors + encode in one call each, ~100 us of today's
+  in-flight CPU) and the caches kept warm (a spin on an idle core), neither of which this
+  loaded machine can show.
+
 In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
 control step): measured at 57-61x on an idle machine (about 66 us per step: autopilot ~25 us,
 physics ~13 us, HIL codec, metrics and the runner the rest; thread CPU time ~62-85 us per
@@ -127,6 +200,7 @@ import os
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from vtolftc.runners.scenario import paper_scenario, run_scenario
 from vtolftc.runners.sitl import SitlConfig, run_sitl
@@ -221,6 +295,147 @@ def _parts(n: int = 3000, reps: int = 5) -> None:
               f"{k} {min(x):.1f} / {sorted(x)[len(x) // 2]:.1f} us" for k, x in res.items()))
 
 
+_FLOOR_MODES = ("zenoh-callback", "zenoh-channel", "ours-callback", "ours-channel", "udp")
+
+
+def _floor_end(role: str, port: int, mode: str) -> tuple[Any, Any, Any]:
+    """One end of the ping-pong: ``send(bytes)``, ``recv(timeout_s | None) -> bytes | None``
+    (None: blocking), ``close()`` for ``mode`` (see :func:`_floor`)."""
+    import queue
+
+    if mode == "udp":
+        import socket
+
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind(("127.0.0.1", port if role == "ping" else port + 1))
+        dest = ("127.0.0.1", port + 1 if role == "ping" else port)
+
+        def recv_udp(timeout_s: float | None) -> bytes | None:
+            sock.settimeout(timeout_s)
+            try:
+                return sock.recvfrom(2048)[0]
+            except TimeoutError:
+                return None
+
+        return (lambda d: sock.sendto(d, dest)), recv_udp, sock.close
+    ends = {"listen": [f"tcp/127.0.0.1:{port}"]} if role == "ping" else {
+        "connect": [f"tcp/127.0.0.1:{port}"]}
+    direction = "up" if role == "ping" else "down"
+    if mode.startswith("ours-"):
+        from vtolftc.protocols.zenoh_transport import ZenohTransport
+
+        t = ZenohTransport("floor", "hil", direction, receive=mode[5:],
+                           **ends)  # type: ignore[arg-type]
+
+        def recv_ours(timeout_s: float | None) -> bytes | None:
+            deadline = time.monotonic() + (5.0 if timeout_s is None else timeout_s)
+            while time.monotonic() < deadline:
+                got = t.recv_datagrams(max(0.0, deadline - time.monotonic()))
+                if got:
+                    return got[0]
+            return None
+
+        return t.send_bytes, recv_ours, t.close
+    import zenoh
+
+    from vtolftc.protocols.zenoh_transport import key_expr, zenoh_config
+
+    session = zenoh.open(zenoh_config(**ends))  # type: ignore[arg-type]
+    pub = session.declare_publisher(key_expr("floor", "hil", direction),
+                                    congestion_control=zenoh.CongestionControl.BLOCK,
+                                    reliability=zenoh.Reliability.RELIABLE, express=True)
+    sub_key = key_expr("floor", "hil", "down" if role == "ping" else "up")
+    if mode == "zenoh-callback":
+        q: queue.SimpleQueue[bytes] = queue.SimpleQueue()
+        session.declare_subscriber(sub_key, lambda smp: q.put(smp.payload.to_bytes()))
+
+        def recv_cb(timeout_s: float | None) -> bytes | None:
+            try:
+                return q.get(timeout=5.0 if timeout_s is None else timeout_s)
+            except queue.Empty:
+                return None
+
+        return pub.put, recv_cb, session.close
+    sub = session.declare_subscriber(sub_key, zenoh.handlers.FifoChannel(256))
+
+    def recv_channel(timeout_s: float | None) -> bytes | None:
+        if timeout_s is None:
+            return bytes(sub.recv().payload.to_bytes())
+        deadline = time.monotonic() + timeout_s  # the hand-shake only: poll
+        while time.monotonic() < deadline:
+            smp = sub.try_recv()
+            if smp is not None:
+                return bytes(smp.payload.to_bytes())
+            time.sleep(0.001)
+        return None
+
+    return pub.put, recv_channel, session.close
+
+
+def _floor(n: int = 3000, port: int = 17550) -> None:
+    """The links' floor: a ping-pong of 100-byte payloads between this process and a child
+    (two processes as in SITL, loopback; zenoh in peer mode without scouting): raw zenoh with a
+    Python callback + queue or with zenoh's FIFO channel, our ``ZenohTransport`` in either
+    receive mode, raw UDP sockets (blocking). Round trip wall time and this process's CPU per
+    round trip (every thread)."""
+    import subprocess
+    import sys
+
+    for mode in _FLOOR_MODES:
+        send, recv, close = _floor_end("ping", port, mode)
+        child = subprocess.Popen([sys.executable, __file__, "--floor-pong", mode,
+                                  "--floor-port", str(port)])
+        try:
+            payload = b"p" * 100
+            deadline = time.monotonic() + 30.0
+            while time.monotonic() < deadline:  # until the child answers
+                send(payload)
+                if recv(0.2) is not None:
+                    break
+            time.sleep(0.3)
+            while recv(0.05) is not None:  # answers to the hand-shake's repeats
+                pass
+            rtt = []
+            c0 = time.process_time()
+            for _ in range(n):
+                t0 = time.perf_counter()
+                send(payload)
+                recv(None)
+                rtt.append(time.perf_counter() - t0)
+            cpu = time.process_time() - c0
+        finally:
+            send(b"x")
+            try:
+                child.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                child.kill()
+            close()
+        r = sorted(rtt[n // 10:])
+        print(f"{mode}: round trip median {1e6 * r[len(r) // 2]:.0f} us, p90 "
+              f"{1e6 * r[int(0.9 * len(r))]:.0f} us, mean {1e6 * sum(r) / len(r):.0f} us; CPU "
+              f"per round trip (this end) {1e6 * cpu / n:.0f} us; load "
+              f"{os.getloadavg()[0]:.1f}", flush=True)
+        port += 2
+
+
+def _floor_pong(mode: str, port: int) -> None:
+    """The child of :func:`_floor`: echo every payload until ``x`` (at most 120 s)."""
+    import threading
+
+    timer = threading.Timer(120.0, os._exit, (1,))  # never outlive a dead parent for long
+    timer.daemon = True
+    timer.start()
+    send, recv, close = _floor_end("pong", port, mode)
+    try:
+        data = recv(30.0)
+        while data is not None and data[:1] != b"x":
+            send(data)
+            data = recv(None)  # blocking, as in the ping's timed loop
+    finally:
+        time.sleep(0.2)
+        close()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--transport", default="both", choices=("udp", "zenoh", "both"))
@@ -231,7 +446,17 @@ def main() -> None:
                     help="busy-poll time of both processes before sleeping (default 0)")
     ap.add_argument("--parts", action="store_true",
                     help="only the per-call CPU of the HIL codec pieces (packer vs generated)")
+    ap.add_argument("--floor", action="store_true",
+                    help="only the links' floor: a 100-byte ping-pong between two processes")
+    ap.add_argument("--floor-pong", choices=_FLOOR_MODES, help=argparse.SUPPRESS)
+    ap.add_argument("--floor-port", type=int, default=17550, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.floor_pong:
+        _floor_pong(args.floor_pong, args.floor_port)
+        return
+    if args.floor:
+        _floor(port=args.floor_port)
+        return
     if args.parts:
         _parts()
         return
@@ -276,13 +501,15 @@ def main() -> None:
                   f"{res.autopilot_summary.get('cpu_per_step_us', nan):.0f} us, vehicle "
                   f"process {res.vehicle_summary.get('cpu_per_step_us', nan):.0f} us; load "
                   f"average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-            ap_parts = res.autopilot_summary.get("part_mean_us", {})
-            veh_parts = res.vehicle_summary.get("part_mean_us", {})
             step_wall = 1e6 * res.flight_wall_s / steps
-            print(f"    per step ({step_wall:.0f} us of wall time each): autopilot process "
-                  + ", ".join(f"{k} {x:.0f} us" for k, x in ap_parts.items())
-                  + "; vehicle process " + ", ".join(f"{k} {x:.0f} us"
-                                                     for k, x in veh_parts.items()))
+            print(f"    per step ({step_wall:.0f} us of wall time each), wall / thread CPU:")
+            for who, summ in (("autopilot", res.autopilot_summary),
+                              ("vehicle", res.vehicle_summary)):
+                wall_parts = summ.get("part_mean_us", {})
+                cpu_parts = summ.get("part_cpu_mean_us", {})
+                print(f"      {who}: " + ", ".join(
+                    f"{k} {x:.0f} / {cpu_parts.get(k, nan):.0f} us"
+                    for k, x in wall_parts.items()))
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import operator
 import struct
 from typing import Any
 
@@ -45,7 +46,7 @@ _SIGN_TS = struct.Struct("<IH")
 class _Layout:
     """How to turn one message class's unpacked payload into its constructor arguments."""
 
-    __slots__ = ("cls", "crc_extra", "plain", "plan", "size", "unpack")
+    __slots__ = ("chars", "cls", "crc_extra", "pick", "plain", "plan", "size", "unpack")
 
     def __init__(self, cls: Any) -> None:
         self.cls = cls
@@ -57,6 +58,11 @@ class _Layout:
         # constructor's order: exactly the generated decode's `tip` and `L`
         self.plan = [(sum(lengths[:order]), lengths[order]) for order in cls.orders]
         self.plain = sum(lengths) == len(lengths)
+        self.pick = operator.itemgetter(*(tip for tip, _n in self.plan), 0)
+        """The constructor's arguments of a layout without arrays, from the unpacked tuple
+        (one trailing dummy item, so that a one-field message also gets a tuple)."""
+        self.chars = "s" in cls.unpacker.format or "c" in cls.unpacker.format
+        """The layout has char fields (unpacked as bytes, stripped of trailing NULs)."""
 
 
 class FastParser:
@@ -183,8 +189,11 @@ class FastParser:
             if mlen < lay.size:
                 payload += bytes(lay.size - mlen)
             t = lay.unpack(payload[:lay.size])
-            if lay.plain:
-                args = [t[tip] for tip, _n in lay.plan]
+            if lay.plain and not lay.chars:
+                m = lay.cls(*lay.pick(t)[:-1])
+            elif not lay.chars:
+                m = lay.cls(*[t[tip] if n == 1 else list(t[tip:tip + n])
+                              for tip, n in lay.plan])
             else:
                 args = []
                 for tip, length in lay.plan:
@@ -193,10 +202,10 @@ class FastParser:
                         args.append(field)
                     else:
                         args.append(list(t[tip:tip + length]))
-            for i, elem in enumerate(args):
-                if isinstance(elem, bytes):
-                    args[i] = elem.rstrip(b"\x00")
-            m = lay.cls(*args)
+                for i, elem in enumerate(args):
+                    if isinstance(elem, bytes):
+                        args[i] = elem.rstrip(b"\x00")
+                m = lay.cls(*args)
             m._signed = sig_ok
             if sig_ok:
                 m._link_id = msgbuf[-13]

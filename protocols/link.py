@@ -500,6 +500,7 @@ def open_link(
     stream_table: StreamTimestamps | None = None,
     rate_limit_hz: float | None = None,
     rate_burst: float | None = None,
+    zenoh_receive: str = "callback",
 ) -> Link:
     """Open a :class:`Link` from a URL (see the module docstring for the scheme).
 
@@ -521,6 +522,9 @@ def open_link(
         signing replay window shared by several links.
     rate_limit_hz, rate_burst
         receive rate limit in datagrams/s (see :class:`Link`).
+    zenoh_receive
+        how a zenoh link receives: ``"callback"`` or ``"channel"`` (the lockstep HIL link;
+        see :mod:`vtolftc.protocols.zenoh_transport`); ignored by UDP.
 
     Raises
     ------
@@ -550,6 +554,7 @@ def open_link(
             connect=spec.connect,
             mode=spec.mode,
             allow_remote=allow_remote,
+            receive=zenoh_receive,
         )
     try:
         return Link(

@@ -13,16 +13,34 @@ operator, ``down`` toward the physics: on the HIL link the vehicle simulator pub
 publishes ``up`` (telemetry) and the ground station ``down`` (commands).
 
 Publications are reliable, ``express`` (no batching delay) and use congestion control BLOCK, so
-a lockstep exchange never loses a frame to a full queue. Incoming samples are queued by the zenoh
-callback thread into a bounded in-process queue that :meth:`recv_datagrams` drains.
+a lockstep exchange never loses a frame to a full queue. Incoming samples are received in one of
+two ways (``receive=``):
+
+- ``"callback"`` (default): zenoh's receiving thread runs a Python callback (it takes the GIL)
+  that puts the payload into a bounded in-process queue (full: dropped and counted), which
+  :meth:`recv_datagrams` drains; the receiver wakes on that queue: two thread hand-offs and a
+  GIL acquisition per sample.
+- ``"channel"`` (the HIL link: lockstep, one datagram in flight each way): zenoh's own FIFO
+  channel (``zenoh.handlers.FifoChannel``), filled by zenoh's thread without Python or the GIL
+  and read by :meth:`recv_datagrams` directly (``try_recv``; when empty, the blocking ``recv``,
+  which releases the GIL). Measured with ``benchmarks/bench_sitl.py --zenoh-floor`` (100-byte
+  ping-pong, two processes, peer mode, loopback, load 9-10): round trip median 131-149 us with
+  the callback and queue, 79-104 us with the channel. The channel has no timeout: a small
+  watchdog thread ends a wait at its deadline (within ``_WATCH_S``) by publishing an empty
+  payload to this session only, which :meth:`recv_datagrams` drops. A full channel makes
+  zenoh's thread wait (back-pressure to the publisher, whose congestion control is BLOCK)
+  instead of dropping.
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import math
 import queue
 import re
+import threading
+import time
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
@@ -43,6 +61,12 @@ DIRECTIONS = {"up": "down", "down": "up"}
 """Direction published -> direction subscribed."""
 MAX_BATCH = 256
 DEFAULT_QUEUE_MAX = 4096
+RECEIVE_MODES = ("callback", "channel")
+_WATCH_S = 0.005
+"""Channel mode: the watchdog looks at the receiver's deadline at least this often [s] (an
+idle watchdog costs ~200 short wake-ups a second); a wait whose deadline comes sooner than the
+watchdog's next look wakes it (one thread hand-off), so a wait never ends late by more than a
+wake-up (the lockstep's long timeouts never wake it)."""
 
 _NAME_RE = re.compile(r"^[A-Za-z0-9_\-]+$")
 _ENDPOINT_RE = re.compile(r"^(tcp|udp|tls|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})$")
@@ -186,7 +210,10 @@ class ZenohTransport(Transport):
     allow_remote
         permit non-loopback endpoints.
     queue_max
-        received samples kept before new ones are dropped (counted).
+        received samples kept before new ones are dropped (counted; ``"channel"``: before
+        zenoh's thread waits).
+    receive
+        ``"callback"`` or ``"channel"`` (see the module docstring).
 
     Raises
     ------
@@ -209,9 +236,14 @@ class ZenohTransport(Transport):
         mode: str = "peer",
         allow_remote: bool = False,
         queue_max: int = DEFAULT_QUEUE_MAX,
+        receive: str = "callback",
     ) -> None:
         import zenoh
 
+        if receive not in RECEIVE_MODES:
+            raise ValueError(f"zenoh receive mode must be one of {RECEIVE_MODES}, got "
+                             f"{receive!r}")
+        self.receive = receive
         self.pub_key = key_expr(vehicle, link, direction)
         self.sub_key = key_expr(vehicle, link, DIRECTIONS[direction])
         cfg = zenoh_config(listen=listen, connect=connect, mode=mode, allow_remote=allow_remote)
@@ -224,17 +256,50 @@ class ZenohTransport(Transport):
             self._session = zenoh.open(cfg)
         except zenoh.ZError as exc:  # e.g. listen port in use: same error class as UDP's bind
             raise OSError(f"cannot open zenoh session ({self.describe()}): {exc}") from exc
+        self._wake_at = math.inf
+        """Channel mode: monotonic time at which the watchdog ends the receiver's wait."""
+        self._watch_next = math.inf
+        """Channel mode: monotonic time of the watchdog's next look at :attr:`_wake_at`."""
+        self._kick = threading.Event()
+        self._watchdog: threading.Thread | None = None
         try:
-            self._sub = self._session.declare_subscriber(self.sub_key, self._on_sample)
+            channel = receive == "channel"
+            self._sub = self._session.declare_subscriber(
+                self.sub_key,
+                zenoh.handlers.FifoChannel(self._queue_max) if channel else self._on_sample)
             self._pub = self._session.declare_publisher(
                 self.pub_key,
                 congestion_control=zenoh.CongestionControl.BLOCK,
                 reliability=zenoh.Reliability.RELIABLE,
                 express=True,
             )
+            if channel:
+                self._waker = self._session.declare_publisher(
+                    self.sub_key, allowed_destination=zenoh.Locality.SESSION_LOCAL)
+                self._watchdog = threading.Thread(target=self._watch, daemon=True,
+                                                  name="zenoh-recv-watchdog")
+                self._watchdog.start()
         except BaseException:
+            self._closed = True
             self._session.close()
             raise
+
+    def _watch(self) -> None:
+        """Channel mode, watchdog thread: end a wait that reached its deadline (an empty
+        payload to this session's own subscriber)."""
+        kick = self._kick
+        while not self._closed:
+            now = time.monotonic()
+            self._watch_next = now + _WATCH_S  # before reading the deadline: see _recv_channel
+            wake_at = self._wake_at
+            if now >= wake_at:
+                self._wake_at = math.inf
+                with contextlib.suppress(Exception):
+                    self._waker.put(b"")
+                continue
+            self._watch_next = look = min(wake_at, now + _WATCH_S)
+            kick.wait(look - now)
+            kick.clear()
 
     def _on_sample(self, sample: Any) -> None:
         """zenoh callback thread: queue the payload (bounded)."""
@@ -258,6 +323,8 @@ class ZenohTransport(Transport):
 
     def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
         """See :meth:`Transport.recv_datagrams`."""
+        if self._watchdog is not None:
+            return self._recv_channel(timeout_s)
         q = self._queue
         out: list[bytes] = []
         try:
@@ -271,6 +338,38 @@ class ZenohTransport(Transport):
             pass
         return out
 
+    def _recv_channel(self, timeout_s: float | None) -> list[bytes]:
+        """Channel mode: every payload the channel has, waiting up to ``timeout_s`` for the
+        first (the watchdog's empty payloads end a wait and are dropped)."""
+        out: list[bytes] = []
+        if self._closed:
+            return out
+        sub = self._sub
+        try:
+            sample = sub.try_recv()
+            if sample is None:
+                if timeout_s is not None and timeout_s <= 0.0:
+                    return out
+                self._wake_at = wake_at = time.monotonic() + (
+                    0.25 if timeout_s is None else timeout_s)
+                if wake_at < self._watch_next:  # the watchdog would look too late: wake it
+                    self._kick.set()
+                try:
+                    sample = sub.recv()
+                finally:
+                    self._wake_at = math.inf
+            while sample is not None:
+                data = sample.payload.to_bytes()
+                if data:
+                    out.append(data)
+                    if len(out) >= MAX_BATCH:
+                        break
+                sample = sub.try_recv()
+        except Exception:  # the subscriber is gone (closed meanwhile)
+            if not self._closed:
+                raise
+        return out
+
     def ready(self) -> bool:
         """True when at least one remote subscriber matches our publisher."""
         if self._closed:
@@ -282,6 +381,9 @@ class ZenohTransport(Transport):
         if self._closed:
             return
         self._closed = True
+        if self._watchdog is not None:  # (undeclaring the subscriber wakes its receiver)
+            self._kick.set()
+            self._watchdog.join(timeout=1.0)
         for entity in (self._sub, self._pub):
             with contextlib.suppress(Exception):
                 entity.undeclare()

@@ -106,6 +106,11 @@ def test_case1_sitl_equals_in_process(transport, reference, tmp_path):
     assert res.vehicle_summary["link"]["dropped"] >= 2, res.vehicle_summary["link"]
     assert res.autopilot_summary["gcs_links"][0]["dropped"] >= 2
     assert res.autopilot_summary["hil_link"]["dropped"] == 0
+    for summary in (res.autopilot_summary, res.vehicle_summary):  # the per-step profile
+        wall, cpu = summary["part_mean_us"], summary["part_cpu_mean_us"]
+        assert set(cpu) == set(wall) and "wait_and_read" in wall
+        # a thread's CPU time within a part never exceeds the part's wall time
+        assert all(0.0 < cpu[k] <= wall[k] + 1.0 for k in wall), (wall, cpu)
     print(f"{transport}: {res.real_time_factor:.1f}x real time")
 
 

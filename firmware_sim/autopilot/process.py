@@ -66,6 +66,7 @@ from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.link import Link
 from vtolftc.telemetry import TelemetrySample
+from vtolftc.telemetry.step_parts import StepParts
 from vtolftc.telemetry.streamstats import DurationStats
 
 __all__ = ["EXIT_VEHICLE_LOST", "AutopilotProcess"]
@@ -160,9 +161,10 @@ class AutopilotProcess:
         answer), summed [s]: near the wall time, and some 3-5 times the same step's CPU time
         in-process, the code running on caches the other processes emptied while this one
         waited for the vehicle (``benchmarks/bench_sitl.py``)."""
-        self.part_wall_s = {"autopilot_step": 0.0, "status_and_answer": 0.0,
-                            "after_answer": 0.0}
-        """Wall time summed over the steps [s]: ``Autopilot.step``; encoding and sending
+        self.parts = StepParts(("wait_and_read", "autopilot_step", "status_and_answer",
+                                "after_answer"))
+        """Wall and CPU time per step's part: waiting for the vehicle's next state and reading
+        and decoding it (a spin included); ``Autopilot.step``; encoding and sending
         HIL_ACTUATOR_CONTROLS, then the status snapshot; after the answer (metrics,
         observers, failsafe checks, publishing to the ground-station worker), which overlaps
         with the vehicle's work."""
@@ -252,7 +254,7 @@ class AutopilotProcess:
         ever_connected = False
         self._cpu0 = time.process_time()
         pc = time.perf_counter
-        thread_time = time.thread_time
+        parts = self.parts
         next_duty = 0.0
         last_step_start = None
         failsafe = self.failsafe
@@ -266,6 +268,7 @@ class AutopilotProcess:
             if nav is None or held:
                 # nothing to step on: wait for the vehicle (or, held, poll the ground
                 # stations often: their commands are what the hold waits for)
+                parts.start()
                 wait = 0.002 if (held or gcs.has_pending()) else 0.01
                 if self.spin_s > 0 and not held:
                     end = pc() + self.spin_s
@@ -276,26 +279,27 @@ class AutopilotProcess:
                 gcs.poll()
                 if held:
                     gcs.announce_hold(nav.time_usec)
+                elif last_step_start is not None:
+                    parts.lap("wait_and_read")
             else:
                 ever_connected = True
                 gcs.poll()  # commands that arrived meanwhile act at this step
                 if gcs.hold_usec() is None or nav.time_usec < gcs.hold_usec():
                     hil.take()
-                    t0 = pc()
-                    c0 = thread_time()
+                    t0, c0 = parts.start()
                     if last_step_start is not None:
                         self.step_period_s.add(t0 - last_step_start)
                     last_step_start = t0
                     u = ap.step(nav)
-                    t1 = pc()
+                    parts.lap("autopilot_step")
                     # answer first: the armed flag without building the status snapshot
                     # (made right after the send, from the same unchanged state)
                     armed = (armed_of(nav)[1] if armed_of is not None
                              else ap.status().armed)
                     hil.send_controls(nav.time_usec, u, armed)
                     st = ap.status()
-                    t2 = pc()
-                    cpu = thread_time() - c0
+                    t2, c2 = parts.lap("status_and_answer")
+                    cpu = c2 - c0
                     self.step_cpu_s += cpu
                     if cpu > self.step_cpu_max_s:
                         self.step_cpu_max_s = cpu
@@ -315,10 +319,7 @@ class AutopilotProcess:
                         st = ap.status()
                     gcs.on_step(nav, st)
                     self.steps += 1
-                    part = self.part_wall_s
-                    part["autopilot_step"] += t1 - t0
-                    part["status_and_answer"] += t2 - t1
-                    part["after_answer"] += pc() - t2
+                    parts.lap("after_answer")
                 # (no read here: the next pass reads what came meanwhile, one select and
                 # one read when the vehicle's next step is there)
             now = time.monotonic()
@@ -368,8 +369,7 @@ class AutopilotProcess:
             out["step_wall_us"] = self.step_wall_s.summary(1e6)
             out["step_cpu_max_ms"] = self.step_cpu_max_s * 1e3
             out["step_cpu_mean_us"] = 1e6 * self.step_cpu_s / self.step_wall_s.n
-            out["part_mean_us"] = {k: 1e6 * v / self.step_wall_s.n
-                                   for k, v in self.part_wall_s.items()}
+            out.update(self.parts.summary(self.step_wall_s.n))
         if self.compiled_at_ready is not None:
             now = compiled_specialisations()
             out["numba"] = {

@@ -95,6 +95,7 @@ from vtolftc.firmware_sim.vehicle.truth_log import TruthLog
 from vtolftc.protocols import SigningConfig, open_link
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.generated import constants as mav
+from vtolftc.telemetry.step_parts import StepParts
 from vtolftc.telemetry.streamstats import DurationStats
 
 __all__ = ["AUTOPILOT_COMPONENT_ID", "AUTOPILOT_SYSTEM_ID", "EXIT_PEER_LOST", "SAFE_OUTPUT",
@@ -141,7 +142,8 @@ class VehicleProcess:
         """MAVLink 2 signing of the HIL link (None: unsigned, the first autopilot wins)."""
         self.link = open_link(link_url, system_id=VEHICLE_SYSTEM_ID,
                               component_id=VEHICLE_COMPONENT_ID, allow_remote=allow_remote,
-                              track_source=True, signing=signing)
+                              track_source=True, signing=signing,
+                              zenoh_receive="channel")
         self.pinned: object = None
         """Source of the autopilot's first heartbeat (address, or "ids" on zenoh)."""
         self.rejected = {"not_pinned": 0, "foreign_ids": 0, "stale_controls": 0,
@@ -163,9 +165,11 @@ class VehicleProcess:
         self.step_rtt_s = DurationStats()
         """Lockstep: wall time from sending a step's state to receiving its controls [s]
         (bounded memory: count, mean, max exact; quantiles to 0.5 %)."""
-        self.part_wall_s = {"record_and_physics": 0.0, "sensors_and_encode": 0.0, "send": 0.0}
-        """Lockstep: wall time summed over the steps [s] of the vehicle's own part of the
-        critical path (after the controls arrived, until the next state is sent)."""
+        self.parts = StepParts(("wait_and_read", "record_and_physics", "sensors_and_encode",
+                                "send", "after_send"))
+        """Lockstep: wall and CPU time per step's part: waiting for the controls and reading
+        them (a spin included); the critical path until the next state is sent; then the
+        bookkeeping (battery, truth log) that overlaps with the autopilot's work."""
         self.running = True
         self._last_peer = time.monotonic()
         self.out_dir = out_dir
@@ -362,12 +366,13 @@ class VehicleProcess:
         self._cpu0 = time.process_time()
         link = self.link
         v = self.vehicle
-        pc = time.perf_counter
+        parts = self.parts
         if self._done():
             return 0
         datagram = self.state_datagram()
-        t_sent = pc()
+        t_sent = parts.start()[0]
         link.send(datagram)
+        parts.start()
         while self.running:
             got = False
             while not got:
@@ -390,8 +395,7 @@ class VehicleProcess:
                     continue
                 for m in msgs:
                     got = self.handle(m) or got
-            t_got = pc()
-            self.step_rtt_s.add(t_got - t_sent)
+            self.step_rtt_s.add(parts.lap("wait_and_read")[0] - t_sent)
             if self.delay_usec:
                 self._apply_due()
             self._record(flush=False)
@@ -406,19 +410,17 @@ class VehicleProcess:
             battery_now = self.encoder.battery_due()
             if battery_now:
                 self._step_battery()
-            t_phys = pc()
+            parts.lap("record_and_physics")
             datagram = self.state_datagram()
-            t_sent = pc()
+            t_sent = parts.lap("sensors_and_encode")[0]
             link.send(datagram)
-            part = self.part_wall_s
-            part["record_and_physics"] += t_phys - t_got
-            part["sensors_and_encode"] += t_sent - t_phys
-            part["send"] += pc() - t_sent
+            parts.lap("send")
             # bookkeeping while the autopilot computes
             if not battery_now:
                 self._step_battery()
             if self.truth_log is not None:
                 self.truth_log.between_steps()
+            parts.lap("after_send")
         return 0
 
     def _run_realtime(self) -> int:
@@ -476,8 +478,7 @@ class VehicleProcess:
             summary["cpu_per_step_us"] = 1e6 * (time.process_time() - self._cpu0) / self.steps
         if self.step_rtt_s.n:
             summary["step_round_trip_us"] = self.step_rtt_s.summary(1e6)
-            summary["part_mean_us"] = {k: 1e6 * x / max(1, self.steps)
-                                       for k, x in self.part_wall_s.items()}
+            summary.update(self.parts.summary(self.steps))
         if self.truth_log is not None:
             self._event("stop", f"{self.steps} steps, t = {summary['sim_time_s']:.3f} s")
             with contextlib.suppress(Exception):

@@ -205,7 +205,8 @@ def main(argv: list[str] | None = None) -> int:
     links: list[Link] = []
     try:
         hil = open_link(args.hil_link, system_id=1, component_id=1,
-                        allow_remote=args.allow_remote, signing=hil_signing_from_env())
+                        allow_remote=args.allow_remote, signing=hil_signing_from_env(),
+                        zenoh_receive="channel")
         links.append(hil)
         gcs_links = []
         for url in urls:
