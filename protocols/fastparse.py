@@ -8,7 +8,10 @@ known message id, with a good CRC and (on a signed codec) a good signature hash,
 message objects ``decode`` makes (same class, fields, header, buffer, payload, CRC, signing
 flags; a test compares them attribute by attribute over the whole dialect). It decodes with
 the generated message classes' own layout tables (``unpacker``, ``orders``, ``lengths``,
-``crc_extra``): nothing about a message's layout is written by hand here.
+``crc_extra``): nothing about a message's layout is written by hand here. The framing checks
+and the CRC of every frame of a datagram run in one compiled call (:func:`_scan_kernel`, the
+CRC_EXTRA of each id from a table made once from the dialect); only the signature's hash
+(``hashlib``) and the message objects are made in Python.
 
 Anything else (garbage, a MAVLink 1 frame, bad incompat flags, a truncated frame, a bad CRC,
 an unknown id, an unsigned frame or a bad signature on a signing codec) makes
@@ -32,15 +35,19 @@ import operator
 import struct
 from typing import Any
 
+import numba
+import numpy as np
+
 __all__ = ["FastParser"]
 
 _MAGIC_V2 = 0xFD
 _IFLAG_SIGNED = 0x01
 _HEADER_LEN = 10
 _SIG_LEN = 13
-_HEADER = struct.Struct("<BBBBBBBHB")
-_CRC = struct.Struct("<H")
 _SIGN_TS = struct.Struct("<IH")
+_ROW = 10
+"""Columns of :func:`_scan_kernel`'s table: start, end, message id, CRC, payload length,
+incompat flags, compat flags, sequence, system id, component id."""
 
 
 class _Layout:
@@ -82,18 +89,14 @@ class FastParser:
         self._map = module.mavlink_map
         self._header_cls = module.MAVLink_header
         self._layouts: dict[int, _Layout] = {}
-        fast = getattr(module, "mcrf4xx", None)
-        if fast is not None:
-            self._crc = lambda data, extra: fast(bytes((extra,)), fast(data, 0xFFFF))
-        else:
-            x25 = module.x25crc
-
-            def slow(data: Any, extra: int) -> int:
-                c = x25(bytes(data))
-                c.accumulate(bytes((extra,)))
-                return int(c.crc)
-
-            self._crc = slow
+        ids = list(self._map)
+        self._crc_extra = np.full(max(ids) + 1, -1, dtype=np.int16)
+        """CRC_EXTRA by message id (-1: not in the dialect), for :func:`_scan_kernel`."""
+        for msg_id in ids:
+            self._crc_extra[msg_id] = int(self._map[msg_id].crc_extra)
+        self._table = np.zeros((64, _ROW), dtype=np.int64)
+        # compile (or load from numba's cache) now, not at the first datagram of a flight
+        _scan_kernel(b"", 0, self._crc_extra, self._table)
         self.rejected = 0
         """Frames dropped for a signature timestamp the replay window refused."""
 
@@ -117,49 +120,34 @@ class FastParser:
         if type(data) is not bytes:
             data = bytes(data)  # a bytearray or memoryview from some transport
         n = len(data)
-        pos = 0
-        frames: list[tuple[int, int, tuple[int, ...], _Layout, int]] = []
-        view = memoryview(data)
-        crc_of = self._crc
-        while pos < n:
-            if n - pos < _HEADER_LEN + 2 or data[pos] != _MAGIC_V2:
-                return None
-            hdr = _HEADER.unpack_from(data, pos)
-            mlen, iflags = hdr[1], hdr[2]
-            if iflags & ~_IFLAG_SIGNED:
-                return None
-            siglen = _SIG_LEN if iflags & _IFLAG_SIGNED else 0
-            end = pos + _HEADER_LEN + mlen + 2 + siglen
-            if end > n:
-                return None
-            lay = self._layout(hdr[7] | (hdr[8] << 16))
-            if lay is None:
-                return None
-            body_end = pos + _HEADER_LEN + mlen
-            crc = _CRC.unpack_from(data, body_end)[0]
-            if crc != crc_of(view[pos + 1:body_end], lay.crc_extra):
-                return None
-            if key is not None:
-                if not siglen:
+        table = self._table
+        if n // (_HEADER_LEN + 2) >= len(table):
+            table = self._table = np.zeros((n // (_HEADER_LEN + 2) + 1, _ROW), dtype=np.int64)
+        count = _scan_kernel(data, n, self._crc_extra, table)
+        if count < 0:
+            return None
+        frames = table[:count].tolist()
+        if key is not None:
+            for row in frames:
+                pos, end = row[0], row[1]
+                if not row[5] & _IFLAG_SIGNED:
                     return None  # unsigned on a signing codec: the generated path decides
                 digest = hashlib.sha256(key + data[pos:end - 6]).digest()[:6]
                 if not hmac.compare_digest(digest, data[end - 6:end]):
                     return None
-            frames.append((pos, end, hdr, lay, crc))
-            pos = end
         return self._build(data, frames, key)
 
-    def _build(self, data: bytes, frames: list[tuple[int, int, tuple[int, ...], _Layout, int]],
-               key: bytes | None) -> list[Any]:
+    def _build(self, data: bytes, frames: list[list[int]], key: bytes | None) -> list[Any]:
         codec = self.codec
         signing = codec.signing
         out: list[Any] = []
         header_cls = self._header_cls
-        for pos, end, hdr, lay, crc in frames:
-            _magic, mlen, iflags, cflags, seq, src_sys, src_comp, lo, hi = hdr
+        layout = self._layout
+        for pos, end, msg_id, crc, mlen, iflags, cflags, seq, src_sys, src_comp in frames:
+            lay = layout(msg_id)
+            assert lay is not None  # the kernel checked the id
             signed = bool(iflags & _IFLAG_SIGNED)
             siglen = _SIG_LEN if signed else 0
-            msg_id = lo | (hi << 16)
             codec.total_packets_received += 1
             if signed:
                 signing.sig_count += 1
@@ -215,3 +203,57 @@ class FastParser:
             m._header = header_cls(msg_id, iflags, cflags, mlen, seq, src_sys, src_comp)
             out.append(m)
         return out
+
+
+@numba.njit(cache=True)
+def _scan_kernel(data, n, crc_extra, out):  # pragma: no cover - compiled
+    """Check that ``data[:n]`` is nothing but MAVLink 2 frames of known ids with good CRCs.
+
+    Each frame: the magic byte 0xFD, at most the signed incompat flag, the whole frame
+    (header, payload, CRC, 13 signature bytes if signed) inside ``data``, an id with
+    ``crc_extra[id] >= 0``, and the X.25 CRC (CRC-16/MCRF4XX over the header without the
+    magic byte and the payload, then ``crc_extra[id]``) equal to the little-endian CRC field.
+    Writes one row per frame into ``out`` (start, end, id, CRC, payload length, incompat
+    flags, compat flags, sequence, system id, component id) and returns the number of
+    frames, or -1 at the first thing that is not such a frame (the signature's hash is not
+    checked here). ``out`` has at least ``n // 12 + 1`` rows.
+    """
+    pos = 0
+    k = 0
+    while pos < n:
+        if n - pos < _HEADER_LEN + 2 or data[pos] != _MAGIC_V2:
+            return -1
+        mlen = data[pos + 1]
+        iflags = data[pos + 2]
+        if iflags & ~_IFLAG_SIGNED:
+            return -1
+        siglen = _SIG_LEN if iflags & _IFLAG_SIGNED else 0
+        body_end = pos + _HEADER_LEN + mlen
+        end = body_end + 2 + siglen
+        if end > n:
+            return -1
+        msg_id = data[pos + 7] | (data[pos + 8] << 8) | (data[pos + 9] << 16)
+        if msg_id >= len(crc_extra) or crc_extra[msg_id] < 0:
+            return -1
+        crc = 0xFFFF
+        for i in range(pos + 1, body_end + 1):
+            b = data[i] if i < body_end else crc_extra[msg_id]
+            tmp = (b ^ (crc & 0xFF)) & 0xFF
+            tmp = (tmp ^ (tmp << 4)) & 0xFF
+            crc = ((crc >> 8) ^ (tmp << 8) ^ (tmp << 3) ^ (tmp >> 4)) & 0xFFFF
+        if crc != (data[body_end] | (data[body_end + 1] << 8)):
+            return -1
+        row = out[k]
+        row[0] = pos
+        row[1] = end
+        row[2] = msg_id
+        row[3] = crc
+        row[4] = mlen
+        row[5] = iflags
+        row[6] = data[pos + 3]
+        row[7] = data[pos + 4]
+        row[8] = data[pos + 5]
+        row[9] = data[pos + 6]
+        k += 1
+        pos = end
+    return k
