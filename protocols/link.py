@@ -46,7 +46,7 @@ from urllib.parse import urlsplit
 
 from vtolftc.protocols.fastparse import FastParser
 from vtolftc.protocols.mavlink import SigningConfig, StreamTimestamps, dialect, make_codec
-from vtolftc.protocols.transport import LinkUrl, Transport
+from vtolftc.protocols.transport import MAX_BATCH, LinkUrl, Transport
 
 __all__ = [
     "Link",
@@ -176,6 +176,7 @@ class Link:
         self._keep_unknown = keep_unknown
         self._stats = LinkStats()
         self._pending: collections.deque[Any] = collections.deque()
+        self._drained = False
         self._closed = False
 
     # ---------------------------------------------------------------- properties
@@ -205,6 +206,13 @@ class Link:
         self._stats.dropped_overflow = self._transport.overflow_drops
         self._stats.dropped_foreign = self._transport.foreign_drops
         return self._stats
+
+    @property
+    def drained(self) -> bool:
+        """True if the last :meth:`recv` handed over everything the link had then: it read
+        the transport, and the transport's batch was not full (see ``MAX_BATCH``). A reader
+        that wants all that came (``HilBridge.drain``) then needs no second, empty read."""
+        return self._drained
 
     @property
     def closed(self) -> bool:
@@ -261,7 +269,9 @@ class Link:
         """One transport read, parsed into ``out``."""
         limited = self._rate is not None
         if self._track_source:
-            for datagram, src in self._transport.recv_datagrams_from(timeout_s):
+            batch_from = self._transport.recv_datagrams_from(timeout_s)
+            self._drained = len(batch_from) < MAX_BATCH
+            for datagram, src in batch_from:
                 if limited and datagram and not self._admit():
                     continue
                 n = len(out)
@@ -269,7 +279,9 @@ class Link:
                 for m in out[n:]:
                     m._vtolftc_source = src
         else:
-            for datagram in self._transport.recv_datagrams(timeout_s):
+            batch = self._transport.recv_datagrams(timeout_s)
+            self._drained = len(batch) < MAX_BATCH
+            for datagram in batch:
                 if limited and datagram and not self._admit():
                     continue
                 self._parse_datagram(datagram, out)
@@ -283,6 +295,7 @@ class Link:
         if self._pending:
             out = list(self._pending)
             self._pending.clear()
+            self._drained = False  # the transport was not read
             return out
         out: list[Any] = []
         if timeout_s is None:  # wait in slices so that close() from another thread ends it

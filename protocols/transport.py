@@ -12,7 +12,11 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
-__all__ = ["LinkUrl", "Transport"]
+__all__ = ["MAX_BATCH", "LinkUrl", "Transport"]
+
+MAX_BATCH = 256
+"""Most datagrams one :meth:`Transport.recv_datagrams` call returns; a call that returns
+fewer read everything the transport had."""
 
 
 class Transport(ABC):
@@ -27,7 +31,8 @@ class Transport(ABC):
     @abstractmethod
     def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
         """Wait up to ``timeout_s`` (None = forever, 0 = poll) for at least one datagram, then
-        return every datagram already available (bounded batch); ``[]`` on timeout."""
+        return every datagram already available (at most :data:`MAX_BATCH`: fewer means
+        nothing else was available); ``[]`` on timeout."""
 
     @abstractmethod
     def ready(self) -> bool:

@@ -19,12 +19,9 @@ import select
 import socket
 
 from vtolftc.protocols.netutil import require_loopback, resolve_host
-from vtolftc.protocols.transport import Transport
+from vtolftc.protocols.transport import MAX_BATCH, Transport
 
 __all__ = ["MAX_BATCH", "UdpClientTransport", "UdpServerTransport"]
-
-MAX_BATCH = 256
-"""Most datagrams returned by one ``recv_datagrams`` call."""
 _MAX_DATAGRAM = 65535
 _SOCKET_BUFFER = 1 << 20
 

@@ -45,7 +45,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from vtolftc.protocols.netutil import require_loopback
-from vtolftc.protocols.transport import LinkUrl, Transport
+from vtolftc.protocols.transport import MAX_BATCH, LinkUrl, Transport
 
 __all__ = [
     "DIRECTIONS",
@@ -59,7 +59,6 @@ __all__ = [
 KEY_PREFIX = "vtolftc"
 DIRECTIONS = {"up": "down", "down": "up"}
 """Direction published -> direction subscribed."""
-MAX_BATCH = 256
 DEFAULT_QUEUE_MAX = 4096
 RECEIVE_MODES = ("callback", "channel")
 _WATCH_S = 0.005

@@ -277,3 +277,41 @@ def test_declines_bad_frames_whose_crc_is_good(bad: str) -> None:
         link.transport.send_bytes(a + tail)
         assert [m.get_type() for m in link.recv(0)] == ["HIL_SENSOR"]
     assert links[0].stats.as_dict() == links[1].stats.as_dict()
+
+
+class _Counting(_Loop):
+    """:class:`_Loop` that counts its reads and returns at most ``MAX_BATCH`` datagrams."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.reads = 0
+
+    def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
+        from vtolftc.protocols.transport import MAX_BATCH
+
+        self.reads += 1
+        q, self.q = self.q[:MAX_BATCH], self.q[MAX_BATCH:]
+        return q
+
+
+def test_hil_drain_reads_once_a_step_and_everything_past_a_full_batch() -> None:
+    """``HilBridge.drain``: one transport read for a step's datagram (the link says it is
+    drained), a second read after pending messages or a full batch, and every message
+    handled either way."""
+    from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
+    from vtolftc.protocols.transport import MAX_BATCH
+
+    tr = _Counting()
+    link = Link(tr, system_id=1, component_id=1)
+    bridge = HilBridge(link)
+    a, b = _frames()
+    tr.q.append(a + b)
+    assert bridge.drain(0.0) == 2 and tr.reads == 1 and link.drained
+    tr.q.extend([b] * (MAX_BATCH + 44))
+    assert bridge.drain(0.0) == MAX_BATCH + 44
+    assert tr.reads == 3  # the full batch, then the rest
+    tr.q.extend([a, b])
+    assert link.recv_match("HIL_SENSOR", 0.0) is not None  # the HEARTBEAT stays pending
+    tr.q.append(b)
+    assert bridge.drain(0.0) == 2 and not tr.q  # the pending one, then the transport
+    assert link.recv(0.0) == [] and link.drained
