@@ -185,6 +185,51 @@ measurement below; the lead's idle figures of the issue: UDP 14.3x, zenoh 6.9x):
   in-flight CPU) and the caches kept warm (a spin on an idle core), neither of which this
   loaded machine can show.
 
+Session 14 (issue 24; 2 cores shared with 2 other helpers, load average 5-9 through the
+
+flights below, 0.1-6 through the warm figures):
+- Warm pieces (one process, thread CPU): the vehicle's state datagram 15-17 us, of which
+  ``Vehicle.sensors`` 8.8-9.4 us (``dcm`` 2.2, the sample's small numpy arrays and its frozen
+  dataclass ~5), HIL_SENSOR and HIL_STATE_QUATERNION packing 2.0 + 1.9 us (a numba call and
+  SHA-256 from a copied key hash: 0.4 + 0.15 us), the state encoding 1.4 us; the autopilot's
+  read of a step datagram (``--parts`` ``read_fast``, in-memory transport) 13.1 us against 23.9
+  us through the generated parser alone; over a real loopback socket 20.5-23.5 us. Of the read,
+  ``FastParser._build`` (the message objects the link hands over, identical to the generated
+  parser's: header, buffers, signing flags) is ~5 us, SHA-256 of two frames ~1 us,
+  ``HilBridge.handle`` + ``HilStateDecoder`` ~3 us, each syscall ~1 us (a failed non-blocking
+  ``recvfrom`` with its exception 1.15 us, a ``select`` on a ready socket 1.27 us: trying
+  ``poll`` first instead measured 26-28 against 22-25 us, dropped).
+- Change: the framing checks and the CRC of every frame of a datagram in one compiled call
+  (``fastparse._scan_kernel``; CRC_EXTRA from a table made once from the dialect). Interleaved
+  in one process against main's ``FastParser`` (6 x 3000 signed step datagrams, load 5.6):
+  10.1-10.8 -> 9.2-12.5 us per datagram, i.e. ~0.5-1 us: the per-frame Python it replaced was
+  already one ``struct`` unpack and one C CRC call; the objects built after it dominate.
+- Change: ``HilBridge.drain`` reads once per step when the link says it read everything
+  (``Link.drained``: the transport's batch was not full, nothing came from the pending queue),
+  instead of a second read that fails: real UDP socket, warm, 20.5-23.5 -> 17.3-19.7 us per step
+  (with both changes).
+- In flight, pairwise against main (3 interleaved pairs, 20 s of case 1, ``--transport both``,
+  load 5.0-6.7), main -> this tree. UDP real-time factor 4.6 / 3.3 / 4.9 -> 2.3 / 7.5 / 6.6x,
+  CPU per step autopilot process 294 / 386 / 365 -> 507 / 282 / 351 us, vehicle 220 / 244 / 210
+  -> 337 / 197 / 241 us, autopilot wait_and_read CPU 90 / 105 / 104 -> 142 / 81 / 95 us. zenoh
+  4.4 / 5.9 / 7.6 -> 4.6 / 6.4 / 6.6x, CPU autopilot 452 / 396 / 344 -> 451 / 417 / 421 us,
+  vehicle 331 / 319 / 255 -> 344 / 322 / 318 us. The first new UDP flight ran while another
+  helper's burst took the cores (every part of it 1.5x); otherwise the pairs move by less than
+  one pair's spread: a few us per step is below what this load does.
+- Not reached: 20x / 15x (this tree's best flights here 7.5x UDP, 6.6x zenoh; main's 4.9x, 7.6x;
+  load 5-7). Where the remaining time goes (the flights above but the loaded one, thread CPU per
+  step): autopilot read 69-105 us, ``Autopilot.step`` 37-56 us, status + answer 33-50 us, after
+  the answer 67-97 us; vehicle read 43-80 us, physics 19-29 us, sensors + encode 42-63 us, send
+  17-31 us, after the send 42-64 us. The critical path's CPU in flight is 3-5x the warm figures
+  (read 13-20 us warm against 70-100 in flight; sensors + encode 15-17 against 42-63): cold
+  caches after every wait, as sessions 10 and 13 found. A compiled codec saves at most the warm
+  Python (~10 us of the read, ~12 us of sensors + encode); the message objects the link must
+  hand over (ULog, ground-station streams and the bridge read HIL_SENSOR / HIL_STATE_QUATERNION
+  messages) and ``Vehicle.sensors`` (the vehicle model, another owner's) stay in Python unless
+  the HIL step bypasses the message objects altogether (decode the two frames straight into the
+  NavState array and the sensor fields, making the message objects only when an observer asks):
+  the next step, not started here for lack of time.
+
 In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
 control step): measured at 57-61x on an idle machine (about 66 us per step: autopilot ~25 us,
 physics ~13 us, HIL codec, metrics and the runner the rest; thread CPU time ~62-85 us per
