@@ -186,8 +186,8 @@ measurement below; the lead's idle figures of the issue: UDP 14.3x, zenoh 6.9x):
   loaded machine can show.
 
 Session 14 (issue 24; 2 cores shared with 2 other helpers, load average 5-9 through the
-
 flights below, 0.1-6 through the warm figures):
+
 - Warm pieces (one process, thread CPU): the vehicle's state datagram 15-17 us, of which
   ``Vehicle.sensors`` 8.8-9.4 us (``dcm`` 2.2, the sample's small numpy arrays and its frozen
   dataclass ~5), HIL_SENSOR and HIL_STATE_QUATERNION packing 2.0 + 1.9 us (a numba call and
