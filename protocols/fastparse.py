@@ -97,6 +97,9 @@ class FastParser:
         self._table = np.zeros((64, _ROW), dtype=np.int64)
         # compile (or load from numba's cache) now, not at the first datagram of a flight
         _scan_kernel(b"", 0, self._crc_extra, self._table)
+        self._key: bytes | None = None
+        self._key_hash: Any = None
+        """SHA-256 state after the signing key (copied per frame, as ``FramePacker``)."""
         self.rejected = 0
         """Frames dropped for a signature timestamp the replay window refused."""
 
@@ -128,12 +131,17 @@ class FastParser:
             return None
         frames = table[:count].tolist()
         if key is not None:
+            if key is not self._key:
+                self._key, self._key_hash = key, hashlib.sha256(key)
+            key_hash = self._key_hash
+            view = memoryview(data)
             for row in frames:
                 pos, end = row[0], row[1]
                 if not row[5] & _IFLAG_SIGNED:
                     return None  # unsigned on a signing codec: the generated path decides
-                digest = hashlib.sha256(key + data[pos:end - 6]).digest()[:6]
-                if not hmac.compare_digest(digest, data[end - 6:end]):
+                h = key_hash.copy()  # = sha256(key + frame without the hash)
+                h.update(view[pos:end - 6])
+                if not hmac.compare_digest(h.digest()[:6], data[end - 6:end]):
                     return None
         return self._build(data, frames, key)
 
