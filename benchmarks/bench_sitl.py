@@ -217,7 +217,14 @@ flights below, 0.1-6 through the warm figures):
   4.4 / 5.9 / 7.6 -> 4.6 / 6.4 / 6.6x, CPU autopilot 452 / 396 / 344 -> 451 / 417 / 421 us,
   vehicle 331 / 319 / 255 -> 344 / 322 / 318 us. The first new UDP flight ran while another
   helper's burst took the cores (every part of it 1.5x); otherwise the pairs move by less than
-  one pair's spread: a few us per step is below what this load does.
+  one pair's spread: a few us per step is below what this load does. A second set with the
+  last commit (3 pairs, load 13.4-17.1): UDP 2.8 / 3.6 / 8.9 -> 2.0 / 5.0 / 8.7x, CPU per step
+  autopilot 424 / 295 / 265 -> 332 / 263 / 279 us, vehicle 314 / 225 / 191 -> 242 / 189 / 206
+  us, autopilot read 123 / 90 / 74 -> 97 / 75 / 81 us; zenoh 2.6 / 2.4 / 5.2 -> 2.2 / 6.0 /
+  6.6x, CPU autopilot 438 / 381 / 498 -> 436 / 399 / 382 us, vehicle 322 / 294 / 356 -> 314 /
+  288 / 281 us, autopilot read 82 / 70 / 89 -> 78 / 75 / 63 us. Mean autopilot read CPU over
+  the 6 UDP pairs 97.7 -> 95.2 us (85.8 without the loaded flight): the direction of the warm
+  saving, not separable from the noise.
 - Not reached: 20x / 15x (this tree's best flights here 7.5x UDP, 6.6x zenoh; main's 4.9x, 7.6x;
   load 5-7). Where the remaining time goes (the flights above but the loaded one, thread CPU per
   step): autopilot read 69-105 us, ``Autopilot.step`` 37-56 us, status + answer 33-50 us, after
