@@ -315,3 +315,48 @@ def test_hil_drain_reads_once_a_step_and_everything_past_a_full_batch() -> None:
     tr.q.append(b)
     assert bridge.drain(0.0) == 2 and not tr.q  # the pending one, then the transport
     assert link.recv(0.0) == [] and link.drained
+
+
+@pytest.mark.parametrize("signed", [False, True])
+def test_a_flights_hil_datagrams_parse_as_the_generated_path(signed: bool) -> None:
+    """A simulated vehicle's state datagrams of a short flight (HIL_SENSOR, HIL_STATE_QUATERNION,
+    HIL_GPS, GPS_GLOBAL_ORIGIN, BATTERY_STATUS, status) and the autopilot's answers
+    (HIL_ACTUATOR_CONTROLS from ``HilBridge.send_controls``), every fifth datagram with a
+    flipped byte: the fast path hands over what the generated parser does, counters too."""
+    import numpy as np
+
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
+    from vtolftc.firmware_sim.vehicle.battery import BatteryModel
+    from vtolftc.firmware_sim.vehicle.model import Vehicle
+    from vtolftc.firmware_sim.vehicle.state_encoder import StateEncoder
+
+    rng = random.Random(5)
+    af = load_airframe()
+    vehicle = Vehicle(af)
+    sig = (lambda t: SigningConfig(KEY, timestamp=t)) if signed else (lambda t: None)
+    codec = make_codec(1, 191, signing=sig(1000))
+    enc = StateEncoder(vehicle, BatteryModel(rho=af.air_density_kg_m3), codec, 10.0,
+                       lambda: codec.heartbeat_encode(0, 0, 0, 0, 0))
+    tx = _Loop()
+    bridge = HilBridge(Link(tx, system_id=1, component_id=1, signing=sig(1000)))
+    rx = [Link(_Loop(), system_id=1, component_id=1, signing=sig(10)) for _ in range(4)]
+    for link in rx[1::2]:
+        link._fast = _Generated()  # type: ignore[assignment]
+    u = np.linspace(0.2, 0.6, af.n_actuators)
+    for k in range(300):
+        vehicle.step(u, 4)
+        bridge.send_controls(vehicle.time_usec, u * (1 + 0.001 * k), armed=k % 2 == 0)
+        for pair, data in ((rx[0:2], bytearray(enc.datagram())),
+                           (rx[2:4], bytearray(tx.q.pop()))):
+            if k % 5 == 0:
+                data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
+            got = []
+            for link in pair:
+                link.transport.send_bytes(bytes(data))
+                got.append([_state(m) for m in link.recv(0)])
+            assert got[0] == got[1], k
+    assert rx[0].stats.as_dict() == rx[1].stats.as_dict()
+    assert rx[2].stats.as_dict() == rx[3].stats.as_dict()
+    assert rx[0].stats.frames_received > 500 and rx[0].stats.dropped >= 50
+    assert rx[2].stats.frames_received >= 240 and rx[2].stats.dropped >= 50
