@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.firmware_sim.autopilot.attitude import AttitudeController, ScheduledPPIDController
-from vtolftc.firmware_sim.autopilot.control_kernels import scheduled_ppid3_step
+from vtolftc.firmware_sim.autopilot.control_kernels import scheduled_ppid3_step_packed
 from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
 from vtolftc.firmware_sim.autopilot.interface import FlightMode
 
@@ -85,11 +85,12 @@ class AttitudeStage:
             # same compiled step on the same arrays, hence the same bits. The result is the
             # controller's output array (the output stage copies it into the virtual command
             # at once), not a copy
-            bp, rows, slopes = ctrl.schedule.kernel_tables
-            gains, state, const, out = ctrl.kernel_arrays
-            scheduled_ppid3_step(bp, rows, slopes, vs, ref, att, rates, gains, state, const,
-                                 bool(sat_hi[0]), bool(sat_hi[1]),
-                                 bool(sat_hi[2]), bool(sat_lo[0]), bool(sat_lo[1]),
-                                 bool(sat_lo[2]), out)
+            # the schedule's tables and the controller's arrays as two packed arrays (the
+            # same kernels on views of them)
+            out = ctrl.kernel_arrays[3]
+            scheduled_ppid3_step_packed(ctrl.schedule.kernel_packed, vs, ref, att, rates,
+                                        ctrl.kernel_ws, bool(sat_hi[0]), bool(sat_hi[1]),
+                                        bool(sat_hi[2]), bool(sat_lo[0]), bool(sat_lo[1]),
+                                        bool(sat_lo[2]))
             return out
         return ctrl.update(ref, att, rates, vs, sat_hi, sat_lo)
