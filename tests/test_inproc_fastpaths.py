@@ -532,3 +532,70 @@ def test_wire_round_equals_wire_commands_and_the_vehicle_flies_it(ds1):
     with pytest.raises(ValueError, match="NaN or inf"):
         ref.step(wire_commands(bad), 4)
     assert _bits(fast._vws) == _bits(ref._vws)
+
+
+@pytest.mark.parametrize("n_bp", [1, 2, 3, 5])
+def test_packed_ppid_step_equals_unpacked_kernel(ds1, n_bp):
+    """``scheduled_ppid3_step_packed`` on a schedule's ``kernel_packed`` and a controller's
+    workspace gives, step after step, the moments, gains and state of
+    ``scheduled_ppid3_step`` on separate arrays of their own (copies made before the first
+    step), for schedules of 1, 2, 3 and 5 breakpoints (the kernel finds n from the table's
+    size) and airspeeds below, between, on and above the breakpoints."""
+    from vtolftc.firmware_sim.autopilot import control_kernels as ck
+    from vtolftc.firmware_sim.autopilot.attitude import ScheduledPPIDController
+    from vtolftc.firmware_sim.autopilot.schedule import GainSchedule
+
+    base = Autopilot(ds1, controller="gs-shif").attitude_stage.controller.schedule
+    rng = np.random.default_rng(100 + n_bp)
+    bps = tuple(float(b) for b in np.sort(rng.choice(np.arange(0.0, 25.0, 1.5), n_bp,
+                                                     replace=False)))
+    table = {ax: {f: tuple(float(v) * float(rng.uniform(0.5, 1.5)) for v in
+                           (list(vals) * n_bp)[:n_bp])
+                  for f, vals in fields.items()} for ax, fields in base.table.items()}
+    sched = GainSchedule("t", base.airframe_name, base.airframe_sha256, bps, table)
+    ctrl = ScheduledPPIDController(sched)
+    bp, rows, slopes = (a.copy() for a in sched.kernel_tables)
+    G, S, C = (a.copy() for a in ctrl.kernel_arrays[:3])
+    out = np.zeros(3)
+    for k in range(300):
+        V = float(rng.choice([rng.uniform(-2.0, 27.0), rng.choice(bps), np.nan]))
+        ref, att, rates = rng.normal(0, 0.3, 3), rng.normal(0, 0.3, 3), rng.normal(0, 0.5, 3)
+        flags = [bool(b) for b in rng.random(6) < 0.2]
+        ck.scheduled_ppid3_step_packed(sched.kernel_packed, V, ref, att, rates,
+                                       ctrl.kernel_ws, *flags)
+        ck.scheduled_ppid3_step(bp, rows, slopes, V, ref, att, rates, G, S, C, *flags, out)
+        assert ctrl.kernel_arrays[3].tobytes() == out.tobytes(), k
+        assert ctrl.kernel_arrays[0].tobytes() == G.tobytes(), k
+        assert ctrl.kernel_arrays[1].tobytes() == S.tobytes(), k
+
+
+def test_ppid_workspace_views_survive_copy_and_pickle(ds1):
+    """A deep copy and a pickle of a controller stepped mid-flight: their axes' state and
+    ``kernel_arrays`` are views of their own workspace (what the packed kernel writes, the
+    axes read), and they step on as the original does, bit for bit."""
+    import pickle
+
+    from vtolftc.firmware_sim.autopilot import control_kernels as ck
+
+    ctrl = Autopilot(ds1, controller="gs-shif").attitude_stage.controller
+    rng = np.random.default_rng(7)
+
+    def step(c, V, ref, att, rates):
+        ck.scheduled_ppid3_step_packed(c.schedule.kernel_packed, V, ref, att, rates,
+                                       c.kernel_ws, False, False, False, False, False, False)
+        return c.kernel_arrays[3].copy()
+
+    for _ in range(20):
+        step(ctrl, 8.0, *rng.normal(0, 0.3, (3, 3)))
+    copies = [copy.deepcopy(ctrl), pickle.loads(pickle.dumps(ctrl))]
+    for c in copies:
+        assert c.kernel_ws is not ctrl.kernel_ws
+        for arr in (*c.kernel_arrays, *(p._state for p in c.pids), *(p._const for p in c.pids)):
+            assert np.shares_memory(arr, c.kernel_ws)
+    for _ in range(50):
+        args = (float(rng.uniform(0, 20)), *rng.normal(0, 0.3, (3, 3)))
+        want = step(ctrl, *args)
+        for c in copies:
+            assert step(c, *args).tobytes() == want.tobytes()
+            assert [p.integral for p in c.pids] == [p.integral for p in ctrl.pids]
+            assert c.pids[1].gains == ctrl.pids[1].gains
