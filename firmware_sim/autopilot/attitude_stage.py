@@ -72,7 +72,8 @@ class AttitudeStage:
         tc = self._p["FTC_SCHED_TAU"].value
         vs = self.v_sched
         if tc > 0.0 and math.isfinite(vs):
-            vs += min(1.0, self.dt / tc) * (V - vs)
+            r = self.dt / tc
+            vs += (r if r < 1.0 else 1.0) * (V - vs)  # min(1.0, r), without the call
         else:
             vs = V
         self.v_sched = vs
