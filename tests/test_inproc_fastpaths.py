@@ -114,6 +114,15 @@ def test_a_copied_allocator_keeps_its_workspace_views(ds1, how):
         base = {"_tri_r": twin._iws, "_tri_c": twin._iws, "u_min": twin._cst,
                 "u_max": twin._cst}.get(name, twin._ws)
         assert np.shares_memory(getattr(twin, name), base), name
+    for name in ("_ws", "_cst", "_ubuf"):  # the tracked kernel's one float workspace
+        assert np.shares_memory(getattr(twin, name), twin._wsx), name
+    u_a, u_b = np.empty(orig.n_u), np.empty(orig.n_u)
+    for k in range(20):  # allocate_tracked reads the limits and warm start through _wsx
+        v = v0 + np.array([3.0 * k, -2.0 * k, 0.5, -0.5, 0.1])
+        a = orig.allocate_tracked(v, B, orig.u_max, orig.u_pref, u_a, 2, 1e-6, 1e-3)
+        b = twin.allocate_tracked(v, B, twin.u_max, twin.u_pref, u_b, 2, 1e-6, 1e-3)
+        assert a == b and _bits(u_a) == _bits(u_b), k
+        assert _bits(orig._wsx) == _bits(twin._wsx), k
     rng = np.random.default_rng(5)
     for k in range(60):
         v = v0 + rng.normal(0, 1, 5) * [60.0, 20.0, 15.0, 15.0, 5.0] * (6.0 if k % 9 == 4
