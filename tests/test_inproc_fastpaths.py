@@ -175,6 +175,7 @@ def test_output_stage_saturation_flags_equal_the_reference(ds1, path):
         mask = _shortfall_mask_py(twin.sp.v, res.v_achieved, 0.02, 0.02)
         assert out.sat_hi == [bool(mask & 1), bool(mask & 2), bool(mask & 4)], k
         assert out.sat_lo == [bool(mask & 8), bool(mask & 16), bool(mask & 32)], k
+        assert out.sat_mask == mask, k  # the attitude stage's compiled step reads this one
         assert (out.fz_cmd, out.fz_achieved) == (fz, float(res.v_achieved[0])), k
         n_sat += mask != 0
         assert out.saturated_steps == n_sat, k
@@ -228,7 +229,9 @@ def test_attitude_stage_direct_kernel_equals_controller_update(ds1, controller):
         rates = rng.normal(0, 0.5, 3)
         sat_hi = [bool(b) for b in rng.random(3) < 0.2]
         sat_lo = [bool(b) for b in rng.random(3) < 0.2]
-        tau = fast.update(FlightMode.HOVER, 30.0, V, ref, att, rates, sat_hi, sat_lo).copy()
+        mask = sum(b << i for i, b in enumerate(sat_hi + sat_lo))
+        tau = fast.update(FlightMode.HOVER, 30.0, V, ref, att, rates, sat_hi, sat_lo,
+                          None if k % 2 else mask).copy()
         tc = 0.5  # FTC_SCHED_TAU: the stage's low-pass, written out
         v_sched = V if k == 0 else v_sched + min(1.0, 0.004 / tc) * (V - v_sched)
         want = ref_ctrl.update(ref, att, rates, v_sched, sat_hi, sat_lo)
@@ -570,8 +573,9 @@ def test_packed_ppid_step_equals_unpacked_kernel(ds1, n_bp):
         V = float(rng.choice([rng.uniform(-2.0, 27.0), rng.choice(bps), np.nan]))
         ref, att, rates = rng.normal(0, 0.3, 3), rng.normal(0, 0.3, 3), rng.normal(0, 0.5, 3)
         flags = [bool(b) for b in rng.random(6) < 0.2]
+        mask = sum(b << i for i, b in enumerate(flags))  # bits 0-2 sat_hi, 3-5 sat_lo
         ck.scheduled_ppid3_step_packed(sched.kernel_packed, V, ref, att, rates,
-                                       ctrl.kernel_ws, *flags)
+                                       ctrl.kernel_ws, mask)
         ck.scheduled_ppid3_step(bp, rows, slopes, V, ref, att, rates, G, S, C, *flags, out)
         assert ctrl.kernel_arrays[3].tobytes() == out.tobytes(), k
         assert ctrl.kernel_arrays[0].tobytes() == G.tobytes(), k
@@ -591,7 +595,7 @@ def test_ppid_workspace_views_survive_copy_and_pickle(ds1):
 
     def step(c, V, ref, att, rates):
         ck.scheduled_ppid3_step_packed(c.schedule.kernel_packed, V, ref, att, rates,
-                                       c.kernel_ws, False, False, False, False, False, False)
+                                       c.kernel_ws, 0)
         return c.kernel_arrays[3].copy()
 
     for _ in range(20):

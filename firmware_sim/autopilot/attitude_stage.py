@@ -57,12 +57,14 @@ class AttitudeStage:
 
     def update(self, mode: FlightMode, h: float, V: float, ref: NDArray[np.float64],
                att: NDArray[np.float64], rates: NDArray[np.float64], sat_hi: list[bool],
-               sat_lo: list[bool]) -> NDArray[np.float64]:
+               sat_lo: list[bool], sat_mask: int | None = None) -> NDArray[np.float64]:
         """The body torque commands [N m] (FRD) for the reference ``ref`` (roll, pitch, yaw
         [rad]): ``att`` roll/pitch/yaw [rad], ``rates`` body rates [rad/s], ``V`` airspeed
         [m/s], ``h`` altitude [m]; ``sat_hi``/``sat_lo`` the moment axes the last allocation
-        fell short of upwards/downwards (anti-windup). The result may be the controller's
-        own output array (read it before the next step, do not keep it)."""
+        fell short of upwards/downwards (anti-windup), ``sat_mask`` the same flags as the
+        output stage's mask (bits 0-2 ``sat_hi``, 3-5 ``sat_lo``) when the caller has it.
+        The result may be the controller's own output array (read it before the next step,
+        do not keep it)."""
         if mode == _M_TAKEOFF and h - self.est.ground_alt < 0.5:  # still on the ground
             self.controller.reset()
         # gains scheduled on a low-passed airspeed: the measurement's noise would otherwise
@@ -88,10 +90,12 @@ class AttitudeStage:
             # at once), not a copy
             # the schedule's tables and the controller's arrays as two packed arrays (the
             # same kernels on views of them)
+            if sat_mask is None:
+                sat_mask = ((1 if sat_hi[0] else 0) | (2 if sat_hi[1] else 0)
+                            | (4 if sat_hi[2] else 0) | (8 if sat_lo[0] else 0)
+                            | (16 if sat_lo[1] else 0) | (32 if sat_lo[2] else 0))
             out = ctrl.kernel_arrays[3]
             scheduled_ppid3_step_packed(ctrl.schedule.kernel_packed, vs, ref, att, rates,
-                                        ctrl.kernel_ws, bool(sat_hi[0]), bool(sat_hi[1]),
-                                        bool(sat_hi[2]), bool(sat_lo[0]), bool(sat_lo[1]),
-                                        bool(sat_lo[2]))
+                                        ctrl.kernel_ws, sat_mask)
             return out
         return ctrl.update(ref, att, rates, vs, sat_hi, sat_lo)

@@ -352,10 +352,11 @@ def scheduled_ppid3_step(bp, rows, slopes, V, ref, att, rates, G, S, C, sat_hi0,
 
 
 @numba.njit(cache=True)
-def scheduled_ppid3_step_packed(tab, V, ref, att, rates, ws, sat_hi0, sat_hi1, sat_hi2,
-                                sat_lo0, sat_lo1, sat_lo2):  # pragma: no cover - compiled
-    """:func:`scheduled_ppid3_step` on two packed arrays instead of seven (each array argument
-    of a compiled call costs ~0.15-0.2 us to unbox): the same kernels on views of them.
+def scheduled_ppid3_step_packed(tab, V, ref, att, rates, ws,
+                                sat_mask):  # pragma: no cover - compiled
+    """:func:`scheduled_ppid3_step` on two packed arrays instead of seven and one int instead
+    of six bools (each argument of a compiled call costs its own type check and unboxing):
+    the same kernels on views of them, with the same flags.
 
     Parameters
     ----------
@@ -363,11 +364,14 @@ def scheduled_ppid3_step_packed(tab, V, ref, att, rates, ws, sat_hi0, sat_hi1, s
         The schedule's breakpoints (n,), rows (n, 3, 5) and slopes (max(n - 1, 1), 3, 5),
         concatenated (``GainSchedule.kernel_packed``): n = 1 for 31 entries, else
         (size + 15) / 31.
-    V, ref, att, rates, sat_hi0, sat_hi1, sat_hi2, sat_lo0, sat_lo1, sat_lo2
+    V, ref, att, rates
         As :func:`scheduled_ppid3_step`.
     ws : numpy.ndarray, shape (W_SIZE,)
         Gains, state, constants and output at the ``W_*`` offsets (read and written as
         :func:`scheduled_ppid3_step` does its ``G``, ``S``, ``C``, ``out``).
+    sat_mask : int
+        The saturation flags as the output stage's shortfall mask: bits 0-2 ``sat_hi0`` to
+        ``sat_hi2``, bits 3-5 ``sat_lo0`` to ``sat_lo2``.
     """
     size = tab.shape[0]
     n = 1 if size == 31 else (size + 15) // 31
@@ -379,5 +383,6 @@ def scheduled_ppid3_step_packed(tab, V, ref, att, rates, ws, sat_hi0, sat_hi1, s
     S = ws[W_STATE:W_CONST].reshape((3, N_STATE))
     C = ws[W_CONST:W_OUT].reshape((3, N_CONST))
     out = ws[W_OUT:W_SIZE]
-    scheduled_ppid3_step(bp, rows, slopes, V, ref, att, rates, G, S, C, sat_hi0, sat_hi1,
-                         sat_hi2, sat_lo0, sat_lo1, sat_lo2, out)
+    scheduled_ppid3_step(bp, rows, slopes, V, ref, att, rates, G, S, C, (sat_mask & 1) != 0,
+                         (sat_mask & 2) != 0, (sat_mask & 4) != 0, (sat_mask & 8) != 0,
+                         (sat_mask & 16) != 0, (sat_mask & 32) != 0, out)
