@@ -208,7 +208,25 @@ def test_estimate_euler_equals_quat_to_euler(ds1):
         assert got is not None
         assert np.array([got]).tobytes() == np.array([want]).tobytes(), q
         assert est.att.tobytes() == np.array(want).tobytes()
+        assert est.euler == tuple(est.att.tolist())  # what metrics_inputs hands the metrics
+    kept = est.euler
     assert est.update(_nav(qs[0], np.array([0.0, np.inf, 0.0]))) is None
+    assert est.euler is kept  # a rejected sample changes nothing
+
+
+def test_metrics_inputs_euler_is_the_estimates_angles(ds1):
+    """``Autopilot.metrics_inputs`` hands the metrics the Euler angles of the step that flew
+    on ``nav`` (``tuple(est.att.tolist())``, as before), None for another ``nav``."""
+    ap = Autopilot(ds1)
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        q = rng.normal(size=4)
+        nav = _nav(q / np.linalg.norm(q), rng.normal(size=3))
+        ap.step(nav)
+        euler = ap.metrics_inputs(nav)[4]
+        assert euler == tuple(ap.estimate.att.tolist())
+        assert np.array(euler).tobytes() == np.array(quat_to_euler(nav.q_wxyz)).tobytes()
+        assert ap.metrics_inputs(_nav(q, np.zeros(3)))[4] is None
 
 
 @pytest.mark.parametrize("controller", ["gs-shif", "shif"])

@@ -280,7 +280,7 @@ class Autopilot:
         """
         m = self.modes
         est = self.estimate
-        euler = tuple(est.att.tolist()) if nav is est.last_nav else None
+        euler = est.euler if nav is est.last_nav else None
         return m.mode, m.armed, self.setpoints.ref, float(self.setpoints.alt_ref), euler
 
     @property
