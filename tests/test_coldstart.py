@@ -327,7 +327,7 @@ def test_summary_reports_what_was_compiled_after_ready():
         proc.compiled_at_ready = {}
         warm_up(lambda: Autopilot(af), steps=40)
         late = proc.summary()["numba"]["compiled_after_ready"]
-        assert late[AP + "allocation.active_set._allocate_step_tracked"], late
+        assert late[AP + "allocation.active_set._allocate_step_tracked_packed"], late
         proc.compiled_at_ready = compiled_specialisations()
         assert proc.summary()["numba"]["compiled_after_ready"] == {}
     finally:

@@ -7,9 +7,10 @@ the allocation and the outer loops use the raw value). On the ground before take
 controller is held reset (no integrator wind-up against the ground).
 
 With a :class:`~.attitude.ScheduledPPIDController` (``gs-shif``, ``shif``) the stage calls the
-compiled step (:func:`.control_kernels.scheduled_ppid3_step`) itself on the controller's
-arrays: what ``update`` calls, on the same arrays (no conversion, no copy), so the same bits;
-compiled without ``fastmath``.
+compiled step itself (:func:`.control_kernels.scheduled_ppid3_step_packed`: what ``update``
+calls, :func:`.control_kernels.scheduled_ppid3_step`, on views of the schedule's packed
+tables and the controller's workspace, the saturation flags as the output stage's mask; no
+conversion, no copy), so the same bits; compiled without ``fastmath``.
 """
 
 from __future__ import annotations
