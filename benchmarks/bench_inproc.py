@@ -263,13 +263,14 @@ fail under a mutation):
 
 Python function calls per step (cProfile): 90 -> 73. Whole flights (main's tree and this
 branch's in alternate processes, each a warm-up then two runs, the faster one's thread CPU
-per step; 16 pairs at load 13-18): case 1 gs-shif 40 s main 32.4 us, branch 28.7 us
-(medians), pair ratio median 0.954 (0.73-1.28); the campaign's first scenario (60 s,
-``bench_campaign``'s spec) main 33.9, branch 29.1 us, ratio median 0.886 (0.73-1.26). On the
-idle start figure, 0.954 gives ~26.6 us per step (~150x): at the line, not with margin, and
-the spread of the pairs at this load is +-15 %; the campaign's 60 s scenario at ~0.886 of
-main's ~0.43 s is ~0.38 s (~2 x 60 / 0.38 = ~315 scenarios/min on 2 cores before the pool's
-1-3 %), an estimate from loaded ratios, not a measured idle pool run. What is left is as
+per step; 24 pairs at load 10.5-18): case 1 gs-shif 40 s main 32.7 us, branch 29.2 us
+(medians), pair ratio median 0.941 (0.71-1.37, 18 of 24 pairs below 1); the campaign's first
+scenario (60 s, ``bench_campaign``'s spec) main 33.9, branch 29.1 us, ratio median 0.881
+(0.73-1.26, 19 of 24). On the idle start figure (27.9 us) 0.941 gives ~26.3 us per step,
+~152x: over the line by ~2 %, less than the pairs' spread at this load (no idle machine to
+confirm it on). The campaign's 60 s scenario at 0.881 of inproc-13's idle ~0.43 s is
+~0.38 s, ~315 scenarios/min on 2 cores before the pool's 1-3 %: an estimate from loaded
+ratios, not a measured idle pool run (``bench_campaign`` not run here). What is left is as
 inproc-13 wrote: the vehicle kernel (~8 us), the QP (~4-5 us), and ~11 us of Python spread
 over ~20 functions; the next step is still the compiled continuous part of the outer loops.
 """
