@@ -232,6 +232,47 @@ logic, commands and the navigator's decisions: the route the previous rounds cho
 batched campaign engine (its lanes would still run each scenario's Python between diverging
 mode changes and faults). Not done this session: that rewrite, with a port of CPython's
 ``math.hypot`` for the position hold.
+
+Issue 24, branch inproc-14 (2026-12-03, 2 cores shared with 2 other engineers, load 5-18).
+Start (main, this branch's base, load 0.1, idle): ``bench_inproc`` case 1 143.2x, 27.9 us per
+step wall (physics 8.2, codec 1.7, autopilot 15.5, metrics 1.9, runner 0.2). py-spy (2,000/s,
+six 60 s flights): vehicle kernel 27 %, allocation kernel call 14 %, P-PID call 5.7 %, outer
+loops 14.6 % in all, estimate 4.8 %, codec 5.5 %, metrics 4.8 %. Measured here (thread CPU,
+one process, interleaved, load ~14): a numba call costs ~0.05 us per array argument, ~0.03
+per bool, ~0.01 per float (no-op kernels: 1 array 0.14 us, 10 arrays 0.57 us); a
+``min(max(x, lo), hi)`` 0.21 us against 0.04 us as two comparisons. Built (every flight
+bit-identical, ``command_digest.py`` dbd91a71..., 121a7434..., e937b801... after each commit;
+tests in ``tests/test_inproc_fastpaths.py`` and ``test_metrics_kernel.py``, each checked to
+fail under a mutation):
+
+- the P-PID step on two packed arrays and one int (``scheduled_ppid3_step_packed``: the
+  schedule's tables in ``GainSchedule.kernel_packed``, the controller's gains, state,
+  constants and output views of one workspace, relinked on copy and unpickle; the
+  saturation flags as the output stage's mask ``OutputStage.sat_mask``): 17 arguments
+  (10 arrays, 6 bools) -> 7 (5 arrays); the call with its argument conversions 1.88 ->
+  1.40 us (9 interleaved pairs, load 14);
+- the allocator's workspace, limits and command buffer as views of one array: 9 -> 7 array
+  arguments (``_allocate_step_tracked_packed``), 5.24 -> 5.16 us a call;
+- the per-step builtins ``min`` / ``max`` of the outer loops, altitude holds and attitude
+  stage (16 calls per step) written as comparisons with the builtins' own rule
+  (``max(a, b)`` = ``b if b > a else a``: the same result for NaN and signed zeros);
+- the metrics kernel answers "crashed" itself (returns 2), no read-back of its state;
+  ``StateEstimate.euler`` hands the metrics the step's angles without ``tuple(att.tolist())``.
+- tried and dropped: the estimate's 13 ``math.isfinite`` as one sum of ``x - x`` terms
+  (1.30 vs 1.32 us a call: no gain).
+
+Python function calls per step (cProfile): 90 -> 73. Whole flights (main's tree and this
+branch's in alternate processes, each a warm-up then two runs, the faster one's thread CPU
+per step; 24 pairs at load 10.5-18): case 1 gs-shif 40 s main 32.7 us, branch 29.2 us
+(medians), pair ratio median 0.941 (0.71-1.37, 18 of 24 pairs below 1); the campaign's first
+scenario (60 s, ``bench_campaign``'s spec) main 33.9, branch 29.1 us, ratio median 0.881
+(0.73-1.26, 19 of 24). On the idle start figure (27.9 us) 0.941 gives ~26.3 us per step,
+~152x: over the line by ~2 %, less than the pairs' spread at this load (no idle machine to
+confirm it on). The campaign's 60 s scenario at 0.881 of inproc-13's idle ~0.43 s is
+~0.38 s, ~315 scenarios/min on 2 cores before the pool's 1-3 %: an estimate from loaded
+ratios, not a measured idle pool run (``bench_campaign`` not run here). What is left is as
+inproc-13 wrote: the vehicle kernel (~8 us), the QP (~4-5 us), and ~11 us of Python spread
+over ~20 functions; the next step is still the compiled continuous part of the outer loops.
 """
 
 from __future__ import annotations

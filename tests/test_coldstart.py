@@ -85,8 +85,8 @@ def test_warm_up_visits_every_mode_and_prepares_the_flight_kernels():
     fw = sum(1 for m in seen if m == FlightMode.FIXED_WING) * dt
     assert fw > made[0].params.get("VT_TRANS_P2_DUR") + 0.5
     sigs = compiled_specialisations(AP)
-    for name in ("allocation.active_set._allocate_step_tracked",  # the one that flies
-                 "control_kernels.scheduled_ppid3_step"):
+    for name in ("allocation.active_set._allocate_step_tracked_packed",  # the ones that fly
+                 "control_kernels.scheduled_ppid3_step_packed"):
         assert sigs[AP + name], name
 
 
@@ -327,7 +327,7 @@ def test_summary_reports_what_was_compiled_after_ready():
         proc.compiled_at_ready = {}
         warm_up(lambda: Autopilot(af), steps=40)
         late = proc.summary()["numba"]["compiled_after_ready"]
-        assert late[AP + "allocation.active_set._allocate_step_tracked"], late
+        assert late[AP + "allocation.active_set._allocate_step_tracked_packed"], late
         proc.compiled_at_ready = compiled_specialisations()
         assert proc.summary()["numba"]["compiled_after_ready"] == {}
     finally:

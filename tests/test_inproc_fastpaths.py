@@ -114,6 +114,15 @@ def test_a_copied_allocator_keeps_its_workspace_views(ds1, how):
         base = {"_tri_r": twin._iws, "_tri_c": twin._iws, "u_min": twin._cst,
                 "u_max": twin._cst}.get(name, twin._ws)
         assert np.shares_memory(getattr(twin, name), base), name
+    for name in ("_ws", "_cst", "_ubuf"):  # the tracked kernel's one float workspace
+        assert np.shares_memory(getattr(twin, name), twin._wsx), name
+    u_a, u_b = np.empty(orig.n_u), np.empty(orig.n_u)
+    for k in range(20):  # allocate_tracked reads the limits and warm start through _wsx
+        v = v0 + np.array([3.0 * k, -2.0 * k, 0.5, -0.5, 0.1])
+        a = orig.allocate_tracked(v, B, orig.u_max, orig.u_pref, u_a, 2, 1e-6, 1e-3)
+        b = twin.allocate_tracked(v, B, twin.u_max, twin.u_pref, u_b, 2, 1e-6, 1e-3)
+        assert a == b and _bits(u_a) == _bits(u_b), k
+        assert _bits(orig._wsx) == _bits(twin._wsx), k
     rng = np.random.default_rng(5)
     for k in range(60):
         v = v0 + rng.normal(0, 1, 5) * [60.0, 20.0, 15.0, 15.0, 5.0] * (6.0 if k % 9 == 4
@@ -166,6 +175,7 @@ def test_output_stage_saturation_flags_equal_the_reference(ds1, path):
         mask = _shortfall_mask_py(twin.sp.v, res.v_achieved, 0.02, 0.02)
         assert out.sat_hi == [bool(mask & 1), bool(mask & 2), bool(mask & 4)], k
         assert out.sat_lo == [bool(mask & 8), bool(mask & 16), bool(mask & 32)], k
+        assert out.sat_mask == mask, k  # the attitude stage's compiled step reads this one
         assert (out.fz_cmd, out.fz_achieved) == (fz, float(res.v_achieved[0])), k
         n_sat += mask != 0
         assert out.saturated_steps == n_sat, k
@@ -198,7 +208,25 @@ def test_estimate_euler_equals_quat_to_euler(ds1):
         assert got is not None
         assert np.array([got]).tobytes() == np.array([want]).tobytes(), q
         assert est.att.tobytes() == np.array(want).tobytes()
+        assert est.euler == tuple(est.att.tolist())  # what metrics_inputs hands the metrics
+    kept = est.euler
     assert est.update(_nav(qs[0], np.array([0.0, np.inf, 0.0]))) is None
+    assert est.euler is kept  # a rejected sample changes nothing
+
+
+def test_metrics_inputs_euler_is_the_estimates_angles(ds1):
+    """``Autopilot.metrics_inputs`` hands the metrics the Euler angles of the step that flew
+    on ``nav`` (``tuple(est.att.tolist())``, as before), None for another ``nav``."""
+    ap = Autopilot(ds1)
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        q = rng.normal(size=4)
+        nav = _nav(q / np.linalg.norm(q), rng.normal(size=3))
+        ap.step(nav)
+        euler = ap.metrics_inputs(nav)[4]
+        assert euler == tuple(ap.estimate.att.tolist())
+        assert np.array(euler).tobytes() == np.array(quat_to_euler(nav.q_wxyz)).tobytes()
+        assert ap.metrics_inputs(_nav(q, np.zeros(3)))[4] is None
 
 
 @pytest.mark.parametrize("controller", ["gs-shif", "shif"])
@@ -219,7 +247,9 @@ def test_attitude_stage_direct_kernel_equals_controller_update(ds1, controller):
         rates = rng.normal(0, 0.5, 3)
         sat_hi = [bool(b) for b in rng.random(3) < 0.2]
         sat_lo = [bool(b) for b in rng.random(3) < 0.2]
-        tau = fast.update(FlightMode.HOVER, 30.0, V, ref, att, rates, sat_hi, sat_lo).copy()
+        mask = sum(b << i for i, b in enumerate(sat_hi + sat_lo))
+        tau = fast.update(FlightMode.HOVER, 30.0, V, ref, att, rates, sat_hi, sat_lo,
+                          None if k % 2 else mask).copy()
         tc = 0.5  # FTC_SCHED_TAU: the stage's low-pass, written out
         v_sched = V if k == 0 else v_sched + min(1.0, 0.004 / tc) * (V - v_sched)
         want = ref_ctrl.update(ref, att, rates, v_sched, sat_hi, sat_lo)
@@ -532,3 +562,177 @@ def test_wire_round_equals_wire_commands_and_the_vehicle_flies_it(ds1):
     with pytest.raises(ValueError, match="NaN or inf"):
         ref.step(wire_commands(bad), 4)
     assert _bits(fast._vws) == _bits(ref._vws)
+
+
+@pytest.mark.parametrize("n_bp", [1, 2, 3, 5])
+def test_packed_ppid_step_equals_unpacked_kernel(ds1, n_bp):
+    """``scheduled_ppid3_step_packed`` on a schedule's ``kernel_packed`` and a controller's
+    workspace gives, step after step, the moments, gains and state of
+    ``scheduled_ppid3_step`` on separate arrays of their own (copies made before the first
+    step), for schedules of 1, 2, 3 and 5 breakpoints (the kernel finds n from the table's
+    size) and airspeeds below, between, on and above the breakpoints."""
+    from vtolftc.firmware_sim.autopilot import control_kernels as ck
+    from vtolftc.firmware_sim.autopilot.attitude import ScheduledPPIDController
+    from vtolftc.firmware_sim.autopilot.schedule import GainSchedule
+
+    base = Autopilot(ds1, controller="gs-shif").attitude_stage.controller.schedule
+    rng = np.random.default_rng(100 + n_bp)
+    bps = tuple(float(b) for b in np.sort(rng.choice(np.arange(0.0, 25.0, 1.5), n_bp,
+                                                     replace=False)))
+    table = {ax: {f: tuple(float(v) * float(rng.uniform(0.5, 1.5)) for v in
+                           (list(vals) * n_bp)[:n_bp])
+                  for f, vals in fields.items()} for ax, fields in base.table.items()}
+    sched = GainSchedule("t", base.airframe_name, base.airframe_sha256, bps, table)
+    ctrl = ScheduledPPIDController(sched)
+    bp, rows, slopes = (a.copy() for a in sched.kernel_tables)
+    G, S, C = (a.copy() for a in ctrl.kernel_arrays[:3])
+    out = np.zeros(3)
+    for k in range(300):
+        V = float(rng.choice([rng.uniform(-2.0, 27.0), rng.choice(bps), np.nan]))
+        ref, att, rates = rng.normal(0, 0.3, 3), rng.normal(0, 0.3, 3), rng.normal(0, 0.5, 3)
+        flags = [bool(b) for b in rng.random(6) < 0.2]
+        mask = sum(b << i for i, b in enumerate(flags))  # bits 0-2 sat_hi, 3-5 sat_lo
+        ck.scheduled_ppid3_step_packed(sched.kernel_packed, V, ref, att, rates,
+                                       ctrl.kernel_ws, mask)
+        ck.scheduled_ppid3_step(bp, rows, slopes, V, ref, att, rates, G, S, C, *flags, out)
+        assert ctrl.kernel_arrays[3].tobytes() == out.tobytes(), k
+        assert ctrl.kernel_arrays[0].tobytes() == G.tobytes(), k
+        assert ctrl.kernel_arrays[1].tobytes() == S.tobytes(), k
+
+
+def test_ppid_workspace_views_survive_copy_and_pickle(ds1):
+    """A deep copy and a pickle of a controller stepped mid-flight: their axes' state and
+    ``kernel_arrays`` are views of their own workspace (what the packed kernel writes, the
+    axes read), and they step on as the original does, bit for bit."""
+    import pickle
+
+    from vtolftc.firmware_sim.autopilot import control_kernels as ck
+
+    ctrl = Autopilot(ds1, controller="gs-shif").attitude_stage.controller
+    rng = np.random.default_rng(7)
+
+    def step(c, V, ref, att, rates):
+        ck.scheduled_ppid3_step_packed(c.schedule.kernel_packed, V, ref, att, rates,
+                                       c.kernel_ws, 0)
+        return c.kernel_arrays[3].copy()
+
+    for _ in range(20):
+        step(ctrl, 8.0, *rng.normal(0, 0.3, (3, 3)))
+    copies = [copy.deepcopy(ctrl), pickle.loads(pickle.dumps(ctrl))]
+    for c in copies:
+        assert c.kernel_ws is not ctrl.kernel_ws
+        for arr in (*c.kernel_arrays, *(p._state for p in c.pids), *(p._const for p in c.pids)):
+            assert np.shares_memory(arr, c.kernel_ws)
+    for _ in range(50):
+        args = (float(rng.uniform(0, 20)), *rng.normal(0, 0.3, (3, 3)))
+        want = step(ctrl, *args)
+        for c in copies:
+            assert step(c, *args).tobytes() == want.tobytes()
+            assert [p.integral for p in c.pids] == [p.integral for p in ctrl.pids]
+            assert c.pids[1].gains == ctrl.pids[1].gains
+
+
+def _ref_mc_alt(st, h_ref, h, v_up, kp_z, kp_vz, ki_vz, v_max_up, v_max_dn, override):
+    """MulticopterAltitudeHold.update as it was, with the builtins min / max (st: integral,
+    dt, a_up_max, a_dn_max, i_limit; returns (a_up, integral, v_ref))."""
+    integral, dt, a_up_max, a_dn_max, i_limit = st
+    v_ref = (min(max(kp_z * (h_ref - h), -v_max_dn), v_max_up) if override is None
+             else float(override))
+    e = v_ref - v_up
+    p = kp_vz * e
+    dI = ki_vz * e * dt
+    u = p + integral + dI
+    if (u > a_up_max and dI > 0.0) or (u < -a_dn_max and dI < 0.0):
+        dI = 0.0
+    integral = min(max(integral + dI, -i_limit), i_limit)
+    return min(max(p + integral, -a_dn_max), a_up_max), integral, v_ref
+
+
+def _ref_fw_alt(integral, dt, h_ref, h, v_up, kp_alt, kp_vz, ki_vz, climb_max, sink_max,
+                pitch_min, pitch_max):
+    """FixedWingAltitudeHold.update as it was, with the builtins min / max."""
+    v_ref = min(max(kp_alt * (h_ref - h), -sink_max), climb_max)
+    e = v_ref - v_up
+    p = kp_vz * e
+    dI = ki_vz * e * dt
+    u = p + integral + dI
+    if (u > pitch_max and dI > 0.0) or (u < pitch_min and dI < 0.0):
+        dI = 0.0
+    integral = min(max(integral + dI, pitch_min), pitch_max)
+    return min(max(p + integral, pitch_min), pitch_max), integral, v_ref
+
+
+def _adversarial(rng, scale):
+    """A random float, or now and then a NaN, an infinity, a signed zero or a bound."""
+    r = rng.random()
+    if r < 0.03:
+        return float("nan")
+    if r < 0.06:
+        return float(rng.choice([np.inf, -np.inf]))
+    if r < 0.12:
+        return float(rng.choice([0.0, -0.0]))
+    return float(rng.normal(0.0, scale))
+
+
+def _same(a, b):
+    return np.array([a], dtype=float).tobytes() == np.array([b], dtype=float).tobytes()
+
+
+def test_altitude_holds_clip_as_the_builtins_did():
+    """Both altitude holds (their min / max written as comparisons) against the builtins'
+    formulas, bit for bit including NaN, infinities and signed zeros, over random steps with
+    the integral carried on (landing overrides, saturating and zero-width limits)."""
+    from vtolftc.firmware_sim.autopilot.altitude import (
+        FixedWingAltitudeHold,
+        MulticopterAltitudeHold,
+    )
+
+    rng = np.random.default_rng(5)
+    mc, fw = MulticopterAltitudeHold(0.004), FixedWingAltitudeHold(0.004)
+    mc_i = fw_i = 0.0
+    for k in range(20000):
+        a = [_adversarial(rng, s) for s in (30.0, 30.0, 5.0, 2.0, 3.0, 2.0, 4.0, 3.0)]
+        if k % 500 == 0:  # start again from finite integrals after a NaN got in
+            mc.integral = mc_i = float(rng.normal())
+            fw.integral = fw_i = float(rng.normal(0.0, 0.1))
+        override = None if rng.random() < 0.8 else a[7]
+        want = _ref_mc_alt((mc_i, mc.dt, mc.a_up_max, mc.a_dn_max, mc.i_limit), a[0], a[1],
+                           a[2], a[3], a[4], a[5], abs(a[6]), abs(a[7]), override)
+        got = mc.update(a[0], a[1], a[2], kp_z=a[3], kp_vz=a[4], ki_vz=a[5], v_max_up=abs(a[6]),
+                        v_max_dn=abs(a[7]), v_up_override=override)
+        mc_i = want[1]
+        assert _same(got, want[0]) and _same(mc.integral, want[1]), k
+        assert _same(mc.v_up_ref, want[2]), k
+        lo = -abs(a[6]) * 0.3
+        hi = lo if rng.random() < 0.05 else abs(a[7]) * 0.3
+        want = _ref_fw_alt(fw_i, fw.dt, a[0], a[1], a[2], a[3] * 0.1, a[4] * 0.1, a[5] * 0.1,
+                           abs(a[6]), abs(a[7]), lo, hi)
+        got = fw.update(a[0], a[1], a[2], kp_alt=a[3] * 0.1, kp_vz=a[4] * 0.1,
+                        ki_vz=a[5] * 0.1, climb_max=abs(a[6]), sink_max=abs(a[7]),
+                        pitch_min=lo, pitch_max=hi)
+        fw_i = want[1]
+        assert _same(got, want[0]) and _same(fw.integral, want[1]), k
+        assert _same(fw.v_up_ref, want[2]), k
+
+
+def test_outer_loop_helpers_clip_as_the_builtins_did(ds1):
+    """``aero_estimate`` and ``pusher_max_force`` (min / max as comparisons) against the
+    builtins' formulas, bit for bit, on random and adversarial airspeeds and angles."""
+    ap = Autopilot(ds1)
+    outer = ap.outer
+    w = ds1.wing
+    rho = ap.effectiveness._rho
+    rng = np.random.default_rng(9)
+    for k in range(20000):
+        V = abs(_adversarial(rng, 15.0)) if rng.random() < 0.9 else float(rng.uniform(0, 2))
+        alpha = _adversarial(rng, 0.3)
+        tot = 0.0
+        for r in ds1.pushers:
+            tot += r.max_thrust_N * min(1.25, max(0.0, 1.0 - V / r.zero_thrust_axial_speed_m_s))
+        assert _same(outer.pusher_max_force(V), tot), (k, V)
+        if V < 1.0:
+            continue
+        qS = 0.5 * rho * V * V * w.area_m2
+        cl = min(max(w.CL0 + w.CL_alpha * alpha, -w.CL_max), w.CL_max)
+        lift, drag = outer.aero_estimate(V, alpha)
+        assert _same(lift, qS * cl) and _same(drag, qS * (w.CD0 + w.induced_drag_factor * cl * cl))

@@ -63,7 +63,9 @@ def test_kernel_equals_python_reference_bit_for_bit(seed: int) -> None:
             t_nb = np.concatenate((np.roll(t_nb, -int(s_nb[mk.S_HEAD]), axis=0),
                                    np.zeros_like(t_nb)))
             s_py[mk.S_HEAD] = s_nb[mk.S_HEAD] = 0.0
-            assert mk.metrics_step_py(s_py, t_py, *smp) == mk.metrics_step(s_nb, t_nb, *smp)
+            a = mk.metrics_step_py(s_py, t_py, *smp)
+            assert a == mk.metrics_step(s_nb, t_nb, *smp)
+        assert a == (2 if s_py[mk.S_CRASHED] != 0.0 else 1)  # 2: added, crashed
         _same_bits(s_py, s_nb)
         _same_bits(t_py, t_nb)
     assert grew > 0 or seed > 0  # 250 Hz overflows a 64-row ring
@@ -128,3 +130,18 @@ def test_accumulator_equals_plain_python_and_grows_its_ring() -> None:
     # plain Python types (run.json / metrics.json are written with the json module)
     assert type(m["crashed"]) is bool and type(m["quad_chute"]) is bool
     assert type(m["samples"]) is int and type(m["rmse_roll_deg"]) is float
+
+
+def test_add_step_returns_crashed_after_each_sample() -> None:
+    """``add_step``'s return (the kernel's 2) is :attr:`crashed` after every sample, before
+    and after the crash."""
+    rng = np.random.default_rng(0)
+    acc = MetricsAccumulator(window_start_s=1.5)
+    seen = set()
+    for t, pos, roll, pitch, yaw, mode, armed, ref, alt_ref, air in _random_samples(rng, 3000,
+                                                                                  4000):
+        nav = NavState(t, np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), pos, np.zeros(3), air)
+        got = acc.add_step(t, nav, FlightMode(mode), armed, ref, alt_ref, (roll, pitch, yaw))
+        assert got is acc.crashed
+        seen.add(got)
+    assert seen == {False, True}

@@ -61,8 +61,14 @@ class MulticopterAltitudeHold:
 
         ``v_up_override`` replaces the altitude P loop by a climb-rate reference (landing).
         """
+        # min(max(x, lo), hi) written as comparisons (the builtins' own rule, also for NaN
+        # and signed zeros: the later argument only when strictly greater / less), which
+        # saves their calls on this per-step path
         if v_up_override is None:
-            v_ref = min(max(kp_z * (h_ref - h), -v_max_dn), v_max_up)
+            x = kp_z * (h_ref - h)
+            lo = -v_max_dn
+            x = lo if lo > x else x
+            v_ref = v_max_up if v_max_up < x else x
         else:
             v_ref = float(v_up_override)
         self.v_up_ref = v_ref
@@ -70,10 +76,18 @@ class MulticopterAltitudeHold:
         p = kp_vz * e
         dI = ki_vz * e * self.dt
         u = p + self.integral + dI
-        if (u > self.a_up_max and dI > 0.0) or (u < -self.a_dn_max and dI < 0.0):
+        a_up_max = self.a_up_max
+        a_dn = -self.a_dn_max
+        if (u > a_up_max and dI > 0.0) or (u < a_dn and dI < 0.0):
             dI = 0.0
-        self.integral = min(max(self.integral + dI, -self.i_limit), self.i_limit)
-        return min(max(p + self.integral, -self.a_dn_max), self.a_up_max)
+        i_lim = self.i_limit
+        x = self.integral + dI
+        lo = -i_lim
+        x = lo if lo > x else x
+        self.integral = x = i_lim if i_lim < x else x
+        x = p + x
+        x = a_dn if a_dn > x else x
+        return a_up_max if a_up_max < x else x
 
 
 class FixedWingAltitudeHold:
@@ -112,7 +126,11 @@ class FixedWingAltitudeHold:
         float
             pitch reference (rad).
         """
-        v_ref = min(max(kp_alt * (h_ref - h), -sink_max), climb_max)
+        # min(max(x, lo), hi) as comparisons (see MulticopterAltitudeHold.update)
+        x = kp_alt * (h_ref - h)
+        lo = -sink_max
+        x = lo if lo > x else x
+        v_ref = climb_max if climb_max < x else x
         self.v_up_ref = v_ref
         e = v_ref - v_up
         p = kp_vz * e
@@ -120,5 +138,9 @@ class FixedWingAltitudeHold:
         u = p + self.integral + dI
         if (u > pitch_max and dI > 0.0) or (u < pitch_min and dI < 0.0):
             dI = 0.0
-        self.integral = min(max(self.integral + dI, pitch_min), pitch_max)
-        return min(max(p + self.integral, pitch_min), pitch_max)
+        x = self.integral + dI
+        x = pitch_min if pitch_min > x else x
+        self.integral = x = pitch_max if pitch_max < x else x
+        x = p + x
+        x = pitch_min if pitch_min > x else x
+        return pitch_max if pitch_max < x else x

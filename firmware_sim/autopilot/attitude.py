@@ -220,21 +220,40 @@ class ScheduledPPIDController(_GainFileController):
         super().__init__(name, gains_path)
         self.schedule = schedule
         g0 = schedule.gains_at(0.0)
-        self._state = np.zeros((3, ck.N_STATE))
-        self._const = np.zeros((3, ck.N_CONST))
-        self._gains = np.zeros((3, ck.N_GAINS))  # this step's gains, written by the kernel
+        #: gains, state, constants and output in one array (the packed kernel's ``ws``);
+        #: ``_gains``, ``_state``, ``_const`` and ``_out`` are views of it
+        self._ws = np.zeros(ck.W_SIZE)
+        self._link_views()
         #: the three axes (roll, pitch, yaw), views of the arrays the compiled step updates
         self.pids: tuple[CascadedPPID, ...] = tuple(
             ScheduledAxis(g0[ax], dt, wrap=(ax == "yaw"), rate_limit=rl, output_limit=1e6,
                           state=self._state, const=self._const, gains_array=self._gains,
                           row=k)
             for k, (ax, rl) in enumerate(zip(ATTITUDE_AXES, rate_limits, strict=True)))
-        self._out = np.zeros(3)
-        #: ``(gains, state, const, out)``: the arrays of the compiled step
-        #: (``control_kernels.scheduled_ppid3_step``), for a caller that steps it directly as
-        #: :meth:`update` does (the autopilot's attitude stage): this step's gains (3, 5),
-        #: the P-PID state (3, N_STATE), the constants (3, N_CONST), the output (3,) [N m]
+
+    def _link_views(self) -> None:
+        """``_gains`` (this step's gains, written by the kernel), ``_state``, ``_const`` and
+        ``_out`` as views of the workspace ``_ws``, and ``kernel_arrays``: ``(gains, state,
+        const, out)``, the arrays of the compiled step (``control_kernels.
+        scheduled_ppid3_step``) for a caller that steps it directly: this step's gains
+        (3, 5), the P-PID state (3, N_STATE), the constants (3, N_CONST), the output (3,)
+        [N m]. The axes keep the whole state and constants arrays (``CascadedPPID``)."""
+        ws = self._ws
+        self._gains = ws[ck.W_GAINS:ck.W_STATE].reshape(3, ck.N_GAINS)
+        self._state = ws[ck.W_STATE:ck.W_CONST].reshape(3, ck.N_STATE)
+        self._const = ws[ck.W_CONST:ck.W_OUT].reshape(3, ck.N_CONST)
+        self._out = ws[ck.W_OUT:ck.W_SIZE]
         self.kernel_arrays = (self._gains, self._state, self._const, self._out)
+        #: the workspace itself (``control_kernels.scheduled_ppid3_step_packed``'s ``ws``)
+        self.kernel_ws = ws
+        for pid in getattr(self, "pids", ()):
+            pid._state, pid._const, pid._gains_array = self._state, self._const, self._gains
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """A copied or unpickled controller (numpy copies every view on its own) links its
+        arrays, and its axes', to its own workspace again."""
+        self.__dict__.update(state)
+        self._link_views()
 
     def reset(self) -> None:
         """Clear the integrators of the three axes' P-PID loops (``CascadedPPID.reset``)."""

@@ -7,9 +7,10 @@ the allocation and the outer loops use the raw value). On the ground before take
 controller is held reset (no integrator wind-up against the ground).
 
 With a :class:`~.attitude.ScheduledPPIDController` (``gs-shif``, ``shif``) the stage calls the
-compiled step (:func:`.control_kernels.scheduled_ppid3_step`) itself on the controller's
-arrays: what ``update`` calls, on the same arrays (no conversion, no copy), so the same bits;
-compiled without ``fastmath``.
+compiled step itself (:func:`.control_kernels.scheduled_ppid3_step_packed`: what ``update``
+calls, :func:`.control_kernels.scheduled_ppid3_step`, on views of the schedule's packed
+tables and the controller's workspace, the saturation flags as the output stage's mask; no
+conversion, no copy), so the same bits; compiled without ``fastmath``.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.firmware_sim.autopilot.attitude import AttitudeController, ScheduledPPIDController
-from vtolftc.firmware_sim.autopilot.control_kernels import scheduled_ppid3_step
+from vtolftc.firmware_sim.autopilot.control_kernels import scheduled_ppid3_step_packed
 from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
 from vtolftc.firmware_sim.autopilot.interface import FlightMode
 
@@ -57,12 +58,14 @@ class AttitudeStage:
 
     def update(self, mode: FlightMode, h: float, V: float, ref: NDArray[np.float64],
                att: NDArray[np.float64], rates: NDArray[np.float64], sat_hi: list[bool],
-               sat_lo: list[bool]) -> NDArray[np.float64]:
+               sat_lo: list[bool], sat_mask: int | None = None) -> NDArray[np.float64]:
         """The body torque commands [N m] (FRD) for the reference ``ref`` (roll, pitch, yaw
         [rad]): ``att`` roll/pitch/yaw [rad], ``rates`` body rates [rad/s], ``V`` airspeed
         [m/s], ``h`` altitude [m]; ``sat_hi``/``sat_lo`` the moment axes the last allocation
-        fell short of upwards/downwards (anti-windup). The result may be the controller's
-        own output array (read it before the next step, do not keep it)."""
+        fell short of upwards/downwards (anti-windup), ``sat_mask`` the same flags as the
+        output stage's mask (bits 0-2 ``sat_hi``, 3-5 ``sat_lo``) when the caller has it.
+        The result may be the controller's own output array (read it before the next step,
+        do not keep it)."""
         if mode == _M_TAKEOFF and h - self.est.ground_alt < 0.5:  # still on the ground
             self.controller.reset()
         # gains scheduled on a low-passed airspeed: the measurement's noise would otherwise
@@ -72,7 +75,8 @@ class AttitudeStage:
         tc = self._p["FTC_SCHED_TAU"].value
         vs = self.v_sched
         if tc > 0.0 and math.isfinite(vs):
-            vs += min(1.0, self.dt / tc) * (V - vs)
+            r = self.dt / tc
+            vs += (r if r < 1.0 else 1.0) * (V - vs)  # min(1.0, r), without the call
         else:
             vs = V
         self.v_sched = vs
@@ -85,11 +89,14 @@ class AttitudeStage:
             # same compiled step on the same arrays, hence the same bits. The result is the
             # controller's output array (the output stage copies it into the virtual command
             # at once), not a copy
-            bp, rows, slopes = ctrl.schedule.kernel_tables
-            gains, state, const, out = ctrl.kernel_arrays
-            scheduled_ppid3_step(bp, rows, slopes, vs, ref, att, rates, gains, state, const,
-                                 bool(sat_hi[0]), bool(sat_hi[1]),
-                                 bool(sat_hi[2]), bool(sat_lo[0]), bool(sat_lo[1]),
-                                 bool(sat_lo[2]), out)
+            # the schedule's tables and the controller's arrays as two packed arrays (the
+            # same kernels on views of them)
+            if sat_mask is None:
+                sat_mask = ((1 if sat_hi[0] else 0) | (2 if sat_hi[1] else 0)
+                            | (4 if sat_hi[2] else 0) | (8 if sat_lo[0] else 0)
+                            | (16 if sat_lo[1] else 0) | (32 if sat_lo[2] else 0))
+            out = ctrl.kernel_arrays[3]
+            scheduled_ppid3_step_packed(ctrl.schedule.kernel_packed, vs, ref, att, rates,
+                                        ctrl.kernel_ws, sat_mask)
             return out
         return ctrl.update(ref, att, rates, vs, sat_hi, sat_lo)

@@ -248,7 +248,8 @@ class Autopilot:
                                                          V)
         u_pref = out.u_pref_fw if mode is _M_FIXED_WING else out.u_pref_mc
         tau = self.attitude_stage.update(mode, h, V, self.setpoints.ref, est.att,
-                                         nav.omega_body_rad_s, out.sat_hi, out.sat_lo)
+                                         nav.omega_body_rad_s, out.sat_hi, out.sat_lo,
+                                         out.sat_mask)
         return out.allocate(V, tau, reserve, rotor_hi, pusher_hi, u_pref)
 
     # ------------------------------------------------------------------------------------
@@ -279,7 +280,7 @@ class Autopilot:
         """
         m = self.modes
         est = self.estimate
-        euler = tuple(est.att.tolist()) if nav is est.last_nav else None
+        euler = est.euler if nav is est.last_nav else None
         return m.mode, m.armed, self.setpoints.ref, float(self.setpoints.alt_ref), euler
 
     @property

@@ -34,9 +34,10 @@ __all__ = [
     "C_DT", "C_RATE_LIMIT", "C_TUSTIN", "C_U_MAX", "C_U_MIN", "C_WRAP", "G_KD_RATE",
     "G_KI_RATE", "G_KP_ANGLE", "G_KP_RATE", "G_TF_RATE", "N_CONST", "N_GAINS", "N_STATE",
     "S_A", "S_B", "S_DERIVATIVE", "S_E_PREV", "S_INTEGRAL", "S_OUTPUT", "S_OUTPUT_UNSAT",
-    "S_RATE_REF", "S_SATURATED", "S_TF", "filter_coefficients", "lqr3_step", "ppid3_step",
-    "ppid_rate_reference", "ppid_rate_step", "ppid_step", "scheduled_gains",
-    "scheduled_ppid3_step", "wrap_angle",
+    "S_RATE_REF", "S_SATURATED", "S_TF", "W_CONST", "W_GAINS", "W_OUT", "W_SIZE", "W_STATE",
+    "filter_coefficients", "lqr3_step", "ppid3_step", "ppid_rate_reference", "ppid_rate_step",
+    "ppid_step", "scheduled_gains", "scheduled_ppid3_step", "scheduled_ppid3_step_packed",
+    "wrap_angle",
 ]
 
 #: columns of the P-PID gains row
@@ -49,6 +50,15 @@ N_STATE = 10
 #: columns of the P-PID constants row
 C_WRAP, C_RATE_LIMIT, C_DT, C_TUSTIN, C_U_MIN, C_U_MAX = range(6)
 N_CONST = 6
+
+#: The packed workspace of a three-axis P-PID (:func:`scheduled_ppid3_step_packed`): the
+#: gains (3, N_GAINS), state (3, N_STATE), constants (3, N_CONST) and output (3,), each
+#: C-ordered, from these offsets; W_SIZE entries in all.
+W_GAINS = 0
+W_STATE = W_GAINS + 3 * N_GAINS
+W_CONST = W_STATE + 3 * N_STATE
+W_OUT = W_CONST + 3 * N_CONST
+W_SIZE = W_OUT + 3
 
 TWO_PI = 2.0 * math.pi
 
@@ -339,3 +349,40 @@ def scheduled_ppid3_step(bp, rows, slopes, V, ref, att, rates, G, S, C, sat_hi0,
     scheduled_gains(bp, rows, slopes, V, G)
     ppid3_step(ref, att, rates, G, S, C, sat_hi0, sat_hi1, sat_hi2, sat_lo0, sat_lo1,
                sat_lo2, out)
+
+
+@numba.njit(cache=True)
+def scheduled_ppid3_step_packed(tab, V, ref, att, rates, ws,
+                                sat_mask):  # pragma: no cover - compiled
+    """:func:`scheduled_ppid3_step` on two packed arrays instead of seven and one int instead
+    of six bools (each argument of a compiled call costs its own type check and unboxing):
+    the same kernels on views of them, with the same flags.
+
+    Parameters
+    ----------
+    tab : numpy.ndarray, shape (16 n + 15 max(n - 1, 1),)
+        The schedule's breakpoints (n,), rows (n, 3, 5) and slopes (max(n - 1, 1), 3, 5),
+        concatenated (``GainSchedule.kernel_packed``): n = 1 for 31 entries, else
+        (size + 15) / 31.
+    V, ref, att, rates
+        As :func:`scheduled_ppid3_step`.
+    ws : numpy.ndarray, shape (W_SIZE,)
+        Gains, state, constants and output at the ``W_*`` offsets (read and written as
+        :func:`scheduled_ppid3_step` does its ``G``, ``S``, ``C``, ``out``).
+    sat_mask : int
+        The saturation flags as the output stage's shortfall mask: bits 0-2 ``sat_hi0`` to
+        ``sat_hi2``, bits 3-5 ``sat_lo0`` to ``sat_lo2``.
+    """
+    size = tab.shape[0]
+    n = 1 if size == 31 else (size + 15) // 31
+    m = n - 1 if n > 1 else 1
+    bp = tab[0:n]
+    rows = tab[n:16 * n].reshape((n, 3, 5))
+    slopes = tab[16 * n:16 * n + 15 * m].reshape((m, 3, 5))
+    G = ws[W_GAINS:W_STATE].reshape((3, N_GAINS))
+    S = ws[W_STATE:W_CONST].reshape((3, N_STATE))
+    C = ws[W_CONST:W_OUT].reshape((3, N_CONST))
+    out = ws[W_OUT:W_SIZE]
+    scheduled_ppid3_step(bp, rows, slopes, V, ref, att, rates, G, S, C, (sat_mask & 1) != 0,
+                         (sat_mask & 2) != 0, (sat_mask & 4) != 0, (sat_mask & 8) != 0,
+                         (sat_mask & 16) != 0, (sat_mask & 32) != 0, out)

@@ -53,6 +53,8 @@ class StateEstimate:
         its simulated time [us].
     att : ndarray, shape (3,)
         roll, pitch, yaw [rad] (ZYX Euler angles of the NED-to-FRD rotation).
+    euler : tuple of float
+        the same angles as a tuple (what :meth:`update` returned last).
     ql : list of float
         attitude quaternion w, x, y, z.
     vel : list of float
@@ -67,14 +69,15 @@ class StateEstimate:
         altitude of the ground [m, up]: the first usable altitude, then the one at arming.
     """
 
-    __slots__ = ("airspeed", "alt", "att", "ground_alt", "have_nav", "last_nav", "ql",
-                 "time_usec", "v_up", "vel")
+    __slots__ = ("airspeed", "alt", "att", "euler", "ground_alt", "have_nav", "last_nav",
+                 "ql", "time_usec", "v_up", "vel")
 
     def __init__(self) -> None:
         self.have_nav = False
         self.last_nav: NavState | None = None
         self.time_usec = 0
         self.att = np.zeros(3)
+        self.euler = (0.0, 0.0, 0.0)
         self.ql = [1.0, 0.0, 0.0, 0.0]
         self.vel = [0.0, 0.0, 0.0]
         self.alt = 0.0
@@ -119,4 +122,5 @@ class StateEstimate:
         self.alt = h
         if not math.isfinite(self.ground_alt):
             self.ground_alt = h
-        return roll, pitch, yaw
+        self.euler = euler = (roll, pitch, yaw)
+        return euler

@@ -102,7 +102,11 @@ class OuterLoops:
         """
         sp = self.sp
         sp.ref[2] = sp.yaw_hold
-        cos_tilt = max(0.5, math.cos(roll) * math.cos(pitch))
+        # the builtins min / max written as comparisons on this per-step path (their own
+        # rule, also for NaN and signed zeros: max(a, b) = b if b > a else a, min(a, b) =
+        # b if b < a else a): the same bits without their calls
+        c = math.cos(roll) * math.cos(pitch)
+        cos_tilt = c if c > 0.5 else 0.5  # max(0.5, c)
         # estimate.body_velocity_f(*ql, *vel)[0] and [2], inlined (same expressions, same bits)
         w_, x_, y_, z_ = self.est.ql
         vn_, ve_, vd_ = self.est.vel
@@ -150,7 +154,8 @@ class OuterLoops:
         override = None
         vmax_up = pp["MPC_Z_VEL_MAX_UP"].value
         if mode == _M_TAKEOFF:
-            vmax_up = min(vmax_up, pp["MPC_TKO_SPEED"].value)
+            tko = pp["MPC_TKO_SPEED"].value
+            vmax_up = tko if tko < vmax_up else vmax_up  # min(vmax_up, tko)
         if mode == _M_LAND:
             override = -pp["MPC_LAND_SPEED"].value
             sp.alt_ref = h
@@ -166,8 +171,8 @@ class OuterLoops:
         if mode == _M_FRONT_TRANSITION:
             ref[0] = 0.0
             ref[1] = 0.0
-            self.pusher_ramp = min(1.0, self.pusher_ramp
-                                   + pp["VT_PSHER_SLEW"].value * self.dt)
+            r = self.pusher_ramp + pp["VT_PSHER_SLEW"].value * self.dt
+            self.pusher_ramp = r if r < 1.0 else 1.0  # min(1.0, r)
             fx_cmd = pp["VT_F_TRANS_THR"].value * self.pusher_ramp * self.pusher_max_force(V)
         elif mode == _M_BACK_TRANSITION:
             ref[0] = 0.0
@@ -230,9 +235,11 @@ class OuterLoops:
         fx_cmd = drag * math.cos(alpha) - lift * math.sin(alpha) + mass * (
             a_x + g * math.sin(pitch))
         if not ((fx_cmd >= fx_max and e_v > 0) or (fx_cmd <= 0.0 and e_v < 0)):
-            self.airspeed_int = min(max(self.airspeed_int
-                                        + pp["FW_AIRSPD_I"].value * e_v * self.dt, -3.0), 3.0)
-        sp.v[1] = min(max(fx_cmd, 0.0), fx_max)
+            x = self.airspeed_int + pp["FW_AIRSPD_I"].value * e_v * self.dt
+            x = -3.0 if x < -3.0 else x
+            self.airspeed_int = 3.0 if x > 3.0 else x  # min(max(x, -3.0), 3.0)
+        x = 0.0 if fx_cmd < 0.0 else fx_cmd
+        sp.v[1] = fx_max if fx_max < x else x  # min(max(fx_cmd, 0.0), fx_max)
         if not reserve:
             a_up = self.mc_alt.update(sp.alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
                                       kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
@@ -256,7 +263,10 @@ class OuterLoops:
         _, rho, area, cl0, cl_alpha, cl_max, cd0, k_i = wing
         # effectiveness.dynamic_pressure(V) * area, inlined (V >= 1 here)
         qS = 0.5 * rho * V * V * area
-        cl = min(max(cl0 + cl_alpha * alpha, -cl_max), cl_max)
+        cl = cl0 + cl_alpha * alpha
+        lo = -cl_max
+        cl = lo if lo > cl else cl
+        cl = cl_max if cl_max < cl else cl  # min(max(cl, -cl_max), cl_max)
         cd = cd0 + k_i * cl * cl
         return qS * cl, qS * cd
 
@@ -264,7 +274,9 @@ class OuterLoops:
         """Nominal total pusher thrust at full command and airspeed V [m/s], in N."""
         tot = 0.0
         for tmax, v0 in self._pushers_nominal:
-            tot += tmax * min(1.25, max(0.0, 1.0 - V / v0))
+            x = 1.0 - V / v0
+            x = x if x > 0.0 else 0.0  # max(0.0, x)
+            tot += tmax * (x if x < 1.25 else 1.25)  # min(1.25, x)
         return tot
 
     def _position_hold(self, nav: NavState, yaw: float) -> tuple[float, float]:
@@ -291,6 +303,11 @@ class OuterLoops:
         a_fwd = math.cos(yaw) * an + math.sin(yaw) * ae
         a_right = -math.sin(yaw) * an + math.cos(yaw) * ae
         tmax = math.radians(pp["MPC_TILTMAX_AIR"].value)
-        pitch_ref = min(max(-math.atan2(a_fwd, g), -tmax), tmax)
-        roll_ref = min(max(math.atan2(a_right, g), -tmax), tmax)
+        lo = -tmax
+        x = -math.atan2(a_fwd, g)
+        x = lo if lo > x else x
+        pitch_ref = tmax if tmax < x else x  # min(max(x, -tmax), tmax)
+        x = math.atan2(a_right, g)
+        x = lo if lo > x else x
+        roll_ref = tmax if tmax < x else x
         return roll_ref, pitch_ref

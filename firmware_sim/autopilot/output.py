@@ -133,6 +133,9 @@ class OutputStage:
         # bool: read by the attitude controller's anti-windup every step)
         self.sat_hi = [False, False, False]
         self.sat_lo = [False, False, False]
+        #: the same flags as one shortfall mask (bits 0-2: ``sat_hi``, 3-5: ``sat_lo``), what
+        #: the attitude stage's compiled step takes
+        self.sat_mask = 0
         self.saturated_steps = 0
         self.fz_cmd = 0.0
         self.fz_achieved = 0.0
@@ -154,6 +157,7 @@ class OutputStage:
         """Forget which axes the last allocation fell short on (loops reset)."""
         self.sat_hi = [False, False, False]
         self.sat_lo = [False, False, False]
+        self.sat_mask = 0
 
     def allocate(self, V: float, tau: NDArray[np.float64], reserve: bool, rotor_hi: float,
                  pusher_hi: float, u_pref: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -194,6 +198,7 @@ class OutputStage:
                 v, B, hi, u_pref, u, 2, _SAT_ATOL, _SAT_RTOL)
             self.fz_cmd = v.item(0)
             self.sat_hi, self.sat_lo = _SAT_FLAGS[mask]
+            self.sat_mask = mask
             if mask:
                 self.saturated_steps += 1
         else:  # an allocator (or its allocate) replaced by a benchmark or a test
@@ -210,5 +215,6 @@ class OutputStage:
         self.fz_cmd = v.item(0)
         self.fz_achieved = achieved.item(0)
         self.sat_hi, self.sat_lo = _SAT_FLAGS[mask]
+        self.sat_mask = mask
         if mask:
             self.saturated_steps += 1

@@ -173,6 +173,10 @@ class GainSchedule:
         # the same rows and slopes as float arrays, for control_kernels.scheduled_gains
         self.kernel_tables: tuple[np.ndarray, np.ndarray, np.ndarray] = _kernel_tables(
             self._bp, self._rows, self._slopes)
+        #: ``kernel_tables`` concatenated into one read-only array (breakpoints, rows,
+        #: slopes: ``control_kernels.scheduled_ppid3_step_packed``'s ``tab``)
+        self.kernel_packed: np.ndarray = np.concatenate([a.ravel() for a in self.kernel_tables])
+        self.kernel_packed.setflags(write=False)
 
     # -------------------------------------------------------------------------------------
     @classmethod

@@ -164,11 +164,13 @@ class MetricsAccumulator:
             ref = np.array((float(ref[0]), float(ref[1]), float(ref[2])))
         if type(mode) is not FlightMode:
             mode = FlightMode(mode)
-        while not mk.metrics_step(self._s, self._tail, time_usec, pos, roll, pitch, yaw,
-                                  int(mode), bool(armed), ref, float(altitude_ref_m),
-                                  float(nav.airspeed_m_s)):
+        while True:
+            r = mk.metrics_step(self._s, self._tail, time_usec, pos, roll, pitch, yaw,
+                                int(mode), bool(armed), ref, float(altitude_ref_m),
+                                float(nav.airspeed_m_s))
+            if r:
+                return r == 2  # the kernel's "crashed" (s[S_CRASHED]), no read of it here
             self._grow_tail()
-        return bool(self._s[mk.S_CRASHED] != 0.0)
 
     def _grow_tail(self) -> None:
         """Double the tail ring, its samples moved to the start in order."""

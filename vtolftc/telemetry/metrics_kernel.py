@@ -85,7 +85,8 @@ def metrics_step_py(s: NDArray[np.float64], tail: NDArray[np.float64], time_usec
     Returns
     -------
     int
-        1: added. 0: the tail ring is full; nothing was changed (grow it and call again).
+        1: added. 2: added, and the flight has crashed (``s[S_CRASHED]`` set, now or
+        before). 0: the tail ring is full; nothing was changed (grow it and call again).
     """
     cap = tail.shape[0]
     n_tail = int(s[S_LEN])
@@ -163,7 +164,7 @@ def metrics_step_py(s: NDArray[np.float64], tail: NDArray[np.float64], time_usec
         n_tail -= 1
     s[S_HEAD] = head
     s[S_LEN] = n_tail
-    return 1
+    return 2 if s[S_CRASHED] != 0.0 else 1
 
 
 #: the one signature, compiled (or loaded from numba's cache) at import: a SITL autopilot

@@ -323,6 +323,21 @@ def _allocate_step_tracked(v, B, pref, umax_in, cst, has_prev, has_rate, dt, ws,
     return code, ok, it, shortfall_mask(v, va, first, atol, rtol), va[0]
 
 
+@numba.njit(cache=True)
+def _allocate_step_tracked_packed(v, B, pref, umax_in, wsx, n_ws, has_prev, has_rate, dt, iws,
+                                  max_iter, tol, u_out, first, atol, rtol):
+    """:func:`_allocate_step_tracked` with its ``ws``, ``cst`` and ``ubuf`` as consecutive
+    parts of one array ``wsx`` (``ws`` its first ``n_ws`` entries, then ``cst`` (3, n_u),
+    then ``ubuf`` (n_u); ``ActiveSetAllocator._pack``): 7 array arguments instead of 9, the
+    same kernel on views of the same numbers."""
+    n_u = B.shape[1]
+    ws = wsx[0:n_ws]
+    cst = wsx[n_ws:n_ws + 3 * n_u].reshape((3, n_u))
+    ubuf = wsx[n_ws + 3 * n_u:n_ws + 4 * n_u]
+    return _allocate_step_tracked(v, B, pref, umax_in, cst, has_prev, has_rate, dt, ws, iws,
+                                  ubuf, max_iter, tol, u_out, first, atol, rtol)
+
+
 def box_qp(
     H: np.ndarray,
     q: np.ndarray,
@@ -417,9 +432,12 @@ class ActiveSetAllocator(WLSAllocator):
         # allocate_trusted's kernel arguments: the limits as rows of one array (``u_min``,
         # ``u_max`` and ``rate_limit`` become views of it) and the command buffer
         rate = self.rate_limit
-        self._cst = np.stack([self.u_min, self.u_max,
-                              self._zeros_u if rate is None else rate]).astype(F64)
-        self._ubuf = np.zeros(n_u)
+        cst = np.stack([self.u_min, self.u_max,
+                        self._zeros_u if rate is None else rate]).astype(F64)
+        # ``_ws``, ``_cst`` and ``_ubuf`` are in turn views of one array ``_wsx`` (the
+        # tracked kernel's single float workspace: two array arguments fewer per call)
+        self._n_ws = self._ws.size
+        self._wsx = np.concatenate([self._ws, cst.ravel(), np.zeros(n_u)])
         self._link_views()
 
     _WS_PARTS = ("_lo", "_hi", "_B_last", "_w_v2", "_reg", "_Hn", "_Px", "_BtW2s", "_scale",
@@ -428,7 +446,13 @@ class ActiveSetAllocator(WLSAllocator):
 
     def _link_views(self) -> None:
         """Make the ``_WS_PARTS`` attributes views of ``_ws`` (each keeps its shape), the
-        upper-triangle indices views of ``_iws`` and the limits views of ``_cst``."""
+        upper-triangle indices views of ``_iws`` and the limits views of ``_cst``; first
+        ``_ws``, ``_cst`` (3, n_u) and ``_ubuf`` (n_u) as consecutive views of ``_wsx``."""
+        n_ws, n_u = self._n_ws, self.n_u
+        wsx = self._wsx
+        self._ws = wsx[:n_ws]
+        self._cst = wsx[n_ws:n_ws + 3 * n_u].reshape(3, n_u)
+        self._ubuf = wsx[n_ws + 3 * n_u:]
         o = 0
         for name in self._WS_PARTS:
             a = getattr(self, name)
@@ -578,9 +602,10 @@ class ActiveSetAllocator(WLSAllocator):
         u = self._ubuf
         if last is not None and last is not u:
             u[:] = last
-        code, ok, it, mask, fz = _allocate_step_tracked(
-            v, Bk, u_pref, u_max, self._cst, last is not None, self.rate_limit is not None,
-            self.dt, self._ws, self._iws, u, self.max_iter, self.tol, u_out, first, atol, rtol)
+        code, ok, it, mask, fz = _allocate_step_tracked_packed(
+            v, Bk, u_pref, u_max, self._wsx, self._n_ws, last is not None,
+            self.rate_limit is not None, self.dt, self._iws, self.max_iter, self.tol, u_out,
+            first, atol, rtol)
         if code < 0 or not ok:
             u_res, va, status = self._unconverged(code, it, v, B, u_pref, last, t0)
             u_out[:] = u_res
