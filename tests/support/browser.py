@@ -265,6 +265,29 @@ class DashboardPage:
             180.0, "reading the update counter")
         return int(n), float(ms) / 1000.0
 
+    def process_types(self) -> list[str]:
+        """The ``--type`` of every live process of this browser (``browser`` for the browser
+        process itself; e.g. ``renderer``, ``gpu-process``, ``utility``), by a scan of /proc
+        from chromedriver's pid (Linux)."""
+        parent: dict[int, int] = {}
+        for d in Path("/proc").iterdir():
+            with contextlib.suppress(OSError, IndexError, ValueError):
+                if d.name.isdigit():
+                    parent[int(d.name)] = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+        procs: set[int] = set()
+        frontier = {self.driver.service.process.pid}
+        while frontier:
+            frontier = {c for c, p in parent.items() if p in frontier} - procs
+            procs |= frontier
+        out = []
+        for pid in sorted(procs):
+            with contextlib.suppress(OSError):
+                args = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+                types = [a[7:] for a in args.split("\0") if a.startswith("--type=")]
+                if "chrom" in args.split("\0")[0]:
+                    out.append(types[0] if types else "browser")
+        return out
+
     def screenshot(self, path: Path) -> Path:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
