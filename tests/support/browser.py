@@ -282,9 +282,11 @@ class DashboardPage:
         out = []
         for pid in sorted(procs):
             with contextlib.suppress(OSError):
+                # chromium rewrites its children's command lines: one space-separated string
                 args = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
-                types = [a[7:] for a in args.split("\0") if a.startswith("--type=")]
-                if "chrom" in args.split("\0")[0]:
+                args = args.replace("\0", " ").split()
+                types = [a[7:] for a in args if a.startswith("--type=")]
+                if args and "chrom" in args[0]:
                     out.append(types[0] if types else "browser")
         return out
 
