@@ -207,7 +207,11 @@ def test_fresh_cache_sitl_flight_through_every_mode_never_stalls(tmp_path, monke
     message says so. Seen under load (session 13, load 11-16 on 2 cores): one loop gap of
     1014 ms (step CPU max 1.0 ms, nothing compiled after ready) at t = 7.9 s, watchdog cut;
     a plain Python process sleeping 50 ms in a loop beside it overslept by up to 1.02 s in
-    150 s: the processes were not scheduled, the autopilot's code did not stall."""
+    150 s: the processes were not scheduled, the autopilot's code did not stall. Session 14,
+    twice beside 2 burners (load 7.6-12.5 with the other helpers): one pass (137 s); one
+    failure: the probe saw stalls of 1.41 s (sim t = 1.7 s), 0.66 s and 0.73 s (t = 19.4,
+    20.4 s), the vehicle thread runnable (state R) with 0 ms of CPU between samples, CPU
+    pressure "some" 96-98 %; the vehicle's watchdog cut at t = 23.3 s. Same cause."""
     from pymavlink import mavutil
     from support.stall_probe import StallProbe
 
