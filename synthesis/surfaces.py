@@ -412,7 +412,18 @@ class SurfaceChannel:
         return self.inner(self.gains(theta))
 
     def batch_gains(self, thetas: NDArray[np.float64]) -> NDArray[np.float64]:
-        """:meth:`gains` of every row of ``thetas``, shape (nb, 5)."""
+        """:meth:`gains` of every row of ``thetas``.
+
+        Parameters
+        ----------
+        thetas : ndarray of float, shape (nb, 5 (d + 1))
+            Coefficient vectors, one per row.
+
+        Returns
+        -------
+        ndarray of float, shape (nb, 5)
+            The clipped gains of each row in :data:`PARAM_NAMES` order.
+        """
         T = np.asarray(thetas, float).reshape(-1, len(PARAM_NAMES), self.phi.size)
         return np.clip(T @ self.phi, self.lower, self.upper)
 
@@ -471,7 +482,18 @@ class SurfaceRealizer:
 
     @staticmethod
     def applies(channels: Sequence[Any]) -> bool:
-        """Whether every channel is a SurfaceChannel around a CascadeChannel."""
+        """Whether every channel is a SurfaceChannel around a CascadeChannel.
+
+        Parameters
+        ----------
+        channels : sequence
+            A problem's channels.
+
+        Returns
+        -------
+        bool
+            True when :class:`SurfaceRealizer` can realise them.
+        """
         return all(isinstance(c, SurfaceChannel) and isinstance(c.inner, CascadeChannel)
                    for c in channels)
 
