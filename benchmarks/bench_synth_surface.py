@@ -74,7 +74,9 @@ Measured (session 13, 2026-12-03, 2 cores shared with 4 other helpers):
   finiteness test 0.4 s), the central differences 4.5 -> 3.1 s, the abscissa 6.1 -> 3.9 s.
   Paired ``time.process_time`` of that tune after a warm-up, branch / main in alternating
   order (ABBA), load 10-15: 9.61 / 12.16, 9.81 / 10.92, 11.21 / 13.25, 9.64 / 12.29 s
-  (ratios 0.79, 0.90, 0.85, 0.78; median 0.82). The validation (``_sweep_peak`` ->
+  (ratios 0.79, 0.90, 0.85, 0.78; median 0.82); 4 more pairs at load 0-1 (07:36 UTC):
+  7.93 / 10.58, 7.05 / 9.48, 7.58 / 8.79, 9.38 / 10.09 s (0.75, 0.74, 0.86, 0.93; median
+  0.81). The validation (``_sweep_peak`` ->
   ``certificate.mu_real_sweep``, about half its CPU) is not changed: a profile of 12
   axis-points (16 s CPU) spends it in ``dg_scaling.dg_upper_bound``'s SciPy BFGS (line
   searches and wrappers 5.7 s of which the compiled D-G objective is 0.4 s), ``mu.mu_sweep``
