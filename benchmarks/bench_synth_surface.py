@@ -57,6 +57,42 @@ Measured (session 13, 2026-12-03, 2 cores shared with 4 other helpers):
   so not bit for bit). The validation (78.6 s CPU, 147 axis-points, ~0.5 s each) spends
   most in the mixed-mu sweeps (``certificate.mu_real_sweep``); none of its quantities is
   computed twice (the cell-end sweeps use the neighbours' gains on this cell's pieces).
+- Session 14 (2026-12-03, 2 cores shared with 3 other helpers, load 8-16 throughout):
+  the surface problems realise their channels through ``surfaces.SurfaceRealizer``
+  (``TuningProblem.realizer``): per grid point the gains ``clip(C phi)`` and the closed loop
+  once for its three channels, each channel assembled around that loop
+  (``CascadeChannel.assemble``), one finiteness test for the whole point instead of
+  ``as_state_space``'s checked copy of every matrix (a non-finite point still raises
+  ``as_state_space``'s error); the central differences' perturbed gains also once per grid
+  point (``SurfaceRealizer.batch``); the abscissa gradient rows without a ``np.real`` /
+  ``float`` call per entry. The same operations on the same operands: theta, the objective
+  and the channel values of the reduced run are main's bit for bit, and so (the end-to-end
+  run below) are ``gs-shif.json``, ``shif.json``, ``surfaces.json`` and ``lqr.json`` up to
+  their time stamps and timings. cProfile (``time.process_time`` clock, the yaw degree-2
+  tune from the SHIF-less start, 4 iterations): 26.6 s -> 17.4 s; the realisations 10.7 ->
+  5.2 s (what is left: ``_closed`` 1.9 s, ``assemble`` 1.5 s, the gains 0.8 s, the
+  finiteness test 0.4 s), the central differences 4.5 -> 3.1 s, the abscissa 6.1 -> 3.9 s.
+  Paired ``time.process_time`` of that tune after a warm-up, branch / main in alternating
+  order (ABBA), load 10-15: 9.61 / 12.16, 9.81 / 10.92, 11.21 / 13.25, 9.64 / 12.29 s
+  (ratios 0.79, 0.90, 0.85, 0.78; median 0.82); 4 more pairs at load 0-1 (07:36 UTC):
+  7.93 / 10.58, 7.05 / 9.48, 7.58 / 8.79, 9.38 / 10.09 s (0.75, 0.74, 0.86, 0.93; median
+  0.81). The validation (``_sweep_peak`` ->
+  ``certificate.mu_real_sweep``, about half its CPU) is not changed: a profile of 12
+  axis-points (16 s CPU) spends it in ``dg_scaling.dg_upper_bound``'s SciPy BFGS (line
+  searches and wrappers 5.7 s of which the compiled D-G objective is 0.4 s), ``mu.mu_sweep``
+  4.6 s and ``robust.robust_weights``' SLSQP fits 2.8 s: SciPy's optimisers' own Python,
+  which cannot be trimmed without replacing them (and their rounding).
+  End to end, this benchmark on both trees at the same time (06:56-07:20 UTC, load 8 -> 11-16,
+  other helpers' flights and browsers running; one run each): main 1417 s wall, 275.7 s CPU
+  (designs 174.6 s, validation 98.7 s, report 2.4 s); this branch 1410 s wall, 264.8 s CPU
+  (designs 163.0 s, validation 98.5 s, report 3.3 s): designs -7 %, total -4 %, less than
+  the reduced run's -18 % because the SHIF (degree 0, 5 parameters) tunes spend less of
+  their time in the realisations and one loaded run each is noisy. ``validation.json`` is
+  main's byte for byte, the gain files up to ``created_utc``. Target still not met: ~265 s
+  of CPU is >= 132 s on 2 cores; < 90 s needs < ~170 s. What is left per surface point is
+  the arithmetic itself (``_closed``, the assembly, dgeev for the abscissa, the frequency
+  kernel) and SLSQP; the big levers remain those above that move the gains (fewer SLSQP
+  points, chain-rule derivatives), and in the validation SciPy's BFGS inside the D-G bound.
 - A fresh checkout pays numba's first compile of ``dg_kernel.dg_objective`` (30 s of CPU at
   load ~12, measured with cProfile) in the validation's first point; later runs load it
   from ``__pycache__`` (``cache=True``). Time a second run, not the first.

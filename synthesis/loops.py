@@ -652,10 +652,41 @@ class CascadeChannel:
         self._A0, self._C0 = A, C
 
     def __call__(self, theta: NDArray[np.float64]) -> StateSpaceData:
+        return self.assemble(_closed_cached(self._G, self._gkey, np.asarray(theta, float)))
+
+    def loop(self, theta: NDArray[np.float64]) -> ClosedLoop:
+        """The closed loop of this channel's plant at the gains ``theta`` (uncached).
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (5,)
+            P-PID gains in :data:`PARAM_NAMES` order.
+
+        Returns
+        -------
+        ClosedLoop
+            The loop, for :meth:`assemble`.
+        """
+        return _closed(self._G, theta)
+
+    def assemble(self, cl: ClosedLoop) -> StateSpaceData:
+        """The channel around a closed loop of this channel's plant (``__call__`` is
+        ``assemble(_closed(G, theta))``; callers that share one loop among the channels of
+        a plant build it once).
+
+        Parameters
+        ----------
+        cl : ClosedLoop
+            The closed loop of this channel's plant at the gains (not modified).
+
+        Returns
+        -------
+        A, B, C, D : ndarray
+            The channel (fresh float64 2-D arrays).
+        """
         if not hasattr(self, "_A0"):
             self._template()
             self._plan()
-        cl = _closed_cached(self._G, self._gkey, np.asarray(theta, float))
         ncl = self._ncl
         A, C = self._A0.copy(), self._C0.copy()
         B = np.zeros((A.shape[0], 1))
