@@ -356,24 +356,7 @@ def _read_parts(v: Any, enc: Any, signing: Any, n: int, reps: int) -> dict[str, 
     against the generated parser alone (``read_generated``), interleaved."""
     from vtolftc.firmware_sim.autopilot.hil_bridge import HilBridge
     from vtolftc.protocols.link import Link
-    from vtolftc.protocols.transport import Transport
-
-    class Memory(Transport):
-        def __init__(self) -> None:
-            self.q: list[bytes] = []
-
-        def send_bytes(self, data: bytes) -> bool:
-            return True
-
-        def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
-            q, self.q = self.q, []
-            return q
-
-        def ready(self) -> bool:
-            return True
-
-        def close(self) -> None:
-            """Nothing to close."""
+    from vtolftc.protocols.transport import LoopTransport
 
     class Generated:
         rejected = 0
@@ -384,7 +367,7 @@ def _read_parts(v: Any, enc: Any, signing: Any, n: int, reps: int) -> dict[str, 
 
     bridges = {}
     for name in ("read_fast", "read_generated"):
-        link = Link(Memory(), system_id=1, component_id=1, signing=signing)
+        link = Link(LoopTransport(), system_id=1, component_id=1, signing=signing)
         if name == "read_generated":
             link._fast = Generated()  # type: ignore[assignment]
         bridge = bridges[name] = HilBridge(link)
@@ -399,7 +382,7 @@ def _read_parts(v: Any, enc: Any, signing: Any, n: int, reps: int) -> dict[str, 
             tr = bridge.link.transport
             c0 = time.thread_time()
             for g in grams:
-                tr.q = [g]  # type: ignore[attr-defined]
+                tr.send_bytes(g)
                 bridge.drain(0.0)
                 bridge.take()
             res[name].append(1e6 * (time.thread_time() - c0) / n)

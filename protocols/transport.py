@@ -12,7 +12,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
-__all__ = ["MAX_BATCH", "LinkUrl", "Transport"]
+__all__ = ["MAX_BATCH", "LinkUrl", "LoopTransport", "Transport"]
 
 MAX_BATCH = 256
 """Most datagrams one :meth:`Transport.recv_datagrams` call returns; a call that returns
@@ -68,6 +68,33 @@ class Transport(ABC):
     def describe(self) -> str:
         """Human-readable endpoint description."""
         return self.kind
+
+
+class LoopTransport(Transport):
+    """An in-memory transport that hands back what it is sent, in order: for tests and
+    benchmarks that drive a :class:`~vtolftc.protocols.link.Link` without a network (a
+    datagram sent now is received by the next :meth:`recv_datagrams`)."""
+
+    kind = "loop"
+
+    def __init__(self) -> None:
+        self.queue: list[bytes] = []
+
+    def send_bytes(self, data: bytes) -> bool:
+        self.queue.append(data)
+        return True
+
+    def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
+        """Every queued datagram, at most :data:`MAX_BATCH`; never waits (``timeout_s`` is
+        ignored: nothing can arrive while the caller waits)."""
+        out, self.queue = self.queue[:MAX_BATCH], self.queue[MAX_BATCH:]
+        return out
+
+    def ready(self) -> bool:
+        return True
+
+    def close(self) -> None:
+        """Nothing to release."""
 
 
 @dataclass(frozen=True)

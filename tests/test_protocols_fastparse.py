@@ -10,7 +10,7 @@ import pytest
 from vtolftc.protocols.fastparse import FastParser
 from vtolftc.protocols.link import Link
 from vtolftc.protocols.mavlink import SigningConfig, StreamTimestamps, dialect, make_codec
-from vtolftc.protocols.transport import Transport
+from vtolftc.protocols.transport import LoopTransport
 
 KEY = bytes(range(32))
 _INT_RANGES = {"int8_t": (-128, 127), "uint8_t": (0, 255), "int16_t": (-32768, 32767),
@@ -144,34 +144,10 @@ def test_signing_unsigned_bad_hash_and_replay() -> None:
     assert fast.parse(a)[0:] == [] and fast.rejected == 1  # the same timestamp again
 
 
-class _Loop(Transport):
-    """A transport that hands back what it is given."""
-
-    def __init__(self) -> None:
-        self.q: list[bytes] = []
-
-    def send_bytes(self, data: bytes) -> bool:
-        self.q.append(data)
-        return True
-
-    def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
-        q, self.q = self.q, []
-        return q
-
-    def ready(self) -> bool:
-        return True
-
-    def describe(self) -> str:
-        return "loop"
-
-    def close(self) -> None:
-        """Nothing to close."""
-
-
 def test_link_counts_replays_as_signature_drops() -> None:
     """Through a Link: the replayed datagram is counted in ``dropped_signature``."""
     a, _ = _frames(SigningConfig(KEY, timestamp=10_000))
-    link = Link(_Loop(), system_id=1, component_id=1,
+    link = Link(LoopTransport(), system_id=1, component_id=1,
                 signing=SigningConfig(KEY, timestamp=10_000))
     link.send(a)
     assert [m.get_type() for m in link.recv(0)] == ["HIL_SENSOR"]
@@ -213,7 +189,7 @@ def test_corrupted_hil_datagrams_fall_back_exactly_as_the_generated_path(signed:
     hands over the same messages and counts the same drops as one that parses everything
     with the generated parser."""
     rng = random.Random(11)
-    rx = [Link(_Loop(), system_id=1, component_id=1,
+    rx = [Link(LoopTransport(), system_id=1, component_id=1,
                signing=SigningConfig(KEY, timestamp=10) if signed else None)
           for _ in range(2)]
     rx[1]._fast = _Generated()  # type: ignore[assignment]
@@ -271,7 +247,7 @@ def test_declines_bad_frames_whose_crc_is_good(bad: str) -> None:
         tail = _recrc(b[:7] + b"\x99\x99\x00" + b[10:], 0xFF)
     codec = make_codec(1, 1)
     assert FastParser(codec, dialect()).parse(a + tail) is None
-    links = [Link(_Loop(), system_id=1, component_id=1) for _ in range(2)]
+    links = [Link(LoopTransport(), system_id=1, component_id=1) for _ in range(2)]
     links[1]._fast = _Generated()  # type: ignore[assignment]
     for link in links:
         link.transport.send_bytes(a + tail)
@@ -279,19 +255,16 @@ def test_declines_bad_frames_whose_crc_is_good(bad: str) -> None:
     assert links[0].stats.as_dict() == links[1].stats.as_dict()
 
 
-class _Counting(_Loop):
-    """:class:`_Loop` that counts its reads and returns at most ``MAX_BATCH`` datagrams."""
+class _Counting(LoopTransport):
+    """:class:`LoopTransport` that counts its reads."""
 
     def __init__(self) -> None:
         super().__init__()
         self.reads = 0
 
     def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
-        from vtolftc.protocols.transport import MAX_BATCH
-
         self.reads += 1
-        q, self.q = self.q[:MAX_BATCH], self.q[MAX_BATCH:]
-        return q
+        return super().recv_datagrams(timeout_s)
 
 
 def test_hil_drain_reads_once_a_step_and_everything_past_a_full_batch() -> None:
@@ -305,15 +278,15 @@ def test_hil_drain_reads_once_a_step_and_everything_past_a_full_batch() -> None:
     link = Link(tr, system_id=1, component_id=1)
     bridge = HilBridge(link)
     a, b = _frames()
-    tr.q.append(a + b)
+    tr.queue.append(a + b)
     assert bridge.drain(0.0) == 2 and tr.reads == 1 and link.drained
-    tr.q.extend([b] * (MAX_BATCH + 44))
+    tr.queue.extend([b] * (MAX_BATCH + 44))
     assert bridge.drain(0.0) == MAX_BATCH + 44
     assert tr.reads == 3  # the full batch, then the rest
-    tr.q.extend([a, b])
+    tr.queue.extend([a, b])
     assert link.recv_match("HIL_SENSOR", 0.0) is not None  # the HEARTBEAT stays pending
-    tr.q.append(b)
-    assert bridge.drain(0.0) == 2 and not tr.q  # the pending one, then the transport
+    tr.queue.append(b)
+    assert bridge.drain(0.0) == 2 and not tr.queue  # the pending one, then the transport
     assert link.recv(0.0) == [] and link.drained
 
 
@@ -338,9 +311,9 @@ def test_a_flights_hil_datagrams_parse_as_the_generated_path(signed: bool) -> No
     codec = make_codec(1, 191, signing=sig(1000))
     enc = StateEncoder(vehicle, BatteryModel(rho=af.air_density_kg_m3), codec, 10.0,
                        lambda: codec.heartbeat_encode(0, 0, 0, 0, 0))
-    tx = _Loop()
+    tx = LoopTransport()
     bridge = HilBridge(Link(tx, system_id=1, component_id=1, signing=sig(1000)))
-    rx = [Link(_Loop(), system_id=1, component_id=1, signing=sig(10)) for _ in range(4)]
+    rx = [Link(LoopTransport(), system_id=1, component_id=1, signing=sig(10)) for _ in range(4)]
     for link in rx[1::2]:
         link._fast = _Generated()  # type: ignore[assignment]
     u = np.linspace(0.2, 0.6, af.n_actuators)
@@ -348,7 +321,7 @@ def test_a_flights_hil_datagrams_parse_as_the_generated_path(signed: bool) -> No
         vehicle.step(u, 4)
         bridge.send_controls(vehicle.time_usec, u * (1 + 0.001 * k), armed=k % 2 == 0)
         for pair, data in ((rx[0:2], bytearray(enc.datagram())),
-                           (rx[2:4], bytearray(tx.q.pop()))):
+                           (rx[2:4], bytearray(tx.queue.pop()))):
             if k % 5 == 0:
                 data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
             got = []
