@@ -273,6 +273,17 @@ confirm it on). The campaign's 60 s scenario at 0.881 of inproc-13's idle ~0.43 
 ratios, not a measured idle pool run (``bench_campaign`` not run here). What is left is as
 inproc-13 wrote: the vehicle kernel (~8 us), the QP (~4-5 us), and ~11 us of Python spread
 over ~20 functions; the next step is still the compiled continuous part of the outer loops.
+
+The lead's idle check after merging inproc-14 (main 998fee6, 2026-12-03 07:37 UTC,
+load 0.7, no other job): ``bench_inproc`` case 1, 4 runs back to back: 160.6x, 155.4x, 156.6x,
+161.0x (24.8-25.7 us per step); >= 150x real time per core is reached on this idle machine
+(the same command on the base two hours earlier, load 0.0-0.1: 132.6-148.2x, 27.0-30.2 us; a
+second set of 3 runs minutes later gave 142.4 / 151.6 / 146.6x for gs-shif / shif / lqr: the
+host's own noise is +-5 %). ``bench_campaign.py --jobs 2 --scenarios 24 --no-dask`` in the
+same minute: 256.1 scenarios/min, overhead +3.6 %, the warm 60 s scenario 0.49 s (mean of
+3). Per controller, the campaign's first six scenarios twice (thread CPU, load ~0.7): gs-shif
+0.39-0.47 s, shif 0.46-0.55 s, lqr 0.41-0.48 s per 60 s flight (26-37 us per step, more than
+case 1's 25 us). 300 scenarios/min needs ~0.39 s per flight on both cores: not reached.
 """
 
 from __future__ import annotations
