@@ -277,13 +277,16 @@ over ~20 functions; the next step is still the compiled continuous part of the o
 The lead's idle check after merging inproc-14 (main 998fee6, 2026-12-03 07:37 UTC,
 load 0.7, no other job): ``bench_inproc`` case 1, 4 runs back to back: 160.6x, 155.4x, 156.6x,
 161.0x (24.8-25.7 us per step); >= 150x real time per core is reached on this idle machine
-(the same command on the base two hours earlier, load 0.0-0.1: 132.6-148.2x, 27.0-30.2 us; a
+(the same command on the base an hour earlier, load 0.0-0.1: 132.6-148.2x, 27.0-30.2 us; a
 second set of 3 runs minutes later gave 142.4 / 151.6 / 146.6x for gs-shif / shif / lqr: the
 host's own noise is +-5 %). ``bench_campaign.py --jobs 2 --scenarios 24 --no-dask`` in the
 same minute: 256.1 scenarios/min, overhead +3.6 %, the warm 60 s scenario 0.49 s (mean of
-3). Per controller, the campaign's first six scenarios twice (thread CPU, load ~0.7): gs-shif
-0.39-0.47 s, shif 0.46-0.55 s, lqr 0.41-0.48 s per 60 s flight (26-37 us per step, more than
-case 1's 25 us). 300 scenarios/min needs ~0.39 s per flight on both cores: not reached.
+3; the pool's workers took 0.47 s per scenario against 0.45 s of flight). The campaign's first three
+scenarios (gs-shif, shif, lqr), 6 interleaved flights each in one process, thread CPU, load
+~2.9 with a CI run beside: medians 0.393, 0.394, 0.423 s per 60 s flight (26-28 us per step;
+cProfile: the same calls per step for every controller; a first set at load 0.7 spread
+0.39-0.55 s, the host's noise). 300 scenarios/min needs <= 0.40 s per flight with both
+workers running at once: not reached (256.1/min measured).
 """
 
 from __future__ import annotations
