@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pytest
+from support.procs import descendants
 
 from vtolftc.cli.main import run
 from vtolftc.runners.campaign.outcome import outcome
@@ -276,7 +277,7 @@ def test_killed_campaign_resumes_only_the_missing_scenarios(small_reference, tmp
             assert proc.poll() is None, proc.communicate()
             assert time.monotonic() < deadline, "no results within 300 s"
             time.sleep(0.1)
-        workers = _descendants(proc.pid)
+        workers = descendants(proc.pid)
         assert workers  # the pool's processes
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=120)
@@ -306,23 +307,6 @@ def test_killed_campaign_resumes_only_the_missing_scenarios(small_reference, tmp
     while _alive(workers) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not _alive(workers)
-
-
-def _descendants(pid: int) -> set[int]:
-    """Every live descendant of ``pid`` (by a scan of /proc)."""
-    parent: dict[int, int] = {}
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:
-                parent[int(d.name)] = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-    out: set[int] = set()
-    frontier = {pid}
-    while frontier:
-        frontier = {c for c, p in parent.items() if p in frontier} - out
-        out |= frontier
-    return out
 
 
 def _alive(pids: set[int]) -> set[int]:

@@ -20,6 +20,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from support.procs import descendants
+
 __all__ = ["DashboardPage", "find_chromedriver", "find_chromium"]
 
 _STATUS_JS = ("const e = document.getElementById('vtolftc-status');"
@@ -269,16 +271,7 @@ class DashboardPage:
         """The ``--type`` of every live process of this browser (``browser`` for the browser
         process itself; e.g. ``renderer``, ``gpu-process``, ``utility``), by a scan of /proc
         from chromedriver's pid (Linux)."""
-        parent: dict[int, int] = {}
-        for d in Path("/proc").iterdir():
-            with contextlib.suppress(OSError, IndexError, ValueError):
-                if d.name.isdigit():
-                    parent[int(d.name)] = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
-        procs: set[int] = set()
-        frontier = {self.driver.service.process.pid}
-        while frontier:
-            frontier = {c for c, p in parent.items() if p in frontier} - procs
-            procs |= frontier
+        procs = descendants(self.driver.service.process.pid)
         out = []
         for pid in sorted(procs):
             with contextlib.suppress(OSError):
