@@ -5,29 +5,22 @@ from __future__ import annotations
 
 from typing import Any
 
-from vtolftc.protocols import Link, Transport
+from vtolftc.protocols import Link
+from vtolftc.protocols.transport import LoopTransport
 
 
-class CaptureTransport(Transport):
+class CaptureTransport(LoopTransport):
     """Keeps every datagram sent (``sent``); never receives anything."""
 
     kind = "memory"
 
-    def __init__(self) -> None:
-        self.sent: list[bytes] = []
-
-    def send_bytes(self, data: bytes) -> bool:
-        self.sent.append(data)
-        return True
+    @property
+    def sent(self) -> list[bytes]:
+        """Every datagram sent so far (the list itself: clear it to forget them)."""
+        return self.queue
 
     def recv_datagrams(self, timeout_s: float | None) -> list[bytes]:
         return []
-
-    def ready(self) -> bool:
-        return True
-
-    def close(self) -> None:
-        pass
 
 
 def parse(datagrams: list[bytes]) -> list[Any]:
