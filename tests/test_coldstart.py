@@ -24,6 +24,7 @@ from pathlib import Path
 
 import pytest
 from support.memory_link import CaptureTransport, parse, sent_messages
+from support.procs import RT_PRIORITY
 
 from vtolftc.airframe.loader import load_airframe
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
@@ -224,7 +225,8 @@ def test_fresh_cache_sitl_flight_through_every_mode_never_stalls(tmp_path, monke
     cfg = SitlConfig(out_dir=out, realtime=True, plots=False, startup_timeout_s=600.0,
                      vehicle_timeout_s=5.0, extra_autopilot_args=[
                          "--gcs-link", f"udp-client://127.0.0.1:{port}",
-                         "--param", "MPC_LAND_SPEED=1.5"])  # a shorter test, same paths
+                         "--param", "MPC_LAND_SPEED=1.5", *RT_PRIORITY],  # shorter, same paths
+                     extra_vehicle_args=RT_PRIORITY)
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=245,
                                       source_component=190, dialect="common")
     boot_acks: list[tuple[int, int, float]] = []

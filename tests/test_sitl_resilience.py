@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
+from support.procs import RT_PRIORITY
 
 from vtolftc.gcs.client import GroundStation
 from vtolftc.protocols import make_codec, open_link
@@ -106,8 +107,8 @@ def rt(tmp_path_factory):
                          "--gcs-link", f"udp-server://127.0.0.1:{flood_port}",
                          "--param", f"COM_DL_LOSS_T={DL_LOSS_T}",
                          "--param", "NAV_DLL_ACT=3",
-                         "--param", f"COM_HIL_LOSS_T={HIL_LOSS_T}"],
-                     extra_vehicle_args=["--output-timeout", str(OUTPUT_TIMEOUT)])
+                         "--param", f"COM_HIL_LOSS_T={HIL_LOSS_T}", *RT_PRIORITY],
+                     extra_vehicle_args=["--output-timeout", str(OUTPUT_TIMEOUT), *RT_PRIORITY])
     run = SitlRun(cfg)
     run.obs = obs
     run.flood_port = flood_port

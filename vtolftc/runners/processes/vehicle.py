@@ -2,7 +2,7 @@
 
     python -m vtolftc.runners.processes.vehicle --link udp-server://127.0.0.1:4560 [--lockstep]
         [--realtime] [--airframe FILE] [--seed N] [--noise] [--duration S] [--out DIR]
-        [--output-timeout S] [--hil-delay-ms MS] [--hil-loss P]
+        [--output-timeout S] [--hil-delay-ms MS] [--hil-loss P] [--rt-priority N]
 
 What it sends and accepts, the autopilot pinning, the output watchdog and the latency knob are
 documented in :mod:`vtolftc.firmware_sim.vehicle.process`. With ``VTOLFTC_HIL_KEY`` (64
@@ -23,6 +23,11 @@ from typing import Any
 from vtolftc.airframe.loader import AirframeError, load_airframe
 from vtolftc.firmware_sim.vehicle.process import VehicleProcess
 from vtolftc.protocols.hil_signing import hil_signing_from_env
+from vtolftc.runners.processes.priority import (
+    add_rt_priority_argument,
+    apply_rt_priority,
+    check_rt_priority,
+)
 
 __all__ = ["main"]
 
@@ -66,6 +71,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--spin-us", type=float, default=0.0,
                     help="lockstep: busy-poll this long for the controls before sleeping "
                          "(faster on idle cores, costs CPU; default 0)")
+    add_rt_priority_argument(ap)
     return ap.parse_args(argv)
 
 
@@ -85,6 +91,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"vehicle: error: {name} {val!r}: expected a number in [0, {hi:g}]",
                   file=sys.stderr)
             return 2
+    if (bad := check_rt_priority(args.rt_priority)) is not None:
+        print(f"vehicle: error: {bad}", file=sys.stderr)
+        return 2
+    apply_rt_priority(args.rt_priority, "vehicle", sys.stderr)  # before any thread starts
     try:
         signing = hil_signing_from_env()
         airframe = load_airframe(args.airframe) if args.airframe else load_airframe()
