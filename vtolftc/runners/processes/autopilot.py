@@ -191,7 +191,6 @@ def main(argv: list[str] | None = None) -> int:
     if (bad := check_rt_priority(args.rt_priority)) is not None:
         print(f"autopilot: error: {bad}", file=err)
         return 2
-    apply_rt_priority(args.rt_priority, "autopilot", err)  # before any thread starts
     try:
         autopilot, af = _make_autopilot(args)
     except Exception as exc:  # bad airframe, unknown controller, missing gains
@@ -266,6 +265,7 @@ def main(argv: list[str] | None = None) -> int:
         from vtolftc.firmware_sim.autopilot.warmup import warm_up
 
         warm_up(make, stop=lambda: proc is not None and not proc.running)
+        apply_rt_priority(args.rt_priority, "autopilot", err)  # compiled: now real time
 
     proc = AutopilotProcess(
         autopilot, hil, gcs_links, actuators=ActuatorTable.from_names(af.actuator_names),
@@ -274,6 +274,8 @@ def main(argv: list[str] | None = None) -> int:
         on_finish=on_finish, info=info, vehicle_timeout_s=args.vehicle_timeout,
         max_wall_s=args.max_wall, parent_pid=args.parent_pid,
         warmup=None if args.no_warmup else warm)
+    if args.no_warmup:
+        apply_rt_priority(args.rt_priority, "autopilot", err)
     proc.spin_s = max(0.0, args.spin_us) * 1e-6
     for obs in observers:  # the ULog's sensor topics from HIL_SENSOR / HIL_GPS
         if hasattr(obs, "hil"):

@@ -5,10 +5,14 @@ a second or more: measured beside CPU burners on 2 cores (``tests/test_coldstart
 vehicle's loop stalled 0.66-1.41 s with its thread in state R and CPU pressure at 96-98 %, and
 its 0.5 s output watchdog cut the rotors. PX4 on POSIX runs its modules as ``SCHED_FIFO``
 threads for this reason; ``--rt-priority N`` (1-99, opt-in, default off) does the same for a
-whole process: the calling thread is switched to ``SCHED_FIFO`` at priority N before any other
-thread is started, so every thread it starts later inherits the policy. The kernel's real-time
-throttling (``/proc/sys/kernel/sched_rt_runtime_us``, 0.95 s per 1 s by default) still leaves
-ordinary processes some CPU if a real-time thread never sleeps.
+whole process once it is ready: every thread it has then, and so every thread those start
+later, runs ``SCHED_FIFO`` at priority N. Not before: numba compiling for seconds in a
+``SCHED_FIFO`` thread is never preempted by a thread of equal priority, and the autopilot's
+ground-station worker, which must answer TEMPORARILY_REJECTED while the autopilot boots,
+waited 4.8 s for a CPU (both cores held by the two processes' compilers) when the priority was
+set at start. The kernel's real-time throttling (``/proc/sys/kernel/sched_rt_runtime_us``,
+0.95 s per 1 s by default) still leaves ordinary processes some CPU if a real-time thread
+never sleeps.
 
 It needs ``CAP_SYS_NICE`` (root, or ``setcap``/``RLIMIT_RTPRIO``); without it the process says
 so in one line and runs at its ordinary priority.
@@ -17,6 +21,7 @@ so in one line and runs at its ordinary priority.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 from typing import TextIO
 
@@ -41,8 +46,8 @@ def check_rt_priority(n: int) -> str | None:
 
 
 def apply_rt_priority(n: int, who: str, log: TextIO) -> bool:
-    """Switch the calling thread (and the threads it starts afterwards) to ``SCHED_FIFO`` at
-    priority ``n``.
+    """Switch every thread of this process (and so the threads they start afterwards) to
+    ``SCHED_FIFO`` at priority ``n``.
 
     Parameters
     ----------
@@ -61,10 +66,16 @@ def apply_rt_priority(n: int, who: str, log: TextIO) -> bool:
     if n == 0:
         return False
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(n))
+        tids = sorted(int(t) for t in os.listdir("/proc/self/task"))
+    except OSError:  # no /proc: the calling thread only
+        tids = [0]
+    try:
+        for tid in tids:
+            with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(n))
     except OSError as exc:  # EPERM without CAP_SYS_NICE
         print(f"{who}: --rt-priority {n} not applied ({exc.strerror or exc}): ordinary "
               "scheduling", file=log, flush=True)
         return False
-    print(f"{who}: SCHED_FIFO priority {n}", file=log, flush=True)
+    print(f"{who}: SCHED_FIFO priority {n} ({len(tids)} threads)", file=log, flush=True)
     return True

@@ -94,7 +94,6 @@ def main(argv: list[str] | None = None) -> int:
     if (bad := check_rt_priority(args.rt_priority)) is not None:
         print(f"vehicle: error: {bad}", file=sys.stderr)
         return 2
-    apply_rt_priority(args.rt_priority, "vehicle", sys.stderr)  # before any thread starts
     try:
         signing = hil_signing_from_env()
         airframe = load_airframe(args.airframe) if args.airframe else load_airframe()
@@ -106,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
             parent_pid=args.parent_pid, output_timeout_s=args.output_timeout,
             hil_delay_ms=args.hil_delay_ms, hil_loss=args.hil_loss, signing=signing)
         proc.spin_s = max(0.0, args.spin_us) * 1e-6
+        proc.on_warm = lambda: apply_rt_priority(args.rt_priority, "vehicle", sys.stderr)
     except (AirframeError, ValueError, OSError) as exc:
         print(f"vehicle: error: {exc}", file=sys.stderr)
         return 2
