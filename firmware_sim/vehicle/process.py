@@ -78,7 +78,6 @@ import math
 import os
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -129,9 +128,6 @@ class VehicleProcess:
         self.parent_pid = parent_pid
         self._next_parent_check = 0.0
         self.spin_s = 0.0
-        self.on_warm: Callable[[], object] | None = None
-        """Called once the kernels are compiled, before waiting for the autopilot (the
-        program sets its scheduling priority there)."""
         """Lockstep: poll this long without sleeping before blocking (wake-up latency)."""
         self.vehicle = Vehicle(self.airframe, state=initial_state, seed=seed,
                                noise=SensorNoise.typical() if noise else None)
@@ -355,8 +351,6 @@ class VehicleProcess:
         self._event("start", f"vehicle process, {'lockstep' if self.lockstep else 'real time'}")
         try:
             self.warm_up()
-            if self.on_warm is not None:
-                self.on_warm()
             if not self.wait_for_peer():
                 bad = self.link.stats.dropped_signature
                 hint = (f" ({bad} frames with no or a wrong signature: is VTOLFTC_HIL_KEY the "

@@ -75,6 +75,19 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     return ap.parse_args(argv)
 
 
+class _Vehicle(VehicleProcess):
+    """The vehicle process that takes its real-time priority (``--rt-priority``) once its
+    kernels are compiled, before it waits for the autopilot (see
+    :mod:`vtolftc.runners.processes.priority` for why not before)."""
+
+    rt_priority = 0
+
+    def warm_up(self) -> None:
+        """Compile (:meth:`VehicleProcess.warm_up`), then apply the priority."""
+        super().warm_up()
+        apply_rt_priority(self.rt_priority, "vehicle", sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the vehicle process (see the module docstring); returns the exit status."""
     args = _parse_args(argv)
@@ -97,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         signing = hil_signing_from_env()
         airframe = load_airframe(args.airframe) if args.airframe else load_airframe()
-        proc = VehicleProcess(
+        proc = _Vehicle(
             args.link, airframe=airframe, lockstep=args.lockstep, seed=args.seed,
             noise=args.noise, duration_s=args.duration, out_dir=args.out,
             peer_timeout_s=args.peer_timeout, connect_timeout_s=args.connect_timeout,
@@ -105,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
             parent_pid=args.parent_pid, output_timeout_s=args.output_timeout,
             hil_delay_ms=args.hil_delay_ms, hil_loss=args.hil_loss, signing=signing)
         proc.spin_s = max(0.0, args.spin_us) * 1e-6
-        proc.on_warm = lambda: apply_rt_priority(args.rt_priority, "vehicle", sys.stderr)
+        proc.rt_priority = args.rt_priority
     except (AirframeError, ValueError, OSError) as exc:
         print(f"vehicle: error: {exc}", file=sys.stderr)
         return 2
