@@ -24,6 +24,7 @@ from pathlib import Path
 
 import pytest
 from support.memory_link import CaptureTransport, parse, sent_messages
+from support.procs import RT_PRIORITY
 
 from vtolftc.airframe.loader import load_airframe
 from vtolftc.firmware_sim.autopilot.autopilot import Autopilot
@@ -211,7 +212,20 @@ def test_fresh_cache_sitl_flight_through_every_mode_never_stalls(tmp_path, monke
     twice beside 2 burners (load 7.6-12.5 with the other helpers): one pass (137 s); one
     failure: the probe saw stalls of 1.41 s (sim t = 1.7 s), 0.66 s and 0.73 s (t = 19.4,
     20.4 s), the vehicle thread runnable (state R) with 0 ms of CPU between samples, CPU
-    pressure "some" 96-98 %; the vehicle's watchdog cut at t = 23.3 s. Same cause."""
+    pressure "some" 96-98 %; the vehicle's watchdog cut at t = 23.3 s. Same cause.
+
+    The subject is a stall of *our* code after STANDBY, so OS starvation is taken out rather
+    than excused: both processes run with ``--rt-priority`` (SCHED_FIFO from the moment they
+    are compiled and ready, where permitted: root, as CI; :mod:`support.procs`), as PX4's
+    threads do on POSIX, so ordinary processes cannot starve the flight; a stall of the
+    flight code itself still stops the steps (mutation: a 1 s sleep in the autopilot's loop
+    at t = 20 s fails this test). Session 15, beside 4 CPU burners and a dd/fsync writer
+    (load 9-13, PSI cpu 97-99 %): main passed once (not reproduced); with the priority set at
+    process start 2/2 failed (the two compilers at SCHED_FIFO held both cores: a boot ACK
+    after 4.8 s), hence "once ready"; so set, it passed. The probe may still report 0.4-1.3 s
+    "stalls" while both processes sleep between steps and the simulated time then jumps by
+    as much: the probe's own process (ordinary priority) starved, not the flight; the probe
+    reports, the checks below decide."""
     from pymavlink import mavutil
     from support.stall_probe import StallProbe
 
@@ -224,7 +238,8 @@ def test_fresh_cache_sitl_flight_through_every_mode_never_stalls(tmp_path, monke
     cfg = SitlConfig(out_dir=out, realtime=True, plots=False, startup_timeout_s=600.0,
                      vehicle_timeout_s=5.0, extra_autopilot_args=[
                          "--gcs-link", f"udp-client://127.0.0.1:{port}",
-                         "--param", "MPC_LAND_SPEED=1.5"])  # a shorter test, same paths
+                         "--param", "MPC_LAND_SPEED=1.5", *RT_PRIORITY],  # shorter, same paths
+                     extra_vehicle_args=RT_PRIORITY)
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=245,
                                       source_component=190, dialect="common")
     boot_acks: list[tuple[int, int, float]] = []

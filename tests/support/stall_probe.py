@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import os
 import shutil
 import subprocess
 import sys
@@ -29,10 +28,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from vtolftc.runners.processes.procstate import proc_threads
+
 __all__ = ["Stall", "StallProbe", "proc_threads", "pyspy_dump"]
-
-_HZ = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-
 
 @dataclass
 class Stall:
@@ -51,30 +49,6 @@ class Stall:
         d = "not resumed" if self.duration_s is None else f"{self.duration_s:.2f} s"
         return (f"stall at progress {self.progress:.3f} ({d}); report {self.report}: "
                 + " | ".join(self.first_lines))
-
-
-def proc_threads(pid: int) -> list[tuple[int, str, str, float, str]]:
-    """(tid, name, state, CPU time user+system in s, kernel wait channel) of every thread of
-    ``pid`` (empty list when it is gone or there is no ``/proc``)."""
-    out = []
-    base = Path(f"/proc/{pid}/task")
-    try:
-        tids = sorted(int(t.name) for t in base.iterdir())
-    except OSError:
-        return out
-    for tid in tids:
-        try:
-            stat = (base / str(tid) / "stat").read_text()
-            name = (base / str(tid) / "comm").read_text().strip()
-            try:
-                wchan = (base / str(tid) / "wchan").read_text().strip()
-            except OSError:
-                wchan = "?"
-        except OSError:
-            continue
-        f = stat[stat.rindex(")") + 2:].split()
-        out.append((tid, name, f[0], (int(f[11]) + int(f[12])) / _HZ, wchan or "0"))
-    return out
 
 
 def _machine() -> str:

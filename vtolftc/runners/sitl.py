@@ -67,10 +67,13 @@ from vtolftc.base.jsonio import atomic_write_text, json_safe
 from vtolftc.gcs.client import CommandOutcome, GcsError, GroundStation
 from vtolftc.protocols.hil_signing import HIL_KEY_ENV, new_hil_key
 from vtolftc.protocols.netutil import free_tcp_port, free_udp_port
+from vtolftc.runners.processes.procstate import describe_threads
 
 __all__ = ["SitlConfig", "SitlError", "SitlResult", "SitlRun", "run_sitl"]
 
 TRANSPORTS = ("udp", "zenoh")
+KILL_WAIT_S = 60.0
+"""Wall seconds :meth:`SitlRun.stop` waits for a process to end after its SIGKILL."""
 
 
 class SitlError(RuntimeError):
@@ -111,6 +114,8 @@ class SitlConfig:
     """Each process stops when the other is silent this long (wall s)."""
     extra_autopilot_args: list[str] = field(default_factory=list)
     extra_vehicle_args: list[str] = field(default_factory=list)
+    stop_grace_s: float = 10.0
+    """Wall seconds a process gets to end by itself after SIGTERM before the SIGKILL."""
     hil_signing: bool = True
     """Sign the HIL link with a fresh random key for this run (``VTOLFTC_HIL_KEY`` in both
     processes' environment): only this run's autopilot can be pinned by the vehicle."""
@@ -149,6 +154,7 @@ class SitlRun:
         self.out = Path(config.out_dir)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: list[Any] = []
+        self._log_of: dict[str, Any] = {}
         self.gs: GroundStation | None = None
         self._hold_cond = threading.Condition()
         self._hold_ms: int | None = None
@@ -173,6 +179,7 @@ class SitlRun:
     def _spawn(self, name: str, args: list[str]) -> None:
         log = (self.out / f"{name}.log").open("wb")
         self._logs.append(log)
+        self._log_of[name] = log
         env = dict(os.environ)
         env.setdefault("PYTHONUNBUFFERED", "1")
         if self._hil_key is not None:
@@ -362,9 +369,17 @@ class SitlRun:
         return out
 
     # ------------------------------------------------------------------ stop
-    def stop(self, grace_s: float = 10.0) -> None:
+    def stop(self, grace_s: float | None = None) -> None:
         """SIGTERM the autopilot (it writes its metrics), then the vehicle; SIGKILL whatever
-        is still alive after ``grace_s``. Idempotent."""
+        is still alive after ``grace_s`` (default ``cfg.stop_grace_s``). Idempotent.
+
+        A process still alive after the grace has what its threads were doing appended to
+        its log (``<name>.log``: state, kernel wait channel, kernel stack of a thread in
+        uninterruptible sleep) before the SIGKILL. A process in uninterruptible sleep (an
+        ``fsync`` on a loaded disk, for one) ends only once that I/O completes, SIGKILL or
+        not: :class:`SitlError` with the same description if it is still there
+        ``KILL_WAIT_S`` after the SIGKILL."""
+        grace = self.cfg.stop_grace_s if grace_s is None else grace_s
         for name in ("autopilot", "vehicle"):
             p = self.procs.get(name)
             if p is None or p.poll() is not None:
@@ -372,11 +387,26 @@ class SitlRun:
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.killpg(p.pid, signal.SIGTERM)
             try:
-                p.wait(timeout=grace_s)
+                p.wait(timeout=grace)
             except subprocess.TimeoutExpired:
+                self._log_line(name, f"runner: {name} still running {grace:g} s after "
+                               f"SIGTERM, sending SIGKILL; its threads:\n"
+                               f"{describe_threads(p.pid)}")
                 with contextlib.suppress(ProcessLookupError, PermissionError):
                     os.killpg(p.pid, signal.SIGKILL)
-                p.wait(timeout=5.0)
+                try:
+                    p.wait(timeout=KILL_WAIT_S)
+                except subprocess.TimeoutExpired:
+                    raise SitlError(f"{name} (pid {p.pid}) still there {KILL_WAIT_S:g} s after "
+                                    f"SIGKILL; its threads:\n{describe_threads(p.pid)}") from None
+
+    def _log_line(self, name: str, text: str) -> None:
+        """Append ``text`` to ``<name>.log`` (the runner's own lines among the process's)."""
+        log = self._log_of.get(name)
+        if log is not None:  # the child's stdout: one file offset, shared with the child
+            with contextlib.suppress(OSError, ValueError):
+                log.write(text.encode() + b"\n")
+                log.flush()
 
     def close(self) -> None:
         """Stop the processes, close the ground station and the log files."""

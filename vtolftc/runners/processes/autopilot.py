@@ -5,6 +5,7 @@
         [--controller gs-shif|shif|lqr] [--airframe FILE] [--gains-dir DIR]
         [--hold-ms MS] [--param NAME=VALUE ...] [--signing-passphrase TEXT]
         [--out DIR] [--case LABEL] [--window-start S] [--vehicle-timeout S] [--max-wall S]
+        [--rt-priority N]
 
 Ground-station links: by default, like PX4 SITL, it sends to UDP 127.0.0.1:14550 (ground
 stations: QGroundControl, ``vtolftc gcs``) and 127.0.0.1:14540 (API clients: MAVSDK), as a UDP
@@ -55,6 +56,11 @@ from vtolftc.protocols import SigningConfig, StreamTimestamps, open_link
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.hil_signing import hil_signing_from_env
 from vtolftc.protocols.link import Link
+from vtolftc.runners.processes.priority import (
+    add_rt_priority_argument,
+    apply_rt_priority,
+    check_rt_priority,
+)
 
 __all__ = ["DEFAULT_GCS_LINKS", "main", "run_observers"]
 
@@ -116,6 +122,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--spin-us", type=float, default=0.0,
                     help="busy-poll the HIL link this long before sleeping (lower wake-up "
                          "latency on idle cores, costs CPU; default 0)")
+    add_rt_priority_argument(ap)
     return ap.parse_args(argv)
 
 
@@ -181,6 +188,9 @@ def main(argv: list[str] | None = None) -> int:
     """Run the autopilot process (see the module docstring); returns the exit status."""
     args = _parse_args(argv)
     err = sys.stderr
+    if (bad := check_rt_priority(args.rt_priority)) is not None:
+        print(f"autopilot: error: {bad}", file=err)
+        return 2
     try:
         autopilot, af = _make_autopilot(args)
     except Exception as exc:  # bad airframe, unknown controller, missing gains
@@ -255,6 +265,7 @@ def main(argv: list[str] | None = None) -> int:
         from vtolftc.firmware_sim.autopilot.warmup import warm_up
 
         warm_up(make, stop=lambda: proc is not None and not proc.running)
+        apply_rt_priority(args.rt_priority, "autopilot", err)  # compiled: now real time
 
     proc = AutopilotProcess(
         autopilot, hil, gcs_links, actuators=ActuatorTable.from_names(af.actuator_names),
@@ -263,6 +274,8 @@ def main(argv: list[str] | None = None) -> int:
         on_finish=on_finish, info=info, vehicle_timeout_s=args.vehicle_timeout,
         max_wall_s=args.max_wall, parent_pid=args.parent_pid,
         warmup=None if args.no_warmup else warm)
+    if args.no_warmup:
+        apply_rt_priority(args.rt_priority, "autopilot", err)
     proc.spin_s = max(0.0, args.spin_us) * 1e-6
     for obs in observers:  # the ULog's sensor topics from HIL_SENSOR / HIL_GPS
         if hasattr(obs, "hil"):

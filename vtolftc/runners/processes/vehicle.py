@@ -2,7 +2,7 @@
 
     python -m vtolftc.runners.processes.vehicle --link udp-server://127.0.0.1:4560 [--lockstep]
         [--realtime] [--airframe FILE] [--seed N] [--noise] [--duration S] [--out DIR]
-        [--output-timeout S] [--hil-delay-ms MS] [--hil-loss P]
+        [--output-timeout S] [--hil-delay-ms MS] [--hil-loss P] [--rt-priority N]
 
 What it sends and accepts, the autopilot pinning, the output watchdog and the latency knob are
 documented in :mod:`vtolftc.firmware_sim.vehicle.process`. With ``VTOLFTC_HIL_KEY`` (64
@@ -23,6 +23,11 @@ from typing import Any
 from vtolftc.airframe.loader import AirframeError, load_airframe
 from vtolftc.firmware_sim.vehicle.process import VehicleProcess
 from vtolftc.protocols.hil_signing import hil_signing_from_env
+from vtolftc.runners.processes.priority import (
+    add_rt_priority_argument,
+    apply_rt_priority,
+    check_rt_priority,
+)
 
 __all__ = ["main"]
 
@@ -66,7 +71,21 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--spin-us", type=float, default=0.0,
                     help="lockstep: busy-poll this long for the controls before sleeping "
                          "(faster on idle cores, costs CPU; default 0)")
+    add_rt_priority_argument(ap)
     return ap.parse_args(argv)
+
+
+class _Vehicle(VehicleProcess):
+    """The vehicle process that takes its real-time priority (``--rt-priority``) once its
+    kernels are compiled, before it waits for the autopilot (see
+    :mod:`vtolftc.runners.processes.priority` for why not before)."""
+
+    rt_priority = 0
+
+    def warm_up(self) -> None:
+        """Compile (:meth:`VehicleProcess.warm_up`), then apply the priority."""
+        super().warm_up()
+        apply_rt_priority(self.rt_priority, "vehicle", sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -85,10 +104,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"vehicle: error: {name} {val!r}: expected a number in [0, {hi:g}]",
                   file=sys.stderr)
             return 2
+    if (bad := check_rt_priority(args.rt_priority)) is not None:
+        print(f"vehicle: error: {bad}", file=sys.stderr)
+        return 2
     try:
         signing = hil_signing_from_env()
         airframe = load_airframe(args.airframe) if args.airframe else load_airframe()
-        proc = VehicleProcess(
+        proc = _Vehicle(
             args.link, airframe=airframe, lockstep=args.lockstep, seed=args.seed,
             noise=args.noise, duration_s=args.duration, out_dir=args.out,
             peer_timeout_s=args.peer_timeout, connect_timeout_s=args.connect_timeout,
@@ -96,6 +118,7 @@ def main(argv: list[str] | None = None) -> int:
             parent_pid=args.parent_pid, output_timeout_s=args.output_timeout,
             hil_delay_ms=args.hil_delay_ms, hil_loss=args.hil_loss, signing=signing)
         proc.spin_s = max(0.0, args.spin_us) * 1e-6
+        proc.rt_priority = args.rt_priority
     except (AirframeError, ValueError, OSError) as exc:
         print(f"vehicle: error: {exc}", file=sys.stderr)
         return 2
