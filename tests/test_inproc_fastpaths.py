@@ -736,3 +736,128 @@ def test_outer_loop_helpers_clip_as_the_builtins_did(ds1):
         cl = min(max(w.CL0 + w.CL_alpha * alpha, -w.CL_max), w.CL_max)
         lift, drag = outer.aero_estimate(V, alpha)
         assert _same(lift, qS * cl) and _same(drag, qS * (w.CD0 + w.induced_drag_factor * cl * cl))
+
+
+def _hypot2_many(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    import numba
+
+    from vtolftc.firmware_sim.autopilot.outer_kernels import hypot2
+
+    @numba.njit
+    def many(x, y, out):  # pragma: no cover - compiled
+        for i in range(x.size):
+            out[i] = hypot2(x[i], y[i])
+
+    out = np.empty(x.size)
+    many(x, y, out)
+    return out
+
+
+def test_hypot2_is_cpythons_math_hypot_bit_for_bit():
+    """The compiled port of CPython's ``math.hypot`` against ``math.hypot`` itself on 10^6
+    random pairs whose exponents span the whole double range (subnormals to overflow), pairs
+    of nearly equal magnitude, and adversarial pairs (signed zeros, subnormals, the largest
+    double, infinities, NaN, equal values)."""
+    import math
+
+    rng = np.random.default_rng(15)
+    n = 1_000_000
+    e1 = rng.uniform(-1085.0, 1030.0, n)
+    e2 = np.clip(e1 + rng.uniform(-60.0, 60.0, n), -1085.0, 1023.0)
+    with np.errstate(over="ignore"):
+        x = rng.uniform(-2.0, 2.0, n) * np.exp2(e1)
+        y = rng.uniform(-2.0, 2.0, n) * np.exp2(e2)
+    x[: n // 10] = rng.normal(0.0, 3.0, n // 10)  # the position hold's range
+    y[: n // 10] = rng.normal(0.0, 3.0, n // 10)
+    near = slice(n // 10, n // 5)  # ratios near 1
+    y[near] = x[near] * (1.0 + rng.normal(0.0, 1e-9, n // 10))
+    special = [0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1e-310,
+               1.7976931348625157e308, -1.7976931348625157e308, math.inf, -math.inf,
+               math.nan, 1.0, 3.0, 4.0, 1e154, 1e-154]
+    sx, sy = np.meshgrid(special, special)
+    x = np.concatenate([x, sx.ravel(), [1.5, 1e300, 7e-320]])
+    y = np.concatenate([y, sy.ravel(), [1.5, 1e300, 7e-320]])
+    got = _hypot2_many(x, y)
+    want = np.array([math.hypot(a, b) for a, b in zip(x.tolist(), y.tolist(), strict=True)])
+    bad = np.flatnonzero(got.view(np.int64) != want.view(np.int64))
+    assert bad.size == 0, [(x[i], y[i], got[i], want[i]) for i in bad[:5]]
+
+
+def _ref_position_hold(pos, vel, hold_ne, locked, kp, vmax, kv, g, yaw, tilt_max_deg):
+    """``OuterLoops._position_hold`` as it was in Python (session 14): roll and pitch
+    references, the held position, locked."""
+    import math
+
+    vn, ve = float(vel[0]), float(vel[1])
+    if not locked:
+        if math.hypot(vn, ve) < 0.5:
+            hold_ne[:] = pos[:2]
+            locked = True
+        vrn, vre = 0.0, 0.0
+    else:
+        vrn = kp * (hold_ne[0] - float(pos[0]))
+        vre = kp * (hold_ne[1] - float(pos[1]))
+        s = math.hypot(vrn, vre)
+        if s > vmax:
+            vrn, vre = vrn * vmax / s, vre * vmax / s
+    an, ae = kv * (vrn - vn), kv * (vre - ve)
+    a_fwd = math.cos(yaw) * an + math.sin(yaw) * ae
+    a_right = -math.sin(yaw) * an + math.cos(yaw) * ae
+    tmax = math.radians(tilt_max_deg)
+    pitch_ref = min(max(-math.atan2(a_fwd, g), -tmax), tmax)
+    roll_ref = min(max(math.atan2(a_right, g), -tmax), tmax)
+    return roll_ref, pitch_ref, locked
+
+
+def test_position_hold_kernel_equals_the_python_it_replaces():
+    """``position_hold_step`` against the Python position hold, bit for bit (references, held
+    position, lock) on random states: braking and locking (speeds around 0.5 m/s), locked with
+    the velocity reference under and over ``MPC_XY_VEL_MAX``, adversarial values."""
+    from vtolftc.firmware_sim.autopilot.outer_kernels import position_hold_step
+
+    rng = np.random.default_rng(16)
+    ref = np.zeros(3)
+    for k in range(30000):
+        pos = rng.normal(0.0, 20.0, 3)
+        vel = rng.normal(0.0, 0.4 if k % 3 else 3.0, 3)
+        if k % 97 == 5:
+            vel[int(rng.integers(2))] = _adversarial(rng, 1.0)
+        hold = rng.normal(0.0, 20.0, 2) if k % 2 else pos[:2] + rng.normal(0.0, 0.5, 2)
+        locked = bool(rng.random() < 0.6)
+        kp, vmax, kv = float(rng.uniform(0.1, 2.0)), float(rng.uniform(0.5, 12.0)), float(
+            rng.uniform(0.5, 5.0))
+        yaw = float(rng.uniform(-4.0, 4.0))
+        tilt = float(rng.choice([20.0, 35.0, 45.0, rng.uniform(1.0, 60.0)]))
+        h_ref = hold.copy()
+        want = _ref_position_hold(pos, vel, h_ref, locked, kp, vmax, kv, 9.80665, yaw, tilt)
+        h_got = hold.copy()
+        ref[:] = np.nan
+        got_locked = position_hold_step(pos, vel, h_got, ref, locked, kp, vmax, kv, 9.80665,
+                                        yaw, tilt)
+        assert got_locked == want[2], k
+        assert _bits(ref[:2]) == _bits(np.array([want[0], want[1]])), k
+        assert _bits(h_got) == _bits(h_ref), k
+
+
+def test_position_hold_on_a_real_flights_inputs(ds1, monkeypatch):
+    """Case 1's first 12 s (take-off and hover: the position hold at every multicopter
+    step) with the kernel's every call checked against the Python position hold."""
+    from vtolftc.firmware_sim.autopilot import outer_loops
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
+
+    kernel = outer_loops.position_hold_step
+    calls = []
+
+    def checked(pos, vel, hold_ne, ref, locked, *args):
+        want_hold = hold_ne.copy()
+        want = _ref_position_hold(pos, vel, want_hold, locked, *args)
+        got = kernel(pos, vel, hold_ne, ref, locked, *args)
+        assert got == want[2]
+        assert _bits(ref[:2]) == _bits(np.array([want[0], want[1]]))
+        assert _bits(hold_ne) == _bits(want_hold)
+        calls.append(locked)
+        return got
+
+    monkeypatch.setattr(outer_loops, "position_hold_step", checked)
+    run_scenario(paper_scenario("1", 12.0), "gs-shif")
+    assert len(calls) > 1000  # (locked from take-off on: the random test brakes and locks)

@@ -25,6 +25,7 @@ from vtolftc.firmware_sim.autopilot.degraded_lift import DegradedLift
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
 from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
 from vtolftc.firmware_sim.autopilot.interface import FlightMode, NavState
+from vtolftc.firmware_sim.autopilot.outer_kernels import position_hold_step
 from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
 
 __all__ = ["OuterLoops"]
@@ -179,7 +180,12 @@ class OuterLoops:
             ref[1] = 0.0
             pusher_hi = 0.0
         else:
-            ref[0], ref[1] = self._position_hold(nav, yaw)
+            # _position_hold compiled (outer_kernels.position_hold_step: the same bits)
+            sp.hold_locked = position_hold_step(
+                nav.pos_ned_m, nav.vel_ned_m_s, sp.hold_ne, ref, sp.hold_locked,
+                pp["MPC_XY_P"].value, pp["MPC_XY_VEL_MAX"].value,
+                pp["MPC_XY_VEL_P_ACC"].value, self.airframe.gravity_m_s2, yaw,
+                pp["MPC_TILTMAX_AIR"].value)
             pusher_hi = 0.0
         sp.v[1] = fx_cmd
         return pusher_hi
@@ -278,36 +284,3 @@ class OuterLoops:
             x = x if x > 0.0 else 0.0  # max(0.0, x)
             tot += tmax * (x if x < 1.25 else 1.25)  # min(1.25, x)
         return tot
-
-    def _position_hold(self, nav: NavState, yaw: float) -> tuple[float, float]:
-        """Roll and pitch references [rad] holding the horizontal position (brake first)."""
-        pp = self._p
-        sp = self.sp
-        vn, ve = float(nav.vel_ned_m_s[0]), float(nav.vel_ned_m_s[1])
-        if not sp.hold_locked:
-            if math.hypot(vn, ve) < 0.5:
-                sp.hold_ne[:] = nav.pos_ned_m[:2]
-                sp.hold_locked = True
-            vrn, vre = 0.0, 0.0
-        else:
-            kp = pp["MPC_XY_P"].value
-            vrn = kp * (sp.hold_ne[0] - float(nav.pos_ned_m[0]))
-            vre = kp * (sp.hold_ne[1] - float(nav.pos_ned_m[1]))
-            vmax = pp["MPC_XY_VEL_MAX"].value
-            s = math.hypot(vrn, vre)
-            if s > vmax:
-                vrn, vre = vrn * vmax / s, vre * vmax / s
-        kv = pp["MPC_XY_VEL_P_ACC"].value
-        an, ae = kv * (vrn - vn), kv * (vre - ve)
-        g = self.airframe.gravity_m_s2
-        a_fwd = math.cos(yaw) * an + math.sin(yaw) * ae
-        a_right = -math.sin(yaw) * an + math.cos(yaw) * ae
-        tmax = math.radians(pp["MPC_TILTMAX_AIR"].value)
-        lo = -tmax
-        x = -math.atan2(a_fwd, g)
-        x = lo if lo > x else x
-        pitch_ref = tmax if tmax < x else x  # min(max(x, -tmax), tmax)
-        x = math.atan2(a_right, g)
-        x = lo if lo > x else x
-        roll_ref = tmax if tmax < x else x
-        return roll_ref, pitch_ref
