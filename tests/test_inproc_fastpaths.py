@@ -861,3 +861,81 @@ def test_position_hold_on_a_real_flights_inputs(ds1, monkeypatch):
     monkeypatch.setattr(outer_loops, "position_hold_step", checked)
     run_scenario(paper_scenario("1", 12.0), "gs-shif")
     assert len(calls) > 1000  # (locked from take-off on: the random test brakes and locks)
+
+
+def _ref_estimate_update(st: dict, nav: NavState):
+    """``StateEstimate.update`` as it was in Python (session 14) on a dict of its fields,
+    with the body-axis velocity the outer loops computed from its ``ql`` and ``vel``."""
+    import math
+
+    from vtolftc.firmware_sim.autopilot.estimate import body_velocity_f
+
+    pos = nav.pos_ned_m.tolist()
+    vel = nav.vel_ned_m_s.tolist()
+    ql = nav.q_wxyz.tolist()
+    isf = math.isfinite
+    if not (isf(pos[0]) and isf(pos[1]) and isf(pos[2]) and isf(vel[0]) and isf(vel[1])
+            and isf(vel[2]) and isf(ql[0]) and isf(ql[1]) and isf(ql[2]) and isf(ql[3])):
+        return None
+    p_, q_, r_ = nav.omega_body_rad_s.tolist()
+    if not (isf(p_) and isf(q_) and isf(r_)):
+        return None
+    st["time_usec"] = int(nav.time_usec)
+    w, x, y, z = ql
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    ub, _, wb = body_velocity_f(*ql, *vel)
+    st["ub"], st["wb"] = ub, wb
+    st["alt"] = h = -pos[2]
+    st["v_up"] = -vel[2]
+    V = float(nav.airspeed_m_s)
+    st["airspeed"] = V if math.isfinite(V) else 0.0
+    if not math.isfinite(st["ground_alt"]):
+        st["ground_alt"] = h
+    st["euler"] = (roll, pitch, yaw)
+    return st["euler"]
+
+
+def test_estimate_kernel_equals_the_python_it_replaces():
+    """``StateEstimate.update`` (``estimate_step``) against the Python update it replaces,
+    field by field and bit for bit, on random samples with now and then a non-finite entry
+    (rejected, nothing changed), a NaN airspeed, and attitudes at the gimbal lock."""
+    rng = np.random.default_rng(17)
+    est = StateEstimate()
+    st = {"time_usec": 0, "euler": (0.0, 0.0, 0.0), "ub": 0.0, "wb": 0.0, "alt": 0.0,
+          "v_up": 0.0, "airspeed": 0.0, "ground_alt": float("nan")}
+    h = np.sqrt(0.5)
+    for k in range(20000):
+        a = rng.normal(0.0, 1.0, 13) * [1, 1, 1, 1, 2, 2, 2, 50, 50, 30, 10, 10, 3]
+        q = a[0:4] / np.linalg.norm(a[0:4])
+        if k % 50 == 7:
+            q = np.array([h, 0.0, h if k % 100 == 7 else -h, 0.0])
+        buf = np.concatenate([q, a[4:13]])
+        if k % 13 == 4:
+            buf[int(rng.integers(13))] = _adversarial(rng, 1.0) if k % 2 else np.nan
+        air = float(rng.uniform(0, 30)) if k % 17 else float("nan")
+        nav = NavState(k * 4000, buf[0:4], buf[4:7], buf[7:10], buf[10:13], air)
+        want = _ref_estimate_update(st, nav)
+        got = est.update(nav)
+        assert (got is None) == (want is None), k
+        for name in ("time_usec", "ub", "wb", "alt", "v_up", "airspeed", "ground_alt"):
+            assert _same(getattr(est, name), st[name]), (k, name)
+        assert np.array(est.euler).tobytes() == np.array(st["euler"]).tobytes(), k
+        assert est.att.tobytes() == np.array(st["euler"]).tobytes(), k
+
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+def test_a_copied_estimate_keeps_its_workspace_view(how):
+    """``StateEstimate.att`` stays a view of the copy's own workspace after copy and pickle."""
+    import pickle
+
+    est = StateEstimate()
+    q = np.array([0.9, 0.1, -0.2, 0.3])
+    est.update(_nav(q / np.linalg.norm(q), np.zeros(3)))
+    c = copy.deepcopy(est) if how == "deepcopy" else pickle.loads(pickle.dumps(est))
+    assert c.att.tobytes() == est.att.tobytes() and c.euler == est.euler
+    q2 = np.array([0.5, 0.5, 0.5, -0.5])
+    c.update(_nav(q2, np.zeros(3)))
+    assert c.att.tobytes() == np.array(c.euler).tobytes()
+    assert est.att.tobytes() == np.array(est.euler).tobytes() != c.att.tobytes()

@@ -108,13 +108,10 @@ class OuterLoops:
         # b if b < a else a): the same bits without their calls
         c = math.cos(roll) * math.cos(pitch)
         cos_tilt = c if c > 0.5 else 0.5  # max(0.5, c)
-        # estimate.body_velocity_f(*ql, *vel)[0] and [2], inlined (same expressions, same bits)
-        w_, x_, y_, z_ = self.est.ql
-        vn_, ve_, vd_ = self.est.vel
-        ub = ((1 - 2 * (y_ * y_ + z_ * z_)) * vn_ + 2 * (x_ * y_ + w_ * z_) * ve_
-              + 2 * (x_ * z_ - w_ * y_) * vd_)
-        wb = (2 * (x_ * z_ + w_ * y_) * vn_ + 2 * (y_ * z_ - w_ * x_) * ve_
-              + (1 - 2 * (x_ * x_ + y_ * y_)) * vd_)
+        # body_velocity_f(*q, *vel)[0] and [2], computed by the estimate's kernel
+        est = self.est
+        ub = est.ub
+        wb = est.wb
         alpha = math.atan2(wb, ub) if ub > 1.0 else 0.0
         dl = self.degraded
         if dl.active and mode is _M_FRONT_TRANSITION:
@@ -130,7 +127,7 @@ class OuterLoops:
             if mode is _M_FRONT_TRANSITION:
                 self._degraded_lift(h, v_up, V, pitch, alpha, cos_tilt, lift, drag)
             return False, 1.0, pusher_hi
-        t_fw = (self.est.time_usec - self.fw_entry_usec) * 1e-6
+        t_fw = (est.time_usec - self.fw_entry_usec) * 1e-6
         ramp = self._p["VT_TRANS_P2_DUR"].value
         rotor_hi = max(0.0, 1.0 - t_fw / ramp) if ramp > 0 else 0.0
         reserve = False
