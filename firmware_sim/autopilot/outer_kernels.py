@@ -6,6 +6,9 @@
   ``math.hypot`` calls the C library's, which differs from CPython's in ~0.6 % of random pairs;
   this port gives CPython's bits (``tests/test_inproc_fastpaths.py`` compares them on 10^6
   pairs over many magnitudes and on zeros, subnormals, huge values, infinities and NaN).
+- :func:`outer_aero_step` (with :func:`aero_lift_drag`): the tilt factor, angle of attack,
+  nominal wing lift and drag and their body z force of every armed step of
+  :meth:`.outer_loops.OuterLoops.update`, into a small output array.
 - :func:`position_hold_step`: the multicopter position hold of
   :meth:`.outer_loops.OuterLoops._position_hold` (brake, lock, then a P position / P velocity
   cascade to tilt references), the same expressions in the same order.
@@ -20,7 +23,7 @@ import math
 
 import numba
 
-__all__ = ["hypot2", "position_hold_step"]
+__all__ = ["aero_lift_drag", "hypot2", "outer_aero_step", "position_hold_step"]
 
 _VELTKAMP = 134217729.0  # 2**27 + 1
 
@@ -161,3 +164,43 @@ def position_hold_step(pos, vel, hold_ne, ref, locked, kp, vmax, kv, g, yaw,
     x = lo if lo > x else x
     ref[0] = tmax if tmax < x else x
     return locked
+
+
+@numba.njit(cache=True)
+def aero_lift_drag(wing, V, alpha):  # pragma: no cover - compiled
+    """Nominal wing lift and drag [N] at airspeed ``V`` [m/s] and angle of attack ``alpha``
+    [rad]: linear lift clipped at ``CL_max``, parabolic drag; 0 below 1 m/s. ``wing``: air
+    density [kg/m^3], area [m^2], ``CL0``, ``CL_alpha`` [1/rad], ``CL_max``, ``CD0``, induced
+    drag factor (the airframe's nominal values)."""
+    if V < 1.0:
+        return 0.0, 0.0
+    qS = 0.5 * wing[0] * V * V * wing[1]
+    cl = wing[2] + wing[3] * alpha
+    cl_max = wing[4]
+    lo = -cl_max
+    cl = lo if lo > cl else cl
+    cl = cl_max if cl_max < cl else cl  # min(max(cl, -cl_max), cl_max)
+    cd = wing[5] + wing[6] * cl * cl
+    return qS * cl, qS * cd
+
+
+@numba.njit(cache=True)
+def outer_aero_step(roll, pitch, ub, wb, V, alpha_limit, wing, out):  # pragma: no cover
+    """The outer loops' per-step aerodynamics (:meth:`.outer_loops.OuterLoops.update`).
+
+    Writes ``out``: the tilt factor ``max(0.5, cos(roll) cos(pitch))``, the angle of attack
+    ``atan2(wb, ub)`` [rad] (0 unless ``ub`` > 1 m/s), the nominal lift and drag [N] at
+    ``min(alpha, alpha_limit)`` (``alpha_limit`` +inf but in a degraded-lift front
+    transition) and their body z force ``-lift cos(alpha) - drag sin(alpha)`` [N].
+    ``roll``, ``pitch`` [rad]; ``ub``, ``wb`` body-axis velocity x and z [m/s]; ``V``
+    airspeed [m/s]; ``wing`` as :func:`aero_lift_drag`.
+    """
+    c = math.cos(roll) * math.cos(pitch)
+    out[0] = c if c > 0.5 else 0.5  # max(0.5, c)
+    alpha = math.atan2(wb, ub) if ub > 1.0 else 0.0
+    a = alpha_limit if alpha_limit < alpha else alpha  # min(alpha, alpha_limit)
+    lift, drag = aero_lift_drag(wing, V, a)
+    out[1] = alpha
+    out[2] = lift
+    out[3] = drag
+    out[4] = -lift * math.cos(alpha) - drag * math.sin(alpha)

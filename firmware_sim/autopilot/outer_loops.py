@@ -19,13 +19,20 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from vtolftc.airframe.loader import Airframe
 from vtolftc.firmware_sim.autopilot.altitude import FixedWingAltitudeHold, MulticopterAltitudeHold
 from vtolftc.firmware_sim.autopilot.degraded_lift import DegradedLift
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
 from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
 from vtolftc.firmware_sim.autopilot.interface import FlightMode, NavState
-from vtolftc.firmware_sim.autopilot.outer_kernels import position_hold_step
+from vtolftc.firmware_sim.autopilot.outer_kernels import (
+    aero_lift_drag,
+    outer_aero_step,
+    position_hold_step,
+)
 from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
 
 __all__ = ["OuterLoops"]
@@ -72,7 +79,9 @@ class OuterLoops:
         self.output: Any = None  # the output stage (last allocation's Fz), set by the autopilot
         self.degraded = DegradedLift(airframe, pp, dt)
         """Degraded-lift guidance of the front transition (:mod:`.degraded_lift`)."""
-        self._wing: tuple = (None,)  # (airframe, rho, wing constants) of aero_estimate
+        self._wing_of: Any = None  # the airframe the wing constants belong to
+        self._wing = np.zeros(7)  # its wing constants (_wing_constants)
+        self._aero = np.zeros(5)  # outer_aero_step's output
         self._pushers_nominal = [(r.max_thrust_N, r.zero_thrust_axial_speed_m_s)
                                  for r in airframe.pushers]
         self.pusher_ramp = 0.0
@@ -103,24 +112,17 @@ class OuterLoops:
         """
         sp = self.sp
         sp.ref[2] = sp.yaw_hold
-        # the builtins min / max written as comparisons on this per-step path (their own
-        # rule, also for NaN and signed zeros: max(a, b) = b if b > a else a, min(a, b) =
-        # b if b < a else a): the same bits without their calls
-        c = math.cos(roll) * math.cos(pitch)
-        cos_tilt = c if c > 0.5 else 0.5  # max(0.5, c)
-        # body_velocity_f(*q, *vel)[0] and [2], computed by the estimate's kernel
         est = self.est
-        ub = est.ub
-        wb = est.wb
-        alpha = math.atan2(wb, ub) if ub > 1.0 else 0.0
         dl = self.degraded
-        if dl.active and mode is _M_FRONT_TRANSITION:
-            # degraded lift: trust no wing lift beyond the stall margin (a sinking vehicle's
-            # wing is past the stall, where the nominal model's clipped CL is far too high)
-            lift, drag = self.aero_estimate(V, min(alpha, dl.alpha_limit()))
-        else:
-            lift, drag = self.aero_estimate(V, alpha)
-        fz_aero = -lift * math.cos(alpha) - drag * math.sin(alpha)  # body z, N
+        # degraded lift: trust no wing lift beyond the stall margin (a sinking vehicle's wing
+        # is past the stall, where the nominal model's clipped CL is far too high)
+        lim = dl.alpha_limit() if dl.active and mode is _M_FRONT_TRANSITION else math.inf
+        aero = self._aero
+        # cos_tilt = max(0.5, cos(roll) cos(pitch)), alpha = atan2(wb, ub) (0 unless ub > 1),
+        # the nominal lift and drag at min(alpha, lim) and their body z force [N]: compiled
+        wing = self._wing if self._wing_of is self.airframe else self._wing_constants()
+        outer_aero_step(roll, pitch, est.ub, est.wb, V, lim, wing, aero)
+        cos_tilt, alpha, lift, drag, fz_aero = aero.tolist()
 
         if mode is not _M_FIXED_WING:  # TAKEOFF, HOVER, LAND, FRONT/BACK_TRANSITION
             pusher_hi = self._outer_mc(mode, nav, yaw, h, v_up, V, cos_tilt, fz_aero)
@@ -253,25 +255,21 @@ class OuterLoops:
         else:
             sp.v[0] = 0.0
 
+    def _wing_constants(self) -> NDArray[np.float64]:
+        """The nominal wing constants of :func:`.outer_kernels.aero_lift_drag` (air density,
+        area, CL0, CL_alpha, CL_max, CD0, induced drag factor), rebuilt when the airframe
+        object changes."""
+        if self._wing_of is not self.airframe:
+            w = self.airframe.wing
+            self._wing = np.array([self.effectiveness._rho, w.area_m2, w.CL0, w.CL_alpha,
+                                   w.CL_max, w.CD0, w.induced_drag_factor])
+            self._wing_of = self.airframe
+        return self._wing
+
     def aero_estimate(self, V: float, alpha: float) -> tuple[float, float]:
         """Nominal wing lift and drag [N] at airspeed V [m/s] and angle of attack alpha [rad]
         (from the airframe file, linear lift clipped at CL_max)."""
-        if V < 1.0:
-            return 0.0, 0.0
-        wing = self._wing
-        if wing[0] is not self.airframe:
-            w = self.airframe.wing
-            wing = self._wing = (self.airframe, self.effectiveness._rho, w.area_m2, w.CL0,
-                                 w.CL_alpha, w.CL_max, w.CD0, w.induced_drag_factor)
-        _, rho, area, cl0, cl_alpha, cl_max, cd0, k_i = wing
-        # effectiveness.dynamic_pressure(V) * area, inlined (V >= 1 here)
-        qS = 0.5 * rho * V * V * area
-        cl = cl0 + cl_alpha * alpha
-        lo = -cl_max
-        cl = lo if lo > cl else cl
-        cl = cl_max if cl_max < cl else cl  # min(max(cl, -cl_max), cl_max)
-        cd = cd0 + k_i * cl * cl
-        return qS * cl, qS * cd
+        return aero_lift_drag(self._wing_constants(), V, alpha)
 
     def pusher_max_force(self, V: float) -> float:
         """Nominal total pusher thrust at full command and airspeed V [m/s], in N."""
