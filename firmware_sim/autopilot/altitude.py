@@ -25,7 +25,35 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["FixedWingAltitudeHold", "MulticopterAltitudeHold"]
+import numba
+
+__all__ = ["FixedWingAltitudeHold", "MulticopterAltitudeHold", "fw_altitude_law"]
+
+
+@numba.njit(cache=True)
+def fw_altitude_law(integral, dt, h_ref, h, v_up, kp_alt, kp_vz, ki_vz, climb_max, sink_max,
+                    pitch_min, pitch_max):  # pragma: no cover - compiled
+    """One step of the fixed-wing altitude law (:class:`FixedWingAltitudeHold`, whose
+    arguments these are, the integral [rad] and the period ``dt`` [s] first); returns
+    ``(pitch_ref, integral, v_up_ref)`` [rad, rad, m/s]. Compiled without ``fastmath``: the
+    same bits as the expressions in Python; min / max written as comparisons with the
+    builtins' rule (the later argument only when strictly greater / less)."""
+    x = kp_alt * (h_ref - h)
+    lo = -sink_max
+    x = lo if lo > x else x
+    v_ref = climb_max if climb_max < x else x
+    e = v_ref - v_up
+    p = kp_vz * e
+    dI = ki_vz * e * dt
+    u = p + integral + dI
+    if (u > pitch_max and dI > 0.0) or (u < pitch_min and dI < 0.0):
+        dI = 0.0
+    x = integral + dI
+    x = pitch_min if pitch_min > x else x
+    integral = x = pitch_max if pitch_max < x else x
+    x = p + x
+    x = pitch_min if pitch_min > x else x
+    return (pitch_max if pitch_max < x else x), integral, v_ref
 
 
 class MulticopterAltitudeHold:
@@ -126,21 +154,7 @@ class FixedWingAltitudeHold:
         float
             pitch reference (rad).
         """
-        # min(max(x, lo), hi) as comparisons (see MulticopterAltitudeHold.update)
-        x = kp_alt * (h_ref - h)
-        lo = -sink_max
-        x = lo if lo > x else x
-        v_ref = climb_max if climb_max < x else x
-        self.v_up_ref = v_ref
-        e = v_ref - v_up
-        p = kp_vz * e
-        dI = ki_vz * e * self.dt
-        u = p + self.integral + dI
-        if (u > pitch_max and dI > 0.0) or (u < pitch_min and dI < 0.0):
-            dI = 0.0
-        x = self.integral + dI
-        x = pitch_min if pitch_min > x else x
-        self.integral = x = pitch_max if pitch_max < x else x
-        x = p + x
-        x = pitch_min if pitch_min > x else x
-        return pitch_max if pitch_max < x else x
+        out, self.integral, self.v_up_ref = fw_altitude_law(
+            self.integral, self.dt, h_ref, h, v_up, kp_alt, kp_vz, ki_vz, climb_max, sink_max,
+            pitch_min, pitch_max)
+        return out

@@ -9,6 +9,8 @@
 - :func:`outer_aero_step` (with :func:`aero_lift_drag`): the tilt factor, angle of attack,
   nominal wing lift and drag and their body z force of every armed step of
   :meth:`.outer_loops.OuterLoops.update`, into a small output array.
+- :func:`fw_longitudinal_step` (with :func:`pusher_force` and
+  :func:`.altitude.fw_altitude_law`): the fixed-wing altitude and airspeed loops.
 - :func:`position_hold_step`: the multicopter position hold of
   :meth:`.outer_loops.OuterLoops._position_hold` (brake, lock, then a P position / P velocity
   cascade to tilt references), the same expressions in the same order.
@@ -23,7 +25,10 @@ import math
 
 import numba
 
-__all__ = ["aero_lift_drag", "hypot2", "outer_aero_step", "position_hold_step"]
+from vtolftc.firmware_sim.autopilot.altitude import fw_altitude_law
+
+__all__ = ["aero_lift_drag", "fw_longitudinal_step", "hypot2", "outer_aero_step",
+           "position_hold_step", "pusher_force"]
 
 _VELTKAMP = 134217729.0  # 2**27 + 1
 
@@ -204,3 +209,51 @@ def outer_aero_step(roll, pitch, ub, wb, V, alpha_limit, wing, out):  # pragma: 
     out[2] = lift
     out[3] = drag
     out[4] = -lift * math.cos(alpha) - drag * math.sin(alpha)
+
+
+@numba.njit(cache=True)
+def pusher_force(pushers, V):  # pragma: no cover - compiled
+    """Nominal total pusher thrust [N] at full command and airspeed ``V`` [m/s]; ``pushers``
+    holds each pusher's static thrust [N] and zero-thrust axial speed [m/s] in turn."""
+    tot = 0.0
+    for i in range(0, pushers.size, 2):
+        x = 1.0 - V / pushers[i + 1]
+        x = x if x > 0.0 else 0.0  # max(0.0, x)
+        tot += pushers[i] * (x if x < 1.25 else 1.25)  # min(1.25, x)
+    return tot
+
+
+@numba.njit(cache=True)
+def fw_longitudinal_step(pushers, c, h_ref, h, v_up, V, pitch, alpha, lift, drag, fw_integral,
+                         kp_alt, kp_vz, ki_vz, climb_max, sink_max, pitch_min_deg,
+                         pitch_max_deg, v_sp, kp_v, ki_v, airspeed_int):  # pragma: no cover
+    """The fixed-wing altitude (pitch) and airspeed (pusher force) loops of one step
+    (:meth:`.outer_loops.OuterLoops._outer_fw`).
+
+    ``pushers`` as :func:`pusher_force`; ``c``: mass [kg], gravity [m/s^2], the outer loops'
+    period and the altitude hold's [s]. ``h_ref``, ``h`` [m], ``v_up`` [m/s], ``V`` airspeed
+    [m/s], ``pitch``, ``alpha`` [rad], nominal ``lift``, ``drag`` [N]; the altitude law's
+    integral [rad] and gains (``FW_ALT_P``, ``FW_VZ_P``, ``FW_VZ_I``, ``FW_CLMB_MAX``,
+    ``FW_SINK_MAX``, ``FW_P_LIM_MIN`` / ``MAX`` [deg]); the airspeed setpoint [m/s], the
+    airspeed hold's gains (``FW_AIRSPD_P``, ``FW_AIRSPD_I``) and integral [m/s^2].
+
+    Returns ``(pitch_ref, fw_integral, v_up_ref, airspeed_int, fx)``: the pitch reference
+    [rad], the altitude law's new integral and climb-rate reference, the airspeed hold's new
+    integral and the pushers' force command [N] (``min(max(fx_cmd, 0), fx_max)``).
+    """
+    mass = c[0]
+    g = c[1]
+    pitch_ref, fw_integral, v_ref = fw_altitude_law(
+        fw_integral, c[3], h_ref, h, v_up, kp_alt, kp_vz, ki_vz, climb_max, sink_max,
+        pitch_min_deg * (math.pi / 180.0), pitch_max_deg * (math.pi / 180.0))
+    fx_max = pusher_force(pushers, V)
+    e_v = v_sp - V
+    a_x = kp_v * e_v + airspeed_int
+    fx_cmd = drag * math.cos(alpha) - lift * math.sin(alpha) + mass * (
+        a_x + g * math.sin(pitch))
+    if not ((fx_cmd >= fx_max and e_v > 0) or (fx_cmd <= 0.0 and e_v < 0)):
+        x = airspeed_int + ki_v * e_v * c[2]
+        x = -3.0 if x < -3.0 else x
+        airspeed_int = 3.0 if x > 3.0 else x  # min(max(x, -3.0), 3.0)
+    x = 0.0 if fx_cmd < 0.0 else fx_cmd
+    return pitch_ref, fw_integral, v_ref, airspeed_int, (fx_max if fx_max < x else x)

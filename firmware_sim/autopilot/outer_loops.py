@@ -30,8 +30,10 @@ from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
 from vtolftc.firmware_sim.autopilot.interface import FlightMode, NavState
 from vtolftc.firmware_sim.autopilot.outer_kernels import (
     aero_lift_drag,
+    fw_longitudinal_step,
     outer_aero_step,
     position_hold_step,
+    pusher_force,
 )
 from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
 
@@ -82,8 +84,12 @@ class OuterLoops:
         self._wing_of: Any = None  # the airframe the wing constants belong to
         self._wing = np.zeros(7)  # its wing constants (_wing_constants)
         self._aero = np.zeros(5)  # outer_aero_step's output
-        self._pushers_nominal = [(r.max_thrust_N, r.zero_thrust_axial_speed_m_s)
-                                 for r in airframe.pushers]
+        # each pusher's static thrust [N] and zero-thrust axial speed [m/s] (pusher_force)
+        self._pushers = np.array([x for r in airframe.pushers
+                                  for x in (r.max_thrust_N, r.zero_thrust_axial_speed_m_s)],
+                                 dtype=np.float64)
+        # mass [kg], gravity [m/s^2], period [s], the fixed-wing altitude hold's period [s]
+        self._fw_c = np.array([airframe.mass_kg, airframe.gravity_m_s2, dt, self.fw_alt.dt])
         self.pusher_ramp = 0.0
         self.fw_entry_usec = 0
         self.airspeed_int = 0.0
@@ -222,29 +228,20 @@ class OuterLoops:
         ref = sp.ref
         mass = self.airframe.mass_kg
         g = self.airframe.gravity_m_s2
-        lim = math.radians
         lateral = self.navigator.fw_lateral(nav, roll, yaw, V)
         if lateral is None:
             ref[0] = 0.0
         else:
             ref[0], ref[2] = lateral
-        ref[1] = self.fw_alt.update(sp.alt_ref, h, v_up, kp_alt=pp["FW_ALT_P"].value,
-                                    kp_vz=pp["FW_VZ_P"].value, ki_vz=pp["FW_VZ_I"].value,
-                                    climb_max=pp["FW_CLMB_MAX"].value,
-                                    sink_max=pp["FW_SINK_MAX"].value,
-                                    pitch_min=lim(pp["FW_P_LIM_MIN"].value),
-                                    pitch_max=lim(pp["FW_P_LIM_MAX"].value))
-        fx_max = self.pusher_max_force(V)
-        e_v = self.navigator.airspeed_setpoint() - V
-        a_x = pp["FW_AIRSPD_P"].value * e_v + self.airspeed_int
-        fx_cmd = drag * math.cos(alpha) - lift * math.sin(alpha) + mass * (
-            a_x + g * math.sin(pitch))
-        if not ((fx_cmd >= fx_max and e_v > 0) or (fx_cmd <= 0.0 and e_v < 0)):
-            x = self.airspeed_int + pp["FW_AIRSPD_I"].value * e_v * self.dt
-            x = -3.0 if x < -3.0 else x
-            self.airspeed_int = 3.0 if x > 3.0 else x  # min(max(x, -3.0), 3.0)
-        x = 0.0 if fx_cmd < 0.0 else fx_cmd
-        sp.v[1] = fx_max if fx_max < x else x  # min(max(fx_cmd, 0.0), fx_max)
+        # fw_alt.update, pusher_max_force and the airspeed hold: one compiled call
+        fa = self.fw_alt
+        c = self._fw_c  # mass, gravity, periods: the airframe's and the loops' constants
+        ref[1], fa.integral, fa.v_up_ref, self.airspeed_int, sp.v[1] = fw_longitudinal_step(
+            self._pushers, c, sp.alt_ref, h, v_up, V, pitch, alpha, lift, drag, fa.integral,
+            pp["FW_ALT_P"].value, pp["FW_VZ_P"].value, pp["FW_VZ_I"].value,
+            pp["FW_CLMB_MAX"].value, pp["FW_SINK_MAX"].value, pp["FW_P_LIM_MIN"].value,
+            pp["FW_P_LIM_MAX"].value, self.navigator.airspeed_setpoint(),
+            pp["FW_AIRSPD_P"].value, pp["FW_AIRSPD_I"].value, self.airspeed_int)
         if not reserve:
             a_up = self.mc_alt.update(sp.alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
                                       kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
@@ -273,9 +270,4 @@ class OuterLoops:
 
     def pusher_max_force(self, V: float) -> float:
         """Nominal total pusher thrust at full command and airspeed V [m/s], in N."""
-        tot = 0.0
-        for tmax, v0 in self._pushers_nominal:
-            x = 1.0 - V / v0
-            x = x if x > 0.0 else 0.0  # max(0.0, x)
-            tot += tmax * (x if x < 1.25 else 1.25)  # min(1.25, x)
-        return tot
+        return pusher_force(self._pushers, V)
