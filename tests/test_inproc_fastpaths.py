@@ -839,28 +839,64 @@ def test_position_hold_kernel_equals_the_python_it_replaces():
         assert _bits(h_got) == _bits(h_ref), k
 
 
-def test_position_hold_on_a_real_flights_inputs(ds1, monkeypatch):
-    """Case 1's first 12 s (take-off and hover: the position hold at every multicopter
-    step) with the kernel's every call checked against the Python position hold."""
+def _ref_mc_hold(pos, vel, hold_ne, ref, v, c, locked, integral, h_ref, h, v_up, kp_z, kp_vz,
+                 ki_vz, v_max_up, v_max_dn, override, use_override, cos_tilt, fz_aero, kp_xy,
+                 vmax_xy, kv_xy, yaw, tilt_max_deg):
+    """``_outer_mc``'s TAKEOFF / HOVER / LAND path as it was in Python (session 14), on
+    ``mc_hold_step``'s arguments: writes ``hold_ne``, ``ref``, ``v``; returns ``(locked,
+    integral, v_up_ref)``."""
+    a_up, integral, v_ref = _ref_mc_alt((integral, c[4], c[5], c[6], c[7]), h_ref, h, v_up,
+                                        kp_z, kp_vz, ki_vz, v_max_up, v_max_dn,
+                                        override if use_override else None)
+    v[0] = (-float(c[0]) * (float(c[1]) + a_up) / cos_tilt - fz_aero)
+    roll_ref, pitch_ref, locked = _ref_position_hold(pos, vel, hold_ne, locked, kp_xy, vmax_xy,
+                                                     kv_xy, float(c[1]), yaw, tilt_max_deg)
+    ref[0], ref[1] = roll_ref, pitch_ref
+    v[1] = 0.0
+    return locked, integral, v_ref
+
+
+def test_mc_hold_step_on_a_real_flights_inputs(ds1, monkeypatch):
+    """Case 1's first 12 s (take-off and hover: ``mc_hold_step`` at every multicopter step)
+    with the kernel's every call checked against the Python it replaces (altitude hold, z
+    force, position hold), bit for bit; then random calls around those inputs (braking and
+    locking, the landing override, saturating limits)."""
     from vtolftc.firmware_sim.autopilot import outer_loops
     from vtolftc.runners.scenario import paper_scenario, run_scenario
 
-    kernel = outer_loops.position_hold_step
+    kernel = outer_loops.mc_hold_step
     calls = []
 
-    def checked(pos, vel, hold_ne, ref, locked, *args):
-        want_hold = hold_ne.copy()
-        want = _ref_position_hold(pos, vel, want_hold, locked, *args)
-        got = kernel(pos, vel, hold_ne, ref, locked, *args)
-        assert got == want[2]
-        assert _bits(ref[:2]) == _bits(np.array([want[0], want[1]]))
-        assert _bits(hold_ne) == _bits(want_hold)
-        calls.append(locked)
+    def check(args):
+        pos, vel, hold_ne, ref, v, c = args[:6]
+        w_hold, w_ref, w_v = hold_ne.copy(), ref.copy(), v.copy()
+        want = _ref_mc_hold(pos, vel, w_hold, w_ref, w_v, c, *args[6:])
+        got = kernel(*args)
+        assert got == want
+        assert _bits(ref) == _bits(w_ref) and _bits(v) == _bits(w_v)
+        assert _bits(hold_ne) == _bits(w_hold)
         return got
 
-    monkeypatch.setattr(outer_loops, "position_hold_step", checked)
+    def checked(*args):
+        calls.append(tuple(a.copy() if isinstance(a, np.ndarray) else a for a in args))
+        return check(args)
+
+    monkeypatch.setattr(outer_loops, "mc_hold_step", checked)
     run_scenario(paper_scenario("1", 12.0), "gs-shif")
-    assert len(calls) > 1000  # (locked from take-off on: the random test brakes and locks)
+    assert len(calls) > 1000
+    rng = np.random.default_rng(20)
+    for k in range(5000):
+        args = list(calls[int(rng.integers(len(calls)))])
+        args[0] = args[0] + rng.normal(0.0, 3.0, 3)  # pos
+        args[1] = args[1] * float(rng.choice([0.0, 1.0, 30.0])) + rng.normal(0.0, 0.3, 3)
+        args[6] = bool(rng.random() < 0.5)  # locked
+        args[7] = float(rng.normal(0.0, 3.0))  # integral
+        args[10] = float(rng.normal(0.0, 4.0))  # v_up
+        args[16], args[17] = -float(rng.uniform(0.1, 2.0)), bool(k % 4 == 0)  # landing
+        args[19] = float(rng.normal(0.0, 50.0))  # fz_aero
+        args[3], args[4] = np.full(3, np.nan), args[4].copy()  # what the step must write
+        args[4][:2] = np.nan
+        check(tuple(args))
 
 
 def _ref_estimate_update(st: dict, nav: NavState):
@@ -1040,7 +1076,7 @@ def test_fw_longitudinal_kernel_equals_the_python_it_replaces(ds1):
             continue  # (math.cos / sin of inf raise; the estimate's values are finite)
         want = _ref_fw_longitudinal(outer, fw_i, as_i, h_ref, h, v_up, V, pitch, alpha, lift,
                                     drag, gains, v_sp)
-        got = fw_longitudinal_step(outer._pushers, outer._fw_c, h_ref, h, v_up, V, pitch,
+        got = fw_longitudinal_step(outer._pushers, outer._consts, h_ref, h, v_up, V, pitch,
                                    alpha, lift, drag, fw_i, *gains[:7], v_sp, *gains[7:],
                                    as_i)
         # equal bits, or NaN where the Python gave NaN: a NaN's sign bit follows the operand

@@ -11,6 +11,7 @@
   :meth:`.outer_loops.OuterLoops.update`, into a small output array.
 - :func:`fw_longitudinal_step` (with :func:`pusher_force` and
   :func:`.altitude.fw_altitude_law`): the fixed-wing altitude and airspeed loops.
+- :func:`mc_hold_step`: TAKEOFF, HOVER and LAND's altitude law, z force and position hold.
 - :func:`position_hold_step`: the multicopter position hold of
   :meth:`.outer_loops.OuterLoops._position_hold` (brake, lock, then a P position / P velocity
   cascade to tilt references), the same expressions in the same order.
@@ -25,10 +26,10 @@ import math
 
 import numba
 
-from vtolftc.firmware_sim.autopilot.altitude import fw_altitude_law
+from vtolftc.firmware_sim.autopilot.altitude import fw_altitude_law, mc_altitude_law
 
-__all__ = ["aero_lift_drag", "fw_longitudinal_step", "hypot2", "outer_aero_step",
-           "position_hold_step", "pusher_force"]
+__all__ = ["aero_lift_drag", "fw_longitudinal_step", "hypot2", "mc_hold_step",
+           "outer_aero_step", "position_hold_step", "pusher_force"]
 
 _VELTKAMP = 134217729.0  # 2**27 + 1
 
@@ -257,3 +258,29 @@ def fw_longitudinal_step(pushers, c, h_ref, h, v_up, V, pitch, alpha, lift, drag
         airspeed_int = 3.0 if x > 3.0 else x  # min(max(x, -3.0), 3.0)
     x = 0.0 if fx_cmd < 0.0 else fx_cmd
     return pitch_ref, fw_integral, v_ref, airspeed_int, (fx_max if fx_max < x else x)
+
+
+@numba.njit(cache=True)
+def mc_hold_step(pos, vel, hold_ne, ref, v, c, locked, integral, h_ref, h, v_up, kp_z, kp_vz,
+                 ki_vz, v_max_up, v_max_dn, override, use_override, cos_tilt, fz_aero, kp_xy,
+                 vmax_xy, kv_xy, yaw, tilt_max_deg):  # pragma: no cover - compiled
+    """The multicopter outer loops of TAKEOFF, HOVER and LAND in one call
+    (:meth:`.outer_loops.OuterLoops._outer_mc`): the altitude law
+    (:func:`.altitude.mc_altitude_law`) and the body z force ``v[0] = -m (g + a_up) /
+    cos_tilt - fz_aero`` [N], the position hold (:func:`position_hold_step`, writing
+    ``ref[0:2]`` and ``hold_ne``) and no pusher force (``v[1] = 0``).
+
+    ``c``: mass [kg], gravity [m/s^2], the loops' period, the fixed-wing altitude hold's
+    period, the multicopter altitude hold's period [s] and its ``a_up_max``, ``a_dn_max``,
+    ``i_limit`` [m/s^2]. The altitude law's integral and arguments and the position hold's
+    (``MPC_XY_P``, ``MPC_XY_VEL_MAX``, ``MPC_XY_VEL_P_ACC``, ``yaw``, ``MPC_TILTMAX_AIR``) as
+    in those functions. Returns ``(locked, integral, v_up_ref)``.
+    """
+    a_up, integral, v_ref = mc_altitude_law(integral, c[4], c[5], c[6], c[7], h_ref, h, v_up,
+                                            kp_z, kp_vz, ki_vz, v_max_up, v_max_dn, override,
+                                            use_override)
+    v[0] = -c[0] * (c[1] + a_up) / cos_tilt - fz_aero
+    locked = position_hold_step(pos, vel, hold_ne, ref, locked, kp_xy, vmax_xy, kv_xy, c[1],
+                                yaw, tilt_max_deg)
+    v[1] = 0.0
+    return locked, integral, v_ref

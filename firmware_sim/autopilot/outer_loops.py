@@ -31,8 +31,8 @@ from vtolftc.firmware_sim.autopilot.interface import FlightMode, NavState
 from vtolftc.firmware_sim.autopilot.outer_kernels import (
     aero_lift_drag,
     fw_longitudinal_step,
+    mc_hold_step,
     outer_aero_step,
-    position_hold_step,
     pusher_force,
 )
 from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
@@ -88,8 +88,12 @@ class OuterLoops:
         self._pushers = np.array([x for r in airframe.pushers
                                   for x in (r.max_thrust_N, r.zero_thrust_axial_speed_m_s)],
                                  dtype=np.float64)
-        # mass [kg], gravity [m/s^2], period [s], the fixed-wing altitude hold's period [s]
-        self._fw_c = np.array([airframe.mass_kg, airframe.gravity_m_s2, dt, self.fw_alt.dt])
+        # the kernels' constants (the airframe and the loops are fixed at construction): mass
+        # [kg], gravity [m/s^2], period [s], the fixed-wing and multicopter altitude holds'
+        # periods [s], the latter's a_up_max, a_dn_max, i_limit [m/s^2]
+        ma = self.mc_alt
+        self._consts = np.array([airframe.mass_kg, airframe.gravity_m_s2, dt, self.fw_alt.dt,
+                                 ma.dt, ma.a_up_max, ma.a_dn_max, ma.i_limit])
         self.pusher_ramp = 0.0
         self.fw_entry_usec = 0
         self.airspeed_int = 0.0
@@ -165,6 +169,19 @@ class OuterLoops:
         if mode == _M_LAND:
             override = -pp["MPC_LAND_SPEED"].value
             sp.alt_ref = h
+        if mode is not _M_FRONT_TRANSITION and mode is not _M_BACK_TRANSITION:
+            # TAKEOFF, HOVER, LAND: the altitude hold, the z force, the position hold (its
+            # hypot CPython's) and no pusher force in one compiled call, the same bits
+            ma = self.mc_alt
+            sp.hold_locked, ma.integral, ma.v_up_ref = mc_hold_step(
+                nav.pos_ned_m, nav.vel_ned_m_s, sp.hold_ne, ref, sp.v, self._consts,
+                sp.hold_locked, ma.integral, sp.alt_ref, h, v_up, pp["MPC_Z_P"].value,
+                pp["MPC_Z_VEL_P_ACC"].value, pp["MPC_Z_VEL_I_ACC"].value, vmax_up,
+                pp["MPC_Z_VEL_MAX_DN"].value, 0.0 if override is None else override,
+                override is not None, cos_tilt, fz_aero, pp["MPC_XY_P"].value,
+                pp["MPC_XY_VEL_MAX"].value, pp["MPC_XY_VEL_P_ACC"].value, yaw,
+                pp["MPC_TILTMAX_AIR"].value)
+            return 0.0
         a_up = self.mc_alt.update(sp.alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
                                   kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
                                   ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
@@ -180,17 +197,9 @@ class OuterLoops:
             r = self.pusher_ramp + pp["VT_PSHER_SLEW"].value * self.dt
             self.pusher_ramp = r if r < 1.0 else 1.0  # min(1.0, r)
             fx_cmd = pp["VT_F_TRANS_THR"].value * self.pusher_ramp * self.pusher_max_force(V)
-        elif mode == _M_BACK_TRANSITION:
+        else:  # BACK_TRANSITION
             ref[0] = 0.0
             ref[1] = 0.0
-            pusher_hi = 0.0
-        else:
-            # _position_hold compiled (outer_kernels.position_hold_step: the same bits)
-            sp.hold_locked = position_hold_step(
-                nav.pos_ned_m, nav.vel_ned_m_s, sp.hold_ne, ref, sp.hold_locked,
-                pp["MPC_XY_P"].value, pp["MPC_XY_VEL_MAX"].value,
-                pp["MPC_XY_VEL_P_ACC"].value, self.airframe.gravity_m_s2, yaw,
-                pp["MPC_TILTMAX_AIR"].value)
             pusher_hi = 0.0
         sp.v[1] = fx_cmd
         return pusher_hi
@@ -235,7 +244,7 @@ class OuterLoops:
             ref[0], ref[2] = lateral
         # fw_alt.update, pusher_max_force and the airspeed hold: one compiled call
         fa = self.fw_alt
-        c = self._fw_c  # mass, gravity, periods: the airframe's and the loops' constants
+        c = self._consts
         ref[1], fa.integral, fa.v_up_ref, self.airspeed_int, sp.v[1] = fw_longitudinal_step(
             self._pushers, c, sp.alt_ref, h, v_up, V, pitch, alpha, lift, drag, fa.integral,
             pp["FW_ALT_P"].value, pp["FW_VZ_P"].value, pp["FW_VZ_I"].value,
