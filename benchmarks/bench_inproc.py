@@ -325,16 +325,19 @@ Measured A/B (main's tree and this branch's in alternate processes, each a warm-
 flights, the faster one's thread CPU per control step; 8 pairs at load 10-13.7): case 1
 gs-shif 40 s main 31.8 us, branch 27.6 us (medians), pair ratio median 0.872 (0.74-1.45, 6
 of 8 below 1); the campaign's first scenario (60 s, ``bench_campaign``'s spec) main 30.6,
-branch 27.2 us, ratio median 0.911 (0.76-1.06, 6 of 8). An earlier set of 6 pairs with the
-estimate and position hold only: medians 0.94 and ~1.0. ``bench_campaign.py --jobs 2
---scenarios 24 --no-dask``, once on each tree back to back at load 10.6-11.6: main 51.4,
-branch 40.0 scenarios/min (flights 2.3-2.8 s of wall time each: the cores were shared 5-6
-ways, so these wall-time rates say nothing about the code); CPU of all the campaign's
-processes 0.57 (main) and 0.56 s (branch) per scenario. No idle machine to measure on: on
-the lead's idle figures (case 1 24.8-25.7 us per step; the campaign's flights 0.39-0.42 s)
-the ratios give ~21.6-22.4 us per step (~170x) and ~0.36-0.38 s per 60 s flight, i.e.
-~315-330 scenarios/min on 2 workers before the pool's ~3 %: around the 300/min line, an
-estimate from loaded ratios whose spread is +-15 %, to be confirmed on an idle machine.
+branch 27.2 us, ratio median 0.911 (0.76-1.06, 6 of 8). 8 more pairs at load 2.4-6.3: case 1
+main 38.5, branch 34.2 us, ratio median 0.895 (0.70-1.36, 6 of 8); campaign scenario main
+37.1, branch 33.1 us, ratio median 0.887 (0.70-1.25, 6 of 8). An earlier set of 6 pairs with
+the estimate and position hold only: medians 0.94 and ~1.0. ``bench_campaign.py --jobs 2
+--scenarios 24 --no-dask`` on each tree back to back, twice: at load 10.6-11.6 main 51.4,
+branch 40.0 scenarios/min, CPU of all the campaign's processes 0.57 and 0.56 s per scenario;
+at load 5.2-8.6 main 40.7, branch 64.7 scenarios/min, CPU 0.67 and 0.52 s per scenario (the
+flights took 1.8-2.9 s of wall time each: the cores were shared 3-6 ways, so the wall-time
+rates say nothing about the code). No idle machine to measure on: on the lead's idle figures
+(case 1 24.8-25.7 us per step; the campaign's flights 0.39-0.42 s) ratios of ~0.88-0.91 give
+~22-23 us per step (~165-170x) and ~0.35-0.38 s per 60 s flight, i.e. ~315-340 scenarios/min
+on 2 workers before the pool's ~3 %: around the 300/min line, an estimate from loaded ratios
+whose spread is +-15-35 %, to be confirmed on an idle machine.
 
 What is left per step (cProfile at load ~10, the campaign scenario): the vehicle kernel
 (~10.6 us profiled), the QP kernel (~5.6), and the Python of ``run_scenario`` (~4.8),
