@@ -335,7 +335,7 @@ at load 5.2-8.6 main 40.7, branch 64.7 scenarios/min, CPU 0.67 and 0.52 s per sc
 flights took 1.8-2.9 s of wall time each: the cores were shared 3-6 ways, so the wall-time
 rates say nothing about the code). No idle machine to measure on: on the lead's idle figures
 (case 1 24.8-25.7 us per step; the campaign's flights 0.39-0.42 s) ratios of ~0.88-0.91 give
-~22-23 us per step (~165-170x) and ~0.35-0.38 s per 60 s flight, i.e. ~315-340 scenarios/min
+~21.6-23 us per step (~175-185x) and ~0.35-0.38 s per 60 s flight, i.e. ~315-340 scenarios/min
 on 2 workers before the pool's ~3 %: around the 300/min line, an estimate from loaded ratios
 whose spread is +-15-35 %, to be confirmed on an idle machine.
 
