@@ -287,6 +287,69 @@ scenarios (gs-shif, shif, lqr), 6 interleaved flights each in one process, threa
 cProfile: the same calls per step for every controller; a first set at load 0.7 spread
 0.39-0.55 s, the host's noise). 300 scenarios/min needs <= 0.40 s per flight with both
 workers running at once: not reached (256.1/min measured).
+
+Issue 24, branch inproc-15 (2026-12-03, 2 cores shared with 2 other engineers running CPU
+burners at times: load 8-13 throughout). The outer loops' continuous part compiled, Python
+keeping the mode logic, the navigator and the front/back transitions (every flight
+bit-identical, ``command_digest.py`` dbd91a71..., 121a7434..., e937b801... after each
+commit; each kernel tested bit for bit against the Python it replaced, copied into
+``tests/test_inproc_fastpaths.py``, each test checked to fail under a mutation):
+
+- ``StateEstimate.update`` is one call (``estimate.estimate_step``: the 13 finiteness
+  checks, the Euler angles, the body-axis velocity x and z the outer loops used to compute
+  from ``ql`` / ``vel``, altitude and climb rate into a 7-float workspace, ``att`` a view of
+  it); in one process on 5,000 recorded-like samples, 15 interleaved pairs, thread CPU, load
+  9.7: 3.06 -> 1.48 us per step (update + the outer loops' body velocity);
+- the outer loops' aerodynamics of every armed step (``outer_kernels.outer_aero_step``: tilt
+  factor, angle of attack, nominal lift / drag, their z force; ``aero_estimate`` is its
+  ``aero_lift_drag``);
+- TAKEOFF / HOVER / LAND in one call (``mc_hold_step``: ``altitude.mc_altitude_law``, the
+  z force, the position hold) and FIXED_WING's altitude and airspeed loops in one
+  (``fw_longitudinal_step``: ``altitude.fw_altitude_law``, ``pusher_force``, the airspeed
+  hold); the altitude-hold classes call the same laws (one home);
+- the position hold's ``math.hypot`` is ``outer_kernels.hypot2``, a port of CPython 3.11's
+  (``vector_norm`` for two values: power-of-two scaling, Dekker's exact squares, compensated
+  sums, one differential correction; 3.11's divide-by-the-maximum branch when the maximum is
+  subnormal, which 3.12 replaced): 0 differences from ``math.hypot`` on 10^6 pairs over the
+  whole double range plus signed zeros, subnormals, the largest double, infinities, NaN
+  (numba's ``math.hypot``, the C library's, differs in 349 of those pairs; a first port with
+  3.12's subnormal branch differed in 19, all with a subnormal maximum).
+
+Python function calls per control step (cProfile, ``--profile``): 73 -> 46. One semantic
+note: a NaN produced inside ``fw_longitudinal_step`` from non-finite inputs can carry the
+other sign bit than CPython's (the compiler may order the operands of a commutative + or *);
+nothing reads it (the estimate rejects non-finite states, the allocator non-finite commands)
+and no flight reaches it.
+
+Measured A/B (main's tree and this branch's in alternate processes, each a warm-up then two
+flights, the faster one's thread CPU per control step; 8 pairs at load 10-13.7): case 1
+gs-shif 40 s main 31.8 us, branch 27.6 us (medians), pair ratio median 0.872 (0.74-1.45, 6
+of 8 below 1); the campaign's first scenario (60 s, ``bench_campaign``'s spec) main 30.6,
+branch 27.2 us, ratio median 0.911 (0.76-1.06, 6 of 8). 8 more pairs at load 2.4-6.3: case 1
+main 38.5, branch 34.2 us, ratio median 0.895 (0.70-1.36, 6 of 8); campaign scenario main
+37.1, branch 33.1 us, ratio median 0.887 (0.70-1.25, 6 of 8). An earlier set of 6 pairs with
+the estimate and position hold only: medians 0.94 and ~1.0. ``bench_campaign.py --jobs 2
+--scenarios 24 --no-dask`` on each tree back to back, twice: at load 10.6-11.6 main 51.4,
+branch 40.0 scenarios/min, CPU of all the campaign's processes 0.57 and 0.56 s per scenario;
+at load 5.2-8.6 main 40.7, branch 64.7 scenarios/min, CPU 0.67 and 0.52 s per scenario (the
+flights took 1.8-2.9 s of wall time each: the cores were shared 3-6 ways, so the wall-time
+rates say nothing about the code). No idle machine to measure on: on the lead's idle figures
+(case 1 24.8-25.7 us per step; the campaign's flights 0.39-0.42 s) ratios of ~0.88-0.91 give
+~21.6-23 us per step (~175-185x) and ~0.35-0.38 s per 60 s flight, i.e. ~315-340 scenarios/min
+on 2 workers before the pool's ~3 %: around the 300/min line, an estimate from loaded ratios
+whose spread is +-15-35 %, to be confirmed on an idle machine.
+
+What is left per step (cProfile at load ~10, the campaign scenario): the vehicle kernel
+(~10.6 us profiled), the QP kernel (~5.6), and the Python of ``run_scenario`` (~4.8),
+``allocate_tracked`` (~4.1, with ``_count_solved``), ``Autopilot.step``, ``add_step``,
+``OutputStage.allocate``, ``Vehicle.step``, ``HilRoundTrip`` (~3.5-3.9 each),
+``OuterLoops.update`` and ``AttitudeStage.update`` (~3.2 each), ``Commander.update_mode``
+with the mode machine and the navigator (~6 together); ``StateEstimate.update`` is ~4.8
+profiled of which most is the call's five array arguments (the navigation state's four
+arrays are views of one buffer in ``HilRoundTrip``, a ``NavState`` field for that buffer
+would make it one). The next cuts: the front/back transitions and degraded lift (Python,
+~13 % of the campaign's steps: 1,903 of 14,750), the mode machine's keyword calls, and
+fusing the runner's per-step work (HIL round trip, metrics, vehicle) into one call.
 """
 
 from __future__ import annotations

@@ -25,7 +25,67 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["FixedWingAltitudeHold", "MulticopterAltitudeHold"]
+import numba
+
+__all__ = ["FixedWingAltitudeHold", "MulticopterAltitudeHold", "fw_altitude_law",
+           "mc_altitude_law"]
+
+
+@numba.njit(cache=True)
+def mc_altitude_law(integral, dt, a_up_max, a_dn_max, i_limit, h_ref, h, v_up, kp_z, kp_vz,
+                    ki_vz, v_max_up, v_max_dn, override, use_override):  # pragma: no cover
+    """One step of the multicopter altitude law (:class:`MulticopterAltitudeHold`: its
+    integral [m/s^2], period [s] and limits, then its ``update``'s arguments;
+    ``use_override`` says whether ``override`` is given); returns ``(a_up, integral,
+    v_up_ref)`` [m/s^2, m/s^2, m/s]. Compiled without ``fastmath`` (the same bits as the
+    expressions in Python; min / max as comparisons with the builtins' rule)."""
+    if not use_override:
+        x = kp_z * (h_ref - h)
+        lo = -v_max_dn
+        x = lo if lo > x else x
+        v_ref = v_max_up if v_max_up < x else x
+    else:
+        v_ref = override
+    e = v_ref - v_up
+    p = kp_vz * e
+    dI = ki_vz * e * dt
+    u = p + integral + dI
+    a_dn = -a_dn_max
+    if (u > a_up_max and dI > 0.0) or (u < a_dn and dI < 0.0):
+        dI = 0.0
+    x = integral + dI
+    lo = -i_limit
+    x = lo if lo > x else x
+    integral = x = i_limit if i_limit < x else x
+    x = p + x
+    x = a_dn if a_dn > x else x
+    return (a_up_max if a_up_max < x else x), integral, v_ref
+
+
+@numba.njit(cache=True)
+def fw_altitude_law(integral, dt, h_ref, h, v_up, kp_alt, kp_vz, ki_vz, climb_max, sink_max,
+                    pitch_min, pitch_max):  # pragma: no cover - compiled
+    """One step of the fixed-wing altitude law (:class:`FixedWingAltitudeHold`, whose
+    arguments these are, the integral [rad] and the period ``dt`` [s] first); returns
+    ``(pitch_ref, integral, v_up_ref)`` [rad, rad, m/s]. Compiled without ``fastmath``: the
+    same bits as the expressions in Python; min / max written as comparisons with the
+    builtins' rule (the later argument only when strictly greater / less)."""
+    x = kp_alt * (h_ref - h)
+    lo = -sink_max
+    x = lo if lo > x else x
+    v_ref = climb_max if climb_max < x else x
+    e = v_ref - v_up
+    p = kp_vz * e
+    dI = ki_vz * e * dt
+    u = p + integral + dI
+    if (u > pitch_max and dI > 0.0) or (u < pitch_min and dI < 0.0):
+        dI = 0.0
+    x = integral + dI
+    x = pitch_min if pitch_min > x else x
+    integral = x = pitch_max if pitch_max < x else x
+    x = p + x
+    x = pitch_min if pitch_min > x else x
+    return (pitch_max if pitch_max < x else x), integral, v_ref
 
 
 class MulticopterAltitudeHold:
@@ -61,33 +121,11 @@ class MulticopterAltitudeHold:
 
         ``v_up_override`` replaces the altitude P loop by a climb-rate reference (landing).
         """
-        # min(max(x, lo), hi) written as comparisons (the builtins' own rule, also for NaN
-        # and signed zeros: the later argument only when strictly greater / less), which
-        # saves their calls on this per-step path
-        if v_up_override is None:
-            x = kp_z * (h_ref - h)
-            lo = -v_max_dn
-            x = lo if lo > x else x
-            v_ref = v_max_up if v_max_up < x else x
-        else:
-            v_ref = float(v_up_override)
-        self.v_up_ref = v_ref
-        e = v_ref - v_up
-        p = kp_vz * e
-        dI = ki_vz * e * self.dt
-        u = p + self.integral + dI
-        a_up_max = self.a_up_max
-        a_dn = -self.a_dn_max
-        if (u > a_up_max and dI > 0.0) or (u < a_dn and dI < 0.0):
-            dI = 0.0
-        i_lim = self.i_limit
-        x = self.integral + dI
-        lo = -i_lim
-        x = lo if lo > x else x
-        self.integral = x = i_lim if i_lim < x else x
-        x = p + x
-        x = a_dn if a_dn > x else x
-        return a_up_max if a_up_max < x else x
+        use = v_up_override is not None
+        out, self.integral, self.v_up_ref = mc_altitude_law(
+            self.integral, self.dt, self.a_up_max, self.a_dn_max, self.i_limit, h_ref, h, v_up,
+            kp_z, kp_vz, ki_vz, v_max_up, v_max_dn, float(v_up_override) if use else 0.0, use)
+        return out
 
 
 class FixedWingAltitudeHold:
@@ -126,21 +164,7 @@ class FixedWingAltitudeHold:
         float
             pitch reference (rad).
         """
-        # min(max(x, lo), hi) as comparisons (see MulticopterAltitudeHold.update)
-        x = kp_alt * (h_ref - h)
-        lo = -sink_max
-        x = lo if lo > x else x
-        v_ref = climb_max if climb_max < x else x
-        self.v_up_ref = v_ref
-        e = v_ref - v_up
-        p = kp_vz * e
-        dI = ki_vz * e * self.dt
-        u = p + self.integral + dI
-        if (u > pitch_max and dI > 0.0) or (u < pitch_min and dI < 0.0):
-            dI = 0.0
-        x = self.integral + dI
-        x = pitch_min if pitch_min > x else x
-        self.integral = x = pitch_max if pitch_max < x else x
-        x = p + x
-        x = pitch_min if pitch_min > x else x
-        return pitch_max if pitch_max < x else x
+        out, self.integral, self.v_up_ref = fw_altitude_law(
+            self.integral, self.dt, h_ref, h, v_up, kp_alt, kp_vz, ki_vz, climb_max, sink_max,
+            pitch_min, pitch_max)
+        return out

@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from vtolftc.firmware_sim.autopilot.interface import NavState
 
-__all__ = ["StateEstimate", "body_velocity", "body_velocity_f"]
+__all__ = ["StateEstimate", "body_velocity", "body_velocity_f", "estimate_step"]
 
 
 def body_velocity(q: NDArray[np.float64], v: NDArray[np.float64]) -> tuple[float, float, float]:
@@ -40,6 +41,47 @@ def body_velocity_f(w: float, x: float, y: float, z: float, vn: float, ve: float
             r02 * vn + r12 * ve + r22 * vd)
 
 
+#: Layout of :class:`StateEstimate`'s workspace (``StateEstimate.ws``), float64:
+#: roll, pitch, yaw [rad], body-axis velocity x (forward) and z (down) [m/s], altitude [m, up],
+#: climb rate [m/s, up].
+W_ROLL, W_PITCH, W_YAW, W_UB, W_WB, W_ALT, W_VUP = range(7)
+W_SIZE = 7
+
+
+@numba.njit(cache=True)
+def estimate_step(q, omega, pos, vel, ws):  # pragma: no cover - compiled
+    """The numerical part of :meth:`StateEstimate.update`: False (``ws`` untouched) when any
+    of ``pos``, ``vel``, ``q`` or ``omega`` is not finite, else True with ``ws`` written (the
+    ``W_*`` layout): the ZYX Euler angles of ``q`` (``quat_to_euler``'s expressions, its clip
+    as comparisons), the NED velocity in body axes x and z (:func:`body_velocity_f`'s
+    expressions), the altitude ``-pos[2]`` and the climb rate ``-vel[2]``."""
+    if not (math.isfinite(pos[0]) and math.isfinite(pos[1]) and math.isfinite(pos[2])
+            and math.isfinite(vel[0]) and math.isfinite(vel[1]) and math.isfinite(vel[2])
+            and math.isfinite(q[0]) and math.isfinite(q[1]) and math.isfinite(q[2])
+            and math.isfinite(q[3]) and math.isfinite(omega[0])
+            and math.isfinite(omega[1]) and math.isfinite(omega[2])):
+        return False
+    w = q[0]
+    x = q[1]
+    y = q[2]
+    z = q[3]
+    ws[0] = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    s_ = 2.0 * (w * y - z * x)
+    s_ = s_ if s_ < 1.0 else 1.0
+    ws[1] = math.asin(s_ if s_ > -1.0 else -1.0)
+    ws[2] = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    vn = vel[0]
+    ve = vel[1]
+    vd = vel[2]
+    ws[3] = ((1 - 2 * (y * y + z * z)) * vn + 2 * (x * y + w * z) * ve
+             + 2 * (x * z - w * y) * vd)
+    ws[4] = (2 * (x * z + w * y) * vn + 2 * (y * z - w * x) * ve
+             + (1 - 2 * (x * x + y * y)) * vd)
+    ws[5] = -pos[2]
+    ws[6] = -vel[2]
+    return True
+
+
 class StateEstimate:
     """The vehicle state of the last usable navigation data (see the module docstring).
 
@@ -51,14 +93,15 @@ class StateEstimate:
         the last usable navigation data.
     time_usec : int
         its simulated time [us].
+    ws : ndarray, shape (W_SIZE,)
+        the workspace :func:`estimate_step` writes (the ``W_*`` layout).
     att : ndarray, shape (3,)
-        roll, pitch, yaw [rad] (ZYX Euler angles of the NED-to-FRD rotation).
+        roll, pitch, yaw [rad] (ZYX Euler angles of the NED-to-FRD rotation): a view of
+        ``ws[0:3]`` (relinked on copy and unpickle).
     euler : tuple of float
         the same angles as a tuple (what :meth:`update` returned last).
-    ql : list of float
-        attitude quaternion w, x, y, z.
-    vel : list of float
-        velocity NED [m/s].
+    ub, wb : float
+        velocity in body axes x (forward) and z (down) [m/s].
     alt : float
         altitude above the NED origin [m, up].
     v_up : float
@@ -70,51 +113,40 @@ class StateEstimate:
     """
 
     __slots__ = ("airspeed", "alt", "att", "euler", "ground_alt", "have_nav", "last_nav",
-                 "ql", "time_usec", "v_up", "vel")
+                 "time_usec", "ub", "v_up", "wb", "ws")
 
     def __init__(self) -> None:
         self.have_nav = False
         self.last_nav: NavState | None = None
         self.time_usec = 0
-        self.att = np.zeros(3)
+        self.ws = np.zeros(W_SIZE)
+        self.att = self.ws[W_ROLL:W_YAW + 1]
         self.euler = (0.0, 0.0, 0.0)
-        self.ql = [1.0, 0.0, 0.0, 0.0]
-        self.vel = [0.0, 0.0, 0.0]
+        self.ub = 0.0
+        self.wb = 0.0
         self.alt = 0.0
         self.v_up = 0.0
         self.airspeed = 0.0
         self.ground_alt = math.nan
 
+    def __getstate__(self) -> dict:
+        return {k: getattr(self, k) for k in self.__slots__ if k != "att"}
+
+    def __setstate__(self, state: dict) -> None:
+        for k, v in state.items():
+            setattr(self, k, v)
+        self.att = self.ws[W_ROLL:W_YAW + 1]
+
     def update(self, nav: NavState) -> tuple[float, float, float] | None:
         """Take ``nav`` in; returns its roll, pitch, yaw [rad], or None (nothing changed)
         when any of its position, velocity, attitude or rates is not finite."""
-        pos = nav.pos_ned_m.tolist()
-        vel = nav.vel_ned_m_s.tolist()
-        ql = nav.q_wxyz.tolist()
-        isf = math.isfinite
-        if not (isf(pos[0]) and isf(pos[1]) and isf(pos[2]) and isf(vel[0]) and isf(vel[1])
-                and isf(vel[2]) and isf(ql[0]) and isf(ql[1]) and isf(ql[2]) and isf(ql[3])):
-            return None
-        p_, q_, r_ = nav.omega_body_rad_s.tolist()
-        if not (isf(p_) and isf(q_) and isf(r_)):
+        if not estimate_step(nav.q_wxyz, nav.omega_body_rad_s, nav.pos_ned_m,
+                             nav.vel_ned_m_s, self.ws):
             return None
         self.have_nav = True
         self.last_nav = nav
         self.time_usec = int(nav.time_usec)
-        # quat_to_euler(ql), inlined: the same expressions in the same order (its clip
-        # max(-1, min(1, s)) written as comparisons: equal for the finite s it gets here)
-        w, x, y, z = ql
-        roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-        s_ = 2.0 * (w * y - z * x)
-        s_ = s_ if s_ < 1.0 else 1.0
-        pitch = math.asin(s_ if s_ > -1.0 else -1.0)
-        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-        att = self.att
-        att[0], att[1], att[2] = roll, pitch, yaw
-        self.ql = ql
-        self.vel = vel
-        h = -pos[2]
-        self.v_up = -vel[2]
+        roll, pitch, yaw, self.ub, self.wb, h, self.v_up = self.ws.tolist()
         V = float(nav.airspeed_m_s)
         if not math.isfinite(V):
             V = 0.0

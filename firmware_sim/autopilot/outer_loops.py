@@ -19,12 +19,22 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from vtolftc.airframe.loader import Airframe
 from vtolftc.firmware_sim.autopilot.altitude import FixedWingAltitudeHold, MulticopterAltitudeHold
 from vtolftc.firmware_sim.autopilot.degraded_lift import DegradedLift
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
 from vtolftc.firmware_sim.autopilot.estimate import StateEstimate
 from vtolftc.firmware_sim.autopilot.interface import FlightMode, NavState
+from vtolftc.firmware_sim.autopilot.outer_kernels import (
+    aero_lift_drag,
+    fw_longitudinal_step,
+    mc_hold_step,
+    outer_aero_step,
+    pusher_force,
+)
 from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
 
 __all__ = ["OuterLoops"]
@@ -71,9 +81,19 @@ class OuterLoops:
         self.output: Any = None  # the output stage (last allocation's Fz), set by the autopilot
         self.degraded = DegradedLift(airframe, pp, dt)
         """Degraded-lift guidance of the front transition (:mod:`.degraded_lift`)."""
-        self._wing: tuple = (None,)  # (airframe, rho, wing constants) of aero_estimate
-        self._pushers_nominal = [(r.max_thrust_N, r.zero_thrust_axial_speed_m_s)
-                                 for r in airframe.pushers]
+        self._wing_of: Any = None  # the airframe the wing constants belong to
+        self._wing = np.zeros(7)  # its wing constants (_wing_constants)
+        self._aero = np.zeros(5)  # outer_aero_step's output
+        # each pusher's static thrust [N] and zero-thrust axial speed [m/s] (pusher_force)
+        self._pushers = np.array([x for r in airframe.pushers
+                                  for x in (r.max_thrust_N, r.zero_thrust_axial_speed_m_s)],
+                                 dtype=np.float64)
+        # the kernels' constants (the airframe and the loops are fixed at construction): mass
+        # [kg], gravity [m/s^2], period [s], the fixed-wing and multicopter altitude holds'
+        # periods [s], the latter's a_up_max, a_dn_max, i_limit [m/s^2]
+        ma = self.mc_alt
+        self._consts = np.array([airframe.mass_kg, airframe.gravity_m_s2, dt, self.fw_alt.dt,
+                                 ma.dt, ma.a_up_max, ma.a_dn_max, ma.i_limit])
         self.pusher_ramp = 0.0
         self.fw_entry_usec = 0
         self.airspeed_int = 0.0
@@ -102,34 +122,24 @@ class OuterLoops:
         """
         sp = self.sp
         sp.ref[2] = sp.yaw_hold
-        # the builtins min / max written as comparisons on this per-step path (their own
-        # rule, also for NaN and signed zeros: max(a, b) = b if b > a else a, min(a, b) =
-        # b if b < a else a): the same bits without their calls
-        c = math.cos(roll) * math.cos(pitch)
-        cos_tilt = c if c > 0.5 else 0.5  # max(0.5, c)
-        # estimate.body_velocity_f(*ql, *vel)[0] and [2], inlined (same expressions, same bits)
-        w_, x_, y_, z_ = self.est.ql
-        vn_, ve_, vd_ = self.est.vel
-        ub = ((1 - 2 * (y_ * y_ + z_ * z_)) * vn_ + 2 * (x_ * y_ + w_ * z_) * ve_
-              + 2 * (x_ * z_ - w_ * y_) * vd_)
-        wb = (2 * (x_ * z_ + w_ * y_) * vn_ + 2 * (y_ * z_ - w_ * x_) * ve_
-              + (1 - 2 * (x_ * x_ + y_ * y_)) * vd_)
-        alpha = math.atan2(wb, ub) if ub > 1.0 else 0.0
+        est = self.est
         dl = self.degraded
-        if dl.active and mode is _M_FRONT_TRANSITION:
-            # degraded lift: trust no wing lift beyond the stall margin (a sinking vehicle's
-            # wing is past the stall, where the nominal model's clipped CL is far too high)
-            lift, drag = self.aero_estimate(V, min(alpha, dl.alpha_limit()))
-        else:
-            lift, drag = self.aero_estimate(V, alpha)
-        fz_aero = -lift * math.cos(alpha) - drag * math.sin(alpha)  # body z, N
+        # degraded lift: trust no wing lift beyond the stall margin (a sinking vehicle's wing
+        # is past the stall, where the nominal model's clipped CL is far too high)
+        lim = dl.alpha_limit() if dl.active and mode is _M_FRONT_TRANSITION else math.inf
+        aero = self._aero
+        # cos_tilt = max(0.5, cos(roll) cos(pitch)), alpha = atan2(wb, ub) (0 unless ub > 1),
+        # the nominal lift and drag at min(alpha, lim) and their body z force [N]: compiled
+        wing = self._wing if self._wing_of is self.airframe else self._wing_constants()
+        outer_aero_step(roll, pitch, est.ub, est.wb, V, lim, wing, aero)
+        cos_tilt, alpha, lift, drag, fz_aero = aero.tolist()
 
         if mode is not _M_FIXED_WING:  # TAKEOFF, HOVER, LAND, FRONT/BACK_TRANSITION
             pusher_hi = self._outer_mc(mode, nav, yaw, h, v_up, V, cos_tilt, fz_aero)
             if mode is _M_FRONT_TRANSITION:
                 self._degraded_lift(h, v_up, V, pitch, alpha, cos_tilt, lift, drag)
             return False, 1.0, pusher_hi
-        t_fw = (self.est.time_usec - self.fw_entry_usec) * 1e-6
+        t_fw = (est.time_usec - self.fw_entry_usec) * 1e-6
         ramp = self._p["VT_TRANS_P2_DUR"].value
         rotor_hi = max(0.0, 1.0 - t_fw / ramp) if ramp > 0 else 0.0
         reserve = False
@@ -159,6 +169,19 @@ class OuterLoops:
         if mode == _M_LAND:
             override = -pp["MPC_LAND_SPEED"].value
             sp.alt_ref = h
+        if mode is not _M_FRONT_TRANSITION and mode is not _M_BACK_TRANSITION:
+            # TAKEOFF, HOVER, LAND: the altitude hold, the z force, the position hold (its
+            # hypot CPython's) and no pusher force in one compiled call, the same bits
+            ma = self.mc_alt
+            sp.hold_locked, ma.integral, ma.v_up_ref = mc_hold_step(
+                nav.pos_ned_m, nav.vel_ned_m_s, sp.hold_ne, ref, sp.v, self._consts,
+                sp.hold_locked, ma.integral, sp.alt_ref, h, v_up, pp["MPC_Z_P"].value,
+                pp["MPC_Z_VEL_P_ACC"].value, pp["MPC_Z_VEL_I_ACC"].value, vmax_up,
+                pp["MPC_Z_VEL_MAX_DN"].value, 0.0 if override is None else override,
+                override is not None, cos_tilt, fz_aero, pp["MPC_XY_P"].value,
+                pp["MPC_XY_VEL_MAX"].value, pp["MPC_XY_VEL_P_ACC"].value, yaw,
+                pp["MPC_TILTMAX_AIR"].value)
+            return 0.0
         a_up = self.mc_alt.update(sp.alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
                                   kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
                                   ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
@@ -174,12 +197,9 @@ class OuterLoops:
             r = self.pusher_ramp + pp["VT_PSHER_SLEW"].value * self.dt
             self.pusher_ramp = r if r < 1.0 else 1.0  # min(1.0, r)
             fx_cmd = pp["VT_F_TRANS_THR"].value * self.pusher_ramp * self.pusher_max_force(V)
-        elif mode == _M_BACK_TRANSITION:
+        else:  # BACK_TRANSITION
             ref[0] = 0.0
             ref[1] = 0.0
-            pusher_hi = 0.0
-        else:
-            ref[0], ref[1] = self._position_hold(nav, yaw)
             pusher_hi = 0.0
         sp.v[1] = fx_cmd
         return pusher_hi
@@ -217,29 +237,20 @@ class OuterLoops:
         ref = sp.ref
         mass = self.airframe.mass_kg
         g = self.airframe.gravity_m_s2
-        lim = math.radians
         lateral = self.navigator.fw_lateral(nav, roll, yaw, V)
         if lateral is None:
             ref[0] = 0.0
         else:
             ref[0], ref[2] = lateral
-        ref[1] = self.fw_alt.update(sp.alt_ref, h, v_up, kp_alt=pp["FW_ALT_P"].value,
-                                    kp_vz=pp["FW_VZ_P"].value, ki_vz=pp["FW_VZ_I"].value,
-                                    climb_max=pp["FW_CLMB_MAX"].value,
-                                    sink_max=pp["FW_SINK_MAX"].value,
-                                    pitch_min=lim(pp["FW_P_LIM_MIN"].value),
-                                    pitch_max=lim(pp["FW_P_LIM_MAX"].value))
-        fx_max = self.pusher_max_force(V)
-        e_v = self.navigator.airspeed_setpoint() - V
-        a_x = pp["FW_AIRSPD_P"].value * e_v + self.airspeed_int
-        fx_cmd = drag * math.cos(alpha) - lift * math.sin(alpha) + mass * (
-            a_x + g * math.sin(pitch))
-        if not ((fx_cmd >= fx_max and e_v > 0) or (fx_cmd <= 0.0 and e_v < 0)):
-            x = self.airspeed_int + pp["FW_AIRSPD_I"].value * e_v * self.dt
-            x = -3.0 if x < -3.0 else x
-            self.airspeed_int = 3.0 if x > 3.0 else x  # min(max(x, -3.0), 3.0)
-        x = 0.0 if fx_cmd < 0.0 else fx_cmd
-        sp.v[1] = fx_max if fx_max < x else x  # min(max(fx_cmd, 0.0), fx_max)
+        # fw_alt.update, pusher_max_force and the airspeed hold: one compiled call
+        fa = self.fw_alt
+        c = self._consts
+        ref[1], fa.integral, fa.v_up_ref, self.airspeed_int, sp.v[1] = fw_longitudinal_step(
+            self._pushers, c, sp.alt_ref, h, v_up, V, pitch, alpha, lift, drag, fa.integral,
+            pp["FW_ALT_P"].value, pp["FW_VZ_P"].value, pp["FW_VZ_I"].value,
+            pp["FW_CLMB_MAX"].value, pp["FW_SINK_MAX"].value, pp["FW_P_LIM_MIN"].value,
+            pp["FW_P_LIM_MAX"].value, self.navigator.airspeed_setpoint(),
+            pp["FW_AIRSPD_P"].value, pp["FW_AIRSPD_I"].value, self.airspeed_int)
         if not reserve:
             a_up = self.mc_alt.update(sp.alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
                                       kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
@@ -250,64 +261,22 @@ class OuterLoops:
         else:
             sp.v[0] = 0.0
 
+    def _wing_constants(self) -> NDArray[np.float64]:
+        """The nominal wing constants of :func:`.outer_kernels.aero_lift_drag` (air density,
+        area, CL0, CL_alpha, CL_max, CD0, induced drag factor), rebuilt when the airframe
+        object changes."""
+        if self._wing_of is not self.airframe:
+            w = self.airframe.wing
+            self._wing = np.array([self.effectiveness._rho, w.area_m2, w.CL0, w.CL_alpha,
+                                   w.CL_max, w.CD0, w.induced_drag_factor])
+            self._wing_of = self.airframe
+        return self._wing
+
     def aero_estimate(self, V: float, alpha: float) -> tuple[float, float]:
         """Nominal wing lift and drag [N] at airspeed V [m/s] and angle of attack alpha [rad]
         (from the airframe file, linear lift clipped at CL_max)."""
-        if V < 1.0:
-            return 0.0, 0.0
-        wing = self._wing
-        if wing[0] is not self.airframe:
-            w = self.airframe.wing
-            wing = self._wing = (self.airframe, self.effectiveness._rho, w.area_m2, w.CL0,
-                                 w.CL_alpha, w.CL_max, w.CD0, w.induced_drag_factor)
-        _, rho, area, cl0, cl_alpha, cl_max, cd0, k_i = wing
-        # effectiveness.dynamic_pressure(V) * area, inlined (V >= 1 here)
-        qS = 0.5 * rho * V * V * area
-        cl = cl0 + cl_alpha * alpha
-        lo = -cl_max
-        cl = lo if lo > cl else cl
-        cl = cl_max if cl_max < cl else cl  # min(max(cl, -cl_max), cl_max)
-        cd = cd0 + k_i * cl * cl
-        return qS * cl, qS * cd
+        return aero_lift_drag(self._wing_constants(), V, alpha)
 
     def pusher_max_force(self, V: float) -> float:
         """Nominal total pusher thrust at full command and airspeed V [m/s], in N."""
-        tot = 0.0
-        for tmax, v0 in self._pushers_nominal:
-            x = 1.0 - V / v0
-            x = x if x > 0.0 else 0.0  # max(0.0, x)
-            tot += tmax * (x if x < 1.25 else 1.25)  # min(1.25, x)
-        return tot
-
-    def _position_hold(self, nav: NavState, yaw: float) -> tuple[float, float]:
-        """Roll and pitch references [rad] holding the horizontal position (brake first)."""
-        pp = self._p
-        sp = self.sp
-        vn, ve = float(nav.vel_ned_m_s[0]), float(nav.vel_ned_m_s[1])
-        if not sp.hold_locked:
-            if math.hypot(vn, ve) < 0.5:
-                sp.hold_ne[:] = nav.pos_ned_m[:2]
-                sp.hold_locked = True
-            vrn, vre = 0.0, 0.0
-        else:
-            kp = pp["MPC_XY_P"].value
-            vrn = kp * (sp.hold_ne[0] - float(nav.pos_ned_m[0]))
-            vre = kp * (sp.hold_ne[1] - float(nav.pos_ned_m[1]))
-            vmax = pp["MPC_XY_VEL_MAX"].value
-            s = math.hypot(vrn, vre)
-            if s > vmax:
-                vrn, vre = vrn * vmax / s, vre * vmax / s
-        kv = pp["MPC_XY_VEL_P_ACC"].value
-        an, ae = kv * (vrn - vn), kv * (vre - ve)
-        g = self.airframe.gravity_m_s2
-        a_fwd = math.cos(yaw) * an + math.sin(yaw) * ae
-        a_right = -math.sin(yaw) * an + math.cos(yaw) * ae
-        tmax = math.radians(pp["MPC_TILTMAX_AIR"].value)
-        lo = -tmax
-        x = -math.atan2(a_fwd, g)
-        x = lo if lo > x else x
-        pitch_ref = tmax if tmax < x else x  # min(max(x, -tmax), tmax)
-        x = math.atan2(a_right, g)
-        x = lo if lo > x else x
-        roll_ref = tmax if tmax < x else x
-        return roll_ref, pitch_ref
+        return pusher_force(self._pushers, V)
