@@ -16,6 +16,8 @@ from vtolftc.runners.sitl import SitlConfig, SitlRun
     (["sitl", "--controller", "pid"], "expected gs-shif, shif or lqr"),
     (["sitl", "--duration", "-3"], "--duration"),
     (["sitl", "--duration", "nan"], "--duration"),
+    (["sitl", "--rt-priority", "100"], "--rt-priority 100: expected 0 (off) or a SCHED_FIFO"),
+    (["sitl", "--rt-priority", "-1"], "--rt-priority -1"),
 ])
 def test_sitl_cli_rejects_bad_input(argv, fragment, capsys, tmp_path):
     assert cli_run([*argv, "--out", str(tmp_path / "run")]) == 2
@@ -41,6 +43,34 @@ def test_link_plan_is_loopback_and_consistent(transport, tmp_path):
         assert all(e.startswith("tcp/127.0.0.1:") for e in vehicle.listen + ap_gcs.listen)
     with pytest.raises(ValueError, match="udp or zenoh"):
         SitlRun(SitlConfig(transport="serial"))
+
+
+def test_rt_priority_reaches_both_processes_and_only_when_asked(tmp_path, monkeypatch):
+    """``SitlConfig.rt_priority`` (``vtolftc sitl --rt-priority N``) is passed to both programs'
+    command lines; the default (0) passes nothing. No process is started: ``_spawn`` records."""
+
+    class SpawnedError(Exception):
+        pass
+
+    class FakeStation:
+        def __init__(self, url):
+            pass
+
+        def add_listener(self, fn):  # start() reaches this once both programs are spawned
+            raise SpawnedError
+
+    monkeypatch.setattr("vtolftc.runners.sitl.GroundStation", FakeStation)
+    for prio, want in ((0, None), (12, "12")):
+        run = SitlRun(SitlConfig(out_dir=tmp_path / str(prio), rt_priority=prio))
+        argv: dict[str, list[str]] = {}
+        monkeypatch.setattr(run, "_spawn",
+                            lambda name, args, argv=argv: argv.__setitem__(name, args))
+        with pytest.raises(SpawnedError):
+            run.start()
+        assert set(argv) == {"vehicle", "autopilot"}
+        for name, args in argv.items():
+            got = args[args.index("--rt-priority") + 1] if "--rt-priority" in args else None
+            assert got == want, (name, prio, args)
 
 
 @pytest.mark.slow

@@ -45,6 +45,10 @@ def register(sub: Any) -> None:
     p.add_argument("--transport", default="udp", help="udp (default) or zenoh")
     p.add_argument("--realtime", action="store_true",
                    help="real-time vehicle instead of lockstep (commands land a few steps late)")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="both processes run as SCHED_FIFO at priority N once compiled (1-99; "
+                        "needs root or CAP_SYS_NICE, else one line and ordinary scheduling): "
+                        "for --realtime on a loaded machine; default 0 = ordinary scheduling")
     p.add_argument("--duration", type=float, default=40.0,
                    help="simulated seconds (default 40)")
     p.add_argument("--out", type=Path, default=None,
@@ -96,6 +100,10 @@ def cmd_sitl(args: argparse.Namespace) -> int:
         raise UsageError(f"--controller {args.controller!r}: expected gs-shif, shif or lqr")
     if not (math.isfinite(args.duration) and 0 < args.duration <= 3600):
         raise UsageError(f"--duration {args.duration!r}: expected 0 < seconds <= 3600")
+    from vtolftc.runners.processes.priority import check_rt_priority
+
+    if (bad := check_rt_priority(args.rt_priority)) is not None:
+        raise UsageError(bad)
     case = str(args.case).removeprefix("case")
     from vtolftc.firmware_sim.vehicle.faults import FaultError, load_cases
 
@@ -118,7 +126,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     out = args.out or default_run_dir(case, f"{args.controller}-sitl-{args.transport}")
     cfg = SitlConfig(case=case, controller=args.controller, transport=args.transport,
                      realtime=args.realtime, duration_s=args.duration, out_dir=out,
-                     airframe=args.airframe, gains_dir=args.gains_dir)
+                     airframe=args.airframe, gains_dir=args.gains_dir,
+                     rt_priority=args.rt_priority)
     mode = "real time" if args.realtime else "lockstep"
     print(f"SITL {scenario.name} ({scenario.description}), {args.controller}, "
           f"{args.transport}, {mode}; run folder {out}", flush=True)

@@ -114,6 +114,9 @@ class SitlConfig:
     """Each process stops when the other is silent this long (wall s)."""
     extra_autopilot_args: list[str] = field(default_factory=list)
     extra_vehicle_args: list[str] = field(default_factory=list)
+    rt_priority: int = 0
+    """``SCHED_FIFO`` priority both processes take once compiled (``--rt-priority``; 0 =
+    ordinary scheduling): a loaded machine then cannot starve the real-time loop."""
     stop_grace_s: float = 10.0
     """Wall seconds a process gets to end by itself after SIGTERM before the SIGKILL."""
     hil_signing: bool = True
@@ -217,6 +220,8 @@ class SitlRun:
         common += ["--parent-pid", str(os.getpid())]  # no orphans if this process is killed
         if cfg.spin_us > 0:
             common += ["--spin-us", f"{cfg.spin_us:g}"]
+        if cfg.rt_priority:
+            common += ["--rt-priority", str(int(cfg.rt_priority))]
         latency = []
         if cfg.hil_delay_ms > 0:
             latency += ["--hil-delay-ms", f"{cfg.hil_delay_ms:g}"]
