@@ -259,6 +259,14 @@ class RawFrame:
         """The message's name (as the message object's ``get_type``)."""
         return self._parser._map[self.msg_id].msgname  # type: ignore[no-any-return]
 
+    def get_srcSystem(self) -> int:
+        """The sender's system id (as the message object's)."""
+        return self._row[8]
+
+    def get_srcComponent(self) -> int:
+        """The sender's component id (as the message object's)."""
+        return self._row[9]
+
     def message(self) -> Any:
         """The message object of this frame (made at the first call, then the same one)."""
         m = self._msg

@@ -40,6 +40,7 @@ vx, vy, vz, ind_airspeed, true_airspeed, xacc, yacc, zacc)."""
 _STATE_SIZE = 64
 _CONTROLS_FORMAT = "<QQ16fB"
 """HIL_ACTUATOR_CONTROLS' wire layout (time_usec, flags, controls[16], mode)."""
+_CONTROLS_SIZE = 81
 _DEG_TO_RAD = math.radians(1.0)  # CPython's math.radians: x * (pi / 180)
 
 
@@ -133,22 +134,49 @@ def _state_kernel(data, start, mlen, lat0, lon0, alt0, cos_lat0, a,
     return 0
 
 
-def actuator_controls(raw: Any, n: int) -> NDArray[np.float64]:
-    """The first ``n <= 16`` of HIL_ACTUATOR_CONTROLS' ``controls`` of a :class:`RawFrame`,
-    as float64 (each the float32 the wire carries: the values of ``msg.controls[:n]``)."""
+def actuator_controls(raw: Any, n: int) -> tuple[int, int, bool, NDArray[np.float64]]:
+    """HIL_ACTUATOR_CONTROLS of a :class:`RawFrame` in one compiled call.
+
+    Parameters
+    ----------
+    raw : RawFrame
+        A HIL_ACTUATOR_CONTROLS frame.
+    n : int
+        How many of the 16 ``controls`` to return (``0 <= n <= 16``).
+
+    Returns
+    -------
+    time_usec : int
+        The step answered [us].
+    mode : int
+        The MAV_MODE_FLAG bits.
+    finite : bool
+        All ``n`` controls are finite.
+    controls : numpy.ndarray
+        ``controls[:n]`` as float64 (each the float32 the wire carries: the values of the
+        message's ``controls[:n]``).
+    """
     if not 0 <= n <= HIL_OUTPUTS:
         raise ValueError(f"{n} controls: HIL_ACTUATOR_CONTROLS carries {HIL_OUTPUTS}")
-    return _controls_kernel(raw.data, raw.payload_start, raw.mlen, n)
+    out = np.empty(n)
+    u = np.empty(2, dtype=np.uint64)
+    finite = _controls_kernel(raw.data, raw.payload_start, raw.mlen, out, u)
+    return int(u[0]), int(u[1]), finite, out
 
 
 @numba.njit(cache=True)
-def _controls_kernel(data, start, mlen, n):  # pragma: no cover - compiled
-    p = _payload(data, start, mlen, 81)
+def _controls_kernel(data, start, mlen, out, u64):  # pragma: no cover - compiled
+    """``controls[:out.size]`` into ``out``, ``time_usec`` and ``mode`` into ``u64``;
+    returns whether every control written is finite."""
+    p = _payload(data, start, mlen, _CONTROLS_SIZE)
     f = p[16:80].view(np.float32)
-    out = np.empty(n)
-    for i in range(n):
+    u64[0] = p[0:8].view(np.uint64)[0]
+    u64[1] = p[80]
+    finite = True
+    for i in range(out.size):
         out[i] = np.float64(f[i])
-    return out
+        finite = finite and math.isfinite(out[i])
+    return finite
 
 
 _check_layout("hil_actuator_controls", _CONTROLS_FORMAT)
