@@ -45,6 +45,7 @@ _IFLAG_SIGNED = 0x01
 _HEADER_LEN = 10
 _SIG_LEN = 13
 _SIGN_TS = struct.Struct("<IH")
+_UNSET = object()
 _ROW = 10
 """Columns of :func:`_scan_kernel`'s table: start, end, message id, CRC, payload length,
 incompat flags, compat flags, sequence, system id, component id."""
@@ -253,7 +254,7 @@ class RawFrame:
         self._row = (pos, end, msg_id, crc, mlen, iflags, cflags, seq, src_sys, src_comp)
         self._sig_ok = sig_ok
         self._msg: Any = None
-        self._vtolftc_source: Any = None
+        self._vtolftc_source: Any = _UNSET
 
     def get_type(self) -> str:
         """The message's name (as the message object's ``get_type``)."""
@@ -275,7 +276,7 @@ class RawFrame:
             lay = parser._layout(self.msg_id)
             assert lay is not None  # the kernel checked the id
             m = parser._make(lay, self.data, *self._row, self._sig_ok)
-            if self._vtolftc_source is not None:
+            if self._vtolftc_source is not _UNSET:  # set by a link that tracks sources
                 m._vtolftc_source = self._vtolftc_source
             self._msg = m
         return m
