@@ -11,7 +11,11 @@ what the two processes consume:
   :class:`~vtolftc.protocols.hil.HilStateDecoder` of the message the generated parser makes
   (same float32 -> float64 conversions, same scaling, same operations in the same order);
 - :func:`frame_time_usec`: the leading ``uint64 time_usec`` of a HIL frame;
-- :func:`actuator_controls`: HIL_ACTUATOR_CONTROLS' ``controls`` as float64 values.
+- :func:`actuator_controls`: HIL_ACTUATOR_CONTROLS' ``controls`` as float64 values;
+- :class:`HilFramePackers`: the vehicle's HIL_SENSOR from a sensor sample's arrays and its
+  HIL_STATE_QUATERNION from the rigid-body state, each frame (the state's encoding included)
+  in one compiled call into the :class:`~vtolftc.protocols.fastpack.FramePacker`'s buffer: the
+  bytes of ``FramePacker.pack`` of the same values (signing, sequence numbers too).
 
 The payload offsets are those of the dialect's wire layout (fields sorted by size, MAVLink 2
 zero-tail truncation undone by reading missing bytes as 0); the constructors check them
@@ -29,15 +33,24 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from vtolftc.protocols.hil import EARTH_RADIUS_M, HIL_OUTPUTS, HilStateDecoder, NavState
+from vtolftc.protocols.fastpack import FramePacker, _frame_kernel
+from vtolftc.protocols.hil import (
+    EARTH_RADIUS_M,
+    HIL_OUTPUTS,
+    HilStateDecoder,
+    NavState,
+    _encode_kernel,
+)
 from vtolftc.protocols.mavlink import dialect
 
-__all__ = ["HilStateFrameDecoder", "actuator_controls", "frame_time_usec"]
+__all__ = ["HilFramePackers", "HilStateFrameDecoder", "actuator_controls", "frame_time_usec"]
 
 _STATE_FORMAT = "<Q4ffffiiihhhHHhhh"
 """HIL_STATE_QUATERNION's wire layout the kernel reads (time, q[4], p, q, r, lat, lon, alt,
 vx, vy, vz, ind_airspeed, true_airspeed, xacc, yacc, zacc)."""
 _STATE_SIZE = 64
+_SENSOR_FORMAT = "<QfffffffffffffIB"
+"""HIL_SENSOR's wire layout (time, 13 floats from xacc to temperature, fields_updated, id)."""
 _CONTROLS_FORMAT = "<QQ16fB"
 """HIL_ACTUATOR_CONTROLS' wire layout (time_usec, flags, controls[16], mode)."""
 _CONTROLS_SIZE = 81
@@ -177,6 +190,133 @@ def _controls_kernel(data, start, mlen, out, u64):  # pragma: no cover - compile
         out[i] = np.float64(f[i])
         finite = finite and math.isfinite(out[i])
     return finite
+
+
+_INT64_MAX = 2**63 - 1
+
+
+class HilFramePackers:
+    """HIL_SENSOR and HIL_STATE_QUATERNION frames of the vehicle, each in one compiled call.
+
+    Parameters
+    ----------
+    codec : Any
+        The link's generated ``MAVLink`` object (ids, sequence, signing).
+    home_lat_deg, home_lon_deg, home_alt_m : float
+        Home (the projection's origin of :func:`~vtolftc.protocols.hil.encode_hil_state`).
+
+    Each method returns the frame, or None for what the compiled path leaves to the general
+    one (a float ``struct`` refuses, a state the codec refuses, a time past 2**63 us): the
+    caller then packs with :attr:`sensor` / :attr:`state` ``.pack`` and the
+    :class:`~vtolftc.protocols.hil.HilStateEncoder`, which give the same bytes or raise.
+    """
+
+    __slots__ = ("_home", "_out", "sensor", "state")
+
+    def __init__(self, codec: Any, home_lat_deg: float, home_lon_deg: float,
+                 home_alt_m: float) -> None:
+        from vtolftc.protocols.hil import HilStateEncoder
+
+        _check_layout("hil_sensor", _SENSOR_FORMAT)
+        _check_layout("hil_state_quaternion", _STATE_FORMAT)
+        mod = dialect()
+        self.sensor = FramePacker(codec, mod.MAVLink_hil_sensor_message)
+        self.state = FramePacker(codec, mod.MAVLink_hil_state_quaternion_message)
+        ref = HilStateEncoder(home_lat_deg, home_lon_deg, home_alt_m)
+        self._home = (home_lat_deg, home_lon_deg, home_alt_m, ref._r_cos)
+        self._out = np.empty(14)
+
+    def sensor_frame(self, time_usec: int, accel: NDArray[np.float64],
+                     gyro: NDArray[np.float64], mag: NDArray[np.float64], abs_pressure: float,
+                     diff_pressure: float, pressure_alt: float, temperature: float,
+                     fields_updated: int, sensor_id: int) -> bytes | None:
+        """HIL_SENSOR: ``time_usec`` [us], accelerometer [m/s^2], gyro [rad/s], magnetometer
+        [gauss] (3 float64 each, FRD), pressures [hPa], pressure altitude [m], temperature
+        [degC], ``fields_updated`` bits, sensor id: ``sensor.pack`` of the same values."""
+        if not 0 <= time_usec <= _INT64_MAX or not 0 <= fields_updated < 2**32 \
+                or not 0 <= sensor_id < 256:
+            return None
+        return self.sensor.pack_compiled(
+            _sensor_kernel, time_usec, accel, gyro, mag, float(abs_pressure),
+            float(diff_pressure), float(pressure_alt), float(temperature), fields_updated,
+            sensor_id)
+
+    def state_frame(self, time_usec: int, state: NDArray[np.float64],
+                    airspeed_m_s: float) -> bytes | None:
+        """HIL_STATE_QUATERNION of a rigid-body state (13+ float64: position NED [m],
+        velocity NED [m/s], quaternion w x y z body FRD -> NED, body rates [rad/s]) and
+        airspeed [m/s]: ``state.pack`` of ``HilStateEncoder``'s fields."""
+        if not 0 <= time_usec <= _INT64_MAX or type(state) is not np.ndarray \
+                or state.dtype != np.float64 or state.ndim != 1 or state.shape[0] < 13:
+            return None
+        lat0, lon0, alt0, r_cos = self._home
+        return self.state.pack_compiled(_state_pack_kernel, time_usec, state,
+                                        float(airspeed_m_s), lat0, lon0, alt0, r_cos,
+                                        self._out)
+
+
+@numba.njit(cache=True)
+def _put(buf, pos, value, nbytes):  # pragma: no cover - compiled
+    """``nbytes`` little-endian bytes of the int64 ``value`` (two's complement) at ``pos``."""
+    for k in range(nbytes):
+        buf[pos + k] = (value >> (8 * k)) & 0xFF
+
+
+@numba.njit(cache=True)
+def _put_f32(buf, pos, x, scratch):  # pragma: no cover - compiled
+    """``x`` as ``struct``'s ``f`` packs it; False (nothing that counts) if ``struct``
+    raises: a finite value that overflows float32."""
+    y = np.float32(x)
+    if math.isinf(y) and not math.isinf(x):
+        return False
+    scratch[0] = y
+    _put(buf, pos, np.int64(scratch.view(np.uint32)[0]), 4)
+    return True
+
+
+@numba.njit(cache=True)
+def _sensor_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id, ts,
+                   t, accel, gyro, mag, abs_p, diff_p, alt, temp, fields,
+                   sensor_id):  # pragma: no cover - compiled
+    """HIL_SENSOR's payload (``<QfffffffffffffIB``) at ``buf[10:]``, then the frame."""
+    scratch = np.empty(1, dtype=np.float32)
+    _put(buf, 10, t, 8)
+    vals = (accel[0], accel[1], accel[2], gyro[0], gyro[1], gyro[2], mag[0], mag[1], mag[2],
+            abs_p, diff_p, alt, temp)
+    pos = 18
+    for x in vals:
+        if not _put_f32(buf, pos, x, scratch):
+            return -1
+        pos += 4
+    _put(buf, 70, fields, 4)
+    buf[74] = sensor_id
+    return _frame_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
+                         ts)
+
+
+@numba.njit(cache=True)
+def _state_pack_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
+                       ts, t, state, airspeed, lat0, lon0, alt0, r_cos,
+                       out):  # pragma: no cover - compiled
+    """HIL_STATE_QUATERNION's payload (``<Q4ffffiiihhhHHhhh``) of ``encode_hil_state``'s
+    fields (:func:`~vtolftc.protocols.hil._encode_kernel`, the same bits) at ``buf[10:]``,
+    then the frame; -1 for what the codec refuses."""
+    if not _encode_kernel(state, airspeed, lat0, lon0, alt0, r_cos, out):
+        return -1
+    scratch = np.empty(1, dtype=np.float32)
+    _put(buf, 10, t, 8)
+    for i in range(7):  # already float32 values: no overflow
+        _put_f32(buf, 18 + 4 * i, out[i], scratch)
+    for i in range(3):  # lat, lon [degE7], alt [mm]: int32
+        _put(buf, 46 + 4 * i, np.int64(out[7 + i]), 4)
+    for i in range(3):  # vx, vy, vz [cm/s]: int16
+        _put(buf, 58 + 2 * i, np.int64(out[10 + i]), 2)
+    air = np.int64(out[13])
+    _put(buf, 64, air, 2)  # ind_airspeed, true_airspeed [cm/s]: uint16
+    _put(buf, 66, air, 2)
+    _put(buf, 68, 0, 6)  # xacc, yacc, zacc: 0
+    return _frame_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
+                         ts)
 
 
 _check_layout("hil_actuator_controls", _CONTROLS_FORMAT)

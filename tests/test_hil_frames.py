@@ -6,6 +6,8 @@ from __future__ import annotations
 import functools
 import math
 import random
+import struct
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -258,3 +260,115 @@ def test_controls_frames_of_random_messages() -> None:
                                          all(map(math.isfinite, m.controls)))
         assert got.view(np.int64).tolist() == np.array(m.controls).view(np.int64).tolist()
         assert frame_time_usec(raw) == m.time_usec
+
+
+def _random_state_vector(rng: random.Random) -> np.ndarray:
+    x = np.array([rng.uniform(-3e3, 3e3) for _ in range(3)]
+                 + [rng.uniform(-400.0, 400.0) for _ in range(3)]
+                 + [rng.uniform(-1.0, 1.0) for _ in range(4)]
+                 + [rng.uniform(-5.0, 5.0) for _ in range(3)] + [0.0] * rng.randint(0, 4))
+    k = rng.random()
+    if k < 0.1:
+        x[rng.randrange(13)] = 0.0
+    elif k < 0.13:
+        x[rng.randrange(13)] = rng.choice([np.nan, np.inf, 1e39, -1e300])
+    elif k < 0.16:
+        x[rng.randrange(6)] *= 1e6  # clipped to the integer fields' range
+    return x
+
+
+@pytest.mark.parametrize("signed", [False, True])
+@pytest.mark.parametrize("home", HOMES[:2])
+def test_compiled_packers_give_frame_packer_bytes(signed: bool, home: tuple[float, ...]) -> None:
+    """Random sensor samples and states (zeros cut on the wire, NaN, infinities, float32
+    overflow, clipped integers, sequence numbers wrapping): ``HilFramePackers`` gives the
+    bytes of ``FramePacker.pack`` of the same values (HilStateEncoder's fields for the
+    state), or declines exactly where the general path raises; signing state and sequence
+    numbers advance alike."""
+    from vtolftc.protocols.fastpack import FramePacker
+    from vtolftc.protocols.hil import HilStateEncoder
+    from vtolftc.protocols.hil_frames import HilFramePackers
+
+    rng = random.Random(17)
+    sig = (lambda: SigningConfig(KEY, link_id=2, timestamp=7)) if signed else (lambda: None)
+    ca, cb = make_codec(1, 200, signing=sig()), make_codec(1, 200, signing=sig())
+    fast = HilFramePackers(ca, *home)
+    sensor = FramePacker(cb, _D.MAVLink_hil_sensor_message)
+    state = FramePacker(cb, _D.MAVLink_hil_state_quaternion_message)
+    enc = HilStateEncoder(*home)
+    def general(packer: FramePacker, t: int, x: np.ndarray, air: float) -> bytes:
+        hs = enc(t, x, air)
+        return packer.pack(hs.time_usec, *hs.attitude_quaternion, hs.rollspeed,
+                           hs.pitchspeed, hs.yawspeed, hs.lat, hs.lon, hs.alt, hs.vx, hs.vy,
+                           hs.vz, hs.ind_airspeed, hs.true_airspeed, hs.xacc, hs.yacc,
+                           hs.zacc)
+
+    declined = compiled = 0
+    for k in range(1500):
+        t = rng.choice([0, 4000 * k, 2**62])
+        air = rng.choice([0.0, rng.uniform(0.0, 40.0), 1e6, -3.0])
+        x = _random_state_vector(rng)
+        got = fast.state_frame(t, x, air)
+        try:
+            want = general(state, t, x, air)
+        except (ValueError, OverflowError):
+            assert got is None, k  # declined where the general path raises
+            declined += 1
+            continue
+        if got is None:  # declined (a NaN in the quaternion): the caller's general path
+            got = general(fast.state, t, x, air)
+        else:
+            compiled += 1
+        assert got == want, k
+        vals = [_f32(rng) if rng.random() < 0.9 else rng.choice([np.nan, np.inf, 1e39])
+                for _ in range(13)]
+        arrays = [np.array(vals[i:i + 3]) for i in (0, 3, 6)]
+        fields, sid = rng.choice([0, 0x1FFF, 2**32 - 1]), rng.choice([0, 1, 255])
+        got = fast.sensor_frame(t, *arrays, *vals[9:], fields, sid)
+        try:
+            want = sensor.pack(t, *vals, fields, sid)
+        except (struct.error, OverflowError):
+            assert got is None, k
+            declined += 1
+            continue
+        assert got == want, k
+        compiled += 1
+    assert declined >= 60 and compiled >= 2000
+    assert (ca.seq, ca.signing.timestamp) == (cb.seq, cb.signing.timestamp)
+
+
+@pytest.mark.parametrize("signed", [False, True])
+def test_state_encoder_datagrams_unchanged_by_the_compiled_packers(signed: bool) -> None:
+    """A short flight's state datagrams (and their resends) from a ``StateEncoder`` whose
+    compiled packers decline everything (the general path) and from one that uses them:
+    the same bytes."""
+    from vtolftc.airframe.loader import load_airframe
+    from vtolftc.firmware_sim.vehicle.battery import BatteryModel
+    from vtolftc.firmware_sim.vehicle.model import Vehicle
+    from vtolftc.firmware_sim.vehicle.state_encoder import StateEncoder
+
+    af = load_airframe()
+    encs, vehicles = [], []
+    for fast in (True, False):
+        v = Vehicle(af)
+        codec = make_codec(1, 191,
+                           signing=SigningConfig(KEY, timestamp=50) if signed else None)
+        enc = StateEncoder(v, BatteryModel(rho=af.air_density_kg_m3), codec, 10.0,
+                           lambda c=codec: c.heartbeat_encode(0, 0, 0, 0, 0), resign=signed)
+        if not fast:
+            enc._packers = SimpleNamespace(  # type: ignore[assignment]
+                sensor_frame=lambda *a: None, state_frame=lambda *a: None)
+        encs.append(enc)
+        vehicles.append(v)
+    u = np.linspace(0.2, 0.7, af.n_actuators)
+    for k in range(300):
+        grams = [e.datagram() for e in encs]
+        assert grams[0] == grams[1], k
+        packers = encs[0]._packers
+        assert [p for p, _ in encs[0]._parts if p in (packers.sensor_frame,
+                                                       packers.state_frame)] \
+            == [packers.sensor_frame, packers.state_frame]  # the compiled path flew
+        if k % 7 == 0:
+            assert encs[0].again(grams[0]) == encs[1].again(grams[1]), k
+        for v in vehicles:
+            v.step(u, 4)
