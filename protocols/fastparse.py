@@ -13,6 +13,11 @@ and the CRC of every frame of a datagram run in one compiled call (:func:`_scan_
 CRC_EXTRA of each id from a table made once from the dialect); only the signature's hash
 (``hashlib``) and the message objects are made in Python.
 
+Ids in :attr:`FastParser.defer` (``Link.defer``) are checked, counted and signature-checked
+the same way but handed over as :class:`RawFrame`: the bytes and the frame's header fields,
+the message object made by :meth:`RawFrame.message` only when asked for (the HIL step's
+frames, decoded from their bytes by :mod:`vtolftc.protocols.hil_frames`).
+
 Anything else (garbage, a MAVLink 1 frame, bad incompat flags, a truncated frame, a bad CRC,
 an unknown id, an unsigned frame or a bad signature on a signing codec) makes
 :meth:`FastParser.parse` return ``None`` *before any side effect*, and the caller parses the

@@ -9,6 +9,11 @@ autopilot's outputs into HIL_ACTUATOR_CONTROLS:
   navigation state is :func:`interface.decode_hil_state` of the HIL_STATE_QUATERNION, bit for
   bit, computed by :class:`~vtolftc.protocols.hil.HilStateDecoder` straight from the message (the
   autopilot has no estimator; HIL_SENSOR and HIL_GPS are kept for health flags and telemetry).
+  On the fast path the link hands HIL_SENSOR and HIL_STATE_QUATERNION over as ``RawFrame``
+  (``Link.defer``): the step is decoded from the frame's bytes in one compiled call
+  (:class:`~vtolftc.protocols.hil_frames.HilStateFrameDecoder`, the same bits), and
+  :attr:`HilBridge.last_sensor` / :attr:`HilBridge.last_state` make the message objects only
+  when an observer (ULog, ground-station streams) asks for them.
 - :meth:`send_controls` answers a step with ``controls[0:15]`` = :func:`interface.wire_commands`,
   ``mode`` = MAV_MODE_FLAG_SAFETY_ARMED when armed, ``flags`` bit 0 = lockstep.
 - :meth:`forward_command` sends a fault-injection COMMAND_LONG to the vehicle (faults act in

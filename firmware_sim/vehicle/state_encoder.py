@@ -3,9 +3,10 @@
 HIL_SENSOR + HIL_STATE_QUATERNION every step, HIL_GPS at the GPS rate, GPS_GLOBAL_ORIGIN and
 FAULT_INJECTION_STATUS at 1 Hz, BATTERY_STATUS (the power module) at 5 Hz, packed back to back
 in one datagram (the link parses several frames per datagram). The two messages of every
-step are packed by :class:`~vtolftc.protocols.fastpack.FramePacker` (the generated encoding's
-bytes, signed or not, without its per-message objects); the occasional ones by the generated
-code.
+step are packed by :class:`~vtolftc.protocols.hil_frames.HilFramePackers` (one compiled call
+each: payload, header and CRC into a :class:`~vtolftc.protocols.fastpack.FramePacker`'s buffer,
+the generated encoding's bytes, signed or not; the state's encoding included), falling back to
+``FramePacker.pack`` for what they decline; the occasional ones by the generated code.
 """
 
 from __future__ import annotations
