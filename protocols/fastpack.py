@@ -26,7 +26,7 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["FramePacker"]
+__all__ = ["FramePacker", "frame_kernel"]
 
 _HEADER_LEN = 10
 _CRC_LEN = 2
@@ -62,7 +62,7 @@ class FramePacker:
         self._key: Any = None
         self._key_hash: Any = None
         # compile (or load from numba's cache) now, not at the first frame of a flight
-        _frame_kernel(self._arr, self._size, 0, 0, 0, self._msg_id, self._crc_extra, False,
+        frame_kernel(self._arr, self._size, 0, 0, 0, self._msg_id, self._crc_extra, False,
                       0, 0)
 
     def pack(self, *values: Any) -> bytes:
@@ -85,7 +85,7 @@ class FramePacker:
         s = codec.signing
         signed = bool(s.sign_outgoing)
         ts = s.timestamp if signed else 0
-        n = _frame_kernel(self._arr, self._size, seq, codec.srcSystem, codec.srcComponent,
+        n = frame_kernel(self._arr, self._size, seq, codec.srcSystem, codec.srcComponent,
                           self._msg_id, self._crc_extra, signed, s.link_id if signed else 0,
                           ts)
         return self._finish(n, signed, ts)
@@ -96,7 +96,7 @@ class FramePacker:
 
         ``kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
         timestamp, *args)`` writes the ``size`` payload bytes at ``buf[10:]`` as the class's
-        ``unpacker`` would pack them, then returns :func:`_frame_kernel` of the same
+        ``unpacker`` would pack them, then returns :func:`frame_kernel` of the same
         arguments (or -1, nothing written that counts, for a value ``struct`` would refuse:
         the caller then packs with :meth:`pack`, which raises its error). The sequence number
         and signing advance as in :meth:`pack`; the frame is the same bytes.
@@ -130,7 +130,7 @@ class FramePacker:
         return bytes(buf[:n + 6])
 
 @numba.njit(cache=True)
-def _frame_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
+def frame_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
                   timestamp):  # pragma: no cover
     """Header, trailing-zero truncation and CRC of the payload at ``buf[10:10 + size]``;
     signed: the signed incompat flag and, after the CRC, the link id and the 48-bit

@@ -33,13 +33,13 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from vtolftc.protocols.fastpack import FramePacker, _frame_kernel
+from vtolftc.base.geodesy import FlatEarth
+from vtolftc.protocols.fastpack import FramePacker, frame_kernel
 from vtolftc.protocols.hil import (
     EARTH_RADIUS_M,
     HIL_OUTPUTS,
-    HilStateDecoder,
     NavState,
-    _encode_kernel,
+    encode_state_kernel,
 )
 from vtolftc.protocols.mavlink import dialect
 
@@ -85,9 +85,9 @@ class HilStateFrameDecoder:
 
     def __init__(self, home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> None:
         _check_layout("hil_state_quaternion", _STATE_FORMAT)
-        ref = HilStateDecoder(home_lat_deg, home_lon_deg, home_alt_m)
         self._lat0, self._lon0, self._alt0 = home_lat_deg, home_lon_deg, home_alt_m
-        self._cos = ref._cos  # the same double as the reference decoder's projection
+        # the same double as HilStateDecoder's projection
+        self._cos = FlatEarth(home_lat_deg, home_lon_deg).cos_lat0
         self._u64 = np.zeros(2, dtype=np.uint64)
 
     def __call__(self, raw: Any) -> NavState | None:
@@ -215,15 +215,14 @@ class HilFramePackers:
 
     def __init__(self, codec: Any, home_lat_deg: float, home_lon_deg: float,
                  home_alt_m: float) -> None:
-        from vtolftc.protocols.hil import HilStateEncoder
-
         _check_layout("hil_sensor", _SENSOR_FORMAT)
         _check_layout("hil_state_quaternion", _STATE_FORMAT)
         mod = dialect()
         self.sensor = FramePacker(codec, mod.MAVLink_hil_sensor_message)
         self.state = FramePacker(codec, mod.MAVLink_hil_state_quaternion_message)
-        ref = HilStateEncoder(home_lat_deg, home_lon_deg, home_alt_m)
-        self._home = (home_lat_deg, home_lon_deg, home_alt_m, ref._r_cos)
+        # the same doubles as HilStateEncoder's projection
+        r_cos = EARTH_RADIUS_M * FlatEarth(home_lat_deg, home_lon_deg).cos_lat0
+        self._home = (home_lat_deg, home_lon_deg, home_alt_m, r_cos)
         self._out = np.empty(14)
 
     def sensor_frame(self, time_usec: int, accel: NDArray[np.float64],
@@ -290,7 +289,7 @@ def _sensor_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, l
         pos += 4
     _put(buf, 70, fields, 4)
     buf[74] = sensor_id
-    return _frame_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
+    return frame_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
                          ts)
 
 
@@ -299,9 +298,9 @@ def _state_pack_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signe
                        ts, t, state, airspeed, lat0, lon0, alt0, r_cos,
                        out):  # pragma: no cover - compiled
     """HIL_STATE_QUATERNION's payload (``<Q4ffffiiihhhHHhhh``) of ``encode_hil_state``'s
-    fields (:func:`~vtolftc.protocols.hil._encode_kernel`, the same bits) at ``buf[10:]``,
+    fields (:func:`~vtolftc.protocols.hil.encode_state_kernel`, the same bits) at ``buf[10:]``,
     then the frame; -1 for what the codec refuses."""
-    if not _encode_kernel(state, airspeed, lat0, lon0, alt0, r_cos, out):
+    if not encode_state_kernel(state, airspeed, lat0, lon0, alt0, r_cos, out):
         return -1
     scratch = np.empty(1, dtype=np.float32)
     _put(buf, 10, t, 8)
@@ -315,7 +314,7 @@ def _state_pack_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signe
     _put(buf, 64, air, 2)  # ind_airspeed, true_airspeed [cm/s]: uint16
     _put(buf, 66, air, 2)
     _put(buf, 68, 0, 6)  # xacc, yacc, zacc: 0
-    return _frame_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
+    return frame_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
                          ts)
 
 
