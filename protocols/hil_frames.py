@@ -26,6 +26,7 @@ bytes in place.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -35,6 +36,7 @@ from numpy.typing import NDArray
 
 from vtolftc.base.geodesy import FlatEarth
 from vtolftc.protocols.fastpack import FramePacker, frame_kernel
+from vtolftc.protocols.fastparse import RawFrame
 from vtolftc.protocols.hil import (
     EARTH_RADIUS_M,
     HIL_OUTPUTS,
@@ -43,7 +45,8 @@ from vtolftc.protocols.hil import (
 )
 from vtolftc.protocols.mavlink import dialect
 
-__all__ = ["HilFramePackers", "HilStateFrameDecoder", "actuator_controls", "frame_time_usec"]
+__all__ = ["HilFramePackers", "HilStateFrameDecoder", "actuator_controls", "frame_time_usec",
+           "warm_up"]
 
 _STATE_FORMAT = "<Q4ffffiiihhhHHhhh"
 """HIL_STATE_QUATERNION's wire layout the kernel reads (time, q[4], p, q, r, lat, lon, alt,
@@ -316,6 +319,37 @@ def _state_pack_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signe
     _put(buf, 68, 0, 6)  # xacc, yacc, zacc: 0
     return frame_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
                          ts)
+
+
+@functools.cache
+def warm_up() -> None:
+    """Compile (or load from numba's cache) every kernel of this module for the argument
+    types of a flight, once per process: called when the autopilot's bridge and the
+    vehicle's encoder are made, so that a fresh cache compiles nothing after the autopilot
+    says STANDBY (``tests/test_coldstart.py``)."""
+    from vtolftc.protocols.fastparse import FastParser
+    from vtolftc.protocols.mavlink import make_codec
+
+    codec = make_codec(1, 1)
+    packers = HilFramePackers(codec, 47.0, 8.0, 500.0)
+    z = np.zeros(3)
+    x = np.zeros(13)
+    x[6] = 1.0
+    data = packers.sensor_frame(4000, z, z, z, 1013.25, 0.0, 0.0, 15.0, 0x1FFF, 0)
+    data = (data or b"") + (packers.state_frame(4000, x, 0.0) or b"")
+    data += codec.hil_actuator_controls_encode(4000, [0.0] * HIL_OUTPUTS, 0, 0).pack(codec)
+    mod = dialect()
+    parser = FastParser(make_codec(2, 2), mod)
+    parser.defer = frozenset((mod.MAVLink_hil_state_quaternion_message.id,
+                              mod.MAVLink_hil_actuator_controls_message.id))
+    frames = parser.parse(data) or []
+    for raw in frames:
+        if type(raw) is not RawFrame:
+            continue
+        if raw.msg_id == mod.MAVLink_hil_state_quaternion_message.id:
+            HilStateFrameDecoder(47.0, 8.0, 500.0)(raw)
+        else:
+            actuator_controls(raw, 1)
 
 
 _check_layout("hil_actuator_controls", _CONTROLS_FORMAT)

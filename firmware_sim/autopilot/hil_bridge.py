@@ -48,7 +48,7 @@ from vtolftc.protocols.fastpack import FramePacker
 from vtolftc.protocols.fastparse import RawFrame
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.hil import HIL_OUTPUTS, HilStateDecoder
-from vtolftc.protocols.hil_frames import HilStateFrameDecoder, frame_time_usec
+from vtolftc.protocols.hil_frames import HilStateFrameDecoder, frame_time_usec, warm_up
 from vtolftc.protocols.link import Link
 from vtolftc.protocols.mavlink import dialect
 
@@ -90,6 +90,7 @@ class HilBridge:
         self._decode_frame: HilStateFrameDecoder | None = None
         """The same from the frame's bytes (the step's frames come as ``RawFrame``)."""
         link.defer((_ID_SENSOR, _ID_STATE))
+        warm_up()  # compile the frame kernels now, not at the first step of a flight
         self._controls_packer = FramePacker(link.codec,
                                             dialect().MAVLink_hil_actuator_controls_message)
         self._u32 = np.zeros(HIL_OUTPUTS, dtype=np.float32)

@@ -19,7 +19,7 @@ from vtolftc.firmware_sim.vehicle.battery import BatteryModel
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.protocols.fastpack import FramePacker
 from vtolftc.protocols.hil import HilStateEncoder
-from vtolftc.protocols.hil_frames import HilFramePackers
+from vtolftc.protocols.hil_frames import HilFramePackers, warm_up
 
 __all__ = ["StateEncoder"]
 
@@ -61,6 +61,7 @@ class StateEncoder:
         self._packers = HilFramePackers(codec, self.home.lat_deg, self.home.lon_deg,
                                         self.home.alt_m)
         self._sensor = self._packers.sensor
+        warm_up()  # compile the frame kernels now, not at the first step of a flight
         self._state = self._packers.state
         self._next_gps = 0
         self._next_origin = 0
