@@ -275,9 +275,20 @@ measurement below):
   677 / 522 / 405 / 597 / 582 -> 639 / 560 / 643 / 422 us, vehicle 530 / 403 / 360 / 453 /
   529 -> 478 / 420 / 475 / 343 us, autopilot read 125 / 93 / 61 / 111 / 110 -> 94 / 86 /
   82 / 59 us (mean 100 -> 80). The reads move the way of the warm saving; nothing else can
-  be told from the load's noise (one pair's spread is 2x).
-- Not reached: 20x / 15x (best flights here 4.0x UDP, 5.2x zenoh at load 11-13; main's
-  5.2x, 6.6x). Where the time goes, measured in these flights (thread CPU per step, UDP):
+  be told from the load's noise (one pair's spread is 2x). Two more pairs at the end, load
+  2.8-3.8 (this, main, this, main): UDP 7.9 / 7.6 against 7.7 / 8.1x (wall per step 506 /
+  527 against 517 / 497 us), CPU per step autopilot 352 / 299 against 302 / 288 us, vehicle
+  217 / 231 against 229 / 206 us, autopilot read 80 / 64 against 78 / 69 us; zenoh 6.3 /
+  5.4 against 5.2 / 5.1x (636 / 742 against 770 / 780 us), CPU autopilot 425 / 454 against
+  544 / 535 us, vehicle 352 / 347 against 429 / 411 us, autopilot read 59 / 69 against 95 /
+  106 us. UDP unchanged within its spread; zenoh 5-20 % quicker in both pairs, more than the
+  warm saving explains (2 pairs: not established).
+- ``test_coldstart``'s fresh-cache SITL flight failed once (take-off not within 90 s, load
+  11-16, the fast suite running beside it) before the frame kernels were compiled at start
+  (``hil_frames.warm_up``, called by ``HilBridge`` and ``StateEncoder``); with it, it passed
+  alone (153 s, load ~4-6).
+- Not reached: 20x / 15x (best flights here 7.9x UDP, 6.3x zenoh at load 3-4; main's 8.1x,
+  5.2x). Where the time goes, measured in these flights (thread CPU per step, UDP):
   autopilot read 83-140 us (its warm cost is now ~10 us: the rest is the wake-up on cold
   caches and the syscalls), ``Autopilot.step`` 62-93 us, status + answer 40-66 us, after the
   answer 118-167 us (metrics, observers, ground-station hand-over: on the critical path
