@@ -239,6 +239,70 @@ flights below, 0.1-6 through the warm figures):
   NavState array and the sensor fields, making the message objects only when an observer asks):
   the next step, not started here for lack of time.
 
+Session 15 (issue 24; 2 cores shared with 2 other helpers, load average 9-16 through every
+measurement below):
+
+- Change: the HIL step without message objects. ``Link.defer(ids)`` makes the fast parser
+  hand the step's frames over as ``fastparse.RawFrame`` (framing, CRC, signature, replay
+  window and counters as before; the message object made by ``RawFrame.message()`` only when
+  asked). The autopilot decodes HIL_STATE_QUATERNION into its ``NavState`` in one compiled
+  call (``hil_frames.HilStateFrameDecoder``, ``HilStateDecoder``'s bits) and reads
+  HIL_SENSOR's time from the bytes; ``HilBridge.last_sensor`` / ``last_state`` make the
+  message objects for ULog and the ground-station streams when they look (decimated). The
+  vehicle reads HIL_ACTUATOR_CONTROLS in one compiled call (``hil_frames.actuator_controls``)
+  and packs HIL_SENSOR (from the sample's arrays) and HIL_STATE_QUATERNION (the state's
+  encoding fused in) in one compiled call each (``hil_frames.HilFramePackers`` through
+  ``FramePacker.pack_compiled``: the same bytes, signing and sequence numbers). Anything the
+  compiled paths decline (a corrupt datagram, a NaN quaternion, a float32 overflow) takes
+  today's path. ``tests/test_hil_frames.py`` compares both paths value by value and byte by
+  byte (random fields, truncated payloads, corrupted flights, signed and unsigned).
+- Warm (one process, thread CPU, interleaved): autopilot read of a step datagram
+  (``--parts`` ``read_fast``, 3 + 2 pairs against main's tree at load 9.6-12.3) min 14.8 /
+  16.5 / 15.3 / 18.7 / 15.3 -> 15.8 / 9.8 / 10.1 / 15.6 / 11.3 us, i.e. ~5 us (a third) off
+  when the two runs are alike; the vehicle's signed state datagram, general against compiled
+  packers in one process (12 x 2000 each, load 10.4-10.7) min 17.9 / 18.7 -> 16.4 / 16.9 us,
+  median 19.6 / 22.4 -> 16.7 / 20.4 us (``Vehicle.sensors``, another owner's, is ~10 us of
+  it); the vehicle's read of a signed HIL_ACTUATOR_CONTROLS + the commands, message against
+  frame (12 x 2000, load 10.0), min 7.6 -> 7.1 us, median 11.0 -> 8.9 us.
+- In flight, pairwise against main (interleaved main, this, main, ... : 5 main and 4 new
+  flights of 20 s of case 1, ``--transport both``, load 9.1-15.8), main -> this tree:
+  UDP real-time factor 2.3 / 4.1 / 3.8 / 2.5 / 5.2 -> 3.9 / 1.7 / 4.0 / 3.3x, CPU per step
+  autopilot process 521 / 426 / 430 / 621 / 300 -> 477 / 604 / 452 / 380 us (mean 460 ->
+  478), vehicle 375 / 303 / 336 / 426 / 227 -> 338 / 418 / 336 / 276 us (333 -> 342),
+  autopilot wait_and_read CPU 144 / 112 / 122 / 176 / 83 -> 120 / 140 / 104 / 83 us (127 ->
+  112), vehicle sensors + encode CPU 99 / 80 / 71 / 109 / 59 -> 81 / 111 / 76 / 74 us;
+  zenoh 2.5 / 3.7 / 6.6 / 3.6 / 2.7 -> 0.9 (load 15.8) / 3.3 / 4.2 / 5.2x, CPU autopilot
+  677 / 522 / 405 / 597 / 582 -> 639 / 560 / 643 / 422 us, vehicle 530 / 403 / 360 / 453 /
+  529 -> 478 / 420 / 475 / 343 us, autopilot read 125 / 93 / 61 / 111 / 110 -> 94 / 86 /
+  82 / 59 us (mean 100 -> 80). The reads move the way of the warm saving; nothing else can
+  be told from the load's noise (one pair's spread is 2x). Two more pairs at the end, load
+  2.8-3.8 (this, main, this, main): UDP 7.9 / 7.6 against 7.7 / 8.1x (wall per step 506 /
+  527 against 517 / 497 us), CPU per step autopilot 352 / 299 against 302 / 288 us, vehicle
+  217 / 231 against 229 / 206 us, autopilot read 80 / 64 against 78 / 69 us; zenoh 6.3 /
+  5.4 against 5.2 / 5.1x (636 / 742 against 770 / 780 us), CPU autopilot 425 / 454 against
+  544 / 535 us, vehicle 352 / 347 against 429 / 411 us, autopilot read 59 / 69 against 95 /
+  106 us. UDP unchanged within its spread; zenoh 5-20 % quicker in both pairs, more than the
+  warm saving explains (2 pairs: not established).
+- ``test_coldstart``'s fresh-cache SITL flight failed once (take-off not within 90 s, load
+  11-16, the fast suite running beside it) before the frame kernels were compiled at start
+  (``hil_frames.warm_up``, called by ``HilBridge`` and ``StateEncoder``); with it, it passed
+  alone (153 s, load ~4-6).
+- Not reached: 20x / 15x (best flights here 7.9x UDP, 6.3x zenoh at load 3-4; main's 8.1x,
+  5.2x). Where the time goes, measured in these flights (thread CPU per step, UDP):
+  autopilot read 83-140 us (its warm cost is now ~10 us: the rest is the wake-up on cold
+  caches and the syscalls), ``Autopilot.step`` 62-93 us, status + answer 40-66 us, after the
+  answer 118-167 us (metrics, observers, ground-station hand-over: on the critical path
+  whenever the vehicle is quicker); vehicle read 73-127 us, physics 31-44 us, sensors +
+  encode 74-111 us (warm 16-17 us, of which ``Vehicle.sensors`` 10 us), send 22-34 us. The
+  codec's warm cost on the critical path is now ~10 us (autopilot read) + ~6 us (vehicle
+  packing) + ~7 us (vehicle read): there is nothing left of the codec worth compiling; the
+  in-flight figures are 3-8x the warm ones, as sessions 10, 13 and 14 found, because every
+  step begins with a wake-up on caches the other process (and the other jobs) emptied. On
+  an idle machine (the lead's 280 us / 14x UDP) this session's saving is at most ~10-15 us
+  a step of warm CPU, ~5 %: 20x (200 us) needs the after-answer work off the critical path
+  and both processes on warm cores (one process, or pinned cores with spinning on an idle
+  machine), which this loaded machine cannot show.
+
 In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
 control step): measured at 57-61x on an idle machine (about 66 us per step: autopilot ~25 us,
 physics ~13 us, HIL codec, metrics and the runner the rest; thread CPU time ~62-85 us per

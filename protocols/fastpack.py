@@ -26,7 +26,7 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["FramePacker"]
+__all__ = ["FramePacker", "frame_kernel"]
 
 _HEADER_LEN = 10
 _CRC_LEN = 2
@@ -62,7 +62,7 @@ class FramePacker:
         self._key: Any = None
         self._key_hash: Any = None
         # compile (or load from numba's cache) now, not at the first frame of a flight
-        _frame_kernel(self._arr, self._size, 0, 0, 0, self._msg_id, self._crc_extra, False,
+        frame_kernel(self._arr, self._size, 0, 0, 0, self._msg_id, self._crc_extra, False,
                       0, 0)
 
     def pack(self, *values: Any) -> bytes:
@@ -80,32 +80,57 @@ class FramePacker:
             The frame, equal to ``cls(...).pack(codec)`` (signed or not, as the codec).
         """
         codec = self._codec
-        buf = self._buf
-        self._pack_into(buf, _HEADER_LEN, *values)
+        self._pack_into(self._buf, _HEADER_LEN, *values)
         seq = codec.seq
         s = codec.signing
-        if not s.sign_outgoing:
-            n = _frame_kernel(self._arr, self._size, seq, codec.srcSystem, codec.srcComponent,
-                              self._msg_id, self._crc_extra, False, 0, 0)
-            codec.seq = (seq + 1) & 0xFF
+        signed = bool(s.sign_outgoing)
+        ts = s.timestamp if signed else 0
+        n = frame_kernel(self._arr, self._size, seq, codec.srcSystem, codec.srcComponent,
+                          self._msg_id, self._crc_extra, signed, s.link_id if signed else 0,
+                          ts)
+        return self._finish(n, signed, ts)
+
+    def pack_compiled(self, kernel: Any, *args: Any) -> bytes | None:
+        """One frame whose payload a compiled ``kernel`` writes from ``args`` (the values
+        straight from their arrays, no per-field Python objects), or None if it declines.
+
+        ``kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
+        timestamp, *args)`` writes the ``size`` payload bytes at ``buf[10:]`` as the class's
+        ``unpacker`` would pack them, then returns :func:`frame_kernel` of the same
+        arguments (or -1, nothing written that counts, for a value ``struct`` would refuse:
+        the caller then packs with :meth:`pack`, which raises its error). The sequence number
+        and signing advance as in :meth:`pack`; the frame is the same bytes.
+        """
+        codec = self._codec
+        s = codec.signing
+        signed = bool(s.sign_outgoing)
+        ts = s.timestamp if signed else 0
+        n = kernel(self._arr, self._size, codec.seq, codec.srcSystem, codec.srcComponent,
+                   self._msg_id, self._crc_extra, signed, s.link_id if signed else 0, ts,
+                   *args)
+        return None if n < 0 else self._finish(n, signed, ts)
+
+    def _finish(self, n: int, signed: bool, ts: int) -> bytes:
+        """The frame of ``n`` bytes in the buffer: signed (the hash appended, the signing
+        timestamp advanced) if ``signed``; the codec's sequence number advanced."""
+        codec = self._codec
+        buf = self._buf
+        codec.seq = (codec.seq + 1) & 0xFF
+        if not signed:
             return bytes(buf[:n])
+        s = codec.signing
         key = s.secret_key
         assert key is not None
         if key is not self._key:
             self._key, self._key_hash = key, hashlib.sha256(key)
-        ts = s.timestamp
-        n = _frame_kernel(self._arr, self._size, seq, codec.srcSystem, codec.srcComponent,
-                          self._msg_id, self._crc_extra, True, s.link_id, ts)
         h = self._key_hash.copy()
         h.update(self._view[:n])
         buf[n:n + 6] = h.digest()[:6]
         s.timestamp = ts + 1
-        codec.seq = (seq + 1) & 0xFF
         return bytes(buf[:n + 6])
 
-
 @numba.njit(cache=True)
-def _frame_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
+def frame_kernel(buf, size, seq, sys_id, comp_id, msg_id, crc_extra, signed, link_id,
                   timestamp):  # pragma: no cover
     """Header, trailing-zero truncation and CRC of the payload at ``buf[10:10 + size]``;
     signed: the signed incompat flag and, after the CRC, the link id and the 48-bit

@@ -13,6 +13,11 @@ and the CRC of every frame of a datagram run in one compiled call (:func:`_scan_
 CRC_EXTRA of each id from a table made once from the dialect); only the signature's hash
 (``hashlib``) and the message objects are made in Python.
 
+Ids in :attr:`FastParser.defer` (``Link.defer``) are checked, counted and signature-checked
+the same way but handed over as :class:`RawFrame`: the bytes and the frame's header fields,
+the message object made by :meth:`RawFrame.message` only when asked for (the HIL step's
+frames, decoded from their bytes by :mod:`vtolftc.protocols.hil_frames`).
+
 Anything else (garbage, a MAVLink 1 frame, bad incompat flags, a truncated frame, a bad CRC,
 an unknown id, an unsigned frame or a bad signature on a signing codec) makes
 :meth:`FastParser.parse` return ``None`` *before any side effect*, and the caller parses the
@@ -38,13 +43,14 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["FastParser"]
+__all__ = ["FastParser", "RawFrame"]
 
 _MAGIC_V2 = 0xFD
 _IFLAG_SIGNED = 0x01
 _HEADER_LEN = 10
 _SIG_LEN = 13
 _SIGN_TS = struct.Struct("<IH")
+_UNSET = object()
 _ROW = 10
 """Columns of :func:`_scan_kernel`'s table: start, end, message id, CRC, payload length,
 incompat flags, compat flags, sequence, system id, component id."""
@@ -102,6 +108,9 @@ class FastParser:
         """SHA-256 state after the signing key (copied per frame, as ``FramePacker``)."""
         self.rejected = 0
         """Frames dropped for a signature timestamp the replay window refused."""
+        self.defer: frozenset[int] = frozenset()
+        """Message ids handed over as :class:`RawFrame` (the message object made only when
+        asked for) instead of message objects."""
 
     def _layout(self, msg_id: int) -> _Layout | None:
         lay = self._layouts.get(msg_id)
@@ -149,13 +158,12 @@ class FastParser:
         codec = self.codec
         signing = codec.signing
         out: list[Any] = []
-        header_cls = self._header_cls
         layout = self._layout
+        defer = self.defer
         for pos, end, msg_id, crc, mlen, iflags, cflags, seq, src_sys, src_comp in frames:
             lay = layout(msg_id)
             assert lay is not None  # the kernel checked the id
             signed = bool(iflags & _IFLAG_SIGNED)
-            siglen = _SIG_LEN if signed else 0
             codec.total_packets_received += 1
             if signed:
                 signing.sig_count += 1
@@ -180,37 +188,103 @@ class FastParser:
                         codec.total_receive_errors += 1
                         self.rejected += 1
                         continue
-            msgbuf = bytearray(data[pos:end])
-            payload = data[pos + _HEADER_LEN:pos + _HEADER_LEN + mlen]
-            if mlen < lay.size:
-                payload += bytes(lay.size - mlen)
-            t = lay.unpack(payload[:lay.size])
-            if lay.plain and not lay.chars:
-                m = lay.cls(*lay.pick(t)[:-1])
-            elif not lay.chars:
-                m = lay.cls(*[t[tip] if n == 1 else list(t[tip:tip + n])
-                              for tip, n in lay.plan])
-            else:
-                args = []
-                for tip, length in lay.plan:
-                    field = t[tip]
-                    if length == 1 or isinstance(field, bytes):
-                        args.append(field)
-                    else:
-                        args.append(list(t[tip:tip + length]))
-                for i, elem in enumerate(args):
-                    if isinstance(elem, bytes):
-                        args[i] = elem.rstrip(b"\x00")
-                m = lay.cls(*args)
-            m._signed = sig_ok
-            if sig_ok:
-                m._link_id = msgbuf[-13]
-            m._msgbuf = msgbuf
-            m._payload = msgbuf[6:-(2 + siglen)]
-            m._crc = crc
-            m._header = header_cls(msg_id, iflags, cflags, mlen, seq, src_sys, src_comp)
+            if msg_id in defer:
+                out.append(RawFrame(self, data, pos, end, msg_id, crc, mlen, iflags, cflags,
+                                    seq, src_sys, src_comp, sig_ok))
+                continue
+            m = self._make(lay, data, pos, end, msg_id, crc, mlen, iflags, cflags, seq,
+                           src_sys, src_comp, sig_ok)
             out.append(m)
         return out
+
+    def _make(self, lay: _Layout, data: bytes, pos: int, end: int, msg_id: int, crc: int,
+              mlen: int, iflags: int, cflags: int, seq: int, src_sys: int, src_comp: int,
+              sig_ok: bool) -> Any:
+        """The generated ``decode``'s message object of the frame ``data[pos:end]`` (its
+        signature already checked and accounted: ``sig_ok``)."""
+        siglen = _SIG_LEN if iflags & _IFLAG_SIGNED else 0
+        msgbuf = bytearray(data[pos:end])
+        payload = data[pos + _HEADER_LEN:pos + _HEADER_LEN + mlen]
+        if mlen < lay.size:
+            payload += bytes(lay.size - mlen)
+        t = lay.unpack(payload[:lay.size])
+        if lay.plain and not lay.chars:
+            m = lay.cls(*lay.pick(t)[:-1])
+        elif not lay.chars:
+            m = lay.cls(*[t[tip] if n == 1 else list(t[tip:tip + n])
+                          for tip, n in lay.plan])
+        else:
+            args = []
+            for tip, length in lay.plan:
+                field = t[tip]
+                if length == 1 or isinstance(field, bytes):
+                    args.append(field)
+                else:
+                    args.append(list(t[tip:tip + length]))
+            for i, elem in enumerate(args):
+                if isinstance(elem, bytes):
+                    args[i] = elem.rstrip(b"\x00")
+            m = lay.cls(*args)
+        m._signed = sig_ok
+        if sig_ok:
+            m._link_id = msgbuf[-13]
+        m._msgbuf = msgbuf
+        m._payload = msgbuf[6:-(2 + siglen)]
+        m._crc = crc
+        m._header = self._header_cls(msg_id, iflags, cflags, mlen, seq, src_sys, src_comp)
+        return m
+
+
+class RawFrame:
+    """A frame :class:`FastParser` checked (framing, CRC, signature and its replay window,
+    counters) but did not turn into a message object: the ids in :attr:`FastParser.defer`.
+
+    A reader on the hot path decodes the numbers it needs from :attr:`data` itself
+    (the payload is ``data[payload_start:payload_start + mlen]``, zero tail truncated as
+    MAVLink 2 sends it); :meth:`message` makes, once, the very object the parser would have
+    handed over (same class, fields, header, buffers, signing flags).
+    """
+
+    __slots__ = ("_msg", "_parser", "_row", "_sig_ok", "_vtolftc_source", "data", "mlen",
+                 "msg_id", "payload_start")
+
+    def __init__(self, parser: FastParser, data: bytes, pos: int, end: int, msg_id: int,
+                 crc: int, mlen: int, iflags: int, cflags: int, seq: int, src_sys: int,
+                 src_comp: int, sig_ok: bool) -> None:
+        self._parser = parser
+        self.data = data
+        self.msg_id = msg_id
+        self.mlen = mlen
+        self.payload_start = pos + _HEADER_LEN
+        self._row = (pos, end, msg_id, crc, mlen, iflags, cflags, seq, src_sys, src_comp)
+        self._sig_ok = sig_ok
+        self._msg: Any = None
+        self._vtolftc_source: Any = _UNSET
+
+    def get_type(self) -> str:
+        """The message's name (as the message object's ``get_type``)."""
+        return self._parser._map[self.msg_id].msgname  # type: ignore[no-any-return]
+
+    def get_srcSystem(self) -> int:
+        """The sender's system id (as the message object's)."""
+        return self._row[8]
+
+    def get_srcComponent(self) -> int:
+        """The sender's component id (as the message object's)."""
+        return self._row[9]
+
+    def message(self) -> Any:
+        """The message object of this frame (made at the first call, then the same one)."""
+        m = self._msg
+        if m is None:
+            parser = self._parser
+            lay = parser._layout(self.msg_id)
+            assert lay is not None  # the kernel checked the id
+            m = parser._make(lay, self.data, *self._row, self._sig_ok)
+            if self._vtolftc_source is not _UNSET:  # set by a link that tracks sources
+                m._vtolftc_source = self._vtolftc_source
+            self._msg = m
+        return m
 
 
 @numba.njit(cache=True)

@@ -409,7 +409,7 @@ class HilStateEncoder:
         """
         o = self._out
         if type(state) is np.ndarray and state.dtype == _F64 and state.ndim == 1 \
-                and state.shape[0] >= 13 and _encode_kernel(
+                and state.shape[0] >= 13 and encode_state_kernel(
                     state, float(airspeed_m_s), self._lat0, self._lon0, self._alt0,
                     self._r_cos, o):
             (qw, qx, qy, qz, p, q, r, lat, lon, alt, vx, vy, vz, air) = o.tolist()
@@ -422,7 +422,7 @@ class HilStateEncoder:
 
 
 @numba.njit(cache=True)
-def _encode_kernel(state, airspeed, lat0, lon0, alt0, r_cos, out):  # pragma: no cover
+def encode_state_kernel(state, airspeed, lat0, lon0, alt0, r_cos, out):  # pragma: no cover
     """:func:`encode_hil_state` compiled (as :func:`_round_trip_kernel`'s encode half).
 
     Writes the float32-rounded quaternion and rates, then the rounded and clipped lat, lon

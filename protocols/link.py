@@ -222,6 +222,13 @@ class Link:
     def __repr__(self) -> str:
         return f"Link({self._transport.describe()}{', closed' if self._closed else ''})"
 
+    def defer(self, ids: Iterable[int]) -> None:
+        """Hand valid frames of these message ids over as
+        :class:`~vtolftc.protocols.fastparse.RawFrame` (checked and counted as any frame,
+        the message object made by ``RawFrame.message()`` when asked for) on the fast path;
+        a datagram the generated parser handles still gives message objects."""
+        self._fast.defer = frozenset(int(i) for i in ids)
+
     # ---------------------------------------------------------------- sending
     def send(self, msg: Any) -> int:
         """Send a message (packed with this link's ids, sequence and signing) or raw bytes.

@@ -9,6 +9,11 @@ autopilot's outputs into HIL_ACTUATOR_CONTROLS:
   navigation state is :func:`interface.decode_hil_state` of the HIL_STATE_QUATERNION, bit for
   bit, computed by :class:`~vtolftc.protocols.hil.HilStateDecoder` straight from the message (the
   autopilot has no estimator; HIL_SENSOR and HIL_GPS are kept for health flags and telemetry).
+  On the fast path the link hands HIL_SENSOR and HIL_STATE_QUATERNION over as ``RawFrame``
+  (``Link.defer``): the step is decoded from the frame's bytes in one compiled call
+  (:class:`~vtolftc.protocols.hil_frames.HilStateFrameDecoder`, the same bits), and
+  :attr:`HilBridge.last_sensor` / :attr:`HilBridge.last_state` make the message objects only
+  when an observer (ULog, ground-station streams) asks for them.
 - :meth:`send_controls` answers a step with ``controls[0:15]`` = :func:`interface.wire_commands`,
   ``mode`` = MAV_MODE_FLAG_SAFETY_ARMED when armed, ``flags`` bit 0 = lockstep.
 - :meth:`forward_command` sends a fault-injection COMMAND_LONG to the vehicle (faults act in
@@ -40,8 +45,10 @@ from vtolftc.firmware_sim.autopilot.interface import (
     wire_commands,
 )
 from vtolftc.protocols.fastpack import FramePacker
+from vtolftc.protocols.fastparse import RawFrame
 from vtolftc.protocols.generated import constants as mav
 from vtolftc.protocols.hil import HIL_OUTPUTS, HilStateDecoder
+from vtolftc.protocols.hil_frames import HilStateFrameDecoder, frame_time_usec, warm_up
 from vtolftc.protocols.link import Link
 from vtolftc.protocols.mavlink import dialect
 
@@ -49,6 +56,8 @@ __all__ = ["HilBridge"]
 
 MAV_MODE_FLAG_SAFETY_ARMED = mav.MAV_MODE_FLAG_SAFETY_ARMED
 _HEARTBEAT_PERIOD_S = 1.0
+_ID_SENSOR = dialect().MAVLink_hil_sensor_message.id
+_ID_STATE = dialect().MAVLink_hil_state_quaternion_message.id
 
 
 class HilBridge:
@@ -58,9 +67,9 @@ class HilBridge:
         self.link = link
         self.lockstep = lockstep
         self._home: tuple[float, float, float] | None = None
-        self.last_sensor: Any = None
+        self._last_sensor: Any = None
         self.last_gps: Any = None
-        self.last_state: Any = None
+        self._last_state: Any = None
         self.last_battery: Any = None
         self.last_rx_wall = -np.inf
         self.last_step_wall = -np.inf
@@ -78,6 +87,10 @@ class HilBridge:
         self.decode_errors = 0
         self._decode: HilStateDecoder | None = None
         """Decodes HIL_STATE_QUATERNION about :attr:`home` (made when home is known)."""
+        self._decode_frame: HilStateFrameDecoder | None = None
+        """The same from the frame's bytes (the step's frames come as ``RawFrame``)."""
+        link.defer((_ID_SENSOR, _ID_STATE))
+        warm_up()  # compile the frame kernels now, not at the first step of a flight
         self._controls_packer = FramePacker(link.codec,
                                             dialect().MAVLink_hil_actuator_controls_message)
         self._u32 = np.zeros(HIL_OUTPUTS, dtype=np.float32)
@@ -93,38 +106,52 @@ class HilBridge:
     def home(self, home: tuple[float, float, float] | None) -> None:
         self._home = home
         self._decode = None if home is None else HilStateDecoder(*home)
+        self._decode_frame = None if home is None else HilStateFrameDecoder(*home)
+
+    @property
+    def last_sensor(self) -> Any:
+        """The last HIL_SENSOR message (made from its frame when first asked for)."""
+        m = self._last_sensor
+        return m.message() if type(m) is RawFrame else m
+
+    @last_sensor.setter
+    def last_sensor(self, msg: Any) -> None:
+        self._last_sensor = msg
+
+    @property
+    def last_state(self) -> Any:
+        """The last HIL_STATE_QUATERNION message (made from its frame when first asked
+        for)."""
+        m = self._last_state
+        return m.message() if type(m) is RawFrame else m
+
+    @last_state.setter
+    def last_state(self, msg: Any) -> None:
+        self._last_state = msg
 
     # ------------------------------------------------------------------ input
     def handle(self, msg: Any) -> None:
-        """Take one message from the vehicle."""
+        """Take one message from the vehicle (a message object, or a :class:`RawFrame` of
+        the ids this bridge deferred on its link: HIL_SENSOR and HIL_STATE_QUATERNION, read
+        from their bytes, their message objects made only if an observer asks)."""
         self.last_rx_wall = time.monotonic()
+        if type(msg) is RawFrame:
+            if msg.msg_id == _ID_SENSOR:
+                self._last_sensor = msg
+                self._sensor_time = frame_time_usec(msg)
+                return
+            if msg.msg_id == _ID_STATE:
+                self._last_state = msg
+                self._state(frame_time_usec(msg), msg)
+                return
+            msg = msg.message()
         t = msg.get_type()
         if t == "HIL_SENSOR":
-            self.last_sensor = msg
+            self._last_sensor = msg
             self._sensor_time = int(msg.time_usec)
         elif t == "HIL_STATE_QUATERNION":
-            self.last_state = msg
-            decode = self._decode
-            if decode is None:
-                self.decode_errors += 1
-                return
-            t_us = int(msg.time_usec)
-            if self._sensor_time != t_us:
-                return  # a step is the pair; an unpaired state is not a step
-            if self._last_answer is not None and t_us <= self._last_answer[0]:
-                if t_us == self._last_answer[0]:  # the vehicle resent: our answer was lost
-                    self.link.send(self._last_answer[1])
-                    self.resent += 1
-                return
-            try:
-                nav = decode(msg)
-            except ValueError:
-                self.decode_errors += 1
-                return
-            if self._pending is not None and self._pending.time_usec != t_us:
-                self.superseded += 1
-            self._pending = nav
-            self.last_step_wall = self.last_rx_wall
+            self._last_state = msg
+            self._state(int(msg.time_usec), msg)
         elif t == "HIL_GPS":
             self.last_gps = msg
         elif t == "BATTERY_STATUS":
@@ -138,6 +165,37 @@ class HilBridge:
             self.fault_status = msg
         elif t == "COMMAND_ACK":
             self.vehicle_acks.append(msg)
+
+    def _state(self, t_us: int, msg: Any) -> None:
+        """A HIL_STATE_QUATERNION at ``t_us`` (message or :class:`RawFrame`): the step when
+        it pairs with the last HIL_SENSOR and is newer than the last answer."""
+        decode = self._decode
+        if decode is None:
+            self.decode_errors += 1
+            return
+        if self._sensor_time != t_us:
+            return  # a step is the pair; an unpaired state is not a step
+        if self._last_answer is not None and t_us <= self._last_answer[0]:
+            if t_us == self._last_answer[0]:  # the vehicle resent: our answer was lost
+                self.link.send(self._last_answer[1])
+                self.resent += 1
+            return
+        nav = None
+        if type(msg) is RawFrame:
+            assert self._decode_frame is not None  # made with decode
+            nav = self._decode_frame(msg)
+            if nav is None:  # not a rotation quaternion: the reference raises its error
+                msg = msg.message()
+        if nav is None:
+            try:
+                nav = decode(msg)
+            except ValueError:
+                self.decode_errors += 1
+                return
+        if self._pending is not None and self._pending.time_usec != t_us:
+            self.superseded += 1
+        self._pending = nav
+        self.last_step_wall = self.last_rx_wall
 
     def drain(self, timeout_s: float = 0.0, max_reads: int = 64) -> int:
         """Handle every message the link has now (waiting up to ``timeout_s`` for the first);

@@ -94,7 +94,10 @@ from vtolftc.firmware_sim.vehicle.state_encoder import StateEncoder
 from vtolftc.firmware_sim.vehicle.truth_log import TruthLog
 from vtolftc.protocols import SigningConfig, open_link
 from vtolftc.protocols.failure_units import ActuatorTable
+from vtolftc.protocols.fastparse import RawFrame
 from vtolftc.protocols.generated import constants as mav
+from vtolftc.protocols.hil_frames import actuator_controls
+from vtolftc.protocols.mavlink import dialect
 from vtolftc.telemetry.step_parts import StepParts
 from vtolftc.telemetry.streamstats import DurationStats
 
@@ -110,6 +113,16 @@ _FLUSH_ROWS = 125
 AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID = 1, 1
 SAFE_OUTPUT = 0.0
 """Output-watchdog value of every actuator: rotors and pushers stopped, surfaces neutral."""
+
+
+def _controls(msg: Any, n: int) -> tuple[int, int, bool, Any]:
+    """HIL_ACTUATOR_CONTROLS' ``time_usec``, ``mode``, whether ``controls[:n]`` are all finite,
+    and ``controls[:n]``: from the frame's bytes when the link deferred it (a ``RawFrame``),
+    else from the message object (the same values)."""
+    if type(msg) is RawFrame:
+        return actuator_controls(msg, n)
+    c = msg.controls[:n]
+    return int(msg.time_usec), int(msg.mode), all(map(math.isfinite, c)), c
 
 
 class VehicleProcess:
@@ -144,6 +157,7 @@ class VehicleProcess:
                               component_id=VEHICLE_COMPONENT_ID, allow_remote=allow_remote,
                               track_source=True, signing=signing,
                               zenoh_receive="channel")
+        self.link.defer((dialect().MAVLink_hil_actuator_controls_message.id,))
         self.pinned: object = None
         """Source of the autopilot's first heartbeat (address, or "ids" on zenoh)."""
         self.rejected = {"not_pinned": 0, "foreign_ids": 0, "stale_controls": 0,
@@ -247,7 +261,7 @@ class VehicleProcess:
             return False
         self._last_peer = time.monotonic()
         if kind == "HIL_ACTUATOR_CONTROLS":
-            t = int(msg.time_usec)
+            t, mode, finite, c = _controls(msg, self.airframe.n_actuators)
             now_usec = self.vehicle.time_usec
             if t <= self._last_controls_usec:
                 self.rejected["stale_controls"] += 1
@@ -260,11 +274,10 @@ class VehicleProcess:
             if self.watchdog_tripped:
                 self.watchdog_tripped = False
                 self._event("watchdog", "controls back: the autopilot has the actuators again")
-            self.armed = bool(msg.mode & 128)
-            c = msg.controls[: self.airframe.n_actuators]
+            self.armed = bool(mode & 128)
             if self.loss > 0 and self._loss_rng.random() < self.loss:
                 self.rejected["lost_injected"] += 1
-            elif all(map(math.isfinite, c)):
+            elif finite:
                 if self.delay_usec:
                     self._delay_line.append((now_usec + self.delay_usec, np.array(c)))
                 else:

@@ -3,9 +3,10 @@
 HIL_SENSOR + HIL_STATE_QUATERNION every step, HIL_GPS at the GPS rate, GPS_GLOBAL_ORIGIN and
 FAULT_INJECTION_STATUS at 1 Hz, BATTERY_STATUS (the power module) at 5 Hz, packed back to back
 in one datagram (the link parses several frames per datagram). The two messages of every
-step are packed by :class:`~vtolftc.protocols.fastpack.FramePacker` (the generated encoding's
-bytes, signed or not, without its per-message objects); the occasional ones by the generated
-code.
+step are packed by :class:`~vtolftc.protocols.hil_frames.HilFramePackers` (one compiled call
+each: payload, header and CRC into a :class:`~vtolftc.protocols.fastpack.FramePacker`'s buffer,
+the generated encoding's bytes, signed or not; the state's encoding included), falling back to
+``FramePacker.pack`` for what they decline; the occasional ones by the generated code.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from vtolftc.firmware_sim.vehicle.battery import BatteryModel
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.protocols.fastpack import FramePacker
 from vtolftc.protocols.hil import HilStateEncoder
-from vtolftc.protocols.mavlink import dialect
+from vtolftc.protocols.hil_frames import HilFramePackers, warm_up
 
 __all__ = ["StateEncoder"]
 
@@ -57,9 +58,11 @@ class StateEncoder:
         self._resign = resign
         self._parts: list[tuple[Callable[..., bytes], tuple[Any, ...]]] = []
         """How the frames of the last state datagram were packed (packer, arguments)."""
-        mod = dialect()
-        self._sensor = FramePacker(codec, mod.MAVLink_hil_sensor_message)
-        self._state = FramePacker(codec, mod.MAVLink_hil_state_quaternion_message)
+        self._packers = HilFramePackers(codec, self.home.lat_deg, self.home.lon_deg,
+                                        self.home.alt_m)
+        self._sensor = self._packers.sensor
+        warm_up()  # compile the frame kernels now, not at the first step of a flight
+        self._state = self._packers.state
         self._next_gps = 0
         self._next_origin = 0
         self._next_status = 0
@@ -77,6 +80,13 @@ class StateEncoder:
     def _pack_fast(self, packer: FramePacker, *values: Any) -> bytes:
         self._parts.append((packer.pack, values))
         return packer.pack(*values)
+
+    def _pack_compiled(self, pack: Callable[..., bytes | None], *args: Any) -> bytes | None:
+        """A frame of :class:`HilFramePackers` (None: it declined, nothing advanced)."""
+        data = pack(*args)
+        if data is not None:
+            self._parts.append((pack, args))
+        return data
 
     def again(self, datagram: bytes) -> bytes:
         """The last state datagram, to send again: the same bytes; on a signed link the same
@@ -104,7 +114,11 @@ class StateEncoder:
             parts.append(self._pack(c.gps_global_origin_encode(
                 round(h.lat_deg * 1e7), round(h.lon_deg * 1e7), round(h.alt_m * 1e3), t)))
         s = v.sensors()
-        parts.append(self._pack_fast(
+        data = self._pack_compiled(
+            self._packers.sensor_frame, t, s.accel_m_s2, s.gyro_rad_s, s.mag_gauss,
+            s.abs_pressure_hpa, s.diff_pressure_hpa, s.pressure_alt_m, s.temperature_c,
+            FIELDS_ALL, 0)
+        parts.append(data if data is not None else self._pack_fast(
             self._sensor, t, *s.accel_m_s2.tolist(), *s.gyro_rad_s.tolist(),
             *s.mag_gauss.tolist(), s.abs_pressure_hpa, s.diff_pressure_hpa, s.pressure_alt_m,
             s.temperature_c, FIELDS_ALL, 0))
@@ -116,11 +130,7 @@ class StateEncoder:
                 t, 3, round(s.gps_lat_deg * 1e7), round(s.gps_lon_deg * 1e7),
                 round(s.gps_alt_m * 1e3), 100, 100, min(65535, round(100 * math.hypot(vn, ve))),
                 round(100 * vn), round(100 * ve), round(100 * vd), cog, 12, 0, 0)))
-        hs = self._encode(t, v.x, float(v.fm[6]))  # = encode_hil_state, bit for bit
-        parts.append(self._pack_fast(
-            self._state, hs.time_usec, *hs.attitude_quaternion, hs.rollspeed, hs.pitchspeed,
-            hs.yawspeed, hs.lat, hs.lon, hs.alt, hs.vx, hs.vy, hs.vz, hs.ind_airspeed,
-            hs.true_airspeed, hs.xacc, hs.yacc, hs.zacc))
+        parts.append(self._state_frame(t, v))
         if t >= self._next_status:
             self._next_status = t + 1_000_000
             parts.append(self._pack(self._status_msg()))
@@ -128,6 +138,19 @@ class StateEncoder:
             self._next_battery = t + 200_000
             parts.append(self._pack(self._battery_msg()))
         return b"".join(parts)
+
+    def _state_frame(self, t: int, v: Vehicle) -> bytes:
+        """HIL_STATE_QUATERNION of the vehicle's state at ``t`` (one compiled call; the state
+        copied for :meth:`again`), else through :class:`HilStateEncoder` (same bytes)."""
+        x = v.x.copy() if self._resign else v.x
+        data = self._pack_compiled(self._packers.state_frame, t, x, float(v.fm[6]))
+        if data is not None:
+            return data
+        hs = self._encode(t, v.x, float(v.fm[6]))  # = encode_hil_state, bit for bit
+        return self._pack_fast(
+            self._state, hs.time_usec, *hs.attitude_quaternion, hs.rollspeed, hs.pitchspeed,
+            hs.yawspeed, hs.lat, hs.lon, hs.alt, hs.vx, hs.vy, hs.vz, hs.ind_airspeed,
+            hs.true_airspeed, hs.xacc, hs.yacc, hs.zacc)
 
     def _battery_msg(self) -> Any:
         """BATTERY_STATUS of the power module: cell voltages (mV), current (cA), consumed
