@@ -303,12 +303,23 @@ measurement below):
   and both processes on warm cores (one process, or pinned cores with spinning on an idle
   machine), which this loaded machine cannot show.
 
+- The lead's idle check after the merges (main dac415f against 1f51d91, clean-clone venvs,
+  interleaved, 2 pairs of ``--transport both``, load 1.3-1.6, nothing else running): UDP
+  9.6 / 11.1x -> 10.3 / 10.8x (round trip median 269 / 220 -> 241 / 234 us, mean 404 / 364
+  -> 376 / 372 us), zenoh 6.6 / 6.2x -> 6.3 / 6.5x. No change beyond the noise: the mean
+  round trip is 1.5-1.6x its median (p99 1.2-1.7 ms), so the slowest tenth of the steps
+  costs as much as the codec work saved. Not the garbage collector: both processes with
+  ``gc.set_threshold(200000, 100, 100)`` (a ``sitecustomize``, 2 pairs) gave 10.3 / 10.3x
+  against 10.2 / 10.4x. ``--spin-us 300`` beside one busy helper (load 0.8): median round
+  trip 234 -> 143 us but p90 424 -> 1009 us, 10.0 -> 8.9x: spinning pays only on cores
+  nothing else wants.
+
 In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
-control step): measured at 57-61x on an idle machine (about 66 us per step: autopilot ~25 us,
-physics ~13 us, HIL codec, metrics and the runner the rest; thread CPU time ~62-85 us per
-step on 2026-12-02 at load 18-26). Where the time goes, what was compiled and why the target
-is out of reach without compiling the whole autopilot step: ``benchmarks/bench_inproc.py``
-(its docstring and ``--profile``).
+control step): ``benchmarks/bench_inproc.py`` (its docstring and ``--profile``): 155-161x on
+the idle machine in session 14; after session 15's compiled outer loops, 4 interleaved pairs
+of 120 s flights (load ~1.7, the host's noise +-20 % that hour) 119.8 / 162.9 / 140.3 /
+150.9x against 143.7 / 138.7 / 109.8 / 125.1x before (per-step ratios 1.20, 0.85, 0.78,
+0.83).
 """
 
 from __future__ import annotations
