@@ -122,6 +122,14 @@ LocalCluster, 0.98x tcp://); at load 4.9-6.5 (16:54): pools 23.9 and 33.4 s, Loc
 22.5 s (1.06x the adjacent pool), tcp:// 34.2 s (0.98x). Every fresh cluster's whole campaign
 was >= 0.90x its adjacent pool.
 
+Session 15 (2026-12-03, the lead, idle machine, load 0.1-1.5, nothing else running): the
+outer loops compiled (``bench_inproc.py``'s session 15), ``--jobs 2 --scenarios 24
+--no-dask``, main against the session's base (1f51d91, clean-clone venvs), interleaved, 4
+pairs: 296.8 / 300.2 / 302.0 / 289.9 against 231.4 / 232.1 / 298.6 / 232.3 scenarios/min
+(0.38-0.40 s per flight against 0.49-0.51 s, one base run 0.40 s: the host's speed itself
+jumps between runs), overhead +2.6-3.9 %. 300/min is reached in 2 of 4 runs: at the line,
+without margin.
+
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --whole [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --memory 2000 [--duration 4]
