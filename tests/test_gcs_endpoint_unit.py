@@ -131,3 +131,32 @@ def test_worker_woken_only_when_a_stream_is_due_or_the_status_changed(ep):
     assert 10 <= len(wakes) <= 25, wakes    # not 250
     att = [m for m in _msgs(ep.links[0].transport) if m.get_type() == "ATTITUDE"]
     assert len(att) == 10
+
+
+def test_every_autopilot_event_reaches_the_ground_stations_and_the_run_log(ep):
+    """Two autopilot events of one control step (e.g. "mission complete" and "Disarmed by
+    landing", which a loaded CI run's mission flight produced on one step), and events of
+    steps the worker did not observe one by one, each go out as a STATUSTEXT on every link
+    and as a run event (the ULog's logged messages); a message its command's COMMAND_ACK
+    carried is not sent again. The status's last message alone lost the first of the two."""
+    seen: list[tuple[str, str]] = []
+    ep.on_event = lambda kind, text: seen.append((kind, text))
+    ep.serve_once()
+    ep.ap.commander.note("mission complete")
+    ep.ap.commander.note("Disarmed by landing")
+    ep.refresh_status()
+    ep.serve_once()
+    ep.ap.commander.note("first")
+    ep.refresh_status()   # a snapshot the worker never observes: superseded by the next
+    ep.ap.commander.note("second")
+    ep.refresh_status()
+    ep.serve_once()
+    ep.ap.commander.note("takeoff denied: test")
+    ep.reply(lambda: ep.mark_reported("takeoff denied: test"))
+    ep.refresh_status()
+    ep.serve_once()
+    want = ["mission complete", "Disarmed by landing", "first", "second"]
+    assert [t for k, t in seen if k == "autopilot"] == want
+    for link in ep.links:
+        texts = [m.text for m in _msgs(link.transport) if m.get_type() == "STATUSTEXT"]
+        assert texts == want, texts

@@ -213,14 +213,16 @@ class GcsEndpoint:
         self.commands = np.zeros(len(actuators.motors) + len(actuators.servos))
         self.sim_usec = 0
         self._last_mode: FlightMode | None = None
-        self._last_message = ""
+        self._reported: str | None = None  # a message its COMMAND_ACK carried: not again
+        self._events_seen = len(autopilot.event_log)  # the autopilot's events reported
         self._wall_next = 0.0
         self._last_step_wall = -math.inf
         self.ready = ready
         """True once the autopilot is warm (HEARTBEAT says STANDBY/ACTIVE, not BOOT)."""
         self.mav_state: int | None = None
         """MAV_STATE set by a failsafe (CRITICAL / EMERGENCY), None = normal."""
-        self._snap: tuple[NavState | None, AutopilotStatus | None] = (None, autopilot.status())
+        self._snap: tuple[NavState | None, AutopilotStatus | None, int] = (
+            None, autopilot.status(), self._events_seen)
         self._published: tuple[Any, ...] | None = None
         self.streams = StreamService(self, len(self.links))
         self.services = Px4Services(self)
@@ -386,8 +388,9 @@ class GcsEndpoint:
         otherwise it sees the step within its 5 ms poll. Waking it at every step cost the
         lockstep a thread switch per step for nothing.
         """
+        n_events = len(self.ap.event_log)
         with self._snap_lock:
-            self._snap = (nav, status)
+            self._snap = (nav, status, n_events)
             self._snap_seq += 1
         self.services.on_step(nav)
         self.hold.notice_ms = None
@@ -398,14 +401,15 @@ class GcsEndpoint:
         """Control thread: the worker has work at this step: a stream is due at its simulated
         time, the mode, armed state or message changed, the vehicle's fault status changed."""
         last = self._published
-        self._published = (status.mode, status.armed, status.message)
+        self._published = (status.mode, status.armed, len(self.ap.event_log))
         return (nav.time_usec >= self.streams.earliest_due_usec or last != self._published
                 or self.hil.fault_status is not self.streams.last_fault_status)
 
     def publish_status(self, status: AutopilotStatus) -> None:
         """Control thread: a new status without a step (e.g. after a command)."""
+        n_events = len(self.ap.event_log)
         with self._snap_lock:
-            self._snap = (self._snap[0], status)
+            self._snap = (self._snap[0], status, n_events)
             self._snap_seq += 1
         self._wake.set()
 
@@ -439,8 +443,8 @@ class GcsEndpoint:
 
     def mark_reported(self, message: str) -> None:
         """Worker: the autopilot's ``message`` went out already (with a COMMAND_ACK): do not
-        send it again as a STATUSTEXT when the status shows it."""
-        self._last_message = message
+        send it again as a STATUSTEXT when its event is observed."""
+        self._reported = message
 
     # ------------------------------------------------------------------ observed status
     @property
@@ -460,7 +464,7 @@ class GcsEndpoint:
     def _observe_snapshot(self) -> None:
         with self._snap_lock:
             seq = self._snap_seq
-            nav, st = self._snap
+            nav, st, n_events = self._snap
         if seq == self._seen_seq:
             return
         # answers queued before this snapshot was published go first (they carry the
@@ -474,21 +478,28 @@ class GcsEndpoint:
             self.hold.stepped()
         if st is not None:
             self.commands = np.asarray(st.actuator_commands, dtype=float)
-            self._observe(st)
+            self._observe(st, n_events)
 
-    def _observe(self, st: AutopilotStatus) -> None:
+    def _observe(self, st: AutopilotStatus, n_events: int) -> None:
+        """Worker: a mode change, and every autopilot event up to the snapshot's
+        ``n_events`` (STATUSTEXT and run event each, as PX4's: not only the last message,
+        which lost one of two events of a step, e.g. "mission complete" at touchdown)."""
         self.status = st
-        new_message = bool(st.message) and st.message != self._last_message
+        log = self.ap.event_log
+        new = [text for _, text in log[self._events_seen:n_events] if text]
+        self._events_seen = max(self._events_seen, n_events)
         if self._last_mode is not None and st.mode != self._last_mode:
             text = f"mode {self._last_mode.name} -> {FlightMode(st.mode).name}"
             self.on_event("mode", text)
-            if not new_message:  # the autopilot's own message usually says it already
+            if not new:  # the autopilot's own message usually says it already
                 self.statustext(text, SEVERITY_INFO)
         self._last_mode = FlightMode(st.mode)
-        if new_message:
-            self.statustext(st.message, SEVERITY_NOTICE)
-            self.on_event("autopilot", st.message)
-        self._last_message = st.message
+        for text in new:
+            if text == self._reported:  # went out with its command's COMMAND_ACK
+                self._reported = None
+                continue
+            self.statustext(text, SEVERITY_NOTICE)
+            self.on_event("autopilot", text)
 
     def _wall_duties(self) -> None:
         """1 Hz HEARTBEAT, SYS_STATUS, EXTENDED_SYS_STATE while simulated time does not
