@@ -394,14 +394,15 @@ class GcsEndpoint:
             self._snap_seq += 1
         self.services.on_step(nav)
         self.hold.notice_ms = None
-        if self._news(nav, status):
+        if self._news(nav, status, n_events):
             self._wake.set()
 
-    def _news(self, nav: NavState, status: AutopilotStatus) -> bool:
+    def _news(self, nav: NavState, status: AutopilotStatus, n_events: int) -> bool:
         """Control thread: the worker has work at this step: a stream is due at its simulated
-        time, the mode, armed state or message changed, the vehicle's fault status changed."""
+        time, the mode, armed state or the number of autopilot events (``n_events``) changed,
+        the vehicle's fault status changed."""
         last = self._published
-        self._published = (status.mode, status.armed, len(self.ap.event_log))
+        self._published = (status.mode, status.armed, n_events)
         return (nav.time_usec >= self.streams.earliest_due_usec or last != self._published
                 or self.hil.fault_status is not self.streams.last_fault_status)
 
