@@ -185,20 +185,36 @@ def check_folder(folder: str | Path, root: str | Path, *,
     return problems
 
 
-def _same(a: Any, b: Any) -> bool:
-    """Equal, with NaN equal to NaN (a crashed flight's metrics)."""
-    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
-        return True
+def _same(a: Any, b: Any, rel: float = 0.0) -> bool:
+    """Equal, with NaN equal to NaN (a crashed flight's metrics); floats within ``rel``
+    (relative) when ``rel`` > 0."""
+    if isinstance(a, float) and isinstance(b, float):
+        if math.isnan(a) and math.isnan(b):
+            return True
+        if rel > 0.0:
+            return abs(a - b) <= rel * max(abs(a), abs(b))
     return bool(a == b)
 
 
 def compare_records(stored: Sequence[Mapping[str, Any]], fresh: Sequence[Mapping[str, Any]],
-                    key: Sequence[str] = ("label", "controller")) -> list[str]:
-    """Differences between stored records and freshly computed ones, exactly (no tolerance).
+                    key: Sequence[str] = ("label", "controller"), *,
+                    rel: float = 0.0) -> list[str]:
+    """Differences between stored records and freshly computed ones.
 
     Each fresh record is matched to the stored record with the same ``key`` fields; every
-    field of the fresh record must be present and equal (floats to the last digit; NaN
-    equals NaN).
+    field of the fresh record must be present and equal (floats to the last digit unless
+    ``rel`` > 0; NaN equals NaN).
+
+    Parameters
+    ----------
+    stored, fresh : sequence of mapping
+        The shipped records and the recomputed ones.
+    key : sequence of str
+        The fields that identify a record.
+    rel : float
+        Relative tolerance of float fields (0: to the last digit). For quantities computed
+        through LAPACK / BLAS only: OpenBLAS picks its kernels by CPU, so their last digits
+        differ between machines (a flight's numbers do not: its kernels call no BLAS).
 
     Returns
     -------
@@ -216,6 +232,6 @@ def compare_records(stored: Sequence[Mapping[str, Any]], fresh: Sequence[Mapping
         for field, v in f.items():
             if field not in s:
                 out.append(f"{k}: {field} not stored")
-            elif not _same(s[field], v):
+            elif not _same(s[field], v, rel):
                 out.append(f"{k}: {field} stored {s[field]!r}, computed {v!r}")
     return out
