@@ -1293,19 +1293,44 @@ def _bfgs_stage(
     return th, hist[-1], hist, its, f"BFGS: {status}"
 
 
+BFGS_JITTER = 1e-3
+BFGS_JITTER_SEEDS = (0, 1)
+""":func:`_bfgs_from` also runs from the start moved by BFGS_JITTER of each parameter's scale
+(uniform, one draw per seed of BFGS_JITTER_SEEDS) and keeps the best run. From exactly K = 0
+the path of COMPleib HE3 is decided by the CPU's rounding: 0.80696 on one machine, 0.85458 on
+an AVX512_SPR Xeon, where it ends against the stability boundary (a closed-loop pole pair at
+-2.5e-7 1/s; of 200 random points at relative distance 1e-3 to 1e-1 about half are unstable
+and none is lower). From the jittered starts 0.80695 and 0.80415 on that machine."""
+
+
 def _bfgs_from(
     problem: TuningProblem, theta0: NDArray[np.float64], opts: _Options,
 ) -> tuple[NDArray[np.float64], float, list[float], int, str] | None:
-    """:func:`_bfgs_stage` from a start point, stabilised first as :func:`_local` does (the
-    spectral-abscissa phase); None if that finds no stabilising point."""
+    """:func:`_bfgs_stage` from a start point and from its jittered copies (BFGS_JITTER), each
+    stabilised first as :func:`_local` does (the spectral-abscissa phase); the best run, with
+    the iterations of all; None if no start can be stabilised."""
     ev = _Evaluator(problem)
     lo, hi = problem.lower, problem.upper
-    th = np.clip(theta0, lo, hi)
-    if not math.isfinite(float(np.max(ev.exact(th)[0]))):
-        th, ok = _stabilize(ev, th, lo, hi, opts)
-        if not ok:
-            return None
-    return _bfgs_stage(ev, th, opts)
+    th0 = np.asarray(theta0, dtype=float)
+    starts = [th0] + [th0 + BFGS_JITTER * problem.scales
+                      * np.random.default_rng(s).uniform(-1.0, 1.0, th0.size)
+                      for s in BFGS_JITTER_SEEDS]
+    best, its = None, 0
+    for start in starts:
+        th = np.clip(start, lo, hi)
+        if not math.isfinite(float(np.max(ev.exact(th)[0]))):
+            th, ok = _stabilize(ev, th, lo, hi, opts)
+            if not ok:
+                continue
+        out = _bfgs_stage(ev, th, opts)
+        its += out[3]
+        if best is None or out[1] < best[1]:
+            best = out
+        if opts.interrupted or (opts.deadline is not None and time.monotonic() >= opts.deadline):
+            break
+    if best is None:
+        return None
+    return best[0], best[1], best[2], its, best[4]
 
 
 def _polish(problem: TuningProblem, rec: StartRecord, opts: _Options) -> StartRecord:
