@@ -97,6 +97,14 @@ checked; 18.8 s CPU, 386 s wall at load ~20) and the HE3 target test 24.7 s CPU 
 ``_polish`` from HE3 start 0's record (0.82254 after 84 iterations, the start that is best of
 the five without the polish): 0.80696 (slycot 0.80696), 1010 iterations in all, 72 s CPU
 (970 s wall at load ~20): the BFGS stage from K = 0 gives it, the restarts after it no more.
+(f) Session 16 (2026-12-03), a new machine (Xeon with AVX512_SPR, OpenBLAS 0.3.31): BFGS from
+exactly K = 0 took another path and stopped after 143 iterations at 0.85458, against the
+stability boundary (pole pair at -2.5e-7 1/s; 200 random points at relative distance 1e-3 to
+1e-1 around it: about half unstable, none lower), so the HE3 target test failed. From K = 0
+moved by 1e-3 of the parameter scales (4 seeds): 0.80695, 0.80415, 0.80496, 0.80776, 951-1617
+iterations. ``_bfgs_from`` now runs the start and two jittered copies (seeds 0, 1) and keeps
+the best: 0.80415, 3338 iterations, 48.5 s CPU (load ~9). Restarting BFGS in new units
+after a "stationary" stop (tried) does not move it: the sample finds no descent there either.
 """
 
 from __future__ import annotations
