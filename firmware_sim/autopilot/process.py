@@ -319,7 +319,7 @@ class AutopilotProcess:
                         st = ap.status()
                     gcs.on_step(nav, st)
                     self.steps += 1
-                    parts.lap("after_answer")
+                    parts.end_step("after_answer", nav.time_usec)
                 # (no read here: the next pass reads what came meanwhile, one select and
                 # one read when the vehicle's next step is there)
             now = time.monotonic()
