@@ -3,6 +3,8 @@
     python benchmarks/bench_sitl.py [--transport udp|zenoh|both] [--duration 40] [--case 1]
     python benchmarks/bench_sitl.py --parts   # the HIL codec pieces only, CPU per call
     python benchmarks/bench_sitl.py --floor   # the links' floor: 100-byte ping-pong, 2 processes
+    python benchmarks/bench_sitl.py --transport udp --matrix [--trace] [--rt-priority N]
+        # spin {0, 300} us x pinned {off, on}: one line each (--pin: autopilot CPU 0, vehicle 1)
 
 For each transport it flies the case with ``vtolftc.runners.sitl.run_sitl`` (vehicle and autopilot
 as separate processes, ground-station commands, no plots) and reports:
@@ -313,6 +315,53 @@ measurement below):
   against 10.2 / 10.4x. ``--spin-us 300`` beside one busy helper (load 0.8): median round
   trip 234 -> 143 us but p90 424 -> 1009 us, 10.0 -> 8.9x: spinning pays only on cores
   nothing else wants.
+
+Session 16 (issue 24; 2026-12-03; 2 cores shared with 2 other helpers, load average 6-12 through
+every flight below, so the wall figures are indicative; UDP, 20 s of case 1):
+
+- Tools: ``--trace`` (both processes record every step's parts, wall / thread CPU / end time on
+  the shared monotonic clock, and the control thread's context switches and page faults,
+  ``StepParts.enable_trace``); each round trip is cut into ``ap_busy`` (the autopilot still in
+  the previous step's after-answer work when the state left), ``up`` (send, wake-up, read),
+  ``ap_compute``, ``vehicle_busy`` (the vehicle still in its after-send work when the answer
+  left) and ``down``. ``--pin`` (``--cpu N`` of both programs: the autopilot on CPU 0, the
+  vehicle on CPU 1), ``--rt-priority N``, ``--matrix`` (``--spin-us`` {0, 300} x pinned {off,
+  on}, one line each).
+- The tail, before this session's change (load 6-7): 9.9 % of the steps took over 1 ms and
+  held 46 % of the round-trip time (mean 650 us, 387 us without them). Mean minus median per
+  part, wall: autopilot wait_and_read 87, status_and_answer 68 (the wake-up the send runs),
+  after_answer 55 us; vehicle wait 188, send 104 us; in CPU only after_answer has a tail (35
+  us). The autopilot's after-answer CPU was over 300 us in 42 steps, 40 of them at each 0.5 s
+  of simulated time: the rerun recorder's send of its buffered rows (1.5-2.2 ms of CPU, 3-7 ms
+  of wall, measured in-process and in the traces), which sat on the critical path (``ap_busy``
+  over 500 us in 40-59 steps of a 20 s flight, each 5-7 ms: ~50 us of the mean step). Per
+  step, in the SITL autopilot (thread CPU, mean / p99): metrics 9.6 / 22, run folder 23.5 /
+  65, rerun 17.4 / 34 (max 2456), event log 0.7, ULog 19.6 / 144, failsafe 6.6, ground-station
+  hand-over 9.3 / 48 us.
+- Not the GIL: steps where the control thread slept more than once (a GIL wait is a second
+  voluntary switch) were 0.1-3.8 % at the 1 ms switch interval; 0.1 ms gave 0.6-15 % and
+  1.5 / 3.6 / 3.9x against 6.2 / 4.6 / 4.2x (3 interleaved pairs, load 7-9: noise, no gain).
+  Not page faults (0.1-0.2 minor, no major, per step and thread). Not the disk on the vehicle
+  (its after-send work over 500 us of wall in 11 of 5000 steps).
+- Unpinned, ``vehicle_busy`` was 188-229 us a step and ``ap_busy`` 80-151 us: the loopback send
+  wakes the peer on the sender's core, where it waits for the sender's after-send work.
+  Pinned (2 pairs, load 6.2-7.0): ``vehicle_busy`` 0-3 us, the vehicle's involuntary switches
+  0.46 -> 0.01 per step, 4.4 / 3.4x unpinned against 3.0 / 3.6x pinned: the loaded cores' other
+  jobs then preempt a pinned process that cannot move (session 10's finding); what is left is
+  ``up`` / ``down``, the wake-ups on cores other jobs hold (involuntary switches in 14-47 % of
+  the autopilot's steps): not ours.
+- Change: the SITL autopilot's recorder sends in pieces while the loop waits
+  (``RerunRecorder(deferred=True)``, ``idle_work``; the wait for rerun's writes in its flusher
+  thread). 3 interleaved pairs at load 11-12, before -> after: the 40 largest after-answer
+  steps 3189 / 2573 / 3497 -> 432 / 660 / 436 us of CPU, ``ap_busy`` 173 / 125 / 125 -> 86 /
+  205 / 56 us per step, 3.21 / 3.26 / 3.50 -> 3.56 / 1.87 / 4.28x (the load's noise is larger
+  than the ~50 us a step it saves; on an idle machine, ~20-30 us of ~350).
+- Left of ours: at each 0.5 s of simulated time ~380 us of after-answer CPU (the run folder's
+  and the ULog's flushes), every 20 ms ~150 against ~65 us (the ULog's 50 Hz topics, rerun's
+  rows): ~20 us a step on average, on the critical path only when the vehicle is quicker.
+- ``--matrix --trace`` while the fast test suite ran beside it (load 10): spin 0 unpinned /
+  pinned 2.1 / 1.7x, spin 300 unpinned / pinned 1.7 / 2.2x (round trip median 979 / 1578 /
+  1692 / 818 us): only the idle machine can say what pinning and spinning give.
 
 In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
 control step): ``benchmarks/bench_inproc.py`` (its docstring and ``--profile``): 155-161x on
