@@ -359,9 +359,16 @@ every flight below, so the wall figures are indicative; UDP, 20 s of case 1):
 - Left of ours: at each 0.5 s of simulated time ~380 us of after-answer CPU (the run folder's
   and the ULog's flushes), every 20 ms ~150 against ~65 us (the ULog's 50 Hz topics, rerun's
   rows): ~20 us a step on average, on the critical path only when the vehicle is quicker.
-- ``--matrix --trace`` while the fast test suite ran beside it (load 10): spin 0 unpinned /
-  pinned 2.1 / 1.7x, spin 300 unpinned / pinned 1.7 / 2.2x (round trip median 979 / 1578 /
-  1692 / 818 us): only the idle machine can say what pinning and spinning give.
+- Against main at the end of the session (3 interleaved pairs, load 3.2-4.7, main -> this
+  tree): 7.2 / 4.8 / 3.6 -> 7.4 / 5.4 / 4.0x, round trip mean 618 / 869 / 1127 -> 573 / 712 /
+  977 us, p99 4269 / 5006 / 8071 -> 3904 / 4623 / 5812 us, CPU per step of the autopilot
+  process 332 / 353 / 357 -> 334 / 312 / 367 us: every pair the same way, each within the
+  spread of one pair at this load.
+- ``--matrix`` (load 5.2-6.6): spin 0 unpinned / pinned 4.7 / 3.5x (round trip mean / median
+  922 / 331, 1150 / 291 us), spin 300 unpinned / pinned 6.3 / 4.3x (672 / 95, 906 / 100 us);
+  with ``--trace`` while the fast test suite ran beside it (load 10): 2.1 / 1.7x, 1.7 / 2.2x.
+  Pinned loses on a loaded machine, as in session 10; only the idle machine can say what
+  pinning and spinning give.
 
 In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
 control step): ``benchmarks/bench_inproc.py`` (its docstring and ``--profile``): 155-161x on
