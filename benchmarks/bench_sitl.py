@@ -3,6 +3,8 @@
     python benchmarks/bench_sitl.py [--transport udp|zenoh|both] [--duration 40] [--case 1]
     python benchmarks/bench_sitl.py --parts   # the HIL codec pieces only, CPU per call
     python benchmarks/bench_sitl.py --floor   # the links' floor: 100-byte ping-pong, 2 processes
+    python benchmarks/bench_sitl.py --transport udp --matrix [--trace] [--rt-priority N]
+        # spin {0, 300} us x pinned {off, on}: one line each (--pin: autopilot CPU 0, vehicle 1)
 
 For each transport it flies the case with ``vtolftc.runners.sitl.run_sitl`` (vehicle and autopilot
 as separate processes, ground-station commands, no plots) and reports:
@@ -314,6 +316,60 @@ measurement below):
   trip 234 -> 143 us but p90 424 -> 1009 us, 10.0 -> 8.9x: spinning pays only on cores
   nothing else wants.
 
+Session 16 (issue 24; 2026-12-03; 2 cores shared with 2 other helpers, load average 6-12 through
+every flight below, so the wall figures are indicative; UDP, 20 s of case 1):
+
+- Tools: ``--trace`` (both processes record every step's parts, wall / thread CPU / end time on
+  the shared monotonic clock, and the control thread's context switches and page faults,
+  ``StepParts.enable_trace``); each round trip is cut into ``ap_busy`` (the autopilot still in
+  the previous step's after-answer work when the state left), ``up`` (send, wake-up, read),
+  ``ap_compute``, ``vehicle_busy`` (the vehicle still in its after-send work when the answer
+  left) and ``down``. ``--pin`` (``--cpu N`` of both programs: the autopilot on CPU 0, the
+  vehicle on CPU 1), ``--rt-priority N``, ``--matrix`` (``--spin-us`` {0, 300} x pinned {off,
+  on}, one line each).
+- The tail, before this session's change (load 6-7): 9.9 % of the steps took over 1 ms and
+  held 46 % of the round-trip time (mean 650 us, 387 us without them). Mean minus median per
+  part, wall: autopilot wait_and_read 87, status_and_answer 68 (the wake-up the send runs),
+  after_answer 55 us; vehicle wait 188, send 104 us; in CPU only after_answer has a tail (35
+  us). The autopilot's after-answer CPU was over 300 us in 42 steps, 40 of them at each 0.5 s
+  of simulated time: the rerun recorder's send of its buffered rows (1.5-2.2 ms of CPU, 3-7 ms
+  of wall, measured in-process and in the traces), which sat on the critical path (``ap_busy``
+  over 500 us in 40-59 steps of a 20 s flight, each 5-7 ms: ~50 us of the mean step). Per
+  step, in the SITL autopilot (thread CPU, mean / p99): metrics 9.6 / 22, run folder 23.5 /
+  65, rerun 17.4 / 34 (max 2456), event log 0.7, ULog 19.6 / 144, failsafe 6.6, ground-station
+  hand-over 9.3 / 48 us.
+- Not the GIL: steps where the control thread slept more than once (a GIL wait is a second
+  voluntary switch) were 0.1-3.8 % at the 1 ms switch interval; 0.1 ms gave 0.6-15 % and
+  1.5 / 3.6 / 3.9x against 6.2 / 4.6 / 4.2x (3 interleaved pairs, load 7-9: noise, no gain).
+  Not page faults (0.1-0.2 minor, no major, per step and thread). Not the disk on the vehicle
+  (its after-send work over 500 us of wall in 11 of 5000 steps).
+- Unpinned, ``vehicle_busy`` was 188-229 us a step and ``ap_busy`` 80-151 us: the loopback send
+  wakes the peer on the sender's core, where it waits for the sender's after-send work.
+  Pinned (2 pairs, load 6.2-7.0): ``vehicle_busy`` 0-3 us, the vehicle's involuntary switches
+  0.46 -> 0.01 per step, 4.4 / 3.4x unpinned against 3.0 / 3.6x pinned: the loaded cores' other
+  jobs then preempt a pinned process that cannot move (session 10's finding); what is left is
+  ``up`` / ``down``, the wake-ups on cores other jobs hold (involuntary switches in 14-47 % of
+  the autopilot's steps): not ours.
+- Change: the SITL autopilot's recorder sends in pieces while the loop waits
+  (``RerunRecorder(deferred=True)``, ``idle_work``; the wait for rerun's writes in its flusher
+  thread). 3 interleaved pairs at load 11-12, before -> after: the 40 largest after-answer
+  steps 3189 / 2573 / 3497 -> 432 / 660 / 436 us of CPU, ``ap_busy`` 173 / 125 / 125 -> 86 /
+  205 / 56 us per step, 3.21 / 3.26 / 3.50 -> 3.56 / 1.87 / 4.28x (the load's noise is larger
+  than the ~50 us a step it saves; on an idle machine, ~20-30 us of ~350).
+- Left of ours: at each 0.5 s of simulated time ~380 us of after-answer CPU (the run folder's
+  and the ULog's flushes), every 20 ms ~150 against ~65 us (the ULog's 50 Hz topics, rerun's
+  rows): ~20 us a step on average, on the critical path only when the vehicle is quicker.
+- Against main at the end of the session (3 interleaved pairs, load 3.2-4.7, main -> this
+  tree): 7.2 / 4.8 / 3.6 -> 7.4 / 5.4 / 4.0x, round trip mean 618 / 869 / 1127 -> 573 / 712 /
+  977 us, p99 4269 / 5006 / 8071 -> 3904 / 4623 / 5812 us, CPU per step of the autopilot
+  process 332 / 353 / 357 -> 334 / 312 / 367 us: every pair the same way, each within the
+  spread of one pair at this load.
+- ``--matrix`` (load 5.2-6.6): spin 0 unpinned / pinned 4.7 / 3.5x (round trip mean / median
+  922 / 331, 1150 / 291 us), spin 300 unpinned / pinned 6.3 / 4.3x (672 / 95, 906 / 100 us);
+  with ``--trace`` while the fast test suite ran beside it (load 10): 2.1 / 1.7x, 1.7 / 2.2x.
+  Pinned loses on a loaded machine, as in session 10; only the idle machine can say what
+  pinning and spinning give.
+
 In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
 control step): ``benchmarks/bench_inproc.py`` (its docstring and ``--profile``): 155-161x on
 the idle machine in session 14; after session 15's compiled outer loops, 4 interleaved pairs
@@ -605,6 +661,109 @@ def _floor_pong(mode: str, port: int) -> None:
         close()
 
 
+_SEGMENTS = ("ap_busy", "up", "ap_compute", "vehicle_busy", "down")
+
+
+def _tail(out: Path, slow_us: float = 1000.0, hold_us: float = 50000.0) -> str:
+    """The slow tail from both processes' step traces (``--trace``): each lockstep round trip
+    (vehicle: from the start of the state's send to having read the controls) cut into
+    ``ap_busy`` (the autopilot still in the previous step's after-answer work when the state
+    left), ``up`` (until the autopilot has read and decoded it: the vehicle's send with the
+    wake-up it runs, the autopilot's wake-up, GIL, read), ``ap_compute`` (read to answered:
+    ``Autopilot.step``, the answer's send), ``vehicle_busy`` (the vehicle still in its
+    after-send work when the answer left) and ``down`` (until the vehicle has read it); means
+    over every step and over the slow ones (round trip > ``slow_us``; those > ``hold_us``
+    are the simulation holds, left out), which part is the largest in each slow step, and
+    the context switches and page faults per step of each control thread."""
+    import numpy as np
+
+    try:
+        ap = dict(np.load(out / "autopilot" / "step_trace.npz"))
+        ve = dict(np.load(out / "vehicle" / "step_trace.npz"))
+    except OSError as exc:
+        return f"    (no step trace: {exc})"
+    j_of = {int(k): j for j, k in enumerate(ap["key"])}
+    rows = []
+    for i in range(1, len(ve["key"])):
+        j = j_of.get(int(ve["key"][i]))
+        if j is None or j == 0:
+            continue
+        s0 = ve["end_sensors_and_encode"][i - 1]
+        ap_free = max(s0, ap["end_after_answer"][j - 1])
+        read, ans = ap["end_wait_and_read"][j], ap["end_status_and_answer"][j]
+        ve_free = max(ans, ve["end_after_send"][i - 1])
+        end = ve["end_wait_and_read"][i]
+        seg = (ap_free - s0, read - ap_free, ans - read, ve_free - ans, end - ve_free)
+        sw = [ap[c][j] - ap[c][j - 1] for c in ("nivcsw", "nvcsw", "minflt")]
+        sw += [ve[c][i] - ve[c][i - 1] for c in ("nivcsw", "nvcsw", "minflt")]
+        cpu = [ap[f"cpu_{n}"][j] for n in ("wait_and_read", "autopilot_step",
+                                           "status_and_answer", "after_answer")]
+        rows.append((end - s0, *seg, *sw, *cpu))
+    if not rows:
+        return "    (no matching steps in the traces)"
+    a = 1e6 * np.array(rows)
+    a[:, 6:12] *= 1e-6  # counts, not seconds
+    rtt = a[:, 0]
+    keep = rtt < hold_us
+    slow = keep & (rtt > slow_us)
+    n, ns = int(keep.sum()), int(slow.sum())
+    lines = [f"    tail (trace of {n} steps, {len(rtt) - n} holds left out): {ns} steps "
+             f"({100 * ns / max(1, n):.1f} %) over {slow_us:.0f} us hold "
+             f"{100 * rtt[slow].sum() / max(1e-9, rtt[keep].sum()):.0f} % of the round-trip "
+             f"time; round trip mean {rtt[keep].mean():.0f} us, without them "
+             f"{rtt[keep & ~slow].mean():.0f} us"]
+    for label, m in (("all", keep), ("slow", slow)):
+        if not m.any():
+            continue
+        seg = ", ".join(f"{k} {a[m, 1 + q].mean():.0f}" for q, k in enumerate(_SEGMENTS))
+        sw = a[m, 6:12].mean(axis=0)
+        cpu = a[m, 12:16].mean(axis=0)
+        lines.append(f"      {label}: {seg} us; autopilot thread per step: involuntary / "
+                     f"voluntary switches {sw[0]:.2f} / {sw[1]:.2f}, minor faults "
+                     f"{sw[2]:.1f}, CPU read / step / answer / after {cpu[0]:.0f} / "
+                     f"{cpu[1]:.0f} / {cpu[2]:.0f} / {cpu[3]:.0f} us; vehicle thread: "
+                     f"switches {sw[3]:.2f} / {sw[4]:.2f}, minor faults {sw[5]:.1f}")
+    if ns:
+        top = np.bincount(np.argmax(a[slow, 1:6], axis=1), minlength=5)
+        lines.append("      largest part of the slow steps: " + ", ".join(
+            f"{k} {int(c)}" for k, c in zip(_SEGMENTS, top, strict=True)))
+    return "\n".join(lines)
+
+
+def _fly(args: argparse.Namespace, tr: str, scenario: object, tmp: str, spin_us: float,
+         pin: bool) -> Any:
+    """One SITL flight of the benchmark's configuration."""
+    return run_sitl(SitlConfig(case=args.case, controller=args.controller, transport=tr,
+                               duration_s=args.duration, out_dir=Path(tmp), plots=False,
+                               spin_us=spin_us, rt_priority=args.rt_priority,
+                               autopilot_cpu=0 if pin else -1, vehicle_cpu=1 if pin else -1,
+                               trace_steps=100_000 if args.trace else 0), scenario)
+
+
+def _matrix(args: argparse.Namespace, scenario: object) -> None:
+    """One flight per configuration, ``--spin-us`` {0, 300} x pinned {off, on} (``--pin``:
+    the autopilot on CPU 0, the vehicle on CPU 1), one summary line each."""
+    transports = ("udp", "zenoh") if args.transport == "both" else (args.transport,)
+    nan = float("nan")
+    for tr in transports:
+        for spin in (0.0, 300.0):
+            for pin in (False, True):
+                with tempfile.TemporaryDirectory(prefix=f"bench_sitl_{tr}_") as tmp:
+                    res = _fly(args, tr, scenario, tmp, spin, pin)
+                    rtt = res.vehicle_summary.get("step_round_trip_us", {})
+                    print(f"{tr} spin {spin:3.0f} us pinned {'on ' if pin else 'off'} "
+                          f"rt-priority {args.rt_priority}: {res.real_time_factor:5.1f}x; "
+                          "round trip mean / median / p90 / p99 "
+                          + " / ".join(f"{rtt.get(q, nan):.0f}"
+                                       for q in ("mean", "median", "p90", "p99"))
+                          + f" us; CPU per step autopilot / vehicle "
+                          f"{res.autopilot_summary.get('cpu_per_step_us', nan):.0f} / "
+                          f"{res.vehicle_summary.get('cpu_per_step_us', nan):.0f} us; load "
+                          f"{os.getloadavg()[0]:.1f}", flush=True)
+                    if args.trace:
+                        print(_tail(Path(tmp)), flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--transport", default="both", choices=("udp", "zenoh", "both"))
@@ -613,6 +772,15 @@ def main() -> None:
     ap.add_argument("--controller", default="gs-shif")
     ap.add_argument("--spin-us", type=float, default=0.0,
                     help="busy-poll time of both processes before sleeping (default 0)")
+    ap.add_argument("--pin", action="store_true",
+                    help="pin the autopilot to CPU 0 and the vehicle to CPU 1 (--cpu)")
+    ap.add_argument("--rt-priority", type=int, default=0,
+                    help="both processes SCHED_FIFO at this priority (needs CAP_SYS_NICE)")
+    ap.add_argument("--matrix", action="store_true",
+                    help="one flight per --spin-us {0, 300} x pinned {off, on}, one line each "
+                         "(no in-process reference)")
+    ap.add_argument("--trace", action="store_true",
+                    help="per-step traces of both processes: where the slow steps spend it")
     ap.add_argument("--parts", action="store_true",
                     help="only the per-call CPU of the HIL codec pieces (packer vs generated)")
     ap.add_argument("--floor", action="store_true",
@@ -630,6 +798,9 @@ def main() -> None:
         _parts()
         return
     scenario = paper_scenario(args.case, args.duration)
+    if args.matrix:
+        _matrix(args, scenario)
+        return
 
     t0 = time.perf_counter()
     ref = run_scenario(scenario, args.controller)
@@ -648,9 +819,7 @@ def main() -> None:
     print("|---|---:|---:|---|---:|---:|")
     for tr in transports:
         with tempfile.TemporaryDirectory(prefix=f"bench_sitl_{tr}_") as tmp:
-            res = run_sitl(SitlConfig(case=args.case, controller=args.controller, transport=tr,
-                                      duration_s=args.duration, out_dir=Path(tmp),
-                                      plots=False, spin_us=args.spin_us), scenario)
+            res = _fly(args, tr, scenario, tmp, args.spin_us, args.pin)
             rtt = res.vehicle_summary.get("step_round_trip_us", {})
             steps = max(1, res.autopilot_summary.get("steps", 1))
             in_ap = 1e6 * res.autopilot_summary.get("wall_in_autopilot_s", 0.0) / steps
@@ -679,6 +848,8 @@ def main() -> None:
                 print(f"      {who}: " + ", ".join(
                     f"{k} {x:.0f} / {cpu_parts.get(k, nan):.0f} us"
                     for k, x in wall_parts.items()))
+            if args.trace:
+                print(_tail(Path(tmp)))
 
 
 if __name__ == "__main__":

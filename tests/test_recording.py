@@ -262,3 +262,49 @@ def test_case_run_recording(tmp_path, ds1):
     assert 0.9 < r1a[-1, 1] / r1a[-1, 0] < 1.1
     assert data["faults/marker"][0].tolist() == [pytest.approx(2.0)]
     assert data["mode/state"][1][-1] == "TAKEOFF"
+
+
+def _feed_deferred(rec: RerunRecorder, n: int, pieces_per_sample: int) -> int:
+    """As :func:`_feed`, with ``pieces_per_sample`` calls of ``idle_work`` after each sample
+    (a control loop's waits); returns the most pieces a send was cut into."""
+    rec.on_start({"actuator_names": list(NAMES), "case": "synthetic"})
+    longest = run = 0
+    for k in range(n):
+        s = _sample(k, True)
+        rec.on_sample(s)
+        if k == 550:
+            rec.on_event(s.time_usec, "fault", "injected rotor_2b: 50% loss")
+        if k == 600:
+            rec.on_event(s.time_usec, "command", "transition: DENIED")
+        for _ in range(pieces_per_sample):
+            if rec._pending:
+                run += 1
+                longest = max(longest, run)
+                if not rec.idle_work():
+                    run = 0
+    rec.on_finish({"rmse_altitude_m": 0.25})
+    return longest
+
+
+@pytest.mark.parametrize("pieces_per_sample", [0, 1, 3, 100])
+def test_deferred_sends_write_the_same_recording(tmp_path, pieces_per_sample):
+    """``deferred=True`` (the SITL autopilot's recorder): the sends cut into pieces run by
+    ``idle_work`` while later samples refill the rows (or never, 0: each send finished by the
+    next one and the last by ``on_finish``) write the very series of the default recorder."""
+    kw = {"path_segment_points": 7, "file_flush_s": 1e9}  # flushes on simulated time only
+    ref = RerunRecorder(tmp_path / "ref.rrd", **kw)
+    _feed(ref, 1500)
+    rec = RerunRecorder(tmp_path / "deferred.rrd", deferred=True, **kw)
+    longest = _feed_deferred(rec, 1500, pieces_per_sample)
+    assert not rec._pending
+    if pieces_per_sample:  # one entity per piece (24 here), then it says it is done
+        assert 20 < longest <= 30, longest
+    want, got = read_recording(tmp_path / "ref.rrd"), read_recording(tmp_path / "deferred.rrd")
+    assert sorted(got) == sorted(want)
+    for e, (t, v) in want.items():
+        assert np.array_equal(got[e][0], t), e
+        if isinstance(v, np.ndarray):
+            assert np.array_equal(got[e][1], v), e
+        else:
+            assert [np.asarray(x).tolist() for x in got[e][1]] == [
+                np.asarray(x).tolist() for x in v], e

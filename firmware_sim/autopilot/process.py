@@ -31,7 +31,9 @@ reported by STATUSTEXT and the HEARTBEAT's MAV_STATE, acted on here (land, hold,
 
 Observers get ``on_start(info)``, ``on_sample`` per step, ``on_event`` and one ``on_finish``
 (with the metrics), all from the control thread; events of the ground-station threads are
-queued and handed over in the control thread.
+queued and handed over in the control thread. An observer with ``idle_work()`` (a deferred
+rerun recorder) has it called, one piece at a time, while the loop waits for the vehicle and
+as long as nothing arrived (it returns whether more remains).
 
 Exit status of :meth:`run`: 0 stopped (:attr:`running` cleared, ``max_wall_s``, parent gone),
 3 vehicle lost (``vehicle_timeout_s``).
@@ -259,6 +261,7 @@ class AutopilotProcess:
         last_step_start = None
         failsafe = self.failsafe
         armed_of = getattr(ap, "metrics_inputs", None)
+        idle = [o.idle_work for o in self.observers if hasattr(o, "idle_work")]
         # Autopilot.metrics_inputs: (mode, armed, ...) without the status snapshot
         while self.running:
             nav = hil.peek()
@@ -269,6 +272,9 @@ class AutopilotProcess:
                 # nothing to step on: wait for the vehicle (or, held, poll the ground
                 # stations often: their commands are what the hold waits for)
                 parts.start()
+                for work in idle:  # observers' deferred work, a piece at a time
+                    while hil.peek() is None and work():
+                        hil.drain(0.0)
                 wait = 0.002 if (held or gcs.has_pending()) else 0.01
                 if self.spin_s > 0 and not held:
                     end = pc() + self.spin_s
@@ -319,7 +325,7 @@ class AutopilotProcess:
                         st = ap.status()
                     gcs.on_step(nav, st)
                     self.steps += 1
-                    parts.lap("after_answer")
+                    parts.end_step("after_answer", nav.time_usec)
                 # (no read here: the next pass reads what came meanwhile, one select and
                 # one read when the vehicle's next step is there)
             now = time.monotonic()

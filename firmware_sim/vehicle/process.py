@@ -433,7 +433,7 @@ class VehicleProcess:
                 self._step_battery()
             if self.truth_log is not None:
                 self.truth_log.between_steps()
-            parts.lap("after_send")
+            parts.end_step("after_send", self._last_controls_usec)
         return 0
 
     def _run_realtime(self) -> int:

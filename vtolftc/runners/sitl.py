@@ -117,6 +117,15 @@ class SitlConfig:
     rt_priority: int = 0
     """``SCHED_FIFO`` priority both processes take once compiled (``--rt-priority``; 0 =
     ordinary scheduling): a loaded machine then cannot starve the real-time loop."""
+    autopilot_cpu: int = -1
+    """CPU the autopilot process runs on once compiled (``--cpu``; -1 = not pinned)."""
+    vehicle_cpu: int = -1
+    """CPU the vehicle process runs on once compiled (``--cpu``; -1 = not pinned): with
+    ``autopilot_cpu`` on another core, each process keeps its caches between steps (for an
+    idle machine, :mod:`vtolftc.runners.processes.affinity`)."""
+    trace_steps: int = 0
+    """Both processes record a per-step trace of their first N lockstep steps
+    (``--trace-steps``; ``<out>/{autopilot,vehicle}/step_trace.npz``; 0 = off)."""
     stop_grace_s: float = 10.0
     """Wall seconds a process gets to end by itself after SIGTERM before the SIGKILL."""
     hil_signing: bool = True
@@ -222,19 +231,24 @@ class SitlRun:
             common += ["--spin-us", f"{cfg.spin_us:g}"]
         if cfg.rt_priority:
             common += ["--rt-priority", str(int(cfg.rt_priority))]
+        if cfg.trace_steps > 0:
+            common += ["--trace-steps", str(int(cfg.trace_steps))]
         latency = []
         if cfg.hil_delay_ms > 0:
             latency += ["--hil-delay-ms", f"{cfg.hil_delay_ms:g}"]
         if cfg.hil_loss > 0:
             latency += ["--hil-loss", f"{cfg.hil_loss:g}"]
         timeout = f"{cfg.vehicle_timeout_s:g}"
+        pin = {name: ["--cpu", str(int(n))] if n >= 0 else []
+               for name, n in (("vehicle", cfg.vehicle_cpu), ("autopilot", cfg.autopilot_cpu))}
         self._spawn("vehicle", ["-m", "vtolftc.runners.processes.vehicle", "--link", v_url,
-                                *mode, *common, "--out", str(self.out / "vehicle"),
+                                *mode, *common, *pin["vehicle"], "--out",
+                                str(self.out / "vehicle"),
                                 "--peer-timeout", timeout, "--connect-timeout",
                                 str(cfg.startup_timeout_s), *latency,
                                 *cfg.extra_vehicle_args])
         ap_args = ["-m", "vtolftc.runners.processes.autopilot", "--hil-link", a_hil,
-                   "--gcs-link", a_gcs, "--no-default-gcs", *mode, *common,
+                   "--gcs-link", a_gcs, "--no-default-gcs", *mode, *common, *pin["autopilot"],
                    "--controller", cfg.controller,
                    "--out", str(self.out / "autopilot"), "--case", str(cfg.case),
                    "--vehicle-timeout", timeout,

@@ -41,8 +41,9 @@ buffered, and at least every ``live_flush_s`` of wall time when live), followed 
 ``flush``: rerun writes the file from its own threads on wall-clock time, and a simulation
 running at 50x real time outran them (a SIGKILL of ``vtolftc fly`` on an idle machine lost
 1.1-5.1 s of simulated time without the wait, 0.12 s with it; the wait costs about 3 ms per
-flush, 0.3 s on a 60 s case-1 flight of 3.2 s). What is logged row by row (events, modes,
-faults, the path) leaves rerun's batcher within 8 ms of wall time
+flush, 0.3 s on a 60 s case-1 flight of 3.2 s; ``deferred`` cuts the send into pieces run
+while a control loop waits and hands that wait to a background thread instead). What is logged
+row by row (events, modes, faults, the path) leaves rerun's batcher within 8 ms of wall time
 (``ChunkBatcherConfig.LOW_LATENCY``), and a background thread asks rerun every 0.25 s of wall
 time to write what it holds (events logged while the simulation stands still). So a killed
 process (SIGKILL) loses about ``file_flush_sim_s`` of simulated time, however fast the
@@ -72,10 +73,12 @@ The parts, one job each: :mod:`.rerun_scene` (blueprint, static scene, entity na
 from __future__ import annotations
 
 import atexit
+import collections
 import os
 import sys
 import time
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -128,6 +131,15 @@ class RerunRecorder:
         ports of the web viewer and of its data server (live, headless).
     airframe
         airframe for the aircraft shape (default: the shipped DS-1).
+    deferred
+        for a control loop that must not stall 2-7 ms every ``file_flush_sim_s`` (the SITL
+        autopilot process, in lockstep): a send is not made in :meth:`on_sample` but cut into
+        pieces of one entity each (tens of microseconds) that :meth:`idle_work` runs, one per
+        call, while the loop waits; the rows are copied meanwhile, at most one send is
+        pending (the next one finishes it first), and the wait for rerun's writes happens in
+        the background flusher's thread (``rec.flush`` releases the GIL). A killed process
+        then loses about ``file_flush_sim_s`` plus the few milliseconds of wall time the
+        pieces and the write take. Default False: the send and the wait in :meth:`on_sample`.
     """
 
     def __init__(self, path: Path, *, live: bool = False, application_id: str = "vtolftc",
@@ -135,7 +147,8 @@ class RerunRecorder:
                  live_flush_s: float = 0.2, web_port: int = 9090, grpc_port: int = 9876,
                  airframe: Any = None, file_flush_s: float = 0.5,
                  file_flush_sim_s: float = 0.5, path_period_s: float = 1.0,
-                 path_segment_points: int = 250, write_footer: bool = False) -> None:
+                 path_segment_points: int = 250, write_footer: bool = False,
+                 deferred: bool = False) -> None:
         if not write_footer and "RUST_LOG" not in os.environ:
             # rerun warns about the missing footer on every run (it is meant: module doc); its
             # logger reads this when rerun is first imported (a later change has no effect);
@@ -184,6 +197,11 @@ class RerunRecorder:
         # rerun writes the file from its own threads; this one asks it to every 0.25 s, so a
         # killed process loses at most about file_flush_s + 0.25 s of the recording
         self._flusher = BackgroundFlusher(self._rec, lambda: self._finished)
+        self._deferred = deferred
+        self._pending: collections.deque[Iterator[None]] = collections.deque()
+        """Deferred sends' pieces (at most one send)."""
+        if deferred:
+            self._sender.wait = self._flusher.request
 
     @property
     def viewer_url(self) -> str | None:
@@ -242,6 +260,22 @@ class RerunRecorder:
         if (rows.n >= self._chunk or t - int(rows.t[0]) >= self._flush_span_usec
                 or time.monotonic() - self._last_flush_wall > self._flush_s):
             self._flush()
+
+    def idle_work(self) -> bool:
+        """``deferred``: run the next piece of the pending send (one entity's column, tens of
+        microseconds). True if more pieces remain."""
+        pending = self._pending
+        if not pending:
+            return False
+        if next(pending[0], StopIteration) is StopIteration:
+            pending.popleft()
+        return bool(pending)
+
+    def _finish_pending(self) -> None:
+        """Run every pending piece now (a new send, the end of the run)."""
+        while self._pending:
+            for _ in self._pending.popleft():
+                pass
 
     def on_event(self, time_usec: int, kind: str, text: str) -> None:
         """Log an event; fault events also as a marker on ``faults/marker``."""
@@ -314,10 +348,15 @@ class RerunRecorder:
 
     def _flush(self, final: bool = False) -> None:
         """Send the buffered rows to rerun as columns, wait until rerun has written them, and
-        reset the buffer; the path too, every ``path_period_s`` and at the end."""
+        reset the buffer; the path too, every ``path_period_s`` and at the end (``deferred``:
+        finish the pending send, then queue this one's pieces on a copy of the rows)."""
         self._last_flush_wall = time.monotonic()
         try:
-            self._sender.send(self._rows, self._names, final)
+            self._finish_pending()
+            if self._deferred and not final:
+                self._pending.append(self._sender.pieces(self._rows.copy(), self._names))
+            else:
+                self._sender.send(self._rows, self._names, final)
         finally:
             self._rows.n = 0
             self._rows.path_pts.clear()     # taken by the sender (or lost with a failed send)

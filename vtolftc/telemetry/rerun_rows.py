@@ -61,6 +61,15 @@ class RowBuffer:
         self.path_every = path_every
         self.rows_total = 0
 
+    def copy(self) -> RowBuffer:
+        """The ``n`` rows in use and the path points, copied (a send deferred to later steps
+        reads these while this buffer fills again)."""
+        out = object.__new__(RowBuffer)
+        out.__dict__.update(self.__dict__)
+        out.t, out.buf = self.t[:self.n].copy(), self.buf[:self.n].copy()
+        out.path_pts = list(self.path_pts)
+        return out
+
     def add(self, t: int, sample: TelemetrySample) -> int:
         """Copy ``sample`` (at simulated time ``t`` [us]) into the next row; returns its
         flight mode (as an int). The caller empties the buffer before it overflows."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -80,12 +80,18 @@ class ColumnSender:
         simulated time between two sends of the flown path [us].
     path_segment_points
         points of the flown path per segment entity (at least 2).
+    wait
+        called after each send but the final one to have rerun write the rows (default:
+        ``rec.flush``, blocking until written; :meth:`BackgroundFlusher.request` hands the wait
+        to that thread).
     """
 
     def __init__(self, rr: Any, rec: Any, path_period_usec: int,
-                 path_segment_points: int = 250) -> None:
+                 path_segment_points: int = 250, wait: Any = None) -> None:
         self._rr = rr
         self._rec = rec
+        self.wait = wait
+        """The writes' wait after a send (None: ``rec.flush`` in the caller's thread)."""
         self._path_period_usec = path_period_usec
         self._last_path_usec: int | None = None
         self._seg_cap = max(2, int(path_segment_points))
@@ -108,6 +114,14 @@ class ColumnSender:
         """Send the ``rows.n`` buffered rows as columns (``names`` the actuators), the path
         when due (always when ``final``), and (unless ``final``) wait until rerun has written
         them. Errors are printed, never raised; the caller resets the buffer."""
+        for _ in self.pieces(rows, names, final):
+            pass
+
+    def pieces(self, rows: RowBuffer, names: Sequence[str],
+               final: bool = False) -> Iterator[None]:
+        """:meth:`send` cut into pieces: a generator that sends one entity's column (tens of
+        microseconds) per ``next``. ``rows`` must stay unchanged until it is exhausted (a
+        :meth:`RowBuffer.copy`)."""
         n = rows.n
         if n == 0:
             if final:
@@ -139,24 +153,32 @@ class ColumnSender:
             att = np.degrees(b[:, sl["att"]])
             for j, ax in enumerate(ATTITUDE_AXES):
                 scalars(f"attitude/{ax}", np.column_stack((att_ref[:, j], att[:, j])))
+                yield
             misc = b[:, sl["misc"]]
             scalars("altitude", misc[:, [1, 0]])
+            yield
             scalars("airspeed", misc[:, [2, 3]] if rows.has_truth else misc[:, 2])
             scalars("mode/id", misc[:, 4])
             scalars("mode/armed", misc[:, 5])
+            yield
             scalars("control/virtual", b[:, sl["virt"]])
+            yield
             cmd = b[:, sl["cmd"]]
             eff = b[:, sl["eff"]]
             for j, name in enumerate(names):
                 scalars(actuator_entity(name),
                         np.column_stack((cmd[:, j], eff[:, j])) if rows.has_truth
                         else cmd[:, j])
+                yield
             q = b[:, sl["q"]]
             rec.send_columns("world/aircraft", indexes=times, columns=rr.Transform3D.columns(
                 translation=b[:, sl["pos"]], quaternion=q[:, [1, 2, 3, 0]]))
+            yield
             self._last_row_usec = int(rows.t[n - 1])
             self._send_path(self._last_row_usec, rows.path_pts, final)
-            if not final:
+            if not final and self.wait is not None:
+                self.wait()  # e.g. the flusher thread writes now, this thread goes on
+            elif not final:
                 # rerun writes the file from its own threads, later by wall-clock time: wait
                 # for it here, on simulated time, so a SIGKILL loses about file_flush_sim_s
                 # however fast the simulation runs
@@ -192,7 +214,9 @@ class ColumnSender:
 
 
 class BackgroundFlusher:
-    """A daemon thread asking rerun to write what it holds every 0.25 s of wall time.
+    """A daemon thread asking rerun to write what it holds every 0.25 s of wall time, and at
+    once on :meth:`request` (``rec.flush`` releases the GIL while rerun's threads write: the
+    caller's thread runs on meanwhile).
 
     Parameters
     ----------
@@ -206,14 +230,24 @@ class BackgroundFlusher:
         self._rec = rec
         self._finished = finished
         self._stop = threading.Event()
+        self._wake = threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True, name="rerun-flush")
         self._thread.start()
 
+    def request(self) -> None:
+        """Have the thread ask rerun to write now (returns at once)."""
+        self._wake.set()
+
     def _loop(self) -> None:
-        """Every 0.25 s of wall time, ask rerun to write what it holds (events logged while
-        the simulation stands still); a slow write (timeout) is tried again next time."""
+        """Every 0.25 s of wall time or on :meth:`request`, ask rerun to write what it holds
+        (events logged while the simulation stands still, the rows just sent); a slow write
+        (timeout) is tried again next time."""
         timeout = flush_takes_timeout(self._rec)
-        while not self._stop.wait(0.25):
+        while True:
+            self._wake.wait(0.25)
+            self._wake.clear()
+            if self._stop.is_set():
+                return
             try:
                 self._rec.flush(timeout_sec=1.0) if timeout else self._rec.flush()
             except Exception:  # a timeout on a loaded machine: keep going
@@ -223,5 +257,6 @@ class BackgroundFlusher:
     def stop(self) -> None:
         """Stop the thread (waits up to 2 s for it)."""
         self._stop.set()
+        self._wake.set()
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout=2.0)

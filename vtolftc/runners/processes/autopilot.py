@@ -5,7 +5,7 @@
         [--controller gs-shif|shif|lqr] [--airframe FILE] [--gains-dir DIR]
         [--hold-ms MS] [--param NAME=VALUE ...] [--signing-passphrase TEXT]
         [--out DIR] [--case LABEL] [--window-start S] [--vehicle-timeout S] [--max-wall S]
-        [--rt-priority N]
+        [--rt-priority N] [--cpu N] [--trace-steps N]
 
 Ground-station links: by default, like PX4 SITL, it sends to UDP 127.0.0.1:14550 (ground
 stations: QGroundControl, ``vtolftc gcs``) and 127.0.0.1:14540 (API clients: MAVSDK), as a UDP
@@ -56,6 +56,7 @@ from vtolftc.protocols import SigningConfig, StreamTimestamps, open_link
 from vtolftc.protocols.failure_units import ActuatorTable
 from vtolftc.protocols.hil_signing import hil_signing_from_env
 from vtolftc.protocols.link import Link
+from vtolftc.runners.processes.affinity import add_cpu_argument, apply_cpu, check_cpu
 from vtolftc.runners.processes.priority import (
     add_rt_priority_argument,
     apply_rt_priority,
@@ -123,6 +124,11 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
                     help="busy-poll the HIL link this long before sleeping (lower wake-up "
                          "latency on idle cores, costs CPU; default 0)")
     add_rt_priority_argument(ap)
+    add_cpu_argument(ap)
+    ap.add_argument("--trace-steps", type=int, default=0, metavar="N",
+                    help="record the wall / CPU time of each part of the first N lockstep "
+                         "steps into step_trace.npz in the run folder (StepParts; read by "
+                         "benchmarks/bench_sitl.py --trace); default 0 = off")
     return ap.parse_args(argv)
 
 
@@ -173,7 +179,9 @@ def run_observers(out: Path, plots: bool = True, autopilot: Any = None,
 
     obs: list[Any] = [RunFolderWriter(out, plots=plots), EventLog(out / "autopilot_events.jsonl")]
     if rerun:
-        obs.insert(1, RerunRecorder(out / "run.rrd"))
+        # its sends in pieces while the control loop waits for the vehicle: made at once they
+        # stalled a control step 2-7 ms every 0.5 s of simulated time (bench_sitl, session 16)
+        obs.insert(1, RerunRecorder(out / "run.rrd", deferred=True))
     if autopilot is not None:
         obs.append(ULogWriter(out / "flight.ulg", autopilot))
     return obs
@@ -188,9 +196,10 @@ def main(argv: list[str] | None = None) -> int:
     """Run the autopilot process (see the module docstring); returns the exit status."""
     args = _parse_args(argv)
     err = sys.stderr
-    if (bad := check_rt_priority(args.rt_priority)) is not None:
-        print(f"autopilot: error: {bad}", file=err)
-        return 2
+    for bad in (check_rt_priority(args.rt_priority), check_cpu(args.cpu)):
+        if bad is not None:
+            print(f"autopilot: error: {bad}", file=err)
+            return 2
     try:
         autopilot, af = _make_autopilot(args)
     except Exception as exc:  # bad airframe, unknown controller, missing gains
@@ -254,6 +263,8 @@ def main(argv: list[str] | None = None) -> int:
         def on_finish(m: dict[str, Any], summary: dict[str, Any]) -> None:
             _write_json(out / "metrics.json", m)
             _write_json(out / "autopilot_summary.json", summary)
+            if proc is not None:
+                proc.parts.save_trace(out / "step_trace.npz")
 
     proc: AutopilotProcess | None = None
 
@@ -266,6 +277,7 @@ def main(argv: list[str] | None = None) -> int:
 
         warm_up(make, stop=lambda: proc is not None and not proc.running)
         apply_rt_priority(args.rt_priority, "autopilot", err)  # compiled: now real time
+        apply_cpu(args.cpu, "autopilot", err)  # and pinned
 
     proc = AutopilotProcess(
         autopilot, hil, gcs_links, actuators=ActuatorTable.from_names(af.actuator_names),
@@ -276,7 +288,9 @@ def main(argv: list[str] | None = None) -> int:
         warmup=None if args.no_warmup else warm)
     if args.no_warmup:
         apply_rt_priority(args.rt_priority, "autopilot", err)
+        apply_cpu(args.cpu, "autopilot", err)
     proc.spin_s = max(0.0, args.spin_us) * 1e-6
+    proc.parts.enable_trace(args.trace_steps)
     for obs in observers:  # the ULog's sensor topics from HIL_SENSOR / HIL_GPS
         if hasattr(obs, "hil"):
             obs.hil = proc.hil

@@ -3,6 +3,7 @@
     python -m vtolftc.runners.processes.vehicle --link udp-server://127.0.0.1:4560 [--lockstep]
         [--realtime] [--airframe FILE] [--seed N] [--noise] [--duration S] [--out DIR]
         [--output-timeout S] [--hil-delay-ms MS] [--hil-loss P] [--rt-priority N]
+        [--cpu N] [--trace-steps N]
 
 What it sends and accepts, the autopilot pinning, the output watchdog and the latency knob are
 documented in :mod:`vtolftc.firmware_sim.vehicle.process`. With ``VTOLFTC_HIL_KEY`` (64
@@ -23,6 +24,7 @@ from typing import Any
 from vtolftc.airframe.loader import AirframeError, load_airframe
 from vtolftc.firmware_sim.vehicle.process import VehicleProcess
 from vtolftc.protocols.hil_signing import hil_signing_from_env
+from vtolftc.runners.processes.affinity import add_cpu_argument, apply_cpu, check_cpu
 from vtolftc.runners.processes.priority import (
     add_rt_priority_argument,
     apply_rt_priority,
@@ -72,20 +74,27 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
                     help="lockstep: busy-poll this long for the controls before sleeping "
                          "(faster on idle cores, costs CPU; default 0)")
     add_rt_priority_argument(ap)
+    add_cpu_argument(ap)
+    ap.add_argument("--trace-steps", type=int, default=0, metavar="N",
+                    help="record the wall / CPU time of each part of the first N lockstep "
+                         "steps into step_trace.npz in the run folder (StepParts; read by "
+                         "benchmarks/bench_sitl.py --trace); default 0 = off")
     return ap.parse_args(argv)
 
 
 class _Vehicle(VehicleProcess):
-    """The vehicle process that takes its real-time priority (``--rt-priority``) once its
-    kernels are compiled, before it waits for the autopilot (see
+    """The vehicle process that takes its real-time priority (``--rt-priority``) and its CPU
+    (``--cpu``) once its kernels are compiled, before it waits for the autopilot (see
     :mod:`vtolftc.runners.processes.priority` for why not before)."""
 
     rt_priority = 0
+    cpu = -1
 
     def warm_up(self) -> None:
-        """Compile (:meth:`VehicleProcess.warm_up`), then apply the priority."""
+        """Compile (:meth:`VehicleProcess.warm_up`), then apply the priority and the CPU."""
         super().warm_up()
         apply_rt_priority(self.rt_priority, "vehicle", sys.stderr)
+        apply_cpu(self.cpu, "vehicle", sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -104,9 +113,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"vehicle: error: {name} {val!r}: expected a number in [0, {hi:g}]",
                   file=sys.stderr)
             return 2
-    if (bad := check_rt_priority(args.rt_priority)) is not None:
-        print(f"vehicle: error: {bad}", file=sys.stderr)
-        return 2
+    for bad in (check_rt_priority(args.rt_priority), check_cpu(args.cpu)):
+        if bad is not None:
+            print(f"vehicle: error: {bad}", file=sys.stderr)
+            return 2
     try:
         signing = hil_signing_from_env()
         airframe = load_airframe(args.airframe) if args.airframe else load_airframe()
@@ -119,6 +129,8 @@ def main(argv: list[str] | None = None) -> int:
             hil_delay_ms=args.hil_delay_ms, hil_loss=args.hil_loss, signing=signing)
         proc.spin_s = max(0.0, args.spin_us) * 1e-6
         proc.rt_priority = args.rt_priority
+        proc.cpu = args.cpu
+        proc.parts.enable_trace(args.trace_steps)
     except (AirframeError, ValueError, OSError) as exc:
         print(f"vehicle: error: {exc}", file=sys.stderr)
         return 2
@@ -129,6 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     rc = proc.run()
+    if args.out is not None:
+        proc.parts.save_trace(args.out / "step_trace.npz")
     st = proc.link.stats
     print(f"vehicle: stopped at t = {proc.vehicle.time_usec * 1e-6:.3f} s after {proc.steps} "
           f"steps; link dropped {st.dropped} (garbage {st.dropped_garbage}, crc "

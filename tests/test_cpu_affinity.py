@@ -1,0 +1,145 @@
+"""``--cpu N`` of the SITL process programs (:mod:`vtolftc.runners.processes.affinity`): once
+applied (when the process is compiled and ready), every thread of the process and every thread
+started afterwards runs on CPU N only; an invalid N is one line and exit status 2; a refusal by
+the system is one line and the process stays unpinned (all threads, none half-way)."""
+
+from __future__ import annotations
+
+import errno
+import io
+import os
+import subprocess
+import sys
+
+import pytest
+
+from vtolftc.runners.processes import affinity
+from vtolftc.runners.processes.affinity import apply_cpu, check_cpu
+from vtolftc.runners.sitl import SitlConfig, SitlRun
+
+_CHILD = """
+import os, sys, threading
+from vtolftc.runners.processes.affinity import apply_cpu
+cpu = int(sys.argv[1])
+mask = lambda: sorted(os.sched_getaffinity(0))   # the calling thread's
+go, seen = threading.Event(), {}
+def early():
+    go.wait(); seen["early"] = mask()
+th = threading.Thread(target=early); th.start()   # a thread that exists before the call
+ok = apply_cpu(cpu, "probe", sys.stdout)
+go.set(); th.join()
+later = threading.Thread(target=lambda: seen.update(later=mask())); later.start(); later.join()
+print("main", *mask()); print("early", *seen["early"]); print("later", *seen["later"])
+print("ok", ok)
+"""
+
+_CPUS = sorted(os.sched_getaffinity(0))
+
+
+@pytest.mark.parametrize("n, valid", [(-1, True), (_CPUS[0], True), (_CPUS[-1], True),
+                                      (max(_CPUS) + 1, False), (-2, False), (4096, False)])
+def test_valid_cpus_are_off_and_those_this_process_may_use(n, valid):
+    assert (check_cpu(n) is None) == valid
+
+
+@pytest.mark.skipif(len(_CPUS) < 2, reason="pinning is only visible with 2 CPUs or more")
+@pytest.mark.parametrize("cpu", [_CPUS[0], _CPUS[-1]])
+def test_every_thread_of_the_process_runs_on_the_cpu(cpu):
+    """The threads that exist at the call (the autopilot's ground-station threads) and those
+    started afterwards."""
+    out = subprocess.run([sys.executable, "-c", _CHILD, str(cpu)], capture_output=True,
+                         text=True, timeout=60, check=True).stdout.splitlines()
+    assert out == [f"probe: pinned to CPU {cpu} (2 threads)", f"main {cpu}", f"early {cpu}",
+                   f"later {cpu}", "ok True"]
+
+
+def test_off_does_nothing(monkeypatch):
+    def never(*a):
+        raise AssertionError("sched_setaffinity called for --cpu -1")
+
+    monkeypatch.setattr(os, "sched_setaffinity", never)
+    log = io.StringIO()
+    assert apply_cpu(-1, "probe", log) is False
+    assert log.getvalue() == ""
+
+
+def test_refused_is_one_line_and_no_thread_stays_pinned(monkeypatch):
+    """The system refuses the second thread (EINVAL: the cpuset changed): the first one is put
+    back on its previous set and the process runs unpinned."""
+    calls: list[tuple[int, set[int]]] = []
+
+    def setaff(tid, cpus):
+        calls.append((tid, set(cpus)))
+        if len(calls) == 2:
+            raise OSError(errno.EINVAL, "Invalid argument")
+
+    monkeypatch.setattr(os, "listdir", lambda p: ["11", "12", "13"])
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setattr(os, "sched_setaffinity", setaff)
+    log = io.StringIO()
+    assert affinity.apply_cpu(1, "probe", log) is False
+    assert log.getvalue() == "probe: --cpu 1 not applied (Invalid argument): not pinned\n"
+    assert calls[:2] == [(11, {1}), (12, {1})]
+    assert calls[2:] == [(11, {0, 1}), (12, {0, 1}), (13, {0, 1})]
+
+
+@pytest.mark.parametrize("program, args", [
+    ("vehicle", ["--link", "udp-server://127.0.0.1:9"]),
+    ("autopilot", ["--hil-link", "udp-client://127.0.0.1:9"])])
+def test_bad_cpu_is_one_line_and_exit_2(program, args):
+    p = subprocess.run([sys.executable, "-m", f"vtolftc.runners.processes.{program}", *args,
+                        "--cpu", "4096"], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    assert p.stderr.strip().splitlines() == [
+        f"{program}: error: --cpu 4096: expected -1 (off) or a CPU this process may use: "
+        f"{_CPUS}"]
+
+
+def test_cpus_reach_each_process_and_only_when_asked(tmp_path, monkeypatch):
+    """``SitlConfig.autopilot_cpu`` / ``vehicle_cpu`` are passed to their own program's command
+    line; the default (-1) passes nothing. No process is started: ``_spawn`` records."""
+
+    class SpawnedError(Exception):
+        pass
+
+    class FakeStation:
+        def __init__(self, url):
+            pass
+
+        def add_listener(self, fn):  # start() reaches this once both programs are spawned
+            raise SpawnedError
+
+    monkeypatch.setattr("vtolftc.runners.sitl.GroundStation", FakeStation)
+    for ap_cpu, v_cpu in ((-1, -1), (0, 1), (1, -1), (-1, 0)):
+        run = SitlRun(SitlConfig(out_dir=tmp_path / f"{ap_cpu}{v_cpu}", autopilot_cpu=ap_cpu,
+                                 vehicle_cpu=v_cpu))
+        argv: dict[str, list[str]] = {}
+        monkeypatch.setattr(run, "_spawn",
+                            lambda name, args, argv=argv: argv.__setitem__(name, args))
+        with pytest.raises(SpawnedError):
+            run.start()
+        for name, want in (("autopilot", ap_cpu), ("vehicle", v_cpu)):
+            args = argv[name]
+            got = int(args[args.index("--cpu") + 1]) if "--cpu" in args else -1
+            assert got == want and args.count("--cpu") <= 1, (name, args)
+
+
+@pytest.mark.skipif(len(_CPUS) < 2, reason="pinning is only visible with 2 CPUs or more")
+@pytest.mark.parametrize("program, args, rc", [
+    ("vehicle", ["--link", "udp-server://127.0.0.1:{port}", "--connect-timeout", "1"], 3),
+    ("autopilot", ["--hil-link", "udp-client://127.0.0.1:{port}", "--no-default-gcs",
+                   "--no-warmup", "--max-wall", "1"], 0)])
+def test_the_programs_pin_themselves_once_ready(program, args, rc):
+    """The vehicle after compiling its kernels, the autopilot (``--no-warmup``) before its
+    loop: one line each, then the run goes on (no peer here: it ends by its timeout)."""
+    from vtolftc.protocols.netutil import free_udp_port
+
+    port = free_udp_port()
+    p = subprocess.run([sys.executable, "-m", f"vtolftc.runners.processes.{program}",
+                        *(a.format(port=port) for a in args), "--cpu", str(_CPUS[-1])],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == rc, p.stderr
+    lines = p.stderr.splitlines()
+    pinned = [ln for ln in lines if "CPU" in ln]
+    assert len(pinned) == 1 and pinned[0].startswith(
+        f"{program}: pinned to CPU {_CPUS[-1]} ("), lines
