@@ -43,6 +43,7 @@ __all__ = [
     "NavState",
     "decode_hil_state",
     "encode_hil_state",
+    "nav_of_round_trip",
     "wire_commands",
     "wire_round",
 ]
@@ -214,7 +215,7 @@ class HilRoundTrip:
         Home (the projection's origin): latitude and longitude [deg], altitude AMSL [m].
     """
 
-    __slots__ = ("_alt0", "_cos", "_lat0", "_lon0", "_r_cos")
+    __slots__ = ("_alt0", "_cos", "_lat0", "_lon0", "_r_cos", "kernel_home")
 
     def __init__(self, home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> None:
         self._lat0 = home_lat_deg
@@ -223,6 +224,10 @@ class HilRoundTrip:
         # the same doubles as geodesy.FlatEarth (the codec pair's projection), fused here
         self._cos = FlatEarth(home_lat_deg, home_lon_deg).cos_lat0
         self._r_cos = EARTH_RADIUS_M * self._cos
+        #: :func:`_round_trip_kernel`'s ``lat0, lon0, alt0, r_cos, cos_lat0`` as one array
+        #: (for a caller that fuses the kernel into its own compiled call): the same doubles
+        self.kernel_home = np.array([self._lat0, self._lon0, self._alt0, self._r_cos,
+                                     self._cos])
 
     def __call__(self, time_usec: int, state: NDArray[np.float64],
                  airspeed_m_s: float) -> NavState:
@@ -252,7 +257,7 @@ class HilRoundTrip:
             air = _round_trip_kernel(state, float(airspeed_m_s), self._lat0, self._lon0,
                                      self._alt0, self._r_cos, self._cos, a)
             if air >= 0:  # else a value the codec refuses: the Python path raises its error
-                return NavState(int(time_usec), a[0:4], a[4:7], a[7:10], a[10:13], air * 0.01)
+                return nav_of_round_trip(time_usec, a, air)
         return self._python(time_usec, state, airspeed_m_s)
 
     def _python(self, time_usec: int, state: NDArray[np.float64],
@@ -291,6 +296,13 @@ class HilRoundTrip:
             alt0 - ialt * 1e-3,
             ivx * 0.01, ivy * 0.01, ivz * 0.01))
         return NavState(int(time_usec), a[0:4], a[4:7], a[7:10], a[10:13], air * 0.01)
+
+
+def nav_of_round_trip(time_usec: int, a: NDArray[np.float64], air_cm_s: float) -> NavState:
+    """The :class:`NavState` of a round trip's decoded array ``a`` (at least 13 entries:
+    quaternion, body rates [rad/s], position NED [m], velocity NED [m/s]; its four arrays are
+    views of ``a``) and airspeed ``air_cm_s`` [cm/s] at ``time_usec`` [us]."""
+    return NavState(int(time_usec), a[0:4], a[4:7], a[7:10], a[10:13], air_cm_s * 0.01)
 
 
 _F64 = np.dtype(np.float64)
