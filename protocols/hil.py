@@ -224,7 +224,7 @@ class HilRoundTrip:
         # the same doubles as geodesy.FlatEarth (the codec pair's projection), fused here
         self._cos = FlatEarth(home_lat_deg, home_lon_deg).cos_lat0
         self._r_cos = EARTH_RADIUS_M * self._cos
-        #: :func:`_round_trip_kernel`'s ``lat0, lon0, alt0, r_cos, cos_lat0`` as one array
+        #: :func:`round_trip_kernel`'s ``lat0, lon0, alt0, r_cos, cos_lat0`` as one array
         #: (for a caller that fuses the kernel into its own compiled call): the same doubles
         self.kernel_home = np.array([self._lat0, self._lon0, self._alt0, self._r_cos,
                                      self._cos])
@@ -254,7 +254,7 @@ class HilRoundTrip:
         if type(state) is np.ndarray and state.dtype == _F64 and state.ndim == 1 \
                 and state.shape[0] >= 13:
             a = np.empty(13)
-            air = _round_trip_kernel(state, float(airspeed_m_s), self._lat0, self._lon0,
+            air = round_trip_kernel(state, float(airspeed_m_s), self._lat0, self._lon0,
                                      self._alt0, self._r_cos, self._cos, a)
             if air >= 0:  # else a value the codec refuses: the Python path raises its error
                 return nav_of_round_trip(time_usec, a, air)
@@ -324,7 +324,7 @@ def _clip(x, lo, hi):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _round_trip_kernel(state, airspeed, lat0, lon0, alt0, r_cos, cos_lat0,
+def round_trip_kernel(state, airspeed, lat0, lon0, alt0, r_cos, cos_lat0,
                        a):  # pragma: no cover - compiled
     """:meth:`HilRoundTrip._python` compiled (the same operations in the same order).
 
@@ -435,7 +435,7 @@ class HilStateEncoder:
 
 @numba.njit(cache=True)
 def encode_state_kernel(state, airspeed, lat0, lon0, alt0, r_cos, out):  # pragma: no cover
-    """:func:`encode_hil_state` compiled (as :func:`_round_trip_kernel`'s encode half).
+    """:func:`encode_hil_state` compiled (as :func:`round_trip_kernel`'s encode half).
 
     Writes the float32-rounded quaternion and rates, then the rounded and clipped lat, lon
     [degE7], alt [mm], vx, vy, vz [cm/s] and airspeed [cm/s] into ``out`` (14,); returns

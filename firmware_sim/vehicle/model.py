@@ -64,7 +64,7 @@ def _take_and_step(src, x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm,
 
 
 @numba.njit(cache=True)
-def _take_and_step_packed(src, ws, stuck, n, dt, buf, layout, flags,
+def take_and_step_packed(src, ws, stuck, n, dt, buf, layout, flags,
                           wire):  # pragma: no cover - compiled
     """:func:`_take_and_step` on the vehicle's own float arrays packed into one workspace
     ``ws`` (``Vehicle._pack``: ``x``, ``u``, ``eff``, ``wind``, ``fm``, then ``memo``; ``x``
@@ -75,12 +75,12 @@ def _take_and_step_packed(src, ws, stuck, n, dt, buf, layout, flags,
     numbers: the same bits."""
     if wire:
         src = wire_round(src)
-    x, u, eff, wind, fm, memo = _packed_views(ws, src.size)
+    x, u, eff, wind, fm, memo = packed_views(ws, src.size)
     return _take_and_step(src, x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm, memo)
 
 
 @numba.njit(cache=True)
-def _packed_views(ws, na):  # pragma: no cover - compiled
+def packed_views(ws, na):  # pragma: no cover - compiled
     """The views ``x``, ``u``, ``eff``, ``wind``, ``fm``, ``memo`` of the workspace ``ws``
     (``Vehicle._WS_PARTS``' layout for ``na`` actuators: ``x`` has ``N_RIGID + na`` entries,
     ``wind`` 3, ``fm`` 9)."""
@@ -203,7 +203,7 @@ class Vehicle:
         return self.x.copy()
 
     _WS_PARTS = ("x", "u", "eff", "wind", "fm", "_memo")
-    """The float arrays that are views of ``_vws``, in :func:`_take_and_step_packed`'s
+    """The float arrays that are views of ``_vws``, in :func:`take_and_step_packed`'s
     order."""
 
     def _pack(self) -> None:
@@ -358,7 +358,7 @@ class Vehicle:
         if args is not None:
             # the common case of a control step: the commands taken and the whole batch
             # flown in one compiled call (the branches below, the same kernels)
-            if not _take_and_step_packed(commands, args[0], args[1], int(n), args[2],
+            if not take_and_step_packed(commands, args[0], args[1], int(n), args[2],
                                          args[3], args[4], args[5], wire):
                 raise ValueError("commands contain NaN or inf: expected finite values")
             self.time_usec += int(n) * self.dt_usec
@@ -405,7 +405,7 @@ class Vehicle:
         self._apply_due_faults()
 
     def control_step_args(self, commands: object) -> tuple | None:
-        """The arguments after ``src`` and ``n`` of :func:`_take_and_step_packed` with which
+        """The arguments after ``src`` and ``n`` of :func:`take_and_step_packed` with which
         :meth:`step` flies ``commands`` in one compiled call: ``(ws, stuck, dt [s], buf,
         layout, flags)``; None when it cannot (commands not float64 of the vehicle's shape,
         gusts, a fault pending, the airframe's flattened arrays not current). For a caller

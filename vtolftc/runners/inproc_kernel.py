@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numba
 
-from vtolftc.firmware_sim.vehicle.model import _packed_views, _take_and_step_packed
-from vtolftc.protocols.hil import _round_trip_kernel
+from vtolftc.firmware_sim.vehicle.model import packed_views, take_and_step_packed
+from vtolftc.protocols.hil import round_trip_kernel
 from vtolftc.telemetry.metrics_kernel import metrics_step
 
 __all__ = ["runner_tail_step"]
@@ -60,9 +60,9 @@ def runner_tail_step(s, tail, time_usec, pos, roll, pitch, yaw, mode, armed, ref
                      airspeed)
     if r == 0:
         return 0
-    if not _take_and_step_packed(u, ws, stuck, n, dt, buf, layout, flags, True):
+    if not take_and_step_packed(u, ws, stuck, n, dt, buf, layout, flags, True):
         return r + 4
-    x, _u, _eff, _wind, fm, _memo = _packed_views(ws, u.size)
-    nav_next[13] = _round_trip_kernel(x, fm[6], home[0], home[1], home[2], home[3], home[4],
+    x, _u, _eff, _wind, fm, _memo = packed_views(ws, u.size)
+    nav_next[13] = round_trip_kernel(x, fm[6], home[0], home[1], home[2], home[3], home[4],
                                       nav_next)
     return r
