@@ -1271,3 +1271,38 @@ def test_transition_flight_equals_the_session15_python(ds1, monkeypatch):
     assert (FlightMode.FRONT_TRANSITION, False) in modes
     assert (FlightMode.FIXED_WING, False) in modes and (FlightMode.FIXED_WING, True) in modes
     assert now == then
+
+
+def test_allocate_tracked_v_tail_equals_writing_v_first(ds1):
+    """``allocate_tracked(..., v_tail=tau)`` (the output stage's ``v[2:] = tau`` inside the
+    compiled call) against ``v[2:] = tau`` in Python and then ``allocate_tracked``: the same
+    ``v``, command, status, mask, ``(B u)[0]`` and warm start, step after step, over random
+    problems with stale entries in ``v``'s tail, infeasible demands and a non-finite moment
+    (the invalid-input path reads the written ``v``)."""
+    ap = Autopilot(ds1)
+    one: ActiveSetAllocator = ap.output.allocator
+    two: ActiveSetAllocator = Autopilot(ds1).output.allocator
+    eff = EffectivenessModel(ds1)
+    rng = np.random.default_rng(16)
+    n_u = one.n_u
+    u1, u2 = np.empty(n_u), np.empty(n_u)
+    statuses = set()
+    for k in range(300):
+        B = eff.matrix_on_grid(float(rng.choice([0.0, 7.3, 17.9])), 0.1)
+        v = np.array([-ds1.weight_N, 5.0, 0.0, 0.0, 0.0]) + rng.normal(0, 1, 5) * [
+            60.0, 20.0, 15.0, 15.0, 5.0] * (4.0 if k % 11 == 5 else 1.0)
+        if k == 150:
+            v[3] = np.nan
+        hi = np.ones(n_u)
+        hi[: ap.n_rotors] = float(rng.choice([1.0, 0.6]))
+        pref = ap.u_pref_mc if k % 2 else ap.u_pref_fw
+        v2 = v.copy()
+        v2[2:] = rng.normal(0, 100.0, 3) if k % 3 else np.nan  # stale tail
+        a = one.allocate_tracked(v, B, hi, pref, u1, 2, 0.02, 0.03)
+        b = two.allocate_tracked(v2, B, hi, pref, u2, 2, 0.02, 0.03, v_tail=v[2:].copy())
+        statuses.add(a[0])
+        assert np.array(a).tobytes() == np.array(b).tobytes(), k
+        assert v2.tobytes() == v.tobytes() and u2.tobytes() == u1.tobytes(), k
+        assert one._wsx.tobytes() == two._wsx.tobytes(), k
+    assert len(statuses) >= 2  # a solved step and the invalid input at least
+    assert one.stats.counts == two.stats.counts
