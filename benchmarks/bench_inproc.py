@@ -389,7 +389,11 @@ branch's alternated in processes (each a warm-up flight then the fastest of 2 or
 pair ratio median 0.93 (0.89-1.08, 7 of 8 below 1); 8 pairs at load 11.5-12.2 (final) ratio
 median 1.03 (0.92-1.46); 8 pairs at load 8.3-11.5 (final, fastest of 5) ratio median 0.96
 (0.91-1.12, 6 of 8 below 1). At this load the spread of one pair is +-10-15 %, larger than
-the change: the cut is ~4-7 % of a step by these ratios (~1-2 us), not the 10-15 % asked;
+the change; the load-free figure: callgrind (``--instr-atstart=no``, instrumentation switched
+on with ``callgrind_control`` for one warm 60 s flight of that scenario, both trees run side
+by side): main 3,248.7 M instructions, branch 3,057.0 M, ratio 0.941 (216.6 k -> 203.8 k per
+step; the interpreter's own share grew 471 -> 491 M, the compiled calls' dispatch, type
+checks and wrappers shrank more). The cut is ~6 % of a step (~1.5 us), not the 10-15 % asked;
 on the lead's idle figures (main's campaign flight 0.38-0.40 s) ~0.36-0.38 s per flight,
 ~315-330 scenarios/min on 2 workers before the pool's ~3 % (an estimate, not measured idle).
 
