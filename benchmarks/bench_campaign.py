@@ -130,6 +130,20 @@ pairs: 296.8 / 300.2 / 302.0 / 289.9 against 231.4 / 232.1 / 298.6 / 232.3 scena
 jumps between runs), overhead +2.6-3.9 %. 300/min is reached in 2 of 4 runs: at the line,
 without margin.
 
+Session 16 (2026-12-03, branch inproc-16: the runner's fused tail call, the transition
+kernels, the mode machine's update only where it can act, see ``bench_inproc.py``). Every
+flight bit-identical (``command_digest.py`` unchanged; observer-free flights hashed step by
+step equal). One warm 60 s flight of this spec's first scenario under callgrind: main 3,248.7
+M instructions, branch 3,057.0 M (x0.941). ``--jobs 2 --scenarios 24 --no-dask`` on each tree
+back to back, two pairs, other helpers' jobs running (not a quiet minute): load 3.2-3.9, main
+then branch: CPU of every process per scenario 0.43 / 0.38 s, pool 54.0 / 117.1
+scenarios/min (the pool's flights took 2.10 / 1.01 s of wall time against a warm in-process
+0.39 / 0.88 s: the load's doing), overhead +6.0 / +1.4 %; load 1.7-2.3, branch then main:
+CPU 0.41 / 0.41 s per scenario, pool 101.8 / 156.9 scenarios/min (flights 1.15 / 0.75 s
+wall). The wall-time rates measure the neighbours, not the code; by the instruction count
+the branch's flight is ~6 % cheaper, i.e. main's idle 289.9-302.0/min would be ~305-320/min:
+a small margin, not the 10-15 % asked (to be confirmed idle).
+
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --whole [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --memory 2000 [--duration 4]

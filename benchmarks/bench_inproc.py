@@ -350,6 +350,60 @@ arrays are views of one buffer in ``HilRoundTrip``, a ``NavState`` field for tha
 would make it one). The next cuts: the front/back transitions and degraded lift (Python,
 ~13 % of the campaign's steps: 1,903 of 14,750), the mode machine's keyword calls, and
 fusing the runner's per-step work (HIL round trip, metrics, vehicle) into one call.
+
+Session 16, issue 24, branch inproc-16 (2026-12-03, 2 cores shared with two other helpers,
+load 8-12 throughout). Profiled first on the campaign's first scenario (60 s, gs-shif,
+``bench_campaign``'s spec; cProfile with ``time.thread_time``, py-spy at 2,000 samples/s): 45.4
+Python calls per step; the largest Python lines were the runner's per-step wrappers
+(``Vehicle.step``'s checks, ``HilRoundTrip.__call__``'s checks and ``NavState``,
+``MetricsAccumulator.add_step``'s checks and conversions: ~8 % of the step together), the output
+stage's bookkeeping (~7 %; ``v[2:] = tau`` alone 1-2 %), the outer loops' Python around their
+kernels (~8 %) and the mode machine's keyword call with its four parameters every step.
+Built (every flight bit-identical: ``command_digest.py`` dbd91a71..., 121a7434..., e937b801...
+after each commit; and, since the digest flies with an observer, which keeps the separate
+calls, observer-free flights hashed step by step (commands, navigation states, metrics, end
+time) equal to main's for cases 1, 2, 0 and the campaign's first three scenarios):
+
+- ``vtolftc/runners/inproc_kernel.py``: the runner's work after ``Autopilot.step`` (metrics
+  sample, the vehicle's physics steps on the wire-rounded commands, the next step's HIL round
+  trip) is one compiled call, ``runner_tail_step``, the same three kernels in the same order
+  (no observer, state noise or HIL delay; else, and on the rare paths, the separate calls);
+  its parts' one home: ``Vehicle.control_step_args``, ``MetricsAccumulator.kernel_arrays``,
+  ``HilRoundTrip.kernel_home``, ``hil.nav_of_round_trip`` (``tests/test_runner_fused.py``:
+  the kernel against the separate calls on random and adversarial inputs, whole flights
+  with and without it, failing under 8 mutations);
+- the front and back transitions' altitude law, z force, references and pusher ramp in one
+  compiled call (``outer_kernels.mc_transition_step``), FIXED_WING's z force while the lift
+  rotors ramp down in one (``mc_z_force_step``, also ``mc_hold_step``'s z force); the
+  degraded-lift guidance stays Python (engaged in none of the campaign's 10 % losses);
+- the mode machine's ``update`` only in the modes it can leave by itself
+  (``modes.AUTO_EXIT_MODES``), ``ModeMachine.advance`` elsewhere (all ``update`` did there);
+- the moment demand copied into the virtual command inside the allocation's compiled call
+  (``allocate_tracked(..., v_tail=tau)``) instead of a numpy slice assignment (~0.35 us).
+
+Python calls per control step (cProfile, the campaign scenario): 45.4 -> 43.0 (the fused
+call replaces five calls, adds three small ones; the kernels' call overhead and the wrappers'
+checks are what went). Thread CPU per control step, campaign scenario, main's tree and this
+branch's alternated in processes (each a warm-up flight then the fastest of 2 or 5 flights):
+8 pairs at load 8.8-10.7 (before the ``v_tail`` commit) main 29.4, branch 27.4 us (medians),
+pair ratio median 0.93 (0.89-1.08, 7 of 8 below 1); 8 pairs at load 11.5-12.2 (final) ratio
+median 1.03 (0.92-1.46); 8 pairs at load 8.3-11.5 (final, fastest of 5) ratio median 0.96
+(0.91-1.12, 6 of 8 below 1). At this load the spread of one pair is +-10-15 %, larger than
+the change; the load-free figure: callgrind (``--instr-atstart=no``, instrumentation switched
+on with ``callgrind_control`` for one warm 60 s flight of that scenario, both trees run side
+by side): main 3,248.7 M instructions, branch 3,057.0 M, ratio 0.941 (216.6 k -> 203.8 k per
+step; the interpreter's own share grew 471 -> 491 M, the compiled calls' dispatch, type
+checks and wrappers shrank more). The cut is ~6 % of a step (~1.5 us), not the 10-15 % asked;
+on the lead's idle figures (main's campaign flight 0.38-0.40 s) ~0.36-0.38 s per flight,
+~315-330 scenarios/min on 2 workers before the pool's ~3 % (an estimate, not measured idle).
+
+Tried and dropped: ``v[2:] = tau`` written otherwise in Python (a kept view, ``np.copyto``,
+three item stores of ``tolist()``: 321-421 ns against 377 ns, no gain); ``in`` on a tuple of
+the four auto-exit modes (163 ns) instead of a frozenset (52 ns). Not done: the outer loops'
+aerodynamics (``outer_aero_step``) inside the mode kernels (one dispatch and a ``tolist``
+fewer per step, ~0.3-0.5 us), the degraded-lift guidance compiled, the allocation's
+statistics (``_count_solved``) in its kernel, ``NavState``'s four views built once per step
+(``nav_of_round_trip`` is now ~3.6 % of the step).
 """
 
 from __future__ import annotations

@@ -43,6 +43,7 @@ __all__ = [
     "NavState",
     "decode_hil_state",
     "encode_hil_state",
+    "nav_of_round_trip",
     "wire_commands",
     "wire_round",
 ]
@@ -214,7 +215,7 @@ class HilRoundTrip:
         Home (the projection's origin): latitude and longitude [deg], altitude AMSL [m].
     """
 
-    __slots__ = ("_alt0", "_cos", "_lat0", "_lon0", "_r_cos")
+    __slots__ = ("_alt0", "_cos", "_lat0", "_lon0", "_r_cos", "kernel_home")
 
     def __init__(self, home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> None:
         self._lat0 = home_lat_deg
@@ -223,6 +224,10 @@ class HilRoundTrip:
         # the same doubles as geodesy.FlatEarth (the codec pair's projection), fused here
         self._cos = FlatEarth(home_lat_deg, home_lon_deg).cos_lat0
         self._r_cos = EARTH_RADIUS_M * self._cos
+        #: :func:`round_trip_kernel`'s ``lat0, lon0, alt0, r_cos, cos_lat0`` as one array
+        #: (for a caller that fuses the kernel into its own compiled call): the same doubles
+        self.kernel_home = np.array([self._lat0, self._lon0, self._alt0, self._r_cos,
+                                     self._cos])
 
     def __call__(self, time_usec: int, state: NDArray[np.float64],
                  airspeed_m_s: float) -> NavState:
@@ -249,10 +254,10 @@ class HilRoundTrip:
         if type(state) is np.ndarray and state.dtype == _F64 and state.ndim == 1 \
                 and state.shape[0] >= 13:
             a = np.empty(13)
-            air = _round_trip_kernel(state, float(airspeed_m_s), self._lat0, self._lon0,
+            air = round_trip_kernel(state, float(airspeed_m_s), self._lat0, self._lon0,
                                      self._alt0, self._r_cos, self._cos, a)
             if air >= 0:  # else a value the codec refuses: the Python path raises its error
-                return NavState(int(time_usec), a[0:4], a[4:7], a[7:10], a[10:13], air * 0.01)
+                return nav_of_round_trip(time_usec, a, air)
         return self._python(time_usec, state, airspeed_m_s)
 
     def _python(self, time_usec: int, state: NDArray[np.float64],
@@ -293,6 +298,13 @@ class HilRoundTrip:
         return NavState(int(time_usec), a[0:4], a[4:7], a[7:10], a[10:13], air * 0.01)
 
 
+def nav_of_round_trip(time_usec: int, a: NDArray[np.float64], air_cm_s: float) -> NavState:
+    """The :class:`NavState` of a round trip's decoded array ``a`` (at least 13 entries:
+    quaternion, body rates [rad/s], position NED [m], velocity NED [m/s]; its four arrays are
+    views of ``a``) and airspeed ``air_cm_s`` [cm/s] at ``time_usec`` [us]."""
+    return NavState(int(time_usec), a[0:4], a[4:7], a[7:10], a[10:13], air_cm_s * 0.01)
+
+
 _F64 = np.dtype(np.float64)
 _RAD_TO_DEG = math.degrees(1.0)  # CPython's math.degrees: x * (180 / pi)
 _DEG_TO_RAD = math.radians(1.0)  # math.radians: x * (pi / 180)
@@ -312,7 +324,7 @@ def _clip(x, lo, hi):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _round_trip_kernel(state, airspeed, lat0, lon0, alt0, r_cos, cos_lat0,
+def round_trip_kernel(state, airspeed, lat0, lon0, alt0, r_cos, cos_lat0,
                        a):  # pragma: no cover - compiled
     """:meth:`HilRoundTrip._python` compiled (the same operations in the same order).
 
@@ -423,7 +435,7 @@ class HilStateEncoder:
 
 @numba.njit(cache=True)
 def encode_state_kernel(state, airspeed, lat0, lon0, alt0, r_cos, out):  # pragma: no cover
-    """:func:`encode_hil_state` compiled (as :func:`_round_trip_kernel`'s encode half).
+    """:func:`encode_hil_state` compiled (as :func:`round_trip_kernel`'s encode half).
 
     Writes the float32-rounded quaternion and rates, then the rounded and clipped lat, lon
     [degE7], alt [mm], vx, vy, vz [cm/s] and airspeed [cm/s] into ``out`` (14,); returns

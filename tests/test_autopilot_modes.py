@@ -228,3 +228,36 @@ def test_non_finite_navigation_holds_the_last_command(ap):
     u2 = ap.step(bad)
     np.testing.assert_array_equal(u, u2)
     assert ap.status().allocation_status == "invalid navigation data"
+
+
+def test_update_outside_the_auto_exit_modes_only_advances_the_clock():
+    """In every mode outside ``AUTO_EXIT_MODES`` ``ModeMachine.update`` does what ``advance``
+    does (the commander calls only that there), whatever its arguments: take-off altitude
+    reached, airspeed above every threshold, timeouts passed, landed."""
+    import copy
+    import itertools
+
+    from vtolftc.firmware_sim.autopilot.interface import FlightMode
+    from vtolftc.firmware_sim.autopilot.modes import AUTO_EXIT_MODES, ModeMachine
+
+    args = [dict(altitude_m=h, takeoff_alt_m=30.0, airspeed_m_s=V, arsp_trans=15.0,
+                 trans_timeout_s=tt, b_trans_arsp=8.0, b_trans_dur_s=tt, landed=landed)
+            for h, V, tt, landed in itertools.product((30.0, 0.0), (0.0, 20.0), (0.0, 1e9),
+                                                      (True, False))]
+    outside = [m for m in FlightMode if m not in AUTO_EXIT_MODES]
+    assert FlightMode.HOVER in outside and FlightMode.FIXED_WING in outside
+    for mode, kw in itertools.product(FlightMode, args):
+        mm = ModeMachine(mode=mode, armed=True, mode_since_usec=0, now_usec=1000)
+        a, b = copy.deepcopy(mm), copy.deepcopy(mm)
+        a.update(50_000_000, **kw)
+        b.advance(50_000_000)
+        if mode in outside:
+            assert a == b, (mode, kw)
+    # each auto-exit mode does leave by itself with some arguments
+    for mode in AUTO_EXIT_MODES:
+        left = False
+        for kw in args:
+            a = ModeMachine(mode=mode, armed=True, now_usec=1000)
+            a.update(50_000_000, **kw)
+            left |= a.mode != mode
+        assert left, mode

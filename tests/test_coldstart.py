@@ -89,7 +89,8 @@ def test_warm_up_visits_every_mode_and_prepares_the_flight_kernels():
     for name in ("allocation.active_set._allocate_step_tracked_packed",  # the ones that fly
                  "control_kernels.scheduled_ppid3_step_packed",
                  "outer_kernels.mc_hold_step", "estimate.estimate_step",
-                 "outer_kernels.outer_aero_step", "outer_kernels.fw_longitudinal_step"):
+                 "outer_kernels.outer_aero_step", "outer_kernels.fw_longitudinal_step",
+                 "outer_kernels.mc_transition_step", "outer_kernels.mc_z_force_step"):
         assert sigs[AP + name], name
 
 

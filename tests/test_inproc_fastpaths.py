@@ -1095,3 +1095,214 @@ def test_fw_longitudinal_kernel_equals_the_python_it_replaces(ds1):
         same = (g_.view(np.int64) == w_.view(np.int64)) | (np.isnan(g_) & np.isnan(w_))
         assert same.all(), (k, got, want)
         fw_i, as_i = want[1], want[3]
+
+
+def _ref_transition(outer, ma, front, ramp, h_ref, h, v_up, V, cos_tilt, fz_aero, g_, ref,
+                    v):
+    """``OuterLoops._outer_mc``'s front / back transition branch as it was in Python
+    (session 15; ``ma`` a copy of the altitude hold): writes ``ref[0:2]`` and ``v[0:2]``,
+    returns the pusher ramp."""
+    af = outer.airframe
+    a_up = ma.update(h_ref, h, v_up, kp_z=g_[0], kp_vz=g_[1], ki_vz=g_[2], v_max_up=g_[3],
+                     v_max_dn=g_[4], v_up_override=None)
+    v[0] = (-af.mass_kg * (af.gravity_m_s2 + a_up) / cos_tilt - fz_aero)
+    fx_cmd = 0.0
+    if front:
+        ref[0] = 0.0
+        ref[1] = 0.0
+        r = ramp + g_[5] * outer.dt
+        ramp = r if r < 1.0 else 1.0
+        fx_cmd = g_[6] * ramp * outer.pusher_max_force(V)
+    else:
+        ref[0] = 0.0
+        ref[1] = 0.0
+    v[1] = fx_cmd
+    return ramp
+
+
+def test_transition_and_z_force_kernels_equal_the_python_they_replace(ds1):
+    """``mc_transition_step`` (front and back transition: altitude law, z force, references,
+    pusher ramp) and ``mc_z_force_step`` (fixed-wing while the lift rotors ramp down, and
+    with a climb-rate override) against the Python they replaced, bit for bit over random
+    steps with the integral and ramp carried on (adversarial values; a NaN need only be NaN,
+    as for ``fw_longitudinal_step``)."""
+    import copy as _copy
+
+    from vtolftc.firmware_sim.autopilot.outer_kernels import mc_transition_step, mc_z_force_step
+
+    outer = Autopilot(ds1).outer
+    rng = np.random.default_rng(24)
+    integral, ramp = 0.1, 0.0
+    for k in range(20000):
+        if k % 400 == 0:  # finite state again after a NaN got in
+            integral, ramp = float(rng.normal(0.0, 1.0)), float(rng.uniform(0.0, 1.2))
+        h_ref, h = float(rng.normal(30.0, 5.0)), _adversarial(rng, 30.0)
+        v_up, V = _adversarial(rng, 3.0), abs(_adversarial(rng, 12.0))
+        cos_tilt = float(rng.uniform(0.5, 1.0)) if k % 9 else _adversarial(rng, 1.0)
+        fz_aero = _adversarial(rng, 50.0)
+        if cos_tilt == 0.0:  # both raise ZeroDivisionError (a flight's is >= 0.5)
+            continue
+        g_ = [float(x) for x in (rng.uniform(0.1, 2.0), rng.uniform(0.5, 5.0),
+                                 rng.uniform(0.0, 2.0), rng.uniform(0.5, 5.0),
+                                 rng.uniform(0.5, 3.0), rng.uniform(0.0, 2.0),
+                                 rng.uniform(0.0, 1.0))]
+        ma = _copy.copy(outer.mc_alt)
+        ma.integral = integral
+        ref_w, v_w = rng.normal(size=3), rng.normal(size=5)
+        ref_g, v_g = ref_w.copy(), v_w.copy()
+        if k % 3 < 2:
+            front = k % 3 == 0
+            ramp_w = _ref_transition(outer, ma, front, ramp, h_ref, h, v_up, V, cos_tilt,
+                                     fz_aero, g_, ref_w, v_w)
+            got = mc_transition_step(v_g, ref_g, outer._consts, outer._pushers, integral,
+                                     h_ref, h, v_up, *g_[:5], cos_tilt, fz_aero, front, ramp,
+                                     g_[5], g_[6], V)
+            want = (ma.integral, ma.v_up_ref, ramp_w)
+        else:  # the z force alone, with or without a climb-rate override (landing)
+            ov = float(rng.normal(0.0, 1.0)) if k % 2 else None
+            a_up = ma.update(h_ref, h, v_up, kp_z=g_[0], kp_vz=g_[1], ki_vz=g_[2],
+                             v_max_up=g_[3], v_max_dn=g_[4], v_up_override=ov)
+            v_w[0] = -ds1.mass_kg * (ds1.gravity_m_s2 + a_up) / cos_tilt - fz_aero
+            got = mc_z_force_step(v_g, outer._consts, integral, h_ref, h, v_up, *g_[:5],
+                                  0.0 if ov is None else ov, ov is not None, cos_tilt,
+                                  fz_aero)
+            want = (ma.integral, ma.v_up_ref)
+        g_a = np.r_[np.array(got), v_g, ref_g]
+        w_a = np.r_[np.array(want), v_w, ref_w]
+        same = (g_a.view(np.int64) == w_a.view(np.int64)) | (np.isnan(g_a) & np.isnan(w_a))
+        assert same.all(), (k, got, want, v_g, v_w)
+        integral = want[0]
+        if len(want) == 3:
+            ramp = want[2]
+
+
+def _session15_outer_mc(orig):
+    """``OuterLoops._outer_mc`` with its front / back transition branch as it was in Python
+    (session 15); the other modes through ``orig``."""
+    def outer_mc(self, mode, nav, yaw, h, v_up, V, cos_tilt, fz_aero):
+        if mode not in (FlightMode.FRONT_TRANSITION, FlightMode.BACK_TRANSITION):
+            return orig(self, mode, nav, yaw, h, v_up, V, cos_tilt, fz_aero)
+        pp, sp = self._p, self.sp
+        ref = sp.ref
+        a_up = self.mc_alt.update(sp.alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
+                                  kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
+                                  ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
+                                  v_max_up=pp["MPC_Z_VEL_MAX_UP"].value,
+                                  v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value, v_up_override=None)
+        sp.v[0] = (-self.airframe.mass_kg * (self.airframe.gravity_m_s2 + a_up) / cos_tilt
+                   - fz_aero)
+        fx_cmd = 0.0
+        pusher_hi = 1.0
+        ref[0] = 0.0
+        ref[1] = 0.0
+        if mode == FlightMode.FRONT_TRANSITION:
+            r = self.pusher_ramp + pp["VT_PSHER_SLEW"].value * self.dt
+            self.pusher_ramp = r if r < 1.0 else 1.0
+            fx_cmd = pp["VT_F_TRANS_THR"].value * self.pusher_ramp * self.pusher_max_force(V)
+        else:
+            pusher_hi = 0.0
+        sp.v[1] = fx_cmd
+        return pusher_hi
+
+    return outer_mc
+
+
+def _session15_outer_fw(orig):
+    """``OuterLoops._outer_fw`` with the lift rotors' z force (before the reserve) as it was
+    in Python (session 15): ``orig`` with the reserve's flag, then the z force on top."""
+
+    def outer_fw(self, nav, roll, pitch, yaw, h, v_up, V, cos_tilt, alpha, lift, drag,
+                 fz_aero, reserve):
+        orig(self, nav, roll, pitch, yaw, h, v_up, V, cos_tilt, alpha, lift, drag, fz_aero,
+             True)  # the lateral, altitude and airspeed loops; v[0] = 0
+        if not reserve:
+            pp, sp = self._p, self.sp
+            a_up = self.mc_alt.update(sp.alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
+                                      kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
+                                      ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
+                                      v_max_up=pp["MPC_Z_VEL_MAX_UP"].value,
+                                      v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value)
+            sp.v[0] = (-self.airframe.mass_kg * (self.airframe.gravity_m_s2 + a_up) / cos_tilt
+                       - fz_aero)
+
+    return outer_fw
+
+
+def test_transition_flight_equals_the_session15_python(ds1, monkeypatch):
+    """Case 1 to 32 s (take-off, hover, front transition, fixed-wing with the lift rotors
+    ramping down and then the reserve, the faults at 22 s): every step's commands equal, bit
+    for bit, to a flight whose outer loops run the Python the transition and z-force kernels
+    replaced (which parameter goes where included)."""
+    import hashlib
+
+    from vtolftc.firmware_sim.autopilot.outer_loops import OuterLoops
+    from vtolftc.runners.scenario import paper_scenario, run_scenario
+
+    def fly():
+        h, modes = hashlib.sha256(), []
+
+        def setup(ap):
+            step = ap.step
+            moved = set()
+
+            def rec(nav):
+                # altitude steps on entering the transition (up) and fixed-wing (down): the
+                # climb and descent limits bind there (each parameter must reach its place)
+                m = ap.modes.mode
+                if m in (FlightMode.FRONT_TRANSITION, FlightMode.FIXED_WING) \
+                        and m not in moved:
+                    moved.add(m)
+                    ap.setpoints.alt_ref += 15.0 if m is FlightMode.FRONT_TRANSITION else -25.0
+                u = step(nav)
+                h.update(u.tobytes())
+                modes.append((ap.modes.mode, ap.output._fw_reserve))
+                return u
+
+            ap.step = rec
+
+        run_scenario(paper_scenario("1", 32.0), "gs-shif", autopilot_setup=setup)
+        return h.hexdigest(), modes
+
+    now, modes = fly()
+    monkeypatch.setattr(OuterLoops, "_outer_mc", _session15_outer_mc(OuterLoops._outer_mc))
+    monkeypatch.setattr(OuterLoops, "_outer_fw", _session15_outer_fw(OuterLoops._outer_fw))
+    then, modes_then = fly()
+    assert modes == modes_then
+    assert (FlightMode.FRONT_TRANSITION, False) in modes
+    assert (FlightMode.FIXED_WING, False) in modes and (FlightMode.FIXED_WING, True) in modes
+    assert now == then
+
+
+def test_allocate_tracked_v_tail_equals_writing_v_first(ds1):
+    """``allocate_tracked(..., v_tail=tau)`` (the output stage's ``v[2:] = tau`` inside the
+    compiled call) against ``v[2:] = tau`` in Python and then ``allocate_tracked``: the same
+    ``v``, command, status, mask, ``(B u)[0]`` and warm start, step after step, over random
+    problems with stale entries in ``v``'s tail, infeasible demands and a non-finite moment
+    (the invalid-input path reads the written ``v``)."""
+    ap = Autopilot(ds1)
+    one: ActiveSetAllocator = ap.output.allocator
+    two: ActiveSetAllocator = Autopilot(ds1).output.allocator
+    eff = EffectivenessModel(ds1)
+    rng = np.random.default_rng(16)
+    n_u = one.n_u
+    u1, u2 = np.empty(n_u), np.empty(n_u)
+    statuses = set()
+    for k in range(300):
+        B = eff.matrix_on_grid(float(rng.choice([0.0, 7.3, 17.9])), 0.1)
+        v = np.array([-ds1.weight_N, 5.0, 0.0, 0.0, 0.0]) + rng.normal(0, 1, 5) * [
+            60.0, 20.0, 15.0, 15.0, 5.0] * (4.0 if k % 11 == 5 else 1.0)
+        if k == 150:
+            v[3] = np.nan
+        hi = np.ones(n_u)
+        hi[: ap.n_rotors] = float(rng.choice([1.0, 0.6]))
+        pref = ap.u_pref_mc if k % 2 else ap.u_pref_fw
+        v2 = v.copy()
+        v2[2:] = rng.normal(0, 100.0, 3) if k % 3 else np.nan  # stale tail
+        a = one.allocate_tracked(v, B, hi, pref, u1, 2, 0.02, 0.03)
+        b = two.allocate_tracked(v2, B, hi, pref, u2, 2, 0.02, 0.03, v_tail=v[2:].copy())
+        statuses.add(a[0])
+        assert np.array(a).tobytes() == np.array(b).tobytes(), k
+        assert v2.tobytes() == v.tobytes() and u2.tobytes() == u1.tobytes(), k
+        assert one._wsx.tobytes() == two._wsx.tobytes(), k
+    assert len(statuses) >= 2  # a solved step and the invalid input at least
+    assert one.stats.counts == two.stats.counts

@@ -24,7 +24,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
     NavState,
     ParameterStore,
 )
-from vtolftc.firmware_sim.autopilot.modes import ModeMachine
+from vtolftc.firmware_sim.autopilot.modes import AUTO_EXIT_MODES, ModeMachine
 from vtolftc.firmware_sim.autopilot.navigator import MS_COMPLETE, NavMode
 from vtolftc.firmware_sim.autopilot.outer_loops import OuterLoops
 from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
@@ -249,14 +249,17 @@ class Commander:
             else:
                 self._landed_timer = 0.0
             landed = self._landed_timer > 1.0
-        dl = self.outer.degraded
-        m.update(self.est.time_usec, altitude_m=h, takeoff_alt_m=self.sp.takeoff_alt,
-                 airspeed_m_s=V, arsp_trans=pp["VT_ARSP_TRANS"].value,
-                 # (hover_recoverable() is True while not active: no call then)
-                 trans_timeout_s=(pp["VT_TRANS_TMOUT"].value
-                                  if not dl.active or dl.hover_recoverable() else math.inf),
-                 b_trans_arsp=pp["VT_B_TRANS_ARSP"].value,
-                 b_trans_dur_s=pp["VT_B_TRANS_DUR"].value, landed=landed)
+        if m.mode in AUTO_EXIT_MODES:
+            dl = self.outer.degraded
+            m.update(self.est.time_usec, altitude_m=h, takeoff_alt_m=self.sp.takeoff_alt,
+                     airspeed_m_s=V, arsp_trans=pp["VT_ARSP_TRANS"].value,
+                     # (hover_recoverable() is True while not active: no call then)
+                     trans_timeout_s=(pp["VT_TRANS_TMOUT"].value
+                                      if not dl.active or dl.hover_recoverable() else math.inf),
+                     b_trans_arsp=pp["VT_B_TRANS_ARSP"].value,
+                     b_trans_dur_s=pp["VT_B_TRANS_DUR"].value, landed=landed)
+        else:  # no automatic change in this mode: its parameters and arguments unread
+            m.advance(self.est.time_usec)
         mode = m.mode
         if mode != self.last_mode:
             self._enter_mode(mode, self.last_mode, nav, pitch)

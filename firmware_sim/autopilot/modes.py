@@ -38,6 +38,7 @@ from vtolftc.firmware_sim.autopilot.interface import (
 )
 
 __all__ = [
+    "AUTO_EXIT_MODES",
     "MC_MODES",
     "PX4_MAIN",
     "PX4_SUB_AUTO",
@@ -54,6 +55,12 @@ MC_MODES = frozenset({FlightMode.TAKEOFF, FlightMode.HOVER, FlightMode.LAND})
 PX4_MAIN = {"MANUAL": 1, "ALTCTL": 2, "POSCTL": 3, "AUTO": 4, "ACRO": 5, "OFFBOARD": 6,
             "STABILIZED": 7}
 PX4_SUB_AUTO = {"READY": 1, "TAKEOFF": 2, "LOITER": 3, "MISSION": 4, "RTL": 5, "LAND": 6}
+
+#: Modes that :meth:`ModeMachine.update` may leave by itself (take-off altitude reached,
+#: transition complete or timed out, back transition complete, landed); in the others its
+#: step only advances the clock (:meth:`ModeMachine.advance`).
+AUTO_EXIT_MODES = frozenset({FlightMode.TAKEOFF, FlightMode.FRONT_TRANSITION,
+                             FlightMode.BACK_TRANSITION, FlightMode.LAND})
 
 TAKEOFF_TOL_M = 0.5
 
@@ -203,10 +210,16 @@ class ModeMachine:
         return CommandResult.ACCEPTED
 
     # -- automatic changes --------------------------------------------------------------------
+    def advance(self, now_usec: int) -> None:
+        """:meth:`update` in a mode outside :data:`AUTO_EXIT_MODES`, where it does nothing
+        but this: the clock set to ``now_usec`` [us]."""
+        self.now_usec = int(now_usec)
+
     def update(self, now_usec: int, *, altitude_m: float, takeoff_alt_m: float,
                airspeed_m_s: float, arsp_trans: float, trans_timeout_s: float,
                b_trans_arsp: float, b_trans_dur_s: float, landed: bool) -> None:
-        """Advance the timers and take the automatic transitions of the table above."""
+        """Advance the timers and take the automatic transitions of the table above (only in
+        :data:`AUTO_EXIT_MODES`; in the other modes this is :meth:`advance`)."""
         self.now_usec = int(now_usec)
         m = self.mode
         if m == _M_TAKEOFF and abs(altitude_m - takeoff_alt_m) < TAKEOFF_TOL_M:

@@ -11,7 +11,10 @@
   :meth:`.outer_loops.OuterLoops.update`, into a small output array.
 - :func:`fw_longitudinal_step` (with :func:`pusher_force` and
   :func:`.altitude.fw_altitude_law`): the fixed-wing altitude and airspeed loops.
-- :func:`mc_hold_step`: TAKEOFF, HOVER and LAND's altitude law, z force and position hold.
+- :func:`mc_hold_step`: TAKEOFF, HOVER and LAND's altitude law, z force and position hold;
+  :func:`mc_transition_step`: the front and back transitions' altitude law, z force and
+  pusher ramp; :func:`mc_z_force_step`: the altitude law and z force of both (and of
+  FIXED_WING while the lift rotors ramp down).
 - :func:`position_hold_step`: the multicopter position hold of
   :meth:`.outer_loops.OuterLoops._position_hold` (brake, lock, then a P position / P velocity
   cascade to tilt references), the same expressions in the same order.
@@ -29,7 +32,8 @@ import numba
 from vtolftc.firmware_sim.autopilot.altitude import fw_altitude_law, mc_altitude_law
 
 __all__ = ["aero_lift_drag", "fw_longitudinal_step", "hypot2", "mc_hold_step",
-           "outer_aero_step", "position_hold_step", "pusher_force"]
+           "mc_transition_step", "mc_z_force_step", "outer_aero_step", "position_hold_step",
+           "pusher_force"]
 
 _VELTKAMP = 134217729.0  # 2**27 + 1
 
@@ -261,6 +265,44 @@ def fw_longitudinal_step(pushers, c, h_ref, h, v_up, V, pitch, alpha, lift, drag
 
 
 @numba.njit(cache=True)
+def mc_z_force_step(v, c, integral, h_ref, h, v_up, kp_z, kp_vz, ki_vz, v_max_up, v_max_dn,
+                    override, use_override, cos_tilt, fz_aero):  # pragma: no cover - compiled
+    """The multicopter altitude law (:func:`.altitude.mc_altitude_law` with the hold's
+    constants from ``c``, see :func:`mc_hold_step`) and the body z force it asks of the lift
+    rotors, ``v[0] = -m (g + a_up) / cos_tilt - fz_aero`` [N]; returns ``(integral,
+    v_up_ref)``."""
+    a_up, integral, v_ref = mc_altitude_law(integral, c[4], c[5], c[6], c[7], h_ref, h, v_up,
+                                            kp_z, kp_vz, ki_vz, v_max_up, v_max_dn, override,
+                                            use_override)
+    v[0] = -c[0] * (c[1] + a_up) / cos_tilt - fz_aero
+    return integral, v_ref
+
+
+@numba.njit(cache=True)
+def mc_transition_step(v, ref, c, pushers, integral, h_ref, h, v_up, kp_z, kp_vz, ki_vz,
+                       v_max_up, v_max_dn, cos_tilt, fz_aero, front, ramp, slew, thr,
+                       V):  # pragma: no cover - compiled
+    """The outer loops of FRONT_TRANSITION (``front``) and BACK_TRANSITION in one call
+    (:meth:`.outer_loops.OuterLoops._outer_mc`): the altitude law and z force
+    (:func:`mc_z_force_step`, no climb-rate override), roll and pitch references 0
+    (``ref[0:2]``) and the pushers' force ``v[1]`` [N]: in the front transition
+    ``thr * ramp * pusher_force(pushers, V)`` with the ramp advanced by ``slew`` [1/s] over
+    one period (``c[2]``) up to 1 (``VT_PSHER_SLEW``, ``VT_F_TRANS_THR``), else 0. Returns
+    ``(integral, v_up_ref, ramp)``."""
+    integral, v_ref = mc_z_force_step(v, c, integral, h_ref, h, v_up, kp_z, kp_vz, ki_vz,
+                                      v_max_up, v_max_dn, 0.0, False, cos_tilt, fz_aero)
+    ref[0] = 0.0
+    ref[1] = 0.0
+    fx = 0.0
+    if front:
+        r = ramp + slew * c[2]
+        ramp = r if r < 1.0 else 1.0  # min(1.0, r)
+        fx = thr * ramp * pusher_force(pushers, V)
+    v[1] = fx
+    return integral, v_ref, ramp
+
+
+@numba.njit(cache=True)
 def mc_hold_step(pos, vel, hold_ne, ref, v, c, locked, integral, h_ref, h, v_up, kp_z, kp_vz,
                  ki_vz, v_max_up, v_max_dn, override, use_override, cos_tilt, fz_aero, kp_xy,
                  vmax_xy, kv_xy, yaw, tilt_max_deg):  # pragma: no cover - compiled
@@ -276,10 +318,9 @@ def mc_hold_step(pos, vel, hold_ne, ref, v, c, locked, integral, h_ref, h, v_up,
     (``MPC_XY_P``, ``MPC_XY_VEL_MAX``, ``MPC_XY_VEL_P_ACC``, ``yaw``, ``MPC_TILTMAX_AIR``) as
     in those functions. Returns ``(locked, integral, v_up_ref)``.
     """
-    a_up, integral, v_ref = mc_altitude_law(integral, c[4], c[5], c[6], c[7], h_ref, h, v_up,
-                                            kp_z, kp_vz, ki_vz, v_max_up, v_max_dn, override,
-                                            use_override)
-    v[0] = -c[0] * (c[1] + a_up) / cos_tilt - fz_aero
+    integral, v_ref = mc_z_force_step(v, c, integral, h_ref, h, v_up, kp_z, kp_vz, ki_vz,
+                                      v_max_up, v_max_dn, override, use_override, cos_tilt,
+                                      fz_aero)
     locked = position_hold_step(pos, vel, hold_ne, ref, locked, kp_xy, vmax_xy, kv_xy, c[1],
                                 yaw, tilt_max_deg)
     v[1] = 0.0

@@ -32,6 +32,8 @@ from vtolftc.firmware_sim.autopilot.outer_kernels import (
     aero_lift_drag,
     fw_longitudinal_step,
     mc_hold_step,
+    mc_transition_step,
+    mc_z_force_step,
     outer_aero_step,
     pusher_force,
 )
@@ -182,27 +184,16 @@ class OuterLoops:
                 pp["MPC_XY_VEL_MAX"].value, pp["MPC_XY_VEL_P_ACC"].value, yaw,
                 pp["MPC_TILTMAX_AIR"].value)
             return 0.0
-        a_up = self.mc_alt.update(sp.alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
-                                  kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
-                                  ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
-                                  v_max_up=vmax_up, v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value,
-                                  v_up_override=override)
-        sp.v[0] = (-self.airframe.mass_kg * (self.airframe.gravity_m_s2 + a_up) / cos_tilt
-                   - fz_aero)
-        fx_cmd = 0.0
-        pusher_hi = 1.0
-        if mode == _M_FRONT_TRANSITION:
-            ref[0] = 0.0
-            ref[1] = 0.0
-            r = self.pusher_ramp + pp["VT_PSHER_SLEW"].value * self.dt
-            self.pusher_ramp = r if r < 1.0 else 1.0  # min(1.0, r)
-            fx_cmd = pp["VT_F_TRANS_THR"].value * self.pusher_ramp * self.pusher_max_force(V)
-        else:  # BACK_TRANSITION
-            ref[0] = 0.0
-            ref[1] = 0.0
-            pusher_hi = 0.0
-        sp.v[1] = fx_cmd
-        return pusher_hi
+        # FRONT_TRANSITION, BACK_TRANSITION: the altitude hold, the z force, roll and pitch 0
+        # and the pushers' ramp (front) or none (back) in one compiled call, the same bits
+        ma = self.mc_alt
+        front = mode is _M_FRONT_TRANSITION
+        ma.integral, ma.v_up_ref, self.pusher_ramp = mc_transition_step(
+            sp.v, ref, self._consts, self._pushers, ma.integral, sp.alt_ref, h, v_up,
+            pp["MPC_Z_P"].value, pp["MPC_Z_VEL_P_ACC"].value, pp["MPC_Z_VEL_I_ACC"].value,
+            vmax_up, pp["MPC_Z_VEL_MAX_DN"].value, cos_tilt, fz_aero, front, self.pusher_ramp,
+            pp["VT_PSHER_SLEW"].value, pp["VT_F_TRANS_THR"].value, V)
+        return 1.0 if front else 0.0
 
     def _degraded_lift(self, h: float, v_up: float, V: float, pitch: float, alpha: float,
                        cos_tilt: float, lift: float, drag: float) -> None:
@@ -235,8 +226,6 @@ class OuterLoops:
         pp = self._p
         sp = self.sp
         ref = sp.ref
-        mass = self.airframe.mass_kg
-        g = self.airframe.gravity_m_s2
         lateral = self.navigator.fw_lateral(nav, roll, yaw, V)
         if lateral is None:
             ref[0] = 0.0
@@ -251,13 +240,13 @@ class OuterLoops:
             pp["FW_CLMB_MAX"].value, pp["FW_SINK_MAX"].value, pp["FW_P_LIM_MIN"].value,
             pp["FW_P_LIM_MAX"].value, self.navigator.airspeed_setpoint(),
             pp["FW_AIRSPD_P"].value, pp["FW_AIRSPD_I"].value, self.airspeed_int)
-        if not reserve:
-            a_up = self.mc_alt.update(sp.alt_ref, h, v_up, kp_z=pp["MPC_Z_P"].value,
-                                      kp_vz=pp["MPC_Z_VEL_P_ACC"].value,
-                                      ki_vz=pp["MPC_Z_VEL_I_ACC"].value,
-                                      v_max_up=pp["MPC_Z_VEL_MAX_UP"].value,
-                                      v_max_dn=pp["MPC_Z_VEL_MAX_DN"].value)
-            sp.v[0] = -mass * (g + a_up) / cos_tilt - fz_aero
+        if not reserve:  # the lift rotors' altitude hold and z force, compiled
+            ma = self.mc_alt
+            ma.integral, ma.v_up_ref = mc_z_force_step(
+                sp.v, c, ma.integral, sp.alt_ref, h, v_up, pp["MPC_Z_P"].value,
+                pp["MPC_Z_VEL_P_ACC"].value, pp["MPC_Z_VEL_I_ACC"].value,
+                pp["MPC_Z_VEL_MAX_UP"].value, pp["MPC_Z_VEL_MAX_DN"].value, 0.0, False,
+                cos_tilt, fz_aero)
         else:
             sp.v[0] = 0.0
 

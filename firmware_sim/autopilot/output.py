@@ -179,7 +179,6 @@ class OutputStage:
             B = self._B
         u = self.u
         v = self.sp.v
-        v[2:] = tau
         hi = self._hi
         if rotor_hi != self._hi_key[0] or pusher_hi != self._hi_key[1]:  # rarely changes
             hi[: self.n_rotors] = rotor_hi
@@ -190,18 +189,20 @@ class OutputStage:
             (self.allocator_fw if reserve else self.allocator).reset(u)
             self._fw_reserve = reserve
         alloc = self.allocator_fw if reserve else self.allocator
-        if type(alloc) is ActiveSetAllocator and "allocate" not in alloc.__dict__:
-            # allocate(v, B, u_max=hi, u_pref=u_pref) and _track_saturation(v, B u) in one
-            # compiled call, the command written into u (the arrays here are the kernel's
-            # types by construction); bit for bit the same
+        if type(alloc) is ActiveSetAllocator and "allocate" not in alloc.__dict__ \
+                and type(tau) is np.ndarray:
+            # v[2:] = tau, allocate(v, B, u_max=hi, u_pref=u_pref) and _track_saturation(v,
+            # B u) in one compiled call, the command written into u (the arrays here are the
+            # kernel's types by construction); bit for bit the same
             status, mask, self.fz_achieved = alloc.allocate_tracked(
-                v, B, hi, u_pref, u, 2, _SAT_ATOL, _SAT_RTOL)
+                v, B, hi, u_pref, u, 2, _SAT_ATOL, _SAT_RTOL, v_tail=tau)
             self.fz_cmd = v.item(0)
             self.sat_hi, self.sat_lo = _SAT_FLAGS[mask]
             self.sat_mask = mask
             if mask:
                 self.saturated_steps += 1
         else:  # an allocator (or its allocate) replaced by a benchmark or a test
+            v[2:] = tau
             res = alloc.allocate(v, B, u_max=hi, u_pref=u_pref)
             status = res.status
             self._track_saturation(v, res.v_achieved)

@@ -64,7 +64,7 @@ def _take_and_step(src, x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm,
 
 
 @numba.njit(cache=True)
-def _take_and_step_packed(src, ws, stuck, n, dt, buf, layout, flags,
+def take_and_step_packed(src, ws, stuck, n, dt, buf, layout, flags,
                           wire):  # pragma: no cover - compiled
     """:func:`_take_and_step` on the vehicle's own float arrays packed into one workspace
     ``ws`` (``Vehicle._pack``: ``x``, ``u``, ``eff``, ``wind``, ``fm``, then ``memo``; ``x``
@@ -75,11 +75,19 @@ def _take_and_step_packed(src, ws, stuck, n, dt, buf, layout, flags,
     numbers: the same bits."""
     if wire:
         src = wire_round(src)
-    na = src.size
+    x, u, eff, wind, fm, memo = packed_views(ws, src.size)
+    return _take_and_step(src, x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm, memo)
+
+
+@numba.njit(cache=True)
+def packed_views(ws, na):  # pragma: no cover - compiled
+    """The views ``x``, ``u``, ``eff``, ``wind``, ``fm``, ``memo`` of the workspace ``ws``
+    (``Vehicle._WS_PARTS``' layout for ``na`` actuators: ``x`` has ``N_RIGID + na`` entries,
+    ``wind`` 3, ``fm`` 9)."""
     ie = dyn.N_RIGID + 2 * na  # eff
     iw = ie + na  # wind
-    return _take_and_step(src, ws[0:ie - na], ws[ie - na:ie], ws[ie:iw], stuck, n, dt, buf,
-                          layout, ws[iw:iw + 3], flags, ws[iw + 3:iw + 12], ws[iw + 12:])
+    return (ws[0:ie - na], ws[ie - na:ie], ws[ie:iw], ws[iw:iw + 3], ws[iw + 3:iw + 12],
+            ws[iw + 12:])
 
 
 @dataclass(frozen=True)
@@ -195,7 +203,7 @@ class Vehicle:
         return self.x.copy()
 
     _WS_PARTS = ("x", "u", "eff", "wind", "fm", "_memo")
-    """The float arrays that are views of ``_vws``, in :func:`_take_and_step_packed`'s
+    """The float arrays that are views of ``_vws``, in :func:`take_and_step_packed`'s
     order."""
 
     def _pack(self) -> None:
@@ -346,15 +354,12 @@ class Vehicle:
         """Hold ``commands`` (or the previous ones if None) for ``n`` physics steps; with
         ``wire`` the commands as HIL_ACTUATOR_CONTROLS carries them
         (:func:`~vtolftc.protocols.hil.wire_commands` of them, float32)."""
-        pa = self._packed_args
-        if (type(commands) is np.ndarray and commands.dtype is _F64
-                and commands.shape == self.u.shape and not self._gusty and not self._pending
-                and n > 0 and pa[0] is self.packed):
+        args = self.control_step_args(commands) if n > 0 else None
+        if args is not None:
             # the common case of a control step: the commands taken and the whole batch
             # flown in one compiled call (the branches below, the same kernels)
-            if not _take_and_step_packed(commands, self._vws, self.stuck, int(n),
-                                         self.dt_usec * 1e-6, pa[1], pa[2], self.physics,
-                                         wire):
+            if not take_and_step_packed(commands, args[0], args[1], int(n), args[2],
+                                         args[3], args[4], args[5], wire):
                 raise ValueError("commands contain NaN or inf: expected finite values")
             self.time_usec += int(n) * self.dt_usec
             return
@@ -398,6 +403,21 @@ class Vehicle:
             self.time_usec += batch * self.dt_usec
             remaining -= batch
         self._apply_due_faults()
+
+    def control_step_args(self, commands: object) -> tuple | None:
+        """The arguments after ``src`` and ``n`` of :func:`take_and_step_packed` with which
+        :meth:`step` flies ``commands`` in one compiled call: ``(ws, stuck, dt [s], buf,
+        layout, flags)``; None when it cannot (commands not float64 of the vehicle's shape,
+        gusts, a fault pending, the airframe's flattened arrays not current). For a caller
+        that fuses that kernel into its own compiled call (the in-process runner): after such
+        a call that returned True, it advances ``time_usec`` by ``n * dt_usec`` as
+        :meth:`step` does."""
+        pa = self._packed_args
+        if (type(commands) is np.ndarray and commands.dtype is _F64
+                and commands.shape == self.u.shape and not self._gusty and not self._pending
+                and pa[0] is self.packed):
+            return self._vws, self.stuck, self.dt_usec * 1e-6, pa[1], pa[2], self.physics
+        return None
 
     def _step_gusty(self, n: int, dt: float, buf: np.ndarray, lay: np.ndarray) -> None:
         """``n`` physics steps one at a time, the wind field evaluated at the start of each

@@ -21,6 +21,12 @@ ceil(hil_delay_s x control rate) control steps earlier (a FIFO; 25 ms at 250 Hz 
 28 ms; the first steps of the run see the oldest state there is; telemetry and metrics keep
 the current state). Actions due at a control step are executed before that step's
 ``Autopilot.step``.
+
+Without observers, state noise or HIL delay, what a step does after ``Autopilot.step`` is
+one compiled call (:func:`~vtolftc.runners.inproc_kernel.runner_tail_step`): the metrics'
+sample, the vehicle's physics steps and the next step's HIL round trip, the same kernels in
+the same order (so ``RunResult.timing_s``' ``physics`` then holds the metrics and the round
+trip too, and ``encode_decode`` only what is left of it).
 """
 
 from __future__ import annotations
@@ -50,7 +56,8 @@ from vtolftc.firmware_sim.autopilot.interface import (
 from vtolftc.firmware_sim.vehicle.faults import Fault, case_description, case_faults
 from vtolftc.firmware_sim.vehicle.model import Vehicle
 from vtolftc.firmware_sim.vehicle.sensors import Home
-from vtolftc.protocols.hil import HilRoundTrip
+from vtolftc.protocols.hil import HilRoundTrip, nav_of_round_trip
+from vtolftc.runners.inproc_kernel import runner_tail_step
 from vtolftc.telemetry import RunObserver, TelemetrySample, VehicleTruth
 from vtolftc.telemetry.metrics import MetricsAccumulator
 
@@ -158,6 +165,40 @@ class RunResult:
         return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else math.inf
 
 
+def _run_due_actions(actions: Sequence[Action], act_usec: Sequence[int], i: int, now: int,
+                     ap: Autopilot, veh: Vehicle,
+                     event: Callable[[int, str, str], None]) -> int:
+    """Execute ``actions[i:]`` due at ``now`` [us] (``act_usec``: their times [us]) on the
+    autopilot (commands) and the vehicle (faults), each reported through ``event``; returns
+    the index of the first action not yet due."""
+    while i < len(actions) and act_usec[i] <= now:
+        a = actions[i]
+        i += 1
+        if a.kind == "command":
+            res = ap.command(a.command_id, a.params)
+            event(now, "command", f"{a.label}: command {a.command_id} -> "
+                  f"{CommandResult(res).name}")
+        elif a.kind == "fault" and a.fault is not None:
+            veh.inject(a.fault)
+            event(now, "fault", f"injected {a.fault.describe()}")
+    return i
+
+
+def _observe(now: int, nav: NavState, ap: Autopilot, veh: Vehicle, acc: MetricsAccumulator,
+             obs: Sequence[RunObserver]) -> bool:
+    """The step's :class:`TelemetrySample` (the autopilot's status, the vehicle's truth) to
+    the metrics and every observer; returns :attr:`MetricsAccumulator.crashed`."""
+    x = veh.x
+    truth = VehicleTruth(x[0:3].copy(), x[3:6].copy(), x[6:10].copy(),
+                         np.array(veh.euler_rad), x[10:13].copy(), float(veh.fm[6]),
+                         veh.actuator_positions, veh.effectiveness)
+    sample = TelemetrySample(now, nav, ap.status(), truth)
+    acc.add(sample)
+    for o in obs:
+        o.on_sample(sample)
+    return acc.crashed
+
+
 def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                  airframe: Airframe | None = None, gains_dir: str | Path | None = None,
                  observers: Sequence[RunObserver] = (), physics_hz: int = 1000,
@@ -229,30 +270,31 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
     n_steps = round(scenario.duration_s * control_hz)
     t_phys = t_enc = t_ap = t_obs = 0.0
     pc = time.perf_counter
+    # the metrics' sample, the vehicle's step and the next step's HIL round trip in one
+    # compiled call (runner_tail_step) when nothing else needs the state between them
+    fuse = not obs and not noisy and not n_delay
+    nav_next: NavState | None = None  # the fused call's round trip, for the next step
     wall0 = pc()
     n_events = 0
     try:
         for _ in range(n_steps):
             now = veh.time_usec
-            while next_usec is not None and next_usec <= now:
-                a = actions[i_act]
-                i_act += 1
+            if next_usec is not None and next_usec <= now:
+                i_act = _run_due_actions(actions, act_usec, i_act, now, ap, veh, event)
                 next_usec = act_usec[i_act] if i_act < len(act_usec) else None
-                if a.kind == "command":
-                    res = ap.command(a.command_id, a.params)
-                    event(now, "command", f"{a.label}: command {a.command_id} -> "
-                          f"{CommandResult(res).name}")
-                elif a.kind == "fault" and a.fault is not None:
-                    veh.inject(a.fault)
-                    event(now, "fault", f"injected {a.fault.describe()}")
             t0 = pc()
             x = veh.x
-            if noisy:
-                xe, air = veh.estimated_state()
+            if nav_next is not None:  # computed by the last step's fused call
+                nav = nav_next
+                nav_next = None
             else:
-                xe, air = x, float(veh.fm[6])
-            # exactly decode_hil_state(encode_hil_state(...)): what a SITL autopilot receives
-            nav = round_trip(now, xe, air)
+                if noisy:
+                    xe, air = veh.estimated_state()
+                else:
+                    xe, air = x, float(veh.fm[6])
+                # exactly decode_hil_state(encode_hil_state(...)): what a SITL autopilot
+                # receives
+                nav = round_trip(now, xe, air)
             nav_ap = nav
             if n_delay:  # the autopilot sees the delayed state, telemetry the current one
                 fifo.append(nav)
@@ -267,20 +309,33 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                 warn = "quad-chute" in text or "denied" in text or "forced" in text
                 event(te, "warning" if warn else "mode", text)
             if obs:
-                st = ap.status()
-                truth = VehicleTruth(x[0:3].copy(), x[3:6].copy(), x[6:10].copy(),
-                                     np.array(veh.euler_rad), x[10:13].copy(),
-                                     float(veh.fm[6]), veh.actuator_positions,
-                                     veh.effectiveness)
-                sample = TelemetrySample(now, nav, st, truth)
-                acc.add(sample)
-                for o in obs:
-                    o.on_sample(sample)
-                crashed = acc.crashed
+                crashed = _observe(now, nav, ap, veh, acc, obs)
+                t3 = pc()
+                veh.step(u, n_sub, wire=True)  # the commands as wire_commands(u) carries them
             else:  # nobody reads the status: the metrics take its fields directly
-                crashed = acc.add_step(now, nav, *ap.metrics_inputs(nav))
-            t3 = pc()
-            veh.step(u, n_sub, wire=True)  # the commands as wire_commands(u) carries them
+                mode, armed, ref, alt_ref, euler = ap.metrics_inputs(nav)
+                args = veh.control_step_args(u) if fuse and euler is not None else None
+                r = 0
+                if args is not None:  # the metrics, the vehicle, the next round trip: one call
+                    t3 = t2
+                    s_m, tail = acc.kernel_arrays
+                    a = np.empty(14)
+                    r = runner_tail_step(s_m, tail, now, nav.pos_ned_m, *euler, int(mode),
+                                         armed, ref, alt_ref, nav.airspeed_m_s, u, args[0],
+                                         args[1], n_sub, args[2], args[3], args[4], args[5],
+                                         round_trip.kernel_home, a)
+                    if 0 < r < 3:  # flown
+                        veh.time_usec += n_sub * veh.dt_usec
+                        crashed = r == 2
+                        air_cm_s = a.item(13)
+                        if air_cm_s >= 0:  # else the next step's round_trip raises the error
+                            nav_next = nav_of_round_trip(veh.time_usec, a, air_cm_s)
+                    elif r:  # non-finite commands, nothing flown: the vehicle raises its error
+                        veh.step(u, n_sub, wire=True)
+                if not r:  # the separate calls (not fused, or the metrics' tail ring is full)
+                    crashed = acc.add_step(now, nav, mode, armed, ref, alt_ref, euler)
+                    t3 = pc()
+                    veh.step(u, n_sub, wire=True)  # the commands as wire_commands(u) carries
             t4 = pc()
             t_enc += t1 - t0
             t_ap += t2 - t1

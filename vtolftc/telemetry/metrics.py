@@ -80,6 +80,15 @@ class MetricsAccumulator:
         self._s = mk.new_state(self.window_start_s)
         self._tail = np.zeros((_TAIL_CAPACITY, 4))
 
+    @property
+    def kernel_arrays(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(state, tail)``, the arrays :meth:`add_step` hands
+        :func:`~vtolftc.telemetry.metrics_kernel.metrics_step`, for a caller that fuses that
+        kernel into its own compiled call (the in-process runner); when the kernel answers 0
+        (the tail ring full, nothing changed) that caller calls :meth:`add_step`, which grows
+        the ring. Read them again before each call (growing replaces the tail)."""
+        return self._s, self._tail
+
     # the running values under the names the accumulator has always offered
     @property
     def n(self) -> int:

@@ -67,6 +67,7 @@ from vtolftc.firmware_sim.autopilot.allocation.wls import (
 __all__ = ["ActiveSetAllocator", "box_qp"]
 
 _perf_counter = time.perf_counter
+_NO_TAIL = np.empty(0)  # allocate_tracked's default v_tail: nothing copied into v
 
 
 # one compiled loop the JIT optimises as a whole: splitting it would cost calls per iteration
@@ -325,11 +326,15 @@ def _allocate_step_tracked(v, B, pref, umax_in, cst, has_prev, has_rate, dt, ws,
 
 @numba.njit(cache=True)
 def _allocate_step_tracked_packed(v, B, pref, umax_in, wsx, n_ws, has_prev, has_rate, dt, iws,
-                                  max_iter, tol, u_out, first, atol, rtol):
+                                  max_iter, tol, u_out, first, atol, rtol, tail):
     """:func:`_allocate_step_tracked` with its ``ws``, ``cst`` and ``ubuf`` as consecutive
     parts of one array ``wsx`` (``ws`` its first ``n_ws`` entries, then ``cst`` (3, n_u),
     then ``ubuf`` (n_u); ``ActiveSetAllocator._pack``): 7 array arguments instead of 9, the
-    same kernel on views of the same numbers."""
+    same kernel on views of the same numbers; ``tail`` is first copied into the last entries
+    of ``v`` (the output stage's moment demand; empty: ``v`` as given)."""
+    nt = tail.size
+    for i in range(nt):
+        v[v.size - nt + i] = tail[i]
     n_u = B.shape[1]
     ws = wsx[0:n_ws]
     cst = wsx[n_ws:n_ws + 3 * n_u].reshape((3, n_u))
@@ -574,7 +579,8 @@ class ActiveSetAllocator(WLSAllocator):
 
     def allocate_tracked(self, v: np.ndarray, B: np.ndarray, u_max: np.ndarray,
                          u_pref: np.ndarray, u_out: np.ndarray, first: int, atol: float,
-                         rtol: float) -> tuple[int, int, float]:
+                         rtol: float, *, v_tail: np.ndarray = _NO_TAIL
+                         ) -> tuple[int, int, float]:
         """:meth:`allocate_trusted` with the command written into ``u_out`` and, instead of
         ``B u``, what the output stage reads of it: one compiled call
         (:func:`_allocate_step_tracked`) on a converged step.
@@ -587,6 +593,9 @@ class ActiveSetAllocator(WLSAllocator):
             (n_u,) float64: receives the command ``u`` (normalised units).
         first, atol, rtol
             :func:`~.interface.shortfall_mask`'s, applied to ``v`` and ``B u``.
+        v_tail : numpy.ndarray, optional
+            (k,) float64, copied into ``v[-k:]`` before anything reads ``v`` (the output
+            stage's moment demand, written by the same compiled call).
 
         Returns
         -------
@@ -605,7 +614,7 @@ class ActiveSetAllocator(WLSAllocator):
         code, ok, it, mask, fz = _allocate_step_tracked_packed(
             v, Bk, u_pref, u_max, self._wsx, self._n_ws, last is not None,
             self.rate_limit is not None, self.dt, self._iws, self.max_iter, self.tol, u_out,
-            first, atol, rtol)
+            first, atol, rtol, v_tail)
         if code < 0 or not ok:
             u_res, va, status = self._unconverged(code, it, v, B, u_pref, last, t0)
             u_out[:] = u_res
