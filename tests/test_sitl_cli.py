@@ -18,6 +18,13 @@ from vtolftc.runners.sitl import SitlConfig, SitlRun
     (["sitl", "--duration", "nan"], "--duration"),
     (["sitl", "--rt-priority", "100"], "--rt-priority 100: expected 0 (off) or a SCHED_FIFO"),
     (["sitl", "--rt-priority", "-1"], "--rt-priority -1"),
+    (["sitl", "--spin-us", "-5"], "--spin-us -5.0: expected 0 <= microseconds"),
+    (["sitl", "--spin-us", "nan"], "--spin-us nan"),
+    (["sitl", "--cpus", "0"], "--cpus '0': expected two CPU numbers"),
+    (["sitl", "--cpus", "0,x"], "--cpus '0,x': expected two CPU numbers"),
+    (["sitl", "--cpus", "0,4096"], "--cpus '0,4096': CPU 4096 is not one"),
+    (["sitl", "--cpus=-1,0"], "--cpus '-1,0': CPU -1 is not one"),
+    (["sitl", "--cpus", "0,0"], "need different CPUs"),
 ])
 def test_sitl_cli_rejects_bad_input(argv, fragment, capsys, tmp_path):
     assert cli_run([*argv, "--out", str(tmp_path / "run")]) == 2
@@ -94,3 +101,32 @@ def test_sitl_dashboard_flag_serves_the_page_and_follows_the_run(tmp_path, monke
     assert f"dashboard: {made[0].page_url}" in out and "127.0.0.1" in made[0].page_url
     snap = made[0].gs.snapshot()
     assert snap.armed and snap.sim_time_s > 4.0 and snap.altitude_m > 1.0
+
+
+def test_sitl_cli_passes_spin_and_cpus_to_the_config(tmp_path, monkeypatch):
+    """``vtolftc sitl --spin-us 300 --cpus 0,1`` reaches ``SitlConfig`` (autopilot on the first
+    CPU, vehicle on the second); without them, no spin and nothing pinned. ``run_sitl`` is
+    replaced: no process is started."""
+    import os
+
+    import vtolftc.runners.sitl as sitl_mod
+
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        pytest.skip("needs two CPUs this process may use")
+    seen: list[SitlConfig] = []
+
+    class StopRunError(Exception):
+        pass
+
+    def fake_run(cfg, scenario):
+        seen.append(cfg)
+        raise StopRunError
+
+    monkeypatch.setattr(sitl_mod, "run_sitl", fake_run)
+    a, v = cpus[1], cpus[0]
+    for argv in ([], ["--spin-us", "300", "--cpus", f"{a},{v}"]):
+        with pytest.raises(StopRunError):
+            cli_run(["sitl", "--out", str(tmp_path / str(len(argv))), *argv])
+    assert (seen[0].spin_us, seen[0].autopilot_cpu, seen[0].vehicle_cpu) == (0.0, -1, -1)
+    assert (seen[1].spin_us, seen[1].autopilot_cpu, seen[1].vehicle_cpu) == (300.0, a, v)

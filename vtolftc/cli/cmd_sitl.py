@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +50,13 @@ def register(sub: Any) -> None:
                    help="both processes run as SCHED_FIFO at priority N once compiled (1-99; "
                         "needs root or CAP_SYS_NICE, else one line and ordinary scheduling): "
                         "for --realtime on a loaded machine; default 0 = ordinary scheduling")
+    p.add_argument("--spin-us", type=float, default=0.0, metavar="US",
+                   help="both processes busy-poll the HIL link this long before sleeping "
+                        "(0-100000 us; default 0): with --cpus and --rt-priority, the headless "
+                        "lockstep's fast setting on a machine with two free cores")
+    p.add_argument("--cpus", default=None, metavar="A,V",
+                   help="pin the autopilot to CPU A and the vehicle to CPU V once compiled "
+                        "(e.g. 0,1; default: not pinned)")
     p.add_argument("--duration", type=float, default=40.0,
                    help="simulated seconds (default 40)")
     p.add_argument("--out", type=Path, default=None,
@@ -91,6 +99,34 @@ def _start_dashboard(args: argparse.Namespace, cfg: Any, af: Any) -> Any:
     return dash
 
 
+def _cpus(text: str | None) -> tuple[int, int]:
+    """``--cpus A,V`` as (autopilot CPU, vehicle CPU); (-1, -1) when not given.
+
+    Raises
+    ------
+    UsageError
+        If the text is not two different CPUs this process may use.
+    """
+    from vtolftc.runners.processes.affinity import CPU_OFF, check_cpu
+
+    if text is None:
+        return CPU_OFF, CPU_OFF
+    parts = text.split(",")
+    try:
+        a, v = (int(x) for x in parts)
+    except ValueError:
+        raise UsageError(f"--cpus {text!r}: expected two CPU numbers, autopilot and vehicle, "
+                         "e.g. 0,1") from None
+    for n in (a, v):
+        if n == CPU_OFF or check_cpu(n) is not None:
+            allowed = sorted(os.sched_getaffinity(0))
+            raise UsageError(f"--cpus {text!r}: CPU {n} is not one this process may use: "
+                             f"{allowed}")
+    if a == v:
+        raise UsageError(f"--cpus {text!r}: the autopilot and the vehicle need different CPUs")
+    return a, v
+
+
 def cmd_sitl(args: argparse.Namespace) -> int:
     """Start the processes, fly, stop, print the metrics."""
 
@@ -104,6 +140,9 @@ def cmd_sitl(args: argparse.Namespace) -> int:
 
     if (bad := check_rt_priority(args.rt_priority)) is not None:
         raise UsageError(bad)
+    if not (math.isfinite(args.spin_us) and 0 <= args.spin_us <= 100_000):
+        raise UsageError(f"--spin-us {args.spin_us!r}: expected 0 <= microseconds <= 100000")
+    ap_cpu, veh_cpu = _cpus(args.cpus)
     case = str(args.case).removeprefix("case")
     from vtolftc.firmware_sim.vehicle.faults import FaultError, load_cases
 
@@ -127,7 +166,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     cfg = SitlConfig(case=case, controller=args.controller, transport=args.transport,
                      realtime=args.realtime, duration_s=args.duration, out_dir=out,
                      airframe=args.airframe, gains_dir=args.gains_dir,
-                     rt_priority=args.rt_priority)
+                     rt_priority=args.rt_priority, spin_us=args.spin_us,
+                     autopilot_cpu=ap_cpu, vehicle_cpu=veh_cpu)
     mode = "real time" if args.realtime else "lockstep"
     print(f"SITL {scenario.name} ({scenario.description}), {args.controller}, "
           f"{args.transport}, {mode}; run folder {out}", flush=True)
