@@ -369,6 +369,37 @@ every flight below, so the wall figures are indicative; UDP, 20 s of case 1):
   with ``--trace`` while the fast test suite ran beside it (load 10): 2.1 / 1.7x, 1.7 / 2.2x.
   Pinned loses on a loaded machine, as in session 10; only the idle machine can say what
   pinning and spinning give.
+- The lead on the idle machine after the merges (14:17-14:19 UTC, nothing else running, load
+  1.0-1.8; 20 s of case 1, one flight per line, in this order), real-time factor, round trip
+  mean / median / p90 / p99 us, CPU per step autopilot / vehicle process us:
+
+  ========================================  =====  =========================  =========
+  UDP                                       x      round trip (us)            CPU (us)
+  ========================================  =====  =========================  =========
+  ``--matrix``: spin 0, not pinned          12.1   418 / 205 / 328 / 1019     277 / 186
+  spin 0, pinned                            12.3   421 / 211 / 344 / 1019     259 / 175
+  spin 300, not pinned                      16.9   337 / 89 / 309 / 1268      239 / 179
+  spin 300, pinned                          17.2   344 / 99 / 341 / 1195      230 / 191
+  ``--spin-us 1000``                        17.2   336 / 94 / 331 / 1281      239 / 201
+  ``--spin-us 1000 --pin``                  20.7   305 / 86 / 271 / 989       190 / 173
+  ``--spin-us 300 --pin --rt-priority 10``  24.8   275 / 81 / 151 / 671       162 / 147
+  ``--spin-us 3000 --pin``                  19.7   319 / 89 / 297 / 1009      201 / 187
+  ``--spin-us 300 --pin --rt-priority 10``  25.3   275 / 77 / 148 / 619       157 / 144
+  default (nothing)                         12.2   418 / 203 / 324 / 1009     270 / 185
+  ========================================  =====  =========================  =========
+
+  ``vtolftc sitl --spin-us 300 --cpus 0,1 --rt-priority 10`` (40 s of case 1 with its run
+  folder): 24.2x, the metrics those of the docs (roll / pitch / yaw RMSE 0.2325 / 0.6756 /
+  0.3053 deg). So UDP's 20x is reached on two free cores when each process has a core of its
+  own, keeps it warm (spin) and is not preempted there (``SCHED_FIFO``): the CPU of a step falls
+  by 40 % (cold caches and idle-state wake-ups were most of the in-flight cost, as sessions 10
+  to 15 found) and the round trip's p90 halves.
+  zenoh, same hour: default 6.5x (691 / 446 / 705 / 1907 us), ``--pin`` 8.0x, ``--spin-us 300``
+  6.4x, ``--rt-priority 10`` 6.2x, spin 300 + rt 10 7.1x, spin 300 + pin + rt 10 3.3x, spin
+  1000 + pin + rt 10 1.5x (2750 us round trip: zenoh's own threads pinned beside a spinning
+  ``SCHED_FIFO`` thread get no CPU). zenoh's 15x is not reached: its round trip's floor is
+  ~80-90 us above UDP's (session 13's ``--floor``) and its runtime threads need the cores the
+  spin would keep.
 
 In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
 control step): ``benchmarks/bench_inproc.py`` (its docstring and ``--profile``): 155-161x on
