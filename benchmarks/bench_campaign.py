@@ -143,6 +143,12 @@ CPU 0.41 / 0.41 s per scenario, pool 101.8 / 156.9 scenarios/min (flights 1.15 /
 wall). The wall-time rates measure the neighbours, not the code; by the instruction count
 the branch's flight is ~6 % cheaper, i.e. main's idle 289.9-302.0/min would be ~305-320/min:
 a small margin, not the 10-15 % asked (to be confirmed idle).
+The lead's idle check after the merge (14:21-14:23 UTC, a new machine of this kind: a Xeon
+with AVX512_SPR, nothing else running, load 1.4-1.6; session 15's base 1be7cc4 from its
+clean-clone venv against main, interleaved, 3 pairs): base 290.0 / 294.5 / 300.0, main
+292.7 / 318.6 / 312.7 scenarios/min; CPU of every process per scenario 0.41 / 0.40 / 0.40
+against 0.41 / 0.37 / 0.38 s; overhead +1.6-2.2 % (base +1.9-2.1 %). 300/min is passed in 2
+of 3 runs, by 4-6 %.
 
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --whole [--scenarios 24]

@@ -404,6 +404,12 @@ aerodynamics (``outer_aero_step``) inside the mode kernels (one dispatch and a `
 fewer per step, ~0.3-0.5 us), the degraded-lift guidance compiled, the allocation's
 statistics (``_count_solved``) in its kernel, ``NavState``'s four views built once per step
 (``nav_of_round_trip`` is now ~3.6 % of the step).
+
+The lead's idle check after the merge (14:23-14:24 UTC, load 1.5-1.6, a new machine of this
+kind, a Xeon with AVX512_SPR; session 15's base 1be7cc4 against main, interleaved, 2 pairs,
+``--duration 120``): base 119.9 / 125.6x (33.4 / 31.9 us per step), main 127.3 / 127.5x
+(31.4 / 31.4 us). This host runs a step ~25 % slower than the one that gave 155-161x in
+session 14, so >= 150x is not met here.
 """
 
 from __future__ import annotations
