@@ -12,10 +12,11 @@ import subprocess
 import sys
 
 import pytest
+from support.procs import sitl_command_lines
 
 from vtolftc.runners.processes import affinity
 from vtolftc.runners.processes.affinity import apply_cpu, check_cpu
-from vtolftc.runners.sitl import SitlConfig, SitlRun
+from vtolftc.runners.sitl import SitlConfig
 
 _CHILD = """
 import os, sys, threading
@@ -97,27 +98,10 @@ def test_bad_cpu_is_one_line_and_exit_2(program, args):
 
 def test_cpus_reach_each_process_and_only_when_asked(tmp_path, monkeypatch):
     """``SitlConfig.autopilot_cpu`` / ``vehicle_cpu`` are passed to their own program's command
-    line; the default (-1) passes nothing. No process is started: ``_spawn`` records."""
-
-    class SpawnedError(Exception):
-        pass
-
-    class FakeStation:
-        def __init__(self, url):
-            pass
-
-        def add_listener(self, fn):  # start() reaches this once both programs are spawned
-            raise SpawnedError
-
-    monkeypatch.setattr("vtolftc.runners.sitl.GroundStation", FakeStation)
+    line; the default (-1) passes nothing. No process is started."""
     for ap_cpu, v_cpu in ((-1, -1), (0, 1), (1, -1), (-1, 0)):
-        run = SitlRun(SitlConfig(out_dir=tmp_path / f"{ap_cpu}{v_cpu}", autopilot_cpu=ap_cpu,
-                                 vehicle_cpu=v_cpu))
-        argv: dict[str, list[str]] = {}
-        monkeypatch.setattr(run, "_spawn",
-                            lambda name, args, argv=argv: argv.__setitem__(name, args))
-        with pytest.raises(SpawnedError):
-            run.start()
+        argv = sitl_command_lines(monkeypatch, SitlConfig(
+            out_dir=tmp_path / f"{ap_cpu}{v_cpu}", autopilot_cpu=ap_cpu, vehicle_cpu=v_cpu))
         for name, want in (("autopilot", ap_cpu), ("vehicle", v_cpu)):
             args = argv[name]
             got = int(args[args.index("--cpu") + 1]) if "--cpu" in args else -1

@@ -4,6 +4,7 @@ URL plan (loopback only, free ports, both transports)."""
 from __future__ import annotations
 
 import pytest
+from support.procs import sitl_command_lines
 
 from vtolftc.cli.main import run as cli_run
 from vtolftc.protocols import parse_link_url
@@ -54,27 +55,10 @@ def test_link_plan_is_loopback_and_consistent(transport, tmp_path):
 
 def test_rt_priority_reaches_both_processes_and_only_when_asked(tmp_path, monkeypatch):
     """``SitlConfig.rt_priority`` (``vtolftc sitl --rt-priority N``) is passed to both programs'
-    command lines; the default (0) passes nothing. No process is started: ``_spawn`` records."""
-
-    class SpawnedError(Exception):
-        pass
-
-    class FakeStation:
-        def __init__(self, url):
-            pass
-
-        def add_listener(self, fn):  # start() reaches this once both programs are spawned
-            raise SpawnedError
-
-    monkeypatch.setattr("vtolftc.runners.sitl.GroundStation", FakeStation)
+    command lines; the default (0) passes nothing. No process is started."""
     for prio, want in ((0, None), (12, "12")):
-        run = SitlRun(SitlConfig(out_dir=tmp_path / str(prio), rt_priority=prio))
-        argv: dict[str, list[str]] = {}
-        monkeypatch.setattr(run, "_spawn",
-                            lambda name, args, argv=argv: argv.__setitem__(name, args))
-        with pytest.raises(SpawnedError):
-            run.start()
-        assert set(argv) == {"vehicle", "autopilot"}
+        argv = sitl_command_lines(monkeypatch,
+                                  SitlConfig(out_dir=tmp_path / str(prio), rt_priority=prio))
         for name, args in argv.items():
             got = args[args.index("--rt-priority") + 1] if "--rt-priority" in args else None
             assert got == want, (name, prio, args)
