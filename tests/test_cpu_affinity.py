@@ -96,6 +96,17 @@ def test_bad_cpu_is_one_line_and_exit_2(program, args):
         f"{_CPUS}"]
 
 
+@pytest.mark.parametrize("program, args", [
+    ("vehicle", ["--link", "udp-server://127.0.0.1:9"]),
+    ("autopilot", ["--hil-link", "udp-client://127.0.0.1:9"])])
+def test_negative_trace_steps_is_one_line_and_exit_2(program, args):
+    p = subprocess.run([sys.executable, "-m", f"vtolftc.runners.processes.{program}", *args,
+                        "--trace-steps", "-3"], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    assert p.stderr.strip().splitlines() == [
+        f"{program}: error: --trace-steps -3: expected N >= 0 steps (0 = off)"]
+
+
 def test_cpus_reach_each_process_and_only_when_asked(tmp_path, monkeypatch):
     """``SitlConfig.autopilot_cpu`` / ``vehicle_cpu`` are passed to their own program's command
     line; the default (-1) passes nothing. No process is started."""

@@ -26,6 +26,13 @@ import numpy as np
 __all__ = ["StepParts"]
 
 
+def check_trace_steps(n: int) -> str | None:
+    """The error text for an invalid ``--trace-steps`` value (a negative one), or None."""
+    if n >= 0:
+        return None
+    return f"--trace-steps {n}: expected N >= 0 steps (0 = off)"
+
+
 class StepParts:
     """Per-part sums of wall and thread-CPU time [s] between laps.
 

@@ -62,6 +62,7 @@ from vtolftc.runners.processes.priority import (
     apply_rt_priority,
     check_rt_priority,
 )
+from vtolftc.telemetry.step_parts import check_trace_steps
 
 __all__ = ["DEFAULT_GCS_LINKS", "main", "run_observers"]
 
@@ -196,7 +197,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run the autopilot process (see the module docstring); returns the exit status."""
     args = _parse_args(argv)
     err = sys.stderr
-    for bad in (check_rt_priority(args.rt_priority), check_cpu(args.cpu)):
+    for bad in (check_rt_priority(args.rt_priority), check_cpu(args.cpu),
+                check_trace_steps(args.trace_steps)):
         if bad is not None:
             print(f"autopilot: error: {bad}", file=err)
             return 2

@@ -30,6 +30,7 @@ from vtolftc.runners.processes.priority import (
     apply_rt_priority,
     check_rt_priority,
 )
+from vtolftc.telemetry.step_parts import check_trace_steps
 
 __all__ = ["main"]
 
@@ -113,7 +114,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"vehicle: error: {name} {val!r}: expected a number in [0, {hi:g}]",
                   file=sys.stderr)
             return 2
-    for bad in (check_rt_priority(args.rt_priority), check_cpu(args.cpu)):
+    for bad in (check_rt_priority(args.rt_priority), check_cpu(args.cpu),
+                check_trace_steps(args.trace_steps)):
         if bad is not None:
             print(f"vehicle: error: {bad}", file=sys.stderr)
             return 2
