@@ -67,7 +67,7 @@ from vtolftc.base.jsonio import atomic_write_text, json_safe
 from vtolftc.gcs.client import CommandOutcome, GcsError, GroundStation
 from vtolftc.protocols.hil_signing import HIL_KEY_ENV, new_hil_key
 from vtolftc.protocols.netutil import free_tcp_port, free_udp_port
-from vtolftc.runners.processes.procstate import describe_threads
+from vtolftc.runners.processes.procstate import DUMP_SIGNAL, describe_threads
 
 __all__ = ["SitlConfig", "SitlError", "SitlResult", "SitlRun", "run_sitl"]
 
@@ -393,11 +393,12 @@ class SitlRun:
         is still alive after ``grace_s`` (default ``cfg.stop_grace_s``). Idempotent.
 
         A process still alive after the grace has what its threads were doing appended to
-        its log (``<name>.log``: state, kernel wait channel, kernel stack of a thread in
-        uninterruptible sleep) before the SIGKILL. A process in uninterruptible sleep (an
-        ``fsync`` on a loaded disk, for one) ends only once that I/O completes, SIGKILL or
-        not: :class:`SitlError` with the same description if it is still there
-        ``KILL_WAIT_S`` after the SIGKILL."""
+        its log (``<name>.log``: every thread's Python stack, dumped by the program on
+        ``DUMP_SIGNAL``; state, CPU used over half a second, kernel wait channel, kernel stack
+        of a thread in uninterruptible sleep or running) before the SIGKILL. A process in
+        uninterruptible sleep (an ``fsync`` on a loaded disk, for one) ends only once that I/O
+        completes, SIGKILL or not: :class:`SitlError` with the same description if it is
+        still there ``KILL_WAIT_S`` after the SIGKILL."""
         grace = self.cfg.stop_grace_s if grace_s is None else grace_s
         for name in ("autopilot", "vehicle"):
             p = self.procs.get(name)
@@ -408,9 +409,14 @@ class SitlRun:
             try:
                 p.wait(timeout=grace)
             except subprocess.TimeoutExpired:
+                # its Python stacks into its log (the programs' faulthandler), then its threads
+                # as the kernel sees them, sampled over half a second
                 self._log_line(name, f"runner: {name} still running {grace:g} s after "
-                               f"SIGTERM, sending SIGKILL; its threads:\n"
-                               f"{describe_threads(p.pid)}")
+                               f"SIGTERM; its Python stacks (signal {DUMP_SIGNAL.name}):")
+                with contextlib.suppress(ProcessLookupError, PermissionError):
+                    os.kill(p.pid, DUMP_SIGNAL)
+                threads = describe_threads(p.pid, sample_s=0.5)
+                self._log_line(name, f"runner: sending {name} SIGKILL; its threads:\n{threads}")
                 with contextlib.suppress(ProcessLookupError, PermissionError):
                     os.killpg(p.pid, signal.SIGKILL)
                 try:

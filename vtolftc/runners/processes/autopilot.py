@@ -62,6 +62,7 @@ from vtolftc.runners.processes.priority import (
     apply_rt_priority,
     check_rt_priority,
 )
+from vtolftc.runners.processes.procstate import enable_stack_dump
 from vtolftc.telemetry.step_parts import check_trace_steps
 
 __all__ = ["DEFAULT_GCS_LINKS", "main", "run_observers"]
@@ -302,6 +303,7 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
+    enable_stack_dump()  # SitlRun.stop's evidence when this process does not end
     # the control thread gets the interpreter back within 1 ms from the ground-station threads
     sys.setswitchinterval(0.001)
     return proc.run()

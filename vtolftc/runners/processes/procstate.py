@@ -3,15 +3,31 @@
 Used where a process does not end or does not progress and the reason must be written down:
 :meth:`vtolftc.runners.sitl.SitlRun.stop` for a process still alive after SIGTERM's grace (a
 process in uninterruptible sleep, state D, e.g. an ``fsync`` waiting for a loaded disk, ends
-only once that I/O completes, even after SIGKILL), and the tests' stall probe.
+only once that I/O completes, even after SIGKILL), and the tests' stall probe. The SITL
+programs also dump every thread's Python stack to their stderr (their log) on
+:data:`DUMP_SIGNAL` (:func:`enable_stack_dump`), which ``SitlRun.stop`` sends first.
 """
 
 from __future__ import annotations
 
+import faulthandler
 import os
+import signal
+import sys
+import time
 from pathlib import Path
 
-__all__ = ["describe_threads", "proc_threads"]
+__all__ = ["DUMP_SIGNAL", "describe_threads", "enable_stack_dump", "proc_threads"]
+
+DUMP_SIGNAL = signal.SIGUSR1
+"""The signal on which a program that called :func:`enable_stack_dump` writes every thread's
+Python stack to its stderr."""
+
+
+def enable_stack_dump() -> None:
+    """Write every thread's Python stack to stderr on :data:`DUMP_SIGNAL` (``faulthandler``:
+    from a C signal handler, so also while the interpreter is busy or shutting down)."""
+    faulthandler.register(DUMP_SIGNAL, file=sys.stderr, all_threads=True)
 
 _HZ = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
@@ -40,18 +56,28 @@ def proc_threads(pid: int) -> list[tuple[int, str, str, float, str]]:
     return out
 
 
-def describe_threads(pid: int) -> str:
+def describe_threads(pid: int, sample_s: float = 0.0) -> str:
     """One line per thread of ``pid``: tid, name, state, CPU seconds, wait channel and, for a
-    thread in uninterruptible sleep (D) where readable (root), its kernel stack's function
-    names; "gone" when the process has no ``/proc`` entry."""
+    thread in uninterruptible sleep (D) or running (R) where readable (root), its kernel
+    stack's function names; "gone" when the process has no ``/proc`` entry. With
+    ``sample_s`` > 0 the threads are read twice that many wall seconds apart and each line also
+    gives the CPU time used in between (a thread in R that used none was runnable but given
+    no CPU)."""
+    first = {}
+    if sample_s > 0:
+        first = {t[0]: t[3] for t in proc_threads(pid)}
+        time.sleep(sample_s)
     lines = []
     for tid, name, state, cpu, wchan in proc_threads(pid):
         line = f"{tid} {name} {state} cpu {cpu:.2f} s wchan {wchan}"
-        if state == "D":
+        if tid in first:
+            line += f" (+{cpu - first[tid]:.2f} s in {sample_s:g} s)"
+        if state in ("D", "R"):
             try:
                 stack = Path(f"/proc/{pid}/task/{tid}/stack").read_text().split()
-                line += " stack " + " < ".join(w.split("+")[0] for w in stack
-                                               if "+" in w)
+                names = " < ".join(w.split("+")[0] for w in stack if "+" in w)
+                if names:  # empty for a thread running in user space
+                    line += " stack " + names
             except OSError:
                 pass
         lines.append(line)

@@ -30,6 +30,7 @@ from vtolftc.runners.processes.priority import (
     apply_rt_priority,
     check_rt_priority,
 )
+from vtolftc.runners.processes.procstate import enable_stack_dump
 from vtolftc.telemetry.step_parts import check_trace_steps
 
 __all__ = ["main"]
@@ -142,6 +143,7 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
+    enable_stack_dump()  # SitlRun.stop's evidence when this process does not end
     rc = proc.run()
     if args.out is not None:
         proc.parts.save_trace(args.out / "step_trace.npz")
