@@ -87,24 +87,14 @@ def test_refused_is_one_line_and_no_thread_stays_pinned(monkeypatch):
 @pytest.mark.parametrize("program, args", [
     ("vehicle", ["--link", "udp-server://127.0.0.1:9"]),
     ("autopilot", ["--hil-link", "udp-client://127.0.0.1:9"])])
-def test_bad_cpu_is_one_line_and_exit_2(program, args):
+@pytest.mark.parametrize("flag, value, message", [
+    ("--cpu", "4096", f"--cpu 4096: expected -1 (off) or a CPU this process may use: {_CPUS}"),
+    ("--trace-steps", "-3", "--trace-steps -3: expected N >= 0 steps (0 = off)")])
+def test_bad_cpu_or_trace_steps_is_one_line_and_exit_2(program, args, flag, value, message):
     p = subprocess.run([sys.executable, "-m", f"vtolftc.runners.processes.{program}", *args,
-                        "--cpu", "4096"], capture_output=True, text=True, timeout=120)
+                        flag, value], capture_output=True, text=True, timeout=120)
     assert p.returncode == 2
-    assert p.stderr.strip().splitlines() == [
-        f"{program}: error: --cpu 4096: expected -1 (off) or a CPU this process may use: "
-        f"{_CPUS}"]
-
-
-@pytest.mark.parametrize("program, args", [
-    ("vehicle", ["--link", "udp-server://127.0.0.1:9"]),
-    ("autopilot", ["--hil-link", "udp-client://127.0.0.1:9"])])
-def test_negative_trace_steps_is_one_line_and_exit_2(program, args):
-    p = subprocess.run([sys.executable, "-m", f"vtolftc.runners.processes.{program}", *args,
-                        "--trace-steps", "-3"], capture_output=True, text=True, timeout=120)
-    assert p.returncode == 2
-    assert p.stderr.strip().splitlines() == [
-        f"{program}: error: --trace-steps -3: expected N >= 0 steps (0 = off)"]
+    assert p.stderr.strip().splitlines() == [f"{program}: error: {message}"]
 
 
 def test_cpus_reach_each_process_and_only_when_asked(tmp_path, monkeypatch):
