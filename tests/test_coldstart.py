@@ -86,8 +86,7 @@ def test_warm_up_visits_every_mode_and_prepares_the_flight_kernels():
     fw = sum(1 for m in seen if m == FlightMode.FIXED_WING) * dt
     assert fw > made[0].params.get("VT_TRANS_P2_DUR") + 0.5
     sigs = compiled_specialisations(AP)
-    for name in ("allocation.active_set._allocate_step_tracked_packed",  # the ones that fly
-                 "control_kernels.scheduled_ppid3_step_packed",
+    for name in ("allocation.active_set._ppid_allocate_step_tracked",  # the ones that fly
                  "outer_kernels.mc_hold_step", "estimate.estimate_step",
                  "outer_kernels.outer_aero_step", "outer_kernels.fw_longitudinal_step",
                  "outer_kernels.mc_transition_step", "outer_kernels.mc_z_force_step"):
@@ -349,7 +348,7 @@ def test_summary_reports_what_was_compiled_after_ready():
         proc.compiled_at_ready = {}
         warm_up(lambda: Autopilot(af), steps=40)
         late = proc.summary()["numba"]["compiled_after_ready"]
-        assert late[AP + "allocation.active_set._allocate_step_tracked_packed"], late
+        assert late[AP + "allocation.active_set._ppid_allocate_step_tracked"], late
         proc.compiled_at_ready = compiled_specialisations()
         assert proc.summary()["numba"]["compiled_after_ready"] == {}
     finally:

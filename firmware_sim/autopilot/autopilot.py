@@ -247,9 +247,16 @@ class Autopilot:
         reserve, rotor_hi, pusher_hi = self.outer.update(mode, nav, roll, pitch, yaw, h, v_up,
                                                          V)
         u_pref = out.u_pref_fw if mode is _M_FIXED_WING else out.u_pref_mc
-        tau = self.attitude_stage.update(mode, h, V, self.setpoints.ref, est.att,
-                                         nav.omega_body_rad_s, out.sat_hi, out.sat_lo,
-                                         out.sat_mask)
+        stage = self.attitude_stage
+        ref = self.setpoints.ref
+        rates = nav.omega_body_rad_s
+        # the scheduled P-PID step fused into the allocation's compiled call, when the
+        # controller is stepped directly; else the stage's update and then the allocation
+        ppid = stage.kernel_step_args(mode, h, V, ref, est.att, rates, out.sat_mask)
+        if ppid is not None:
+            return out.allocate(V, None, reserve, rotor_hi, pusher_hi, u_pref, ppid)
+        tau = stage.update(mode, h, V, ref, est.att, rates, out.sat_hi, out.sat_lo,
+                           out.sat_mask)
         return out.allocate(V, tau, reserve, rotor_hi, pusher_hi, u_pref)
 
     # ------------------------------------------------------------------------------------

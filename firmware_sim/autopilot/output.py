@@ -23,6 +23,7 @@ saturation tracking's mask (the same kernels, the same bits as ``allocate`` and
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +33,11 @@ from vtolftc.firmware_sim.autopilot.allocation import (
     ActiveSetAllocator,
     AllocationStatus,
     shortfall_mask,
+)
+from vtolftc.firmware_sim.autopilot.control_kernels import (
+    W_OUT,
+    W_SIZE,
+    scheduled_ppid3_step_packed,
 )
 from vtolftc.firmware_sim.autopilot.effectiveness import EffectivenessModel
 from vtolftc.firmware_sim.autopilot.setpoints import Setpoints
@@ -159,10 +165,16 @@ class OutputStage:
         self.sat_lo = [False, False, False]
         self.sat_mask = 0
 
-    def allocate(self, V: float, tau: NDArray[np.float64], reserve: bool, rotor_hi: float,
-                 pusher_hi: float, u_pref: NDArray[np.float64]) -> NDArray[np.float64]:
+    def allocate(self, V: float, tau: NDArray[np.float64] | None, reserve: bool,
+                 rotor_hi: float, pusher_hi: float, u_pref: NDArray[np.float64],
+                 ppid: tuple[Any, ...] | None = None) -> NDArray[np.float64]:
         """Allocate the virtual command (``setpoints.v[0:2]`` forces [N], ``tau`` torques
-        [N m]) to the actuators at airspeed ``V`` [m/s]; returns a copy of the commands."""
+        [N m]) to the actuators at airspeed ``V`` [m/s]; returns a copy of the commands.
+
+        With ``ppid`` (``AttitudeStage.kernel_step_args``'s answer; ``tau`` then unused) the
+        torques are that compiled P-PID step's, run first: in the allocation's compiled
+        call (``allocate_tracked(..., ppid=...)``), or on its own before a replaced
+        allocator."""
         # B(V) on a 0.1 m/s airspeed grid: the allocator rebuilds its Hessian only when B changes
         # (every ~12 steps in the transition instead of every step); the dynamic pressure
         # differs from the exact one by < 1 % above 10 m/s, far below the faults' 20-50 %.
@@ -190,18 +202,25 @@ class OutputStage:
             self._fw_reserve = reserve
         alloc = self.allocator_fw if reserve else self.allocator
         if type(alloc) is ActiveSetAllocator and "allocate" not in alloc.__dict__ \
-                and type(tau) is np.ndarray:
+                and (ppid is not None or type(tau) is np.ndarray):
             # v[2:] = tau, allocate(v, B, u_max=hi, u_pref=u_pref) and _track_saturation(v,
             # B u) in one compiled call, the command written into u (the arrays here are the
             # kernel's types by construction); bit for bit the same
-            status, mask, self.fz_achieved = alloc.allocate_tracked(
-                v, B, hi, u_pref, u, 2, _SAT_ATOL, _SAT_RTOL, v_tail=tau)
+            if ppid is None:
+                status, mask, self.fz_achieved = alloc.allocate_tracked(
+                    v, B, hi, u_pref, u, 2, _SAT_ATOL, _SAT_RTOL, v_tail=tau)
+            else:  # the P-PID step and the allocation in one compiled call
+                status, mask, self.fz_achieved = alloc.allocate_tracked(
+                    v, B, hi, u_pref, u, 2, _SAT_ATOL, _SAT_RTOL, ppid=ppid)
             self.fz_cmd = v.item(0)
             self.sat_hi, self.sat_lo = _SAT_FLAGS[mask]
             self.sat_mask = mask
             if mask:
                 self.saturated_steps += 1
         else:  # an allocator (or its allocate) replaced by a benchmark or a test
+            if ppid is not None:  # the attitude stage's step, on its own
+                scheduled_ppid3_step_packed(*ppid)
+                tau = ppid[5][W_OUT:W_SIZE]
             v[2:] = tau
             res = alloc.allocate(v, B, u_max=hi, u_pref=u_pref)
             status = res.status

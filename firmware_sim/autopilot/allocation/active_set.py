@@ -42,7 +42,7 @@ previous command.
 from __future__ import annotations
 
 import time
-from typing import Unpack
+from typing import Any, Unpack
 
 import numba
 import numpy as np
@@ -62,6 +62,11 @@ from vtolftc.firmware_sim.autopilot.allocation.wls import (
     ProblemOptions,
     WLSAllocator,
     prepare_wls,
+)
+from vtolftc.firmware_sim.autopilot.control_kernels import (
+    W_OUT,
+    W_SIZE,
+    scheduled_ppid3_step_packed,
 )
 
 __all__ = ["ActiveSetAllocator", "box_qp"]
@@ -343,6 +348,22 @@ def _allocate_step_tracked_packed(v, B, pref, umax_in, wsx, n_ws, has_prev, has_
                                   ubuf, max_iter, tol, u_out, first, atol, rtol)
 
 
+@numba.njit(cache=True)
+def _ppid_allocate_step_tracked(tab, vs, ref, att, rates, pws, sat_mask, v, B, pref, umax_in,
+                                wsx, n_ws, has_prev, has_rate, dt, iws, max_iter, tol, u_out,
+                                first, atol, rtol):
+    """The attitude stage's scheduled P-PID step and the output stage's allocation of its
+    moments in one compiled call: :func:`.control_kernels.scheduled_ppid3_step_packed` (``tab``
+    to ``sat_mask``, its arguments), then :func:`_allocate_step_tracked_packed` (``v`` to
+    ``rtol``) with the P-PID's output (``pws[W_OUT:W_SIZE]``, the moments [N m]) as ``tail``:
+    the two kernels of ``AttitudeStage.update`` and ``allocate_tracked(..., v_tail=tau)``, in
+    that order, on the same arrays (one dispatch and its argument checks fewer per step)."""
+    scheduled_ppid3_step_packed(tab, vs, ref, att, rates, pws, sat_mask)
+    return _allocate_step_tracked_packed(v, B, pref, umax_in, wsx, n_ws, has_prev, has_rate,
+                                         dt, iws, max_iter, tol, u_out, first, atol, rtol,
+                                         pws[W_OUT:W_SIZE])
+
+
 def box_qp(
     H: np.ndarray,
     q: np.ndarray,
@@ -579,8 +600,8 @@ class ActiveSetAllocator(WLSAllocator):
 
     def allocate_tracked(self, v: np.ndarray, B: np.ndarray, u_max: np.ndarray,
                          u_pref: np.ndarray, u_out: np.ndarray, first: int, atol: float,
-                         rtol: float, *, v_tail: np.ndarray = _NO_TAIL
-                         ) -> tuple[int, int, float]:
+                         rtol: float, *, v_tail: np.ndarray = _NO_TAIL,
+                         ppid: tuple[Any, ...] | None = None) -> tuple[int, int, float]:
         """:meth:`allocate_trusted` with the command written into ``u_out`` and, instead of
         ``B u``, what the output stage reads of it: one compiled call
         (:func:`_allocate_step_tracked`) on a converged step.
@@ -596,6 +617,11 @@ class ActiveSetAllocator(WLSAllocator):
         v_tail : numpy.ndarray, optional
             (k,) float64, copied into ``v[-k:]`` before anything reads ``v`` (the output
             stage's moment demand, written by the same compiled call).
+        ppid : tuple, optional
+            ``(tab, vs, ref, att, rates, ws, sat_mask)``, the arguments of
+            :func:`.control_kernels.scheduled_ppid3_step_packed` (the attitude stage's
+            ``kernel_step_args``): that step first, its moments as ``v_tail``, in the same
+            compiled call (:func:`_ppid_allocate_step_tracked`).
 
         Returns
         -------
@@ -611,10 +637,16 @@ class ActiveSetAllocator(WLSAllocator):
         u = self._ubuf
         if last is not None and last is not u:
             u[:] = last
-        code, ok, it, mask, fz = _allocate_step_tracked_packed(
-            v, Bk, u_pref, u_max, self._wsx, self._n_ws, last is not None,
-            self.rate_limit is not None, self.dt, self._iws, self.max_iter, self.tol, u_out,
-            first, atol, rtol, v_tail)
+        if ppid is None:
+            code, ok, it, mask, fz = _allocate_step_tracked_packed(
+                v, Bk, u_pref, u_max, self._wsx, self._n_ws, last is not None,
+                self.rate_limit is not None, self.dt, self._iws, self.max_iter, self.tol,
+                u_out, first, atol, rtol, v_tail)
+        else:
+            code, ok, it, mask, fz = _ppid_allocate_step_tracked(
+                *ppid, v, Bk, u_pref, u_max, self._wsx, self._n_ws, last is not None,
+                self.rate_limit is not None, self.dt, self._iws, self.max_iter, self.tol,
+                u_out, first, atol, rtol)
         if code < 0 or not ok:
             u_res, va, status = self._unconverged(code, it, v, B, u_pref, last, t0)
             u_out[:] = u_res
