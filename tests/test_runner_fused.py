@@ -165,3 +165,40 @@ def test_flights_with_and_without_the_fused_call_are_bit_identical(monkeypatch, 
     fus = _flight(monkeypatch, True, case, duration, hz)
     assert sep[4] == 0 and fus[4] > 0.9 * duration * hz
     assert fus[:4] == sep[:4]
+
+
+def test_fused_runner_never_overwrites_the_nav_the_autopilot_holds():
+    """The fused call decodes the next state into two buffers in turn (session 17): each
+    step's ``NavState`` is a new object, and the previous step's (the estimate's
+    ``last_nav``, read by commands handled before the next step, e.g. loiter and RTL) keeps
+    its values until the autopilot has flown on the next one; the buffers are reused (no
+    array per step)."""
+    seen: list[tuple[NavState, bytes]] = []
+    ids: set[int] = set()
+    bases: list[int] = []
+
+    def setup(ap):
+        step = ap.step
+
+        def rec(nav):
+            if seen:  # the last step's nav, as the autopilot's estimate holds it
+                prev, bits = seen[-1]
+                assert ap.estimate.last_nav is prev
+                assert _nav_bits(prev) == bits, len(seen)
+                assert nav is not prev
+            u = step(nav)
+            assert ap.estimate.last_nav is nav
+            seen.append((nav, _nav_bits(nav)))
+            ids.add(id(nav))
+            bases.append(id(nav.pos_ned_m.base))
+            return u
+
+        ap.step = rec
+
+    runner.run_scenario(runner.paper_scenario("1", 6.0), "gs-shif", autopilot_setup=setup)
+    assert len(seen) == 1500
+    assert len(ids) > 2  # fresh objects (ids of dead ones may be reused, not 2)
+    # the steps not fused (the first, the vehicle's pending steps) decode into new arrays;
+    # the others into the two buffers
+    counts = sorted((bases.count(b) for b in set(bases)), reverse=True)
+    assert counts[0] + counts[1] > 0.95 * len(seen), counts[:4]

@@ -274,6 +274,14 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
     # compiled call (runner_tail_step) when nothing else needs the state between them
     fuse = not obs and not noisy and not n_delay
     nav_next: NavState | None = None  # the fused call's round trip, for the next step
+    # the fused call's decoded states: two buffers written in turn, each with its NavState
+    # views made once (nav_of_round_trip). The one written is never the current step's,
+    # the only one the autopilot still holds then (as its estimate's last_nav: the call is
+    # made only when the autopilot flew on this step's nav); a fresh NavState each step
+    ring = [np.empty(14), np.empty(14)]
+    ring_views = [(t.q_wxyz, t.omega_body_rad_s, t.pos_ned_m, t.vel_ned_m_s)
+                  for t in (nav_of_round_trip(0, b, 0.0) for b in ring)]
+    slot = 0
     wall0 = pc()
     n_events = 0
     try:
@@ -319,7 +327,8 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                 if args is not None:  # the metrics, the vehicle, the next round trip: one call
                     t3 = t2
                     s_m, tail = acc.kernel_arrays
-                    a = np.empty(14)
+                    slot ^= 1
+                    a = ring[slot]
                     r = runner_tail_step(s_m, tail, now, nav.pos_ned_m, *euler, int(mode),
                                          armed, ref, alt_ref, nav.airspeed_m_s, u, args[0],
                                          args[1], n_sub, args[2], args[3], args[4], args[5],
@@ -329,7 +338,11 @@ def run_scenario(scenario: Scenario, controller: str = "gs-shif", *,
                         crashed = r == 2
                         air_cm_s = a.item(13)
                         if air_cm_s >= 0:  # else the next step's round_trip raises the error
-                            nav_next = nav_of_round_trip(veh.time_usec, a, air_cm_s)
+                            # nav_of_round_trip(veh.time_usec, a, air_cm_s), on the
+                            # buffer's views
+                            nq, nw, npos, nvel = ring_views[slot]
+                            nav_next = NavState(int(veh.time_usec), nq, nw, npos, nvel,
+                                                air_cm_s * 0.01)
                     elif r:  # non-finite commands, nothing flown: the vehicle raises its error
                         veh.step(u, n_sub, wire=True)
                 if not r:  # the separate calls (not fused, or the metrics' tail ring is full)
