@@ -89,8 +89,8 @@ def test_fused_call_equals_ppid_then_allocate_tracked(ds1, controller):
 def _fly_hash(monkeypatch: pytest.MonkeyPatch | None, case: str, duration: float,
               controller: str) -> tuple[str, list[tuple[FlightMode, bool]], int]:
     """Every step's commands and P-PID state of a flight, hashed; with ``monkeypatch`` the
-    fused call switched off (``kernel_step_args`` answers None: the stage's ``update``, then
-    the allocation, the code this session replaced). Also the modes flown and the number
+    fused call switched off (the P-PID kernel, then ``allocate_tracked(..., v_tail=tau)``:
+    the separate calls this session replaced). Also the modes flown and the number
     of fused steps."""
     from vtolftc.runners.scenario import paper_scenario, run_scenario
 
@@ -103,7 +103,24 @@ def _fly_hash(monkeypatch: pytest.MonkeyPatch | None, case: str, duration: float
         return r
 
     if monkeypatch is not None:
-        monkeypatch.setattr(AttitudeStage, "kernel_step_args", lambda self, *a: None)
+        # the separate calls: the P-PID kernel on the stage's arguments, its output array as
+        # the torques handed to the allocation (``allocate_tracked(..., v_tail=tau)``)
+        real_update = AttitudeStage.controller_update
+
+        def separate(self, *a):
+            args = args_of(self, *a)
+            self.test_tau = None
+            if args is not None:
+                scheduled_ppid3_step_packed(*args)
+                self.test_tau = self.controller.kernel_arrays[3]
+            return None
+
+        def update(self, *a):
+            tau = self.test_tau
+            return tau if tau is not None else real_update(self, *a)
+
+        monkeypatch.setattr(AttitudeStage, "kernel_step_args", separate)
+        monkeypatch.setattr(AttitudeStage, "controller_update", update)
     else:
         AttitudeStage.kernel_step_args = counted  # type: ignore[method-assign]
     h, modes = hashlib.sha256(), []

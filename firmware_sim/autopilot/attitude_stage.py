@@ -66,59 +66,41 @@ class AttitudeStage:
         output stage's mask (bits 0-2 ``sat_hi``, 3-5 ``sat_lo``) when the caller has it.
         The result may be the controller's own output array (read it before the next step,
         do not keep it)."""
-        vs = self._scheduled_airspeed(mode, h, V)
-        ctrl = self.controller
-        if self._direct(ctrl, rates):
+        if sat_mask is None:
+            sat_mask = ((1 if sat_hi[0] else 0) | (2 if sat_hi[1] else 0)
+                        | (4 if sat_hi[2] else 0) | (8 if sat_lo[0] else 0)
+                        | (16 if sat_lo[1] else 0) | (32 if sat_lo[2] else 0))
+        args = self.kernel_step_args(mode, h, V, ref, att, rates, sat_mask)
+        if args is not None:
             # ctrl.update(ref, att, rates, vs, sat_hi, sat_lo) without its argument
             # conversions (``ref`` and ``att`` are the autopilot's own float64 arrays): the
-            # same compiled step on the same arrays, hence the same bits. The result is the
+            # same compiled step on the same arrays, hence the same bits, on the schedule's
+            # tables and the controller's arrays as two packed arrays. The result is the
             # controller's output array (the output stage copies it into the virtual command
             # at once), not a copy
-            # the schedule's tables and the controller's arrays as two packed arrays (the
-            # same kernels on views of them)
-            if sat_mask is None:
-                sat_mask = ((1 if sat_hi[0] else 0) | (2 if sat_hi[1] else 0)
-                            | (4 if sat_hi[2] else 0) | (8 if sat_lo[0] else 0)
-                            | (16 if sat_lo[1] else 0) | (32 if sat_lo[2] else 0))
-            out = ctrl.kernel_arrays[3]
-            scheduled_ppid3_step_packed(ctrl.schedule.kernel_packed, vs, ref, att, rates,
-                                        ctrl.kernel_ws, sat_mask)
-            return out
-        return ctrl.update(ref, att, rates, vs, sat_hi, sat_lo)
+            scheduled_ppid3_step_packed(*args)
+            return self.controller.kernel_arrays[3]
+        return self.controller_update(ref, att, rates, sat_hi, sat_lo)
 
     def kernel_step_args(self, mode: FlightMode, h: float, V: float, ref: NDArray[np.float64],
                          att: NDArray[np.float64], rates: NDArray[np.float64],
                          sat_mask: int) -> tuple[Any, ...] | None:
-        """:meth:`update` without its compiled step, for a caller that runs that step itself
-        (the output stage, fused with the allocation: ``allocate_tracked(..., ppid=...)``).
+        """:meth:`update`'s work before the controller, and the compiled step's arguments
+        for a caller that runs that step itself (the output stage, fused with the
+        allocation: ``allocate_tracked(..., ppid=...)``).
 
-        When the controller is stepped directly (a :class:`~.attitude.ScheduledPPIDController`
-        whose ``update`` is not replaced, float64 ``rates``), does what :meth:`update` does
-        before that step (the ground reset, the scheduled airspeed) and returns the step's
-        arguments ``(tab, vs, ref, att, rates, ws, sat_mask)``
-        (:func:`.control_kernels.scheduled_ppid3_step_packed`'s; the moments [N m] land in
-        ``ws[W_OUT:W_SIZE]``, the controller's output array). Else returns None and does
-        nothing: the caller then calls :meth:`update`. Arguments as :meth:`update`'s.
+        Resets the controller while on the ground before takeoff and low-passes the
+        airspeed the gains are scheduled with (``v_sched``). When the controller is stepped
+        directly (a :class:`~.attitude.ScheduledPPIDController` whose ``update`` is not
+        replaced on the instance, e.g. by a test's spy; float64 ``rates``) returns the
+        arguments ``(tab, vs, ref, att, rates, ws, sat_mask)`` of
+        :func:`.control_kernels.scheduled_ppid3_step_packed` (the moments [N m] land in
+        ``ws[W_OUT:W_SIZE]``, the controller's output array); else None, and the caller
+        calls :meth:`controller_update`. Arguments as :meth:`update`'s.
         """
         ctrl = self.controller
-        if not self._direct(ctrl, rates):
-            return None
-        vs = self._scheduled_airspeed(mode, h, V)
-        return ctrl.schedule.kernel_packed, vs, ref, att, rates, ctrl.kernel_ws, sat_mask
-
-    @staticmethod
-    def _direct(ctrl: AttitudeController, rates: NDArray[np.float64]) -> bool:
-        """Whether the compiled scheduled step can be run on the controller's arrays (an
-        ``update`` replaced on the instance, e.g. by a test's spy, is called instead)."""
-        return (type(ctrl) is ScheduledPPIDController and "update" not in ctrl.__dict__
-                and type(rates) is np.ndarray and rates.dtype is _F64)
-
-    def _scheduled_airspeed(self, mode: FlightMode, h: float, V: float) -> float:
-        """The step's work before the controller: its reset while on the ground before
-        takeoff, and the airspeed [m/s] the gains are scheduled with (stored in
-        ``v_sched``)."""
         if mode == _M_TAKEOFF and h - self.est.ground_alt < 0.5:  # still on the ground
-            self.controller.reset()
+            ctrl.reset()
         # gains scheduled on a low-passed airspeed: the measurement's noise would otherwise
         # move the gains between neighbouring design points from step to step (in hover
         # between 0 and 1 m/s, whose pitch gains differ by 3x), a randomly time-varying
@@ -131,4 +113,14 @@ class AttitudeStage:
         else:
             vs = V
         self.v_sched = vs
-        return vs
+        if type(ctrl) is ScheduledPPIDController and "update" not in ctrl.__dict__ \
+                and type(rates) is np.ndarray and rates.dtype is _F64:
+            return ctrl.schedule.kernel_packed, vs, ref, att, rates, ctrl.kernel_ws, sat_mask
+        return None
+
+    def controller_update(self, ref: NDArray[np.float64], att: NDArray[np.float64],
+                          rates: NDArray[np.float64], sat_hi: list[bool],
+                          sat_lo: list[bool]) -> NDArray[np.float64]:
+        """The controller's own ``update`` at the scheduled airspeed ``v_sched``, after
+        :meth:`kernel_step_args` answered None; arguments as :meth:`update`'s."""
+        return self.controller.update(ref, att, rates, self.v_sched, sat_hi, sat_lo)

@@ -251,12 +251,11 @@ class Autopilot:
         ref = self.setpoints.ref
         rates = nav.omega_body_rad_s
         # the scheduled P-PID step fused into the allocation's compiled call, when the
-        # controller is stepped directly; else the stage's update and then the allocation
+        # controller is stepped directly; else the controller's update, then the allocation
         ppid = stage.kernel_step_args(mode, h, V, ref, est.att, rates, out.sat_mask)
         if ppid is not None:
             return out.allocate(V, None, reserve, rotor_hi, pusher_hi, u_pref, ppid)
-        tau = stage.update(mode, h, V, ref, est.att, rates, out.sat_hi, out.sat_lo,
-                           out.sat_mask)
+        tau = stage.controller_update(ref, est.att, rates, out.sat_hi, out.sat_lo)
         return out.allocate(V, tau, reserve, rotor_hi, pusher_hi, u_pref)
 
     # ------------------------------------------------------------------------------------
