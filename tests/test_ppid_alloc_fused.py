@@ -200,3 +200,39 @@ def test_a_replaced_allocator_still_gets_the_ppid_moments(ds1):
         assert _bits(plain.attitude_stage.controller.kernel_ws) == _bits(
             spied.attitude_stage.controller.kernel_ws), k
     assert calls[0] == 200
+
+
+def test_kernel_step_args_resets_on_the_ground_and_schedules_the_airspeed(ds1):
+    """``kernel_step_args`` does ``update``'s work before the controller: in TAKEOFF below
+    0.5 m above the ground the controller is reset (its state as a reset twin's), above it
+    and in other modes it is kept; the scheduled airspeed is the FTC_SCHED_TAU low-pass,
+    written out here, and the answer the compiled step's arguments."""
+    ap, twin = Autopilot(ds1), Autopilot(ds1)
+    stage = ap.attitude_stage
+    ctrl = stage.controller
+    stage.est.ground_alt = 100.0
+    rng = np.random.default_rng(8)
+    rates = rng.normal(0.0, 0.5, 3)
+    ref, att = rng.normal(0.0, 0.3, 3), rng.normal(0.0, 0.3, 3)
+    v_sched = np.nan
+    for k, (mode, h) in enumerate([(FlightMode.HOVER, 100.1), (FlightMode.TAKEOFF, 100.6),
+                                   (FlightMode.TAKEOFF, 100.2), (FlightMode.HOVER, 100.1),
+                                   (FlightMode.TAKEOFF, 100.49)]):
+        for _ in range(5):  # some controller state
+            stage.update(FlightMode.HOVER, 120.0, 5.0, ref, att, rates, [False] * 3,
+                         [False] * 3)
+            v_sched = 5.0 if np.isnan(v_sched) else v_sched + 0.004 / 0.5 * (5.0 - v_sched)
+        before = ctrl.kernel_ws.copy()
+        V = float(rng.uniform(0.0, 20.0))
+        args = stage.kernel_step_args(mode, h, V, ref, att, rates, 5)
+        v_sched = v_sched + 0.004 / 0.5 * (V - v_sched)
+        assert stage.v_sched == v_sched, k
+        assert args[1] == v_sched and args[6] == 5 and args[5] is ctrl.kernel_ws, k
+        assert args[0] is ctrl.schedule.kernel_packed and args[4] is rates, k
+        if mode is FlightMode.TAKEOFF and h < 100.5:
+            twin.attitude_stage.controller.kernel_ws[:] = before
+            twin.attitude_stage.controller.reset()
+            assert _bits(ctrl.kernel_ws) == _bits(twin.attitude_stage.controller.kernel_ws)
+            assert _bits(ctrl.kernel_ws) != _bits(before), k
+        else:
+            assert _bits(ctrl.kernel_ws) == _bits(before), k
