@@ -10,7 +10,11 @@ With a :class:`~.attitude.ScheduledPPIDController` (``gs-shif``, ``shif``) the s
 compiled step itself (:func:`.control_kernels.scheduled_ppid3_step_packed`: what ``update``
 calls, :func:`.control_kernels.scheduled_ppid3_step`, on views of the schedule's packed
 tables and the controller's workspace, the saturation flags as the output stage's mask; no
-conversion, no copy), so the same bits; compiled without ``fastmath``.
+conversion, no copy), so the same bits; compiled without ``fastmath``. In a flight the
+autopilot does not call :meth:`AttitudeStage.update`: it takes that step's arguments from
+:meth:`AttitudeStage.kernel_step_args` (the stage's work before the controller done) and
+hands them to the output stage, whose allocation runs the step first in the same compiled
+call (``ActiveSetAllocator.allocate_tracked(..., ppid=...)``).
 """
 
 from __future__ import annotations
