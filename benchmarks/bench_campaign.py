@@ -150,6 +150,18 @@ clean-clone venv against main, interleaved, 3 pairs): base 290.0 / 294.5 / 300.0
 against 0.41 / 0.37 / 0.38 s; overhead +1.6-2.2 % (base +1.9-2.1 %). 300/min is passed in 2
 of 3 runs, by 4-6 %.
 
+Session 17 (2026-12-03, branch inproc-17: the P-PID step inside the allocation's compiled
+call, the runner's reused decode buffers, see ``bench_inproc.py``). Every flight
+bit-identical (``command_digest.py`` unchanged; observer-free flights hashed step by step and
+this spec's first three result rows equal to main's). One warm 60 s flight of this spec's
+first scenario under callgrind: main 3,060.5 M instructions, branch 2,960.4 M (x0.967).
+Thread CPU per control step of that flight, 7 interleaved main/branch pairs at load
+11.3-15.1: medians 30.3 / 29.2 us, pair ratio median 0.983. On the lead's idle figures
+(292.7-318.6/min, 0.37-0.40 s per flight) x0.967 is ~0.36-0.39 s per flight, ~300-330/min:
+a few per cent of margin at best, not the 10-15 % asked. ``bench_campaign`` itself not run
+(the cores were shared 4-7 ways all session: its wall-time rates would measure the
+neighbours).
+
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --whole [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --memory 2000 [--duration 4]

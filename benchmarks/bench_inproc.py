@@ -410,6 +410,60 @@ kind, a Xeon with AVX512_SPR; session 15's base 1be7cc4 against main, interleave
 ``--duration 120``): base 119.9 / 125.6x (33.4 / 31.9 us per step), main 127.3 / 127.5x
 (31.4 / 31.4 us). This host runs a step ~25 % slower than the one that gave 155-161x in
 session 14, so >= 150x is not met here.
+Session 17, issue 24, branch inproc-17 (2026-12-03, 2 cores shared with three other helpers
+and a CI run, load 7.5-15 throughout; every flight bit-identical: ``command_digest.py``
+dbd91a71..., 121a7434..., e937b801... after each commit, and observer-free flights (cases 1,
+2, 0 with gs-shif / shif / lqr and case 1 with shif, 40 s, commands and navigation state
+hashed step by step, metrics, events, end time; the campaign's first three scenarios' result
+rows) equal to main's). Built:
+
+- the attitude stage's scheduled P-PID step inside the allocation's compiled call
+  (``active_set._ppid_allocate_step_tracked``: ``scheduled_ppid3_step_packed``, then
+  ``_allocate_step_tracked_packed`` with the P-PID's output as the moment tail, the same two
+  kernels in the same order); ``AttitudeStage.kernel_step_args`` does the stage's work before
+  the controller (ground reset, scheduled airspeed: its one home, ``update`` uses it) and
+  hands the output stage the step's arguments, ``allocate_tracked(..., ppid=...)``; ``lqr``
+  and a replaced ``update`` or ``allocate`` keep the separate calls
+  (``tests/test_ppid_alloc_fused.py``: the fused call against the two calls on random and
+  adversarial inputs, whole flights against the separate calls, the replaced allocator, the
+  ground reset; failing under 6 mutations: the P-PID after the allocation, its saturation
+  mask dropped, the scheduled airspeed scaled by 1 + 1e-7, the replaced allocator's P-PID
+  step skipped, the ground reset removed or its height moved 0.5 -> 0.6 m);
+- the runner's fused call decodes the next navigation state into two buffers used in turn,
+  their ``NavState`` views made once, instead of ``np.empty(14)`` and four views per step
+  (``nav_of_round_trip`` ~3.6 % of the step in session 16); the buffer written is never the
+  nav the autopilot still holds (its estimate's ``last_nav``), tested step by step
+  (``tests/test_runner_fused.py``; fails with one buffer or the other buffer's views).
+
+Python calls per control step (cProfile): campaign scenario 43.0 -> 40.0, case 1 44 -> 41.
+Callgrind (``--instr-atstart=no``, instrumentation on for one warm 60 s flight of
+``bench_campaign``'s first scenario, main c84b3ba against this branch): 3,060.5 M -> 2,960.4 M
+instructions (x0.967; 204.0 k -> 197.4 k per control step; the interpreter 491 -> 481 M, the
+numba dispatch's type checks and unboxing ~5 M fewer). Thread CPU per control step,
+main's tree and this branch's alternated in processes (a warm-up flight, then the faster of
+two): the campaign scenario, 7 pairs at load 11.3-15.1: main 28.5-31.3 us (median 30.3),
+branch 27.7-29.8 us (median 29.2), pair ratio median 0.983 (0.887-0.998, 7 of 7 below 1);
+case 1 gs-shif 40 s, 7 pairs at load 7.5-10.6: main 28.4-32.0 (median 30.4), branch
+28.5-30.4 (median 29.5), ratio median 0.969 (0.929-1.007, 5 of 7 below 1). The cut is ~3 %
+of a step, not the ~15 % 150x needs on this host (31.4 us idle per step -> ~30.4 us by the
+instruction ratio, ~131x).
+
+Why not more: what a step spends is still spread thin. Per step, one warm campaign flight
+under callgrind (of 197.4 k instructions): the two largest blocks of compiled code 28.9 k
+and 12.9 k (not mapped to kernels; by their size the RK4 physics and the QP), libm's sin /
+cos / atan2 / exp 5.9 k, the interpreter's loop 32.1 k (40 Python calls), numba's dispatch
+(type codes, overload selection, unboxing, ``NRT`` adaptation, memory infos: ~10.5 k), malloc
+/ free 8.6 k, ``numba_attempt_nocopy_reshape`` 2.5 k (the packed kernels' views: five
+reshapes in the P-PID step alone). No single piece
+left is worth more than ~2-3 %: ~15 % takes the one compiled call for the steady modes'
+whole autopilot step (estimate, outer loops of the mode, P-PID, allocation on one flat state;
+the mode machine's exits and the navigator's per-step work as compiled predicates, Python on
+any event), which needs the navigator's fixed-wing lateral guidance (``fw_lateral``: loiter,
+mission legs) compiled first: 54 % of the campaign's steps are fixed-wing. Not started here.
+Tried and not kept: nothing else was built; the aerodynamics inside the mode kernels
+(``outer_aero_step``: one dispatch and a ``tolist`` per step, ~0.3-0.5 us by session 16's
+estimate, ~1 %) and the allocator's statistics in its kernel (``_count_solved``, one call,
+~1 %) remain open.
 """
 
 from __future__ import annotations
