@@ -116,6 +116,10 @@ Measured (session 13, 2026-12-03, 2 cores shared with 4 other helpers):
   structures incl. repeated real and complex scalars, plain / badly scaled / near-real /
   rank-one, cold and warm, converged: ``target=0``): 1.98 s against 15.01 s of CPU (7.6x),
   310 / 320 bounds bit for bit (``tests/test_dg_bfgs.py`` checks the path against SciPy's).
+  ``docs/ds1-claims/certificate.py`` (all six runs, ``--out`` a temporary folder, main and
+  branch on this machine): 114 records main's bit for bit but one piece (paper SHIF, pitch
+  point 4, piece 0: ``mu_upper`` 0.42899988 -> 0.42899965, its ``mu_upper_at_zero`` and
+  peak frequency), the same verdicts, ``CERTIFICATE.md`` byte for byte.
   A fresh checkout compiles ``dg_bfgs`` once (~15 s of CPU, ``cache=True``) besides the
   objective below.
 - A fresh checkout pays numba's first compile of ``dg_kernel.dg_objective`` (30 s of CPU at
