@@ -120,7 +120,8 @@ Measured (session 13, 2026-12-03, 2 cores shared with 4 other helpers):
   branch on this machine): 114 records main's bit for bit but one piece (paper SHIF, pitch
   point 4, piece 0: ``mu_upper`` 0.42899988 -> 0.42899965, its ``mu_upper_at_zero`` and
   peak frequency), the same verdicts, ``CERTIFICATE.md`` byte for byte.
-  A fresh checkout compiles ``dg_bfgs`` once (~15 s of CPU, ``cache=True``) besides the
+  A fresh checkout compiles ``dg_bfgs`` once (19 s of CPU at load 5, ``cache=True``; in each
+  worker process of a first ``--jobs 2`` run) besides the
   objective below.
 - A fresh checkout pays numba's first compile of ``dg_kernel.dg_objective`` (30 s of CPU at
   load ~12, measured with cProfile) in the validation's first point; later runs load it
