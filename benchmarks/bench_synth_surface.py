@@ -93,6 +93,36 @@ Measured (session 13, 2026-12-03, 2 cores shared with 4 other helpers):
   the arithmetic itself (``_closed``, the assembly, dgeev for the abscissa, the frequency
   kernel) and SLSQP; the big levers remain those above that move the gains (fewer SLSQP
   points, chain-rule derivatives), and in the validation SciPy's BFGS inside the D-G bound.
+- Session 17 (2026-12-03, 2 cores shared with 3 other helpers): the D-G bound's optimiser
+  is SciPy's BFGS written out in numba (``synthesis/dg_bfgs.py``: MINPACK-2's dcsrch, the
+  ``line_search_wolfe2`` fallback, the continuation and the stop callback in one compiled
+  call) in place of ``scipy.optimize.minimize``; the same steps, so the same bounds where the
+  rounding agrees. Validation of the shipped ``surface2/gs-shif.json`` on 12 axis-points
+  (V = 0, 2.5, 7, 11.5 m/s x 3 axes), cProfile with ``time.process_time``: main 12.05 s
+  (load ~1), of which ``dg_upper_bound`` 4.58 s (SciPy's BFGS 4.15 s: line searches 2.2 s,
+  the compiled objective 0.57 s), ``mu_real_sweep`` 6.91 s; branch 8.80 s (load ~7),
+  ``dg_upper_bound`` 1.34 s (the compiled BFGS itself 0.16 s; the rest is Python around
+  it: the Osborne start, the start values, the ``certified_value`` check), ``mu_real_sweep``
+  3.59 s. What is left of the validation: the lumped mu_RS sweep (``robustness.analyse``:
+  AB13MD and the power lower bound) ~3.2 s, ``robust_weights``' SLSQP fits ~1.3 s, the
+  dense-grid poles ~1.4 s. Paired ``time.process_time`` of that 12-point validation (no
+  profiler, after a warm-up), branch / main in ABBA order, load 6.5-14: 5.11 / 7.23,
+  5.39 / 7.26, 6.16 / 7.45, 5.60 / 6.85, 6.04 / 7.46, 4.86 / 6.02 s (ratios 0.71, 0.74,
+  0.83, 0.82, 0.81, 0.81; median 0.81); the 12 rows main's bit for bit. The whole
+  147-point validation of ``surface2`` (``jobs=1``, branch and main at the same time, load
+  9-12): 67.4 / 81.5 s CPU (0.83); 146 rows main's bit for bit, one (yaw 5.875 m/s) lower
+  by 3e-9 relative in ``mixed_mu_ends[0]`` and ``mixed_mu_cell`` (0.42899991348 /
+  0.42900099882), no verdict changed. The bound alone (320 seeded random M, 8 block
+  structures incl. repeated real and complex scalars, plain / badly scaled / near-real /
+  rank-one, cold and warm, converged: ``target=0``): 1.98 s against 15.01 s of CPU (7.6x),
+  310 / 320 bounds bit for bit (``tests/test_dg_bfgs.py`` checks the path against SciPy's).
+  ``docs/ds1-claims/certificate.py`` (all six runs, ``--out`` a temporary folder, main and
+  branch on this machine): 114 records main's bit for bit but one piece (paper SHIF, pitch
+  point 4, piece 0: ``mu_upper`` 0.42899988 -> 0.42899965, its ``mu_upper_at_zero`` and
+  peak frequency), the same verdicts, ``CERTIFICATE.md`` byte for byte.
+  A fresh checkout compiles ``dg_bfgs`` once (19 s of CPU at load 5, ``cache=True``; in each
+  worker process of a first ``--jobs 2`` run) besides the
+  objective below.
 - A fresh checkout pays numba's first compile of ``dg_kernel.dg_objective`` (30 s of CPU at
   load ~12, measured with cProfile) in the validation's first point; later runs load it
   from ``__pycache__`` (``cache=True``). Time a second run, not the first.

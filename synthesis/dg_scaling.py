@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize
 
+from vtolftc.synthesis.dg_bfgs import dg_minimise
 from vtolftc.synthesis.dg_kernel import dg_objective
 from vtolftc.synthesis.mu_blocks import Block, BlockStructure
 
@@ -341,6 +341,7 @@ def _dg_parametrisation(blocks: tuple[Block, ...]) -> _DG:
 
 
 _WARM_STAGES = (1e-4, 0.0)
+_COLD_STAGES = (3e-2, 3e-3, 3e-4, 3e-5, 0.0)
 
 
 def dg_upper_bound(
@@ -387,23 +388,16 @@ def dg_upper_bound(
     # beta^2 = lambda: a relative rtol on beta is ~2 rtol on lambda
     warm = x0 is not None and k0 == len(starts) - 1
 
-    def done() -> bool:
-        return obj.best < 0.0 or obj.best <= stop2
-
-    for rel in (_WARM_STAGES if warm else (3e-2, 3e-3, 3e-4, 3e-5, 0.0)):
-        if done():
-            break
-        obj.smooth = rel
-        hist: list[float] = []
-
-        def _cb(intermediate_result: Any, hist: list[float] = hist) -> None:
-            hist.append(obj.best)
-            if done() or (len(hist) > 8 and hist[-9] - hist[-1] <= rtol * abs(hist[-1])):
-                raise StopIteration
-
-        opts: dict[str, Any] = {"maxiter": maxiter, "gtol": 1e-12 * max(abs(obj.best), 1e-300)}
-        res = minimize(obj, x, jac=True, method="BFGS", callback=_cb, options=opts)
-        x = obj.best_x if obj.best_x is not None else np.asarray(res.x)
+    if obj.best > stop2 and obj.best >= 0.0:
+        stages = np.array(_WARM_STAGES if warm else _COLD_STAGES)
+        bx = obj.best_x if obj.best_x is not None else x
+        best, best_x, nfev = dg_minimise(obj.M, np.ascontiguousarray(x, dtype=float),
+                                         par.kernel_args, stages, int(maxiter), float(stop2),
+                                         float(rtol), float(obj.best),
+                                         np.ascontiguousarray(bx, dtype=float))
+        obj.nfev += nfev
+        if best < obj.best:
+            obj.best, obj.best_x = float(best), best_x
     assert obj.best_x is not None
     D, G = par.matrices(obj.best_x)
     cert = certified_value(M, D, G)
@@ -560,8 +554,8 @@ def mixed_mu_upper(
         The uncertainty structure.
     method : {"auto", "ab13md", "dg"}
         ``"auto"`` (AB13MD where it applies, else ``"dg"``), ``"ab13md"`` (error if the
-        structure has repeated or non-square blocks) or ``"dg"`` (D-G optimisation: scipy BFGS
-        on the compiled objective of :mod:`vtolftc.synthesis.dg_kernel`).
+        structure has repeated or non-square blocks) or ``"dg"`` (D-G optimisation: compiled BFGS,
+        :mod:`vtolftc.synthesis.dg_bfgs`, on the objective of :mod:`.dg_kernel`).
     warm_start : MixedMuUpper, optional
         A previous result for the same structure (a neighbouring frequency): its scalings
         start the optimiser.

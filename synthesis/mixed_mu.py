@@ -19,7 +19,8 @@ blocks (and commutes with them),
     M^H D M + j (G M - M^H G) <= beta^2 D   implies   mu(M) <= beta.
 
 :func:`mixed_mu_upper` minimises beta^2 = lambda_max(M^H D M + j(G M - M^H G), D), the largest
-generalised eigenvalue (a quasi-convex function of (D, G)), by BFGS on a log-sum-exp smoothed
+generalised eigenvalue (a quasi-convex function of (D, G)), by BFGS (SciPy's, compiled:
+:mod:`vtolftc.synthesis.dg_bfgs`) on a log-sum-exp smoothed
 lambda_max with continuation, in a parametrisation D_k = d_k I (full blocks), D_k = L_k L_k^H
 (repeated blocks, L_k lower triangular with positive diagonal), G_k Hermitian (real blocks).
 *Every* evaluated (D, G) is a certificate, the smallest is returned, so the value is a valid
