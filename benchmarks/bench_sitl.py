@@ -768,7 +768,8 @@ def _fly(args: argparse.Namespace, tr: str, scenario: object, tmp: str, spin_us:
                                duration_s=args.duration, out_dir=Path(tmp), plots=False,
                                spin_us=spin_us, rt_priority=args.rt_priority,
                                autopilot_cpu=0 if pin else -1, vehicle_cpu=1 if pin else -1,
-                               trace_steps=100_000 if args.trace else 0), scenario)
+                               trace_steps=100_000 if args.trace else 0,
+                               zenoh_lowlatency=args.zenoh_lowlatency), scenario)
 
 
 def _matrix(args: argparse.Namespace, scenario: object) -> None:
@@ -807,6 +808,8 @@ def main() -> None:
                     help="pin the autopilot to CPU 0 and the vehicle to CPU 1 (--cpu)")
     ap.add_argument("--rt-priority", type=int, default=0,
                     help="both processes SCHED_FIFO at this priority (needs CAP_SYS_NICE)")
+    ap.add_argument("--zenoh-lowlatency", action="store_true",
+                    help="zenoh: the HIL link on zenoh's low-latency unicast transport")
     ap.add_argument("--matrix", action="store_true",
                     help="one flight per --spin-us {0, 300} x pinned {off, on}, one line each "
                          "(no in-process reference)")

@@ -89,11 +89,14 @@ def _refuse_constant(name: str) -> None:
     raise AssertionError(f"non-standard JSON constant {name} (write through vtolftc.base.jsonio)")
 
 
-@pytest.mark.parametrize("transport", ["udp", "zenoh"])
+@pytest.mark.parametrize("transport", ["udp", "zenoh", "zenoh-lowlatency"])
 def test_case1_sitl_equals_in_process(transport, reference, tmp_path):
-    """Also with garbage thrown at every reachable port before the flight."""
+    """Also with garbage thrown at every reachable port before the flight (``zenoh-lowlatency``:
+    the HIL link on zenoh's low-latency transport)."""
+    low = transport == "zenoh-lowlatency"
+    transport = transport.removesuffix("-lowlatency")
     cfg = SitlConfig(case="1", transport=transport, duration_s=DURATION_S, out_dir=tmp_path,
-                     plots=False, stop_grace_s=STOP_GRACE_S)
+                     plots=False, stop_grace_s=STOP_GRACE_S, zenoh_lowlatency=low)
     with SitlRun(cfg) as run:
         run.start()
         _spray_garbage(run)

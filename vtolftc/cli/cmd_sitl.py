@@ -57,6 +57,9 @@ def register(sub: Any) -> None:
     p.add_argument("--cpus", default=None, metavar="A,V",
                    help="pin the autopilot to CPU A and the vehicle to CPU V once compiled "
                         "(e.g. 0,1; default: not pinned)")
+    p.add_argument("--zenoh-lowlatency", action="store_true",
+                   help="zenoh: the HIL link on zenoh's low-latency unicast transport (the "
+                        "publishing thread writes the socket; default: the universal one)")
     p.add_argument("--duration", type=float, default=40.0,
                    help="simulated seconds (default 40)")
     p.add_argument("--out", type=Path, default=None,
@@ -167,7 +170,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
                      realtime=args.realtime, duration_s=args.duration, out_dir=out,
                      airframe=args.airframe, gains_dir=args.gains_dir,
                      rt_priority=args.rt_priority, spin_us=args.spin_us,
-                     autopilot_cpu=ap_cpu, vehicle_cpu=veh_cpu)
+                     autopilot_cpu=ap_cpu, vehicle_cpu=veh_cpu,
+                     zenoh_lowlatency=args.zenoh_lowlatency)
     mode = "real time" if args.realtime else "lockstep"
     print(f"SITL {scenario.name} ({scenario.description}), {args.controller}, "
           f"{args.transport}, {mode}; run folder {out}", flush=True)

@@ -128,6 +128,10 @@ class SitlConfig:
     (``--trace-steps``; ``<out>/{autopilot,vehicle}/step_trace.npz``; 0 = off)."""
     stop_grace_s: float = 10.0
     """Wall seconds a process gets to end by itself after SIGTERM before the SIGKILL."""
+    zenoh_lowlatency: bool = False
+    """zenoh: the HIL link (both ends) on zenoh's low-latency unicast transport
+    (``lowlatency=1``, :mod:`vtolftc.protocols.zenoh_transport`): the publishing thread writes
+    the socket, no TX thread hand-over per sample; ignored over UDP."""
     hil_signing: bool = True
     """Sign the HIL link with a fresh random key for this run (``VTOLFTC_HIL_KEY`` in both
     processes' environment): only this run's autopilot can be pinned by the vehicle."""
@@ -182,8 +186,9 @@ class SitlRun:
             return (f"udp-server://127.0.0.1:{hil}", f"udp-client://127.0.0.1:{hil}",
                     f"udp-client://127.0.0.1:{gcs}", f"udp-server://127.0.0.1:{gcs}")
         hil, gcs = free_tcp_port(), free_tcp_port()
-        return (f"zenoh://{v}/hil/up?listen=tcp/127.0.0.1:{hil}",
-                f"zenoh://{v}/hil/down?connect=tcp/127.0.0.1:{hil}",
+        low = "&lowlatency=1" if self.cfg.zenoh_lowlatency else ""
+        return (f"zenoh://{v}/hil/up?listen=tcp/127.0.0.1:{hil}{low}",
+                f"zenoh://{v}/hil/down?connect=tcp/127.0.0.1:{hil}{low}",
                 f"zenoh://{v}/gcs/up?listen=tcp/127.0.0.1:{gcs}",
                 f"zenoh://{v}/gcs/down?connect=tcp/127.0.0.1:{gcs}")
 
