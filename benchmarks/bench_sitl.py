@@ -769,7 +769,8 @@ def _fly(args: argparse.Namespace, tr: str, scenario: object, tmp: str, spin_us:
                                spin_us=spin_us, rt_priority=args.rt_priority,
                                autopilot_cpu=0 if pin else -1, vehicle_cpu=1 if pin else -1,
                                trace_steps=100_000 if args.trace else 0,
-                               zenoh_lowlatency=args.zenoh_lowlatency), scenario)
+                               zenoh_lowlatency=args.zenoh_lowlatency,
+                               zenoh_peer_cpu=args.zenoh_peer_cpu and pin), scenario)
 
 
 def _matrix(args: argparse.Namespace, scenario: object) -> None:
@@ -810,6 +811,9 @@ def main() -> None:
                     help="both processes SCHED_FIFO at this priority (needs CAP_SYS_NICE)")
     ap.add_argument("--zenoh-lowlatency", action="store_true",
                     help="zenoh: the HIL link on zenoh's low-latency unicast transport")
+    ap.add_argument("--zenoh-peer-cpu", action="store_true",
+                    help="zenoh, pinned flights: each process's zenoh runtime threads on the "
+                         "other process's CPU")
     ap.add_argument("--matrix", action="store_true",
                     help="one flight per --spin-us {0, 300} x pinned {off, on}, one line each "
                          "(no in-process reference)")

@@ -26,6 +26,7 @@ from vtolftc.runners.sitl import SitlConfig, SitlRun
     (["sitl", "--cpus", "0,4096"], "--cpus '0,4096': CPU 4096 is not one"),
     (["sitl", "--cpus=-1,0"], "--cpus '-1,0': CPU -1 is not one"),
     (["sitl", "--cpus", "0,0"], "need different CPUs"),
+    (["sitl", "--zenoh-peer-cpu"], "--zenoh-peer-cpu needs --cpus A,V"),
 ])
 def test_sitl_cli_rejects_bad_input(argv, fragment, capsys, tmp_path):
     assert cli_run([*argv, "--out", str(tmp_path / "run")]) == 2
@@ -113,10 +114,12 @@ def test_sitl_cli_passes_spin_and_cpus_to_the_config(tmp_path, monkeypatch):
 
     monkeypatch.setattr(sitl_mod, "run_sitl", fake_run)
     a, v = cpus[1], cpus[0]
-    for argv in ([], ["--spin-us", "300", "--cpus", f"{a},{v}", "--zenoh-lowlatency"]):
+    for argv in ([], ["--spin-us", "300", "--cpus", f"{a},{v}", "--zenoh-lowlatency",
+                      "--zenoh-peer-cpu"]):
         with pytest.raises(StopRunError):
             cli_run(["sitl", "--out", str(tmp_path / str(len(argv))), *argv])
     assert (seen[0].spin_us, seen[0].autopilot_cpu, seen[0].vehicle_cpu,
             seen[0].zenoh_lowlatency) == (0.0, -1, -1, False)
     assert (seen[1].spin_us, seen[1].autopilot_cpu, seen[1].vehicle_cpu,
             seen[1].zenoh_lowlatency) == (300.0, a, v, True)
+    assert (seen[0].zenoh_peer_cpu, seen[1].zenoh_peer_cpu) == (False, True)

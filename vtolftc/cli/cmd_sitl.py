@@ -60,6 +60,9 @@ def register(sub: Any) -> None:
     p.add_argument("--zenoh-lowlatency", action="store_true",
                    help="zenoh: the HIL link on zenoh's low-latency unicast transport (the "
                         "publishing thread writes the socket; default: the universal one)")
+    p.add_argument("--zenoh-peer-cpu", action="store_true",
+                   help="zenoh, with --cpus: each process's zenoh runtime threads on the other "
+                        "process's CPU (the socket reader wakes where the sample was sent)")
     p.add_argument("--duration", type=float, default=40.0,
                    help="simulated seconds (default 40)")
     p.add_argument("--out", type=Path, default=None,
@@ -146,6 +149,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.spin_us) and 0 <= args.spin_us <= 100_000):
         raise UsageError(f"--spin-us {args.spin_us!r}: expected 0 <= microseconds <= 100000")
     ap_cpu, veh_cpu = _cpus(args.cpus)
+    if args.zenoh_peer_cpu and args.cpus is None:
+        raise UsageError("--zenoh-peer-cpu needs --cpus A,V")
     case = str(args.case).removeprefix("case")
     from vtolftc.firmware_sim.vehicle.faults import FaultError, load_cases
 
@@ -171,7 +176,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
                      airframe=args.airframe, gains_dir=args.gains_dir,
                      rt_priority=args.rt_priority, spin_us=args.spin_us,
                      autopilot_cpu=ap_cpu, vehicle_cpu=veh_cpu,
-                     zenoh_lowlatency=args.zenoh_lowlatency)
+                     zenoh_lowlatency=args.zenoh_lowlatency,
+                     zenoh_peer_cpu=args.zenoh_peer_cpu)
     mode = "real time" if args.realtime else "lockstep"
     print(f"SITL {scenario.name} ({scenario.description}), {args.controller}, "
           f"{args.transport}, {mode}; run folder {out}", flush=True)

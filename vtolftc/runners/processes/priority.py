@@ -36,7 +36,7 @@ import re
 from typing import TextIO
 
 __all__ = ["ZENOH_THREAD_RE", "add_rt_priority_argument", "apply_rt_priority",
-           "check_rt_priority", "thread_priorities"]
+           "check_rt_priority", "thread_name", "thread_priorities"]
 
 ZENOH_THREAD_RE = re.compile(r"^(rx|tx|app|acc|net)-[0-9]+$")
 """Names (``/proc/<pid>/task/<tid>/comm``) of zenoh's tokio runtime threads (zenoh-runtime:
@@ -85,7 +85,7 @@ def apply_rt_priority(n: int, who: str, log: TextIO) -> bool:
         tids = sorted(int(t) for t in os.listdir("/proc/self/task"))
     except OSError:  # no /proc: the calling thread only
         tids = [0]
-    prios = thread_priorities(n, {tid: _thread_name(tid) for tid in tids})
+    prios = thread_priorities(n, {tid: thread_name(tid) for tid in tids})
     try:
         for tid, prio in prios.items():
             with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
@@ -121,7 +121,7 @@ def thread_priorities(n: int, names: dict[int, str]) -> dict[int, int]:
     return {tid: top if ZENOH_THREAD_RE.match(name) else n for tid, name in names.items()}
 
 
-def _thread_name(tid: int) -> str:
+def thread_name(tid: int) -> str:
     """A thread's name (``comm``) of this process, "" if unknown (gone, or no ``/proc``)."""
     try:
         with open(f"/proc/self/task/{tid}/comm", encoding="utf-8", errors="replace") as f:
