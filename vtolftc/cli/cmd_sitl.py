@@ -2,6 +2,8 @@
 
     vtolftc sitl --case 1 --controller gs-shif [--transport udp|zenoh] [--realtime]
                  [--duration 40] [--out DIR] [--compare]
+    vtolftc sitl --transport zenoh --spin-us 300 --cpus 0,1 --rt-priority 10
+                 --zenoh-lowlatency --zenoh-peer-cpu   # zenoh's fast headless lockstep
 
 Starts ``vtolftc.runners.processes.vehicle`` and ``vtolftc.runners.processes.autopilot`` on
 free
