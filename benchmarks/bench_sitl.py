@@ -446,6 +446,12 @@ Session 17 (issue 24, zenoh; 2026-12-03; 2 cores shared with 2-3 other helpers, 
   against 11.9 / 11.3x (no gain). The 100-byte floor (raw zenoh, two processes, unpinned):
   universal 43-114 us median, low-latency 30-43 us, unix-socket link 40 us, zenoh's UDP link
   47 us (no gain over TCP); UDP sockets' floor 15-17 us (session 13).
+- ``vtolftc sitl --transport zenoh --spin-us 300 --cpus 0,1 --rt-priority 10
+  --zenoh-lowlatency --zenoh-peer-cpu`` (40 s of case 1 with its run folder, load 3-5): 18.5x
+  and 18.4x, roll / pitch / yaw RMSE 0.2325 / 0.6756 / 0.3053 deg (those of the docs); the
+  processes' logs show every zenoh thread, also those started after the pinning, at priority
+  11 on the other process's CPU. ``bench_sitl.py`` with the same flags, 20 s, load 4.1: 17.4x,
+  round trip mean / median / p90 / p99 334 / 113 / 218 / 756 us, CPU per step 215 / 203 us.
 - So zenoh reaches 15x on two cores that the two processes may hold (``SCHED_FIFO``, pinned,
   spinning); ~17x here under load, the idle machine to be measured. What is left between zenoh
   (median round trip ~120 us) and UDP (~85 us): the low-latency ``put`` (status + answer 58 us
