@@ -5,6 +5,9 @@
     python benchmarks/bench_sitl.py --floor   # the links' floor: 100-byte ping-pong, 2 processes
     python benchmarks/bench_sitl.py --transport udp --matrix [--trace] [--rt-priority N]
         # spin {0, 300} us x pinned {off, on}: one line each (--pin: autopilot CPU 0, vehicle 1)
+    python benchmarks/bench_sitl.py --transport zenoh --duration 20 --spin-us 300 --pin
+        --rt-priority 10 --zenoh-lowlatency --zenoh-peer-cpu   # (one command line)
+        # zenoh's fast lockstep setting (session 17); the last line is the "summary [...]"
 
 For each transport it flies the case with ``vtolftc.runners.sitl.run_sitl`` (vehicle and autopilot
 as separate processes, ground-station commands, no plots) and reports:
@@ -401,6 +404,59 @@ every flight below, so the wall figures are indicative; UDP, 20 s of case 1):
   ~80-90 us above UDP's (session 13's ``--floor``) and its runtime threads need the cores the
   spin would keep.
 
+Session 17 (issue 24, zenoh; 2026-12-03; 2 cores shared with 2-3 other helpers, load average
+9-16 through every flight below; 20 s of case 1; "main" is the main tree at the same flags):
+
+- How a zenoh HIL step travelled: the sender's ``put`` handed the frame to zenoh's TX thread
+  (universal transport), which wrote the TCP socket; the receiver's RX thread (tokio worker
+  ``rx-N``) read it and pushed it into the FIFO channel that the control thread polls
+  (``--spin-us``) or sleeps on: three threads per hop (UDP: one). With ``--spin-us 300 --pin
+  --rt-priority 10`` every thread of a process was ``SCHED_FIFO`` 10 on its one core, so the RX
+  thread could not run until the spinning control thread gave up: each hop cost the whole
+  spin. main's ``--trace``: 100 % of the steps over 1 ms, ``up`` 602 / ``down`` 623 us, 2.6x.
+- Changes (each opt-in but the first, which only touches processes with zenoh threads):
+  ``--rt-priority N`` puts zenoh's runtime threads (``rx/tx/app/acc/net-N``) at N + 1, so the
+  reader preempts the spinner at once (:mod:`vtolftc.runners.processes.priority`); the HIL
+  link on zenoh's low-latency transport (``--zenoh-lowlatency``, URL ``lowlatency=1``, QoS
+  off: the publishing thread writes the socket, no TX thread); ``--zenoh-peer-cpu`` (programs'
+  ``--zenoh-cpu M``) puts each process's zenoh threads on the *other* process's core, where
+  the sample was sent from and whose control thread only waits for the answer then: the
+  reader wakes locally inside the sender's write and the receiving control thread keeps its
+  core and caches (:mod:`vtolftc.runners.processes.affinity`).
+- Interleaved flights, ``--spin-us 300 --pin --rt-priority 10``, real-time factor / round trip
+  median / CPU per step autopilot, vehicle process (us): main 2.7 / 1294 / 834, 730; 2.6 /
+  1360 / 824, 732; 2.6 / 1360 / 852, 770; 2.5 / 1429 / 865, 778; 2.5 / 1429 / 855, 772.
+  With the priority change only 10.3 / 258 / 381, 355 and 9.5 / 261 / 396, 350; + low-latency
+  11.4 / 222 / 340, 321, 10.4, 11.9, 11.3, 11.0, 11.1x; + peer CPU (the fast setting) 17.1 /
+  115 / 225, 212; 16.7 / 127 / 239, 223; 16.7; 17.2 / 119 / 226, 210; 15.0 / 125 / 256, 216;
+  17.0 / 120 / 232, 214 (p90 225-243 us, p99 802-2065 us); spin 1000: 17.2 and 16.0x; no
+  spin: 8.4 and 7.9x; the priority change + peer CPU without low latency 9.0x. main's best
+  zenoh setting of session 16 (``--pin``) gave 1.6 / 1.4 / 1.6x at this load. ``--trace`` of
+  the fast setting (load 11): ``up`` 68, ``ap_compute`` 98, ``down`` 10 us per step; thread
+  CPU autopilot read 78 / step 29 / answer 29 / after 57 us, vehicle read 89, physics 18,
+  sensors + encode 37, send 13 us; one involuntary switch per step per control thread (the
+  reader taking the core for a moment).
+- UDP is untouched (its processes have no zenoh threads): ``--spin-us 300 --pin --rt-priority
+  10`` main / this tree in 5 interleaved pairs 21.9 / 19.2, 21.0 / 20.8, 22.1 / 21.4, 23.0 /
+  20.9 (this tree first), 22.1 / 23.1x (this tree first); round trip median 81-92 us both,
+  CPU per step 170-186 / 151-168 us both.
+- Without flags nothing changed (main 0.9 / 1.3x against 1.9 / 4.4x at load 12-15: the
+  load's noise); ``--zenoh-lowlatency`` alone 3.1 / 5.3x, CPU per step 478 / 446 us against
+  558 / 484 us (autopilot). ``ZENOH_RUNTIME`` with one worker per runtime: 11.8 / 11.8x
+  against 11.9 / 11.3x (no gain). The 100-byte floor (raw zenoh, two processes, unpinned):
+  universal 43-114 us median, low-latency 30-43 us, unix-socket link 40 us, zenoh's UDP link
+  47 us (no gain over TCP); UDP sockets' floor 15-17 us (session 13).
+- ``vtolftc sitl --transport zenoh --spin-us 300 --cpus 0,1 --rt-priority 10
+  --zenoh-lowlatency --zenoh-peer-cpu`` (40 s of case 1 with its run folder, load 3-5): 18.5x
+  and 18.4x, roll / pitch / yaw RMSE 0.2325 / 0.6756 / 0.3053 deg (those of the docs); the
+  processes' logs show every zenoh thread, also those started after the pinning, at priority
+  11 on the other process's CPU. ``bench_sitl.py`` with the same flags, 20 s, load 4.1: 17.4x,
+  round trip mean / median / p90 / p99 334 / 113 / 218 / 756 us, CPU per step 215 / 203 us.
+- So zenoh reaches 15x on two cores that the two processes may hold (``SCHED_FIFO``, pinned,
+  spinning); ~17x here under load, the idle machine to be measured. What is left between zenoh
+  (median round trip ~120 us) and UDP (~85 us): the low-latency ``put`` (status + answer 58 us
+  of wall / 29 us of CPU against UDP's 19 / 19) and the reader's hand-off per hop.
+
 In-process (issue 24's second target, >= 150x real time per core, i.e. ~26 us per 4 ms
 control step): ``benchmarks/bench_inproc.py`` (its docstring and ``--profile``): 155-161x on
 the idle machine in session 14; after session 15's compiled outer loops, 4 interleaved pairs
@@ -768,7 +824,36 @@ def _fly(args: argparse.Namespace, tr: str, scenario: object, tmp: str, spin_us:
                                duration_s=args.duration, out_dir=Path(tmp), plots=False,
                                spin_us=spin_us, rt_priority=args.rt_priority,
                                autopilot_cpu=0 if pin else -1, vehicle_cpu=1 if pin else -1,
-                               trace_steps=100_000 if args.trace else 0), scenario)
+                               trace_steps=100_000 if args.trace else 0,
+                               zenoh_lowlatency=args.zenoh_lowlatency,
+                               zenoh_peer_cpu=args.zenoh_peer_cpu and pin), scenario)
+
+
+def _flags(args: argparse.Namespace, tr: str, spin_us: float, pin: bool) -> str:
+    """The flight's configuration as this script's flags (one summary line's label)."""
+    out = [f"--transport {tr}", f"--spin-us {spin_us:g}"]
+    if pin:
+        out.append("--pin")
+    if args.rt_priority:
+        out.append(f"--rt-priority {args.rt_priority}")
+    if tr == "zenoh":
+        out += [f for f, on in (("--zenoh-lowlatency", args.zenoh_lowlatency),
+                                ("--zenoh-peer-cpu", args.zenoh_peer_cpu and pin)) if on]
+    return " ".join(out)
+
+
+def _summary(args: argparse.Namespace, tr: str, spin_us: float, pin: bool, res: Any) -> str:
+    """One line: real-time factor, HIL round trip percentiles, CPU per step of each process
+    (every thread), the load."""
+    nan = float("nan")
+    rtt = res.vehicle_summary.get("step_round_trip_us", {})
+    return (f"summary [{_flags(args, tr, spin_us, pin)}]: {res.real_time_factor:.1f}x; round "
+            "trip mean / median / p90 / p99 "
+            + " / ".join(f"{rtt.get(q, nan):.0f}" for q in ("mean", "median", "p90", "p99"))
+            + " us; CPU per step autopilot / vehicle "
+            f"{res.autopilot_summary.get('cpu_per_step_us', nan):.0f} / "
+            f"{res.vehicle_summary.get('cpu_per_step_us', nan):.0f} us; load "
+            f"{os.getloadavg()[0]:.1f}")
 
 
 def _matrix(args: argparse.Namespace, scenario: object) -> None:
@@ -807,6 +892,11 @@ def main() -> None:
                     help="pin the autopilot to CPU 0 and the vehicle to CPU 1 (--cpu)")
     ap.add_argument("--rt-priority", type=int, default=0,
                     help="both processes SCHED_FIFO at this priority (needs CAP_SYS_NICE)")
+    ap.add_argument("--zenoh-lowlatency", action="store_true",
+                    help="zenoh: the HIL link on zenoh's low-latency unicast transport")
+    ap.add_argument("--zenoh-peer-cpu", action="store_true",
+                    help="zenoh, pinned flights: each process's zenoh runtime threads on the "
+                         "other process's CPU")
     ap.add_argument("--matrix", action="store_true",
                     help="one flight per --spin-us {0, 300} x pinned {off, on}, one line each "
                          "(no in-process reference)")
@@ -881,6 +971,7 @@ def main() -> None:
                     for k, x in wall_parts.items()))
             if args.trace:
                 print(_tail(Path(tmp)))
+            print(_summary(args, tr, args.spin_us, args.pin, res), flush=True)
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ URL scheme of :func:`open_link`
         peer was heard are dropped and counted (``send_dropped``).
     ``udp-client://HOST:PORT``
         Send to HOST:PORT from an ephemeral local port; only datagrams from HOST:PORT are read.
-    ``zenoh://VEHICLE/LINK/DIRECTION?listen=EP&connect=EP[&mode=peer|client]``
+    ``zenoh://VEHICLE/LINK/DIRECTION?listen=EP&connect=EP[&mode=peer|client][&lowlatency=1]``
         Embedded zenoh session (peer mode by default, multicast scouting off). This end
         publishes raw frames on ``vtolftc/VEHICLE/LINK/DIRECTION`` and subscribes to the opposite
         direction (``up`` <-> ``down``). EP is a zenoh endpoint such as ``tcp/127.0.0.1:7447``;
@@ -27,7 +27,9 @@ URL scheme of :func:`open_link`
         toward the operator, ``down`` toward the physics; on the HIL link the vehicle simulator
         publishes ``up`` (HIL_SENSOR, HIL_GPS, HIL_STATE_QUATERNION) and the autopilot ``down``
         (HIL_ACTUATOR_CONTROLS); on a ground-station link the autopilot publishes ``up``
-        (telemetry, COMMAND_ACK) and the ground station ``down`` (commands).
+        (telemetry, COMMAND_ACK) and the ground station ``down`` (commands). ``lowlatency=1``
+        (both ends): zenoh's low-latency unicast transport (see
+        :mod:`vtolftc.protocols.zenoh_transport`).
 
     HOST must be a loopback address (``127.x.x.x``, ``::1`` written ``[::1]``, or ``localhost``)
     unless ``allow_remote=True`` is passed to :func:`open_link`; a URL alone can never open a
@@ -575,6 +577,7 @@ def open_link(
             mode=spec.mode,
             allow_remote=allow_remote,
             receive=zenoh_receive,
+            lowlatency=spec.lowlatency,
         )
     try:
         return Link(

@@ -110,3 +110,4 @@ class LinkUrl:
     listen: tuple[str, ...] = ()
     connect: tuple[str, ...] = ()
     mode: str = "peer"
+    lowlatency: bool = False

@@ -30,6 +30,15 @@ two ways (``receive=``):
   payload to this session only, which :meth:`recv_datagrams` drops. A full channel makes
   zenoh's thread wait (back-pressure to the publisher, whose congestion control is BLOCK)
   instead of dropping.
+
+Low-latency transport (``lowlatency=True``, URL ``lowlatency=1``; opt-in, for the lockstep HIL
+link, both ends): zenoh's ``transport/unicast/lowlatency`` with its QoS off (the two go
+together). The universal transport hands each publication to its TX thread, which writes the
+socket; the low-latency one writes it in the publishing thread, and the receiving RX thread
+reads the frames without the batch machinery: one thread wake-up less per hop and the
+writing CPU in the thread that has the data in its cache. It has no priorities and no
+fragmentation (payloads beyond the link's batch size are refused); a MAVLink datagram is far
+below it. Both ends must choose it (the transport is negotiated when the session opens).
 """
 
 from __future__ import annotations
@@ -69,7 +78,7 @@ wake-up (the lockstep's long timeouts never wake it)."""
 
 _NAME_RE = re.compile(r"^[A-Za-z0-9_\-]+$")
 _ENDPOINT_RE = re.compile(r"^(tcp|udp|tls|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})$")
-_QUERY_KEYS = {"listen", "connect", "mode"}
+_QUERY_KEYS = {"listen", "connect", "mode", "lowlatency"}
 
 
 def key_expr(vehicle: str, link: str, direction: str) -> str:
@@ -102,8 +111,10 @@ def zenoh_config(
     connect: tuple[str, ...] | list[str] = (),
     mode: str = "peer",
     allow_remote: bool = False,
+    lowlatency: bool = False,
 ) -> Any:
-    """Build a ``zenoh.Config`` with explicit endpoints only (no multicast, no gossip, no shm).
+    """Build a ``zenoh.Config`` with explicit endpoints only (no multicast, no gossip, no shm);
+    ``lowlatency``: zenoh's low-latency unicast transport, QoS off (see the module docstring).
 
     Raises
     ------
@@ -135,11 +146,14 @@ def zenoh_config(
     # nothing to scout: do not wait for scouted peers before zenoh.open returns
     cfg.insert_json5("open/return_conditions/connect_scouted", "false")
     cfg.insert_json5("transport/shared_memory/enabled", "false")
+    if lowlatency:
+        cfg.insert_json5("transport/unicast/lowlatency", "true")
+        cfg.insert_json5("transport/unicast/qos/enabled", "false")
     return cfg
 
 
 def parse_zenoh_url(url: str) -> LinkUrl:
-    """Parse ``zenoh://VEHICLE/LINK/DIRECTION?listen=EP&connect=EP&mode=peer|client``.
+    """Parse ``zenoh://VEHICLE/LINK/DIRECTION?listen=EP&connect=EP&mode=peer|client&lowlatency=0|1``.
 
     Only the syntax is checked here; loopback policy applies when the transport is built.
     """
@@ -182,6 +196,9 @@ def parse_zenoh_url(url: str) -> LinkUrl:
     modes = query.get("mode", ["peer"])
     if len(modes) != 1 or modes[0] not in ("peer", "client"):
         raise ValueError(f"bad zenoh URL {url!r}: mode must be peer or client")
+    low = query.get("lowlatency", ["0"])
+    if len(low) != 1 or low[0] not in ("0", "1"):
+        raise ValueError(f"bad zenoh URL {url!r}: lowlatency must be 0 or 1")
     return LinkUrl(
         scheme="zenoh",
         vehicle=vehicle,
@@ -190,6 +207,7 @@ def parse_zenoh_url(url: str) -> LinkUrl:
         listen=listen,
         connect=connect,
         mode=modes[0],
+        lowlatency=low[0] == "1",
     )
 
 
@@ -213,6 +231,8 @@ class ZenohTransport(Transport):
         zenoh's thread waits).
     receive
         ``"callback"`` or ``"channel"`` (see the module docstring).
+    lowlatency
+        zenoh's low-latency unicast transport (see the module docstring; both ends).
 
     Raises
     ------
@@ -236,6 +256,7 @@ class ZenohTransport(Transport):
         allow_remote: bool = False,
         queue_max: int = DEFAULT_QUEUE_MAX,
         receive: str = "callback",
+        lowlatency: bool = False,
     ) -> None:
         import zenoh
 
@@ -245,7 +266,9 @@ class ZenohTransport(Transport):
         self.receive = receive
         self.pub_key = key_expr(vehicle, link, direction)
         self.sub_key = key_expr(vehicle, link, DIRECTIONS[direction])
-        cfg = zenoh_config(listen=listen, connect=connect, mode=mode, allow_remote=allow_remote)
+        self.lowlatency = bool(lowlatency)
+        cfg = zenoh_config(listen=listen, connect=connect, mode=mode, allow_remote=allow_remote,
+                           lowlatency=self.lowlatency)
         self._endpoints = (tuple(listen), tuple(connect))
         self._queue: queue.SimpleQueue[bytes] = queue.SimpleQueue()
         self._queue_max = int(queue_max)
@@ -396,4 +419,5 @@ class ZenohTransport(Transport):
         return (
             f"zenoh pub={self.pub_key} sub={self.sub_key} "
             f"listen={list(listen)} connect={list(connect)}"
+            + (" lowlatency" if self.lowlatency else "")
         )

@@ -15,8 +15,8 @@ import pytest
 from support.procs import sitl_command_lines
 
 from vtolftc.runners.processes import affinity
-from vtolftc.runners.processes.affinity import apply_cpu, check_cpu
-from vtolftc.runners.sitl import SitlConfig
+from vtolftc.runners.processes.affinity import apply_cpu, check_cpu, thread_cpus
+from vtolftc.runners.sitl import SitlConfig, SitlRun
 
 _CHILD = """
 import os, sys, threading
@@ -54,6 +54,60 @@ def test_every_thread_of_the_process_runs_on_the_cpu(cpu):
                    f"later {cpu}", "ok True"]
 
 
+def test_zenoh_runtime_threads_on_their_own_cpu_only_when_asked():
+    """``--zenoh-cpu M``: zenoh's tokio workers (rx/tx/app/acc/net-N) on M, every other thread
+    (Python's, rerun's ``tokio-rt-worker``, look-alike names) on the process's CPU."""
+    names = {1: "python", 2: "rx-0", 3: "tx-0", 4: "app-0", 5: "acc-1", 6: "net-2",
+             7: "tokio-rt-worker", 8: "zenoh-recv-watchdog", 9: "rx-", 10: "", 11: "rx-1x"}
+    zenoh = {2, 3, 4, 5, 6}
+    assert thread_cpus(0, 1, names) == {t: 1 if t in zenoh else 0 for t in names}
+    assert thread_cpus(3, -1, names) == dict.fromkeys(names, 3)
+
+
+_ZENOH_CHILD = """
+import os, sys, time
+from vtolftc.protocols.zenoh_transport import ZenohTransport
+from vtolftc.runners.processes.affinity import apply_cpu
+cpu, zcpu, port = (int(a) for a in sys.argv[1:4])
+up = ZenohTransport("ds1", "hil", "up", listen=[f"tcp/127.0.0.1:{port}"], receive="channel")
+down = ZenohTransport("ds1", "hil", "down", connect=[f"tcp/127.0.0.1:{port}"],
+                      receive="channel")
+deadline = time.monotonic() + 20.0
+while not (up.ready() and down.ready()) and time.monotonic() < deadline:
+    time.sleep(0.01)
+ok = apply_cpu(cpu, "probe", sys.stdout, zcpu)
+for tid in sorted(int(t) for t in os.listdir("/proc/self/task")):
+    name = open(f"/proc/self/task/{tid}/comm").read().strip()
+    print("thread", name, *sorted(os.sched_getaffinity(tid)))
+up.send_bytes(b"after")   # the link still works with its reader on the other CPU
+got = []
+while not got and time.monotonic() < deadline:
+    got = down.recv_datagrams(1.0)
+print("got", got)
+up.close(); down.close()
+print("ok", ok)
+"""
+
+
+@pytest.mark.skipif(len(_CPUS) < 2, reason="pinning is only visible with 2 CPUs or more")
+def test_a_zenoh_process_puts_zenoh_threads_on_the_zenoh_cpu():
+    from vtolftc.protocols.netutil import free_tcp_port
+
+    cpu, zcpu = _CPUS[-1], _CPUS[0]
+    lines = subprocess.run([sys.executable, "-c", _ZENOH_CHILD, str(cpu), str(zcpu),
+                            str(free_tcp_port())], capture_output=True, text=True, timeout=90,
+                           check=True).stdout.splitlines()
+    assert lines[-1] == "ok True" and "got [b'after']" in lines, lines
+    threads = [ln.split()[1:] for ln in lines if ln.startswith("thread ")]
+    zenoh = [t for t in threads if t[0].split("-")[0] in ("rx", "tx", "app", "acc", "net")]
+    others = [t for t in threads if t not in zenoh]
+    assert zenoh and others, threads
+    assert all(t[1:] == [str(zcpu)] for t in zenoh), threads
+    assert all(t[1:] == [str(cpu)] for t in others), threads
+    assert lines[0] == (f"probe: pinned to CPU {cpu} ({len(threads)} threads), zenoh's "
+                        f"{len(zenoh)} runtime threads to CPU {zcpu}"), lines[0]
+
+
 def test_off_does_nothing(monkeypatch):
     def never(*a):
         raise AssertionError("sched_setaffinity called for --cpu -1")
@@ -89,6 +143,8 @@ def test_refused_is_one_line_and_no_thread_stays_pinned(monkeypatch):
     ("autopilot", ["--hil-link", "udp-client://127.0.0.1:9"])])
 @pytest.mark.parametrize("flag, value, message", [
     ("--cpu", "4096", f"--cpu 4096: expected -1 (off) or a CPU this process may use: {_CPUS}"),
+    ("--zenoh-cpu", "4096",
+     f"--zenoh-cpu 4096: expected -1 (off) or a CPU this process may use: {_CPUS}"),
     ("--trace-steps", "-3", "--trace-steps -3: expected N >= 0 steps (0 = off)")])
 def test_bad_cpu_or_trace_steps_is_one_line_and_exit_2(program, args, flag, value, message):
     p = subprocess.run([sys.executable, "-m", f"vtolftc.runners.processes.{program}", *args,
@@ -107,6 +163,48 @@ def test_cpus_reach_each_process_and_only_when_asked(tmp_path, monkeypatch):
             args = argv[name]
             got = int(args[args.index("--cpu") + 1]) if "--cpu" in args else -1
             assert got == want and args.count("--cpu") <= 1, (name, args)
+
+
+def test_zenoh_peer_cpu_puts_each_zenoh_runtime_on_the_other_cpu(tmp_path, monkeypatch):
+    """``SitlConfig.zenoh_peer_cpu``: the vehicle's zenoh threads on the autopilot's CPU and
+    the reverse (zenoh only; refused unless both processes are pinned). No process starts."""
+    for transport in ("zenoh", "udp"):
+        argv = sitl_command_lines(monkeypatch, SitlConfig(
+            out_dir=tmp_path / transport, transport=transport, autopilot_cpu=0, vehicle_cpu=1,
+            zenoh_peer_cpu=True))
+        got = {name: args[args.index("--zenoh-cpu") + 1] if "--zenoh-cpu" in args else None
+               for name, args in argv.items()}
+        want = {"vehicle": "0", "autopilot": "1"} if transport == "zenoh" else dict.fromkeys(
+            argv)
+        assert got == want, (transport, argv)
+    argv = sitl_command_lines(monkeypatch, SitlConfig(
+        out_dir=tmp_path / "off", transport="zenoh", autopilot_cpu=0, vehicle_cpu=1))
+    assert not any("--zenoh-cpu" in args for args in argv.values())
+    for ap_cpu, v_cpu in ((-1, -1), (0, -1), (-1, 1)):
+        with pytest.raises(ValueError, match="zenoh_peer_cpu needs both processes pinned"):
+            SitlRun(SitlConfig(out_dir=tmp_path / "x", transport="zenoh", zenoh_peer_cpu=True,
+                               autopilot_cpu=ap_cpu, vehicle_cpu=v_cpu))
+
+
+@pytest.mark.skipif(len(_CPUS) < 2, reason="pinning is only visible with 2 CPUs or more")
+@pytest.mark.parametrize("program, link", [
+    ("vehicle", ["--link", "zenoh://ds1/hil/up?listen=tcp/127.0.0.1:{port}",
+                 "--connect-timeout", "1"]),
+    ("autopilot", ["--hil-link", "zenoh://ds1/hil/down?connect=tcp/127.0.0.1:{port}",
+                   "--no-default-gcs", "--no-warmup", "--max-wall", "1"])])
+def test_the_programs_put_zenoh_threads_on_the_zenoh_cpu(program, link):
+    """``--cpu N --zenoh-cpu M`` of both programs over a zenoh HIL link: one line."""
+    from vtolftc.protocols.netutil import free_tcp_port
+
+    port = free_tcp_port()
+    p = subprocess.run([sys.executable, "-m", f"vtolftc.runners.processes.{program}",
+                        *(a.format(port=port) for a in link), "--cpu", str(_CPUS[-1]),
+                        "--zenoh-cpu", str(_CPUS[0])],
+                       capture_output=True, text=True, timeout=120)
+    pinned = [ln for ln in p.stderr.splitlines() if "CPU" in ln]
+    assert len(pinned) == 1, p.stderr
+    assert pinned[0].startswith(f"{program}: pinned to CPU {_CPUS[-1]} ("), pinned
+    assert pinned[0].endswith(f"runtime threads to CPU {_CPUS[0]}"), pinned
 
 
 @pytest.mark.skipif(len(_CPUS) < 2, reason="pinning is only visible with 2 CPUs or more")

@@ -45,19 +45,20 @@ def _udp_pair(**kw) -> tuple[Link, Link]:
     return client, server
 
 
-def _zenoh_pair(**kw) -> tuple[Link, Link]:
-    """(publisher of 'up', publisher of 'down'), matched both ways."""
+def _zenoh_pair(*, low: str = "", **kw) -> tuple[Link, Link]:
+    """(publisher of 'up', publisher of 'down'), matched both ways; ``low``: a query suffix of
+    both URLs (``&lowlatency=1``: zenoh's low-latency transport)."""
     last: Exception | None = None
     for _ in range(5):  # a free port can be taken between probing and listening: retry
         port = free_tcp_port()
         try:
-            up = open_link(f"zenoh://ds1/hil/up?listen=tcp/127.0.0.1:{port}",
+            up = open_link(f"zenoh://ds1/hil/up?listen=tcp/127.0.0.1:{port}{low}",
                            system_id=1, component_id=200, **kw.get("client", {}))
         except OSError as exc:  # address in use
             last = exc
             continue
         try:
-            down = open_link(f"zenoh://ds1/hil/down?connect=tcp/127.0.0.1:{port}",
+            down = open_link(f"zenoh://ds1/hil/down?connect=tcp/127.0.0.1:{port}{low}",
                              system_id=1, component_id=1, **kw.get("server", {}))
         except BaseException:
             up.close()
@@ -69,7 +70,14 @@ def _zenoh_pair(**kw) -> tuple[Link, Link]:
     raise RuntimeError(f"could not open a zenoh pair: {last}")
 
 
-PAIRS = {"udp": _udp_pair, "zenoh": _zenoh_pair}
+def _zenoh_lowlatency_pair(**kw) -> tuple[Link, Link]:
+    """:func:`_zenoh_pair` on zenoh's low-latency unicast transport (both ends)."""
+    up, down = _zenoh_pair(low="&lowlatency=1", **kw)
+    assert up.transport.lowlatency and down.transport.lowlatency
+    return up, down
+
+
+PAIRS = {"udp": _udp_pair, "zenoh": _zenoh_pair, "zenoh-lowlatency": _zenoh_lowlatency_pair}
 
 
 @pytest.fixture(params=sorted(PAIRS))
@@ -317,6 +325,9 @@ def test_wrong_key_dropped_and_counted():
         ("zenoh://ds1/hil/up?listen=127.0.0.1:7447", "bad zenoh endpoint"),
         ("zenoh://ds1/hil/up?listen=tcp/127.0.0.1:7447&bogus=1", "unknown parameter"),
         ("zenoh://ds1/hil/up?connect=tcp/127.0.0.1:7447&mode=router", "mode must be"),
+        ("zenoh://ds1/hil/up?listen=tcp/127.0.0.1:7447&lowlatency=true", "lowlatency must be"),
+        ("zenoh://ds1/hil/up?listen=tcp/127.0.0.1:7447&lowlatency=1&lowlatency=0",
+         "lowlatency must be"),
     ],
 )
 def test_bad_url_clear_error(url, match):
@@ -331,6 +342,10 @@ def test_url_parsing():
     assert (spec.vehicle, spec.link, spec.direction) == ("ds1", "hil", "up")
     assert spec.listen == ("tcp/127.0.0.1:7447", "tcp/[::1]:7448")
     assert spec.connect == ("tcp/localhost:7449",)
+    assert not spec.lowlatency
+    for flag, want in (("0", False), ("1", True)):
+        spec = parse_link_url(f"zenoh://ds1/hil/up?listen=tcp/127.0.0.1:7447&lowlatency={flag}")
+        assert spec.lowlatency is want
     spec = parse_link_url("udp-server://[::1]:14550")
     assert (spec.scheme, spec.host, spec.port) == ("udp-server", "::1", 14550)
 

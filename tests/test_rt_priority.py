@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from vtolftc.runners.processes.priority import check_rt_priority
+from vtolftc.runners.processes.priority import check_rt_priority, thread_priorities
 
 _CHILD = """
 import os, sys, threading
@@ -46,6 +46,64 @@ def test_every_thread_of_the_process_runs_as_fifo_when_permitted():
         pytest.skip("SCHED_FIFO not permitted on this machine")
     assert out[0] == "probe: SCHED_FIFO priority 7 (2 threads)"
     assert out[1:4] == [f"{w} {os.SCHED_FIFO} 7" for w in ("main", "early", "later")], out
+
+
+def test_zenoh_runtime_threads_one_above_the_rest():
+    """zenoh's tokio workers (rx/tx/app/acc/net-N) at N + 1, capped at the maximum; Python's
+    threads, rerun's ``tokio-rt-worker`` and names that only look alike at N."""
+    names = {1: "python", 2: "rx-0", 3: "rx-1", 4: "tx-0", 5: "app-0", 6: "acc-12",
+             7: "net-3", 8: "tokio-rt-worker", 9: "zenoh-recv-watchdog", 10: "rx-", 11: "rx-0a",
+             12: "xrx-0", 13: "", 14: "ChunkBatcher::c", 15: "rx0"}
+    zenoh = {2, 3, 4, 5, 6, 7}
+    assert thread_priorities(10, names) == {t: 11 if t in zenoh else 10 for t in names}
+    top = os.sched_get_priority_max(os.SCHED_FIFO)
+    assert thread_priorities(top, names) == dict.fromkeys(names, top)
+    assert thread_priorities(1, {4: "tx-0"}) == {4: 2}
+
+
+_ZENOH_CHILD = """
+import os, sys, time
+from vtolftc.protocols.zenoh_transport import ZenohTransport
+from vtolftc.runners.processes.priority import apply_rt_priority
+port = int(sys.argv[1])
+up = ZenohTransport("ds1", "hil", "up", listen=[f"tcp/127.0.0.1:{port}"], receive="channel")
+down = ZenohTransport("ds1", "hil", "down", connect=[f"tcp/127.0.0.1:{port}"],
+                      receive="channel")
+deadline = time.monotonic() + 20.0
+while not (up.ready() and down.ready()) and time.monotonic() < deadline:
+    time.sleep(0.01)
+ok = apply_rt_priority(7, "probe", sys.stdout)
+for tid in sorted(int(t) for t in os.listdir("/proc/self/task")):
+    name = open(f"/proc/self/task/{tid}/comm").read().strip()
+    print("thread", name, os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority)
+up.send_bytes(b"after")   # the link still works at those priorities
+got = []
+while not got and time.monotonic() < deadline:
+    got = down.recv_datagrams(1.0)
+print("got", got)
+up.close(); down.close()
+print("ok", ok)
+"""
+
+
+def test_a_zenoh_process_runs_zenoh_threads_one_above_when_permitted():
+    from vtolftc.protocols.netutil import free_tcp_port
+
+    out = subprocess.run([sys.executable, "-c", _ZENOH_CHILD, str(free_tcp_port())],
+                         capture_output=True, text=True, timeout=90, check=True).stdout
+    lines = out.splitlines()
+    if lines[-1] != "ok True":
+        assert lines[0].startswith("probe: --rt-priority 7 not applied"), out
+        pytest.skip("SCHED_FIFO not permitted on this machine")
+    threads = [ln.split()[1:] for ln in lines if ln.startswith("thread ")]
+    zenoh = [t for t in threads if t[0].split("-")[0] in ("rx", "tx", "app", "acc", "net")]
+    others = [t for t in threads if t not in zenoh]
+    assert zenoh and others, threads
+    assert all(t[1:] == [str(os.SCHED_FIFO), "8"] for t in zenoh), threads
+    assert all(t[1:] == [str(os.SCHED_FIFO), "7"] for t in others), threads
+    assert lines[0] == (f"probe: SCHED_FIFO priority 7 ({len(threads)} threads), zenoh's "
+                        f"{len(zenoh)} runtime threads at 8"), lines[0]
+    assert "got [b'after']" in lines
 
 
 @pytest.mark.parametrize("program, args", [

@@ -89,11 +89,26 @@ def _refuse_constant(name: str) -> None:
     raise AssertionError(f"non-standard JSON constant {name} (write through vtolftc.base.jsonio)")
 
 
-@pytest.mark.parametrize("transport", ["udp", "zenoh"])
+_FAST_ZENOH = {"zenoh_lowlatency": True, "spin_us": 300.0, "rt_priority": 10}
+"""The zenoh lockstep's fast setting (``bench_sitl.py``'s docstring, session 17), with both
+processes pinned and each one's zenoh threads on the other's CPU where there are 2 CPUs."""
+
+
+@pytest.mark.parametrize("transport", ["udp", "zenoh", "zenoh-lowlatency", "zenoh-fast"])
 def test_case1_sitl_equals_in_process(transport, reference, tmp_path):
-    """Also with garbage thrown at every reachable port before the flight."""
+    """Also with garbage thrown at every reachable port before the flight (``zenoh-lowlatency``:
+    the HIL link on zenoh's low-latency transport; ``zenoh-fast``: :data:`_FAST_ZENOH`)."""
+    extra: dict = {}
+    if transport == "zenoh-lowlatency":
+        extra = {"zenoh_lowlatency": True}
+    elif transport == "zenoh-fast":
+        extra = dict(_FAST_ZENOH)
+        cpus = sorted(os.sched_getaffinity(0))
+        if len(cpus) >= 2:
+            extra.update(autopilot_cpu=cpus[0], vehicle_cpu=cpus[1], zenoh_peer_cpu=True)
+    transport = transport.split("-")[0]
     cfg = SitlConfig(case="1", transport=transport, duration_s=DURATION_S, out_dir=tmp_path,
-                     plots=False, stop_grace_s=STOP_GRACE_S)
+                     plots=False, stop_grace_s=STOP_GRACE_S, **extra)
     with SitlRun(cfg) as run:
         run.start()
         _spray_garbage(run)
@@ -128,6 +143,10 @@ def test_case1_sitl_equals_in_process(transport, reference, tmp_path):
         assert set(cpu) == set(wall) and "wait_and_read" in wall
         # a thread's CPU time within a part never exceeds the part's wall time
         assert all(0.0 < cpu[k] <= wall[k] + 1.0 for k in wall), (wall, cpu)
+    if extra.get("zenoh_peer_cpu"):  # applied once compiled (the autopilot's warm-up path)
+        for name in ("autopilot", "vehicle"):
+            log = (tmp_path / f"{name}.log").read_text()
+            assert "zenoh's" in log and "runtime threads to CPU" in log, log[-2000:]
     print(f"{transport}: {res.real_time_factor:.1f}x real time")
 
 

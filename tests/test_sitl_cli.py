@@ -26,6 +26,7 @@ from vtolftc.runners.sitl import SitlConfig, SitlRun
     (["sitl", "--cpus", "0,4096"], "--cpus '0,4096': CPU 4096 is not one"),
     (["sitl", "--cpus=-1,0"], "--cpus '-1,0': CPU -1 is not one"),
     (["sitl", "--cpus", "0,0"], "need different CPUs"),
+    (["sitl", "--zenoh-peer-cpu"], "--zenoh-peer-cpu needs --cpus A,V"),
 ])
 def test_sitl_cli_rejects_bad_input(argv, fragment, capsys, tmp_path):
     assert cli_run([*argv, "--out", str(tmp_path / "run")]) == 2
@@ -34,10 +35,14 @@ def test_sitl_cli_rejects_bad_input(argv, fragment, capsys, tmp_path):
     assert not (tmp_path / "run").exists()  # nothing started
 
 
-@pytest.mark.parametrize("transport", ["udp", "zenoh"])
-def test_link_plan_is_loopback_and_consistent(transport, tmp_path):
-    run = SitlRun(SitlConfig(transport=transport, out_dir=tmp_path))
+@pytest.mark.parametrize("transport, low", [("udp", False), ("zenoh", False), ("udp", True),
+                                            ("zenoh", True)])
+def test_link_plan_is_loopback_and_consistent(transport, low, tmp_path):
+    """``zenoh_lowlatency``: both ends of the HIL link (zenoh only), not the ground station's."""
+    run = SitlRun(SitlConfig(transport=transport, out_dir=tmp_path, zenoh_lowlatency=low))
     vehicle, ap_hil, ap_gcs, gs = (parse_link_url(u) for u in run._urls())
+    want = low and transport == "zenoh"
+    assert [u.lowlatency for u in (vehicle, ap_hil, ap_gcs, gs)] == [want, want, False, False]
     if transport == "udp":
         assert vehicle.scheme == gs.scheme == "udp-server"
         assert ap_hil.scheme == ap_gcs.scheme == "udp-client"
@@ -109,8 +114,12 @@ def test_sitl_cli_passes_spin_and_cpus_to_the_config(tmp_path, monkeypatch):
 
     monkeypatch.setattr(sitl_mod, "run_sitl", fake_run)
     a, v = cpus[1], cpus[0]
-    for argv in ([], ["--spin-us", "300", "--cpus", f"{a},{v}"]):
+    for argv in ([], ["--spin-us", "300", "--cpus", f"{a},{v}", "--zenoh-lowlatency",
+                      "--zenoh-peer-cpu"]):
         with pytest.raises(StopRunError):
             cli_run(["sitl", "--out", str(tmp_path / str(len(argv))), *argv])
-    assert (seen[0].spin_us, seen[0].autopilot_cpu, seen[0].vehicle_cpu) == (0.0, -1, -1)
-    assert (seen[1].spin_us, seen[1].autopilot_cpu, seen[1].vehicle_cpu) == (300.0, a, v)
+    assert (seen[0].spin_us, seen[0].autopilot_cpu, seen[0].vehicle_cpu,
+            seen[0].zenoh_lowlatency) == (0.0, -1, -1, False)
+    assert (seen[1].spin_us, seen[1].autopilot_cpu, seen[1].vehicle_cpu,
+            seen[1].zenoh_lowlatency) == (300.0, a, v, True)
+    assert (seen[0].zenoh_peer_cpu, seen[1].zenoh_peer_cpu) == (False, True)

@@ -4,6 +4,7 @@ of both SITL processes uses it."""
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from collections.abc import Iterator
@@ -12,19 +13,19 @@ import pytest
 
 from vtolftc.protocols.link import open_link
 from vtolftc.protocols.netutil import free_tcp_port
-from vtolftc.protocols.zenoh_transport import ZenohTransport
+from vtolftc.protocols.zenoh_transport import ZenohTransport, zenoh_config
 
 
-def _pair(receive: str) -> tuple[ZenohTransport, ZenohTransport]:
+def _pair(receive: str, lowlatency: bool = False) -> tuple[ZenohTransport, ZenohTransport]:
     for _ in range(5):  # a free port can be taken between probing and listening: retry
         port = free_tcp_port()
         try:
             up = ZenohTransport("ds1", "hil", "up", listen=[f"tcp/127.0.0.1:{port}"],
-                                receive=receive)
+                                receive=receive, lowlatency=lowlatency)
         except OSError:
             continue
         down = ZenohTransport("ds1", "hil", "down", connect=[f"tcp/127.0.0.1:{port}"],
-                              receive=receive)
+                              receive=receive, lowlatency=lowlatency)
         deadline = time.monotonic() + 10.0
         while not (up.ready() and down.ready()) and time.monotonic() < deadline:
             time.sleep(0.01)
@@ -35,9 +36,10 @@ def _pair(receive: str) -> tuple[ZenohTransport, ZenohTransport]:
     raise RuntimeError("could not open a zenoh pair")
 
 
-@pytest.fixture
-def pair() -> Iterator[tuple[ZenohTransport, ZenohTransport]]:
-    up, down = _pair("channel")
+@pytest.fixture(params=[False, True], ids=["universal", "lowlatency"])
+def pair(request) -> Iterator[tuple[ZenohTransport, ZenohTransport]]:
+    """A channel-mode pair on zenoh's universal and on its low-latency transport."""
+    up, down = _pair("channel", request.param)
     try:
         yield up, down
     finally:
@@ -140,3 +142,17 @@ def test_open_link_passes_the_receive_mode():
         assert link.transport.receive == "channel"
     with open_link(f"zenoh://ds1/gcs/up?listen=tcp/127.0.0.1:{free_tcp_port()}") as link:
         assert link.transport.receive == "callback"  # the default (ground-station links)
+
+
+def test_lowlatency_is_the_session_config_and_only_when_asked():
+    """zenoh's low-latency unicast transport needs its QoS off; the default keeps both."""
+    ep = [f"tcp/127.0.0.1:{free_tcp_port()}"]
+    for low, want in ((False, (False, True)), (True, (True, False))):
+        cfg = zenoh_config(listen=ep, lowlatency=low)
+        got = tuple(json.loads(cfg.get_json(k)) for k in ("transport/unicast/lowlatency",
+                                                         "transport/unicast/qos/enabled"))
+        assert got == want, (low, got)
+    with open_link(f"zenoh://ds1/hil/up?listen={ep[0]}&lowlatency=1") as link:
+        assert link.transport.lowlatency and "lowlatency" in link.transport.describe()
+    with open_link(f"zenoh://ds1/hil/up?listen=tcp/127.0.0.1:{free_tcp_port()}") as link:
+        assert not link.transport.lowlatency and "lowlatency" not in link.transport.describe()

@@ -2,6 +2,8 @@
 
     vtolftc sitl --case 1 --controller gs-shif [--transport udp|zenoh] [--realtime]
                  [--duration 40] [--out DIR] [--compare]
+    vtolftc sitl --transport zenoh --spin-us 300 --cpus 0,1 --rt-priority 10
+                 --zenoh-lowlatency --zenoh-peer-cpu   # zenoh's fast headless lockstep
 
 Starts ``vtolftc.runners.processes.vehicle`` and ``vtolftc.runners.processes.autopilot`` on
 free
@@ -57,6 +59,12 @@ def register(sub: Any) -> None:
     p.add_argument("--cpus", default=None, metavar="A,V",
                    help="pin the autopilot to CPU A and the vehicle to CPU V once compiled "
                         "(e.g. 0,1; default: not pinned)")
+    p.add_argument("--zenoh-lowlatency", action="store_true",
+                   help="zenoh: the HIL link on zenoh's low-latency unicast transport (the "
+                        "publishing thread writes the socket; default: the universal one)")
+    p.add_argument("--zenoh-peer-cpu", action="store_true",
+                   help="zenoh, with --cpus: each process's zenoh runtime threads on the other "
+                        "process's CPU (the socket reader wakes where the sample was sent)")
     p.add_argument("--duration", type=float, default=40.0,
                    help="simulated seconds (default 40)")
     p.add_argument("--out", type=Path, default=None,
@@ -143,6 +151,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.spin_us) and 0 <= args.spin_us <= 100_000):
         raise UsageError(f"--spin-us {args.spin_us!r}: expected 0 <= microseconds <= 100000")
     ap_cpu, veh_cpu = _cpus(args.cpus)
+    if args.zenoh_peer_cpu and args.cpus is None:
+        raise UsageError("--zenoh-peer-cpu needs --cpus A,V")
     case = str(args.case).removeprefix("case")
     from vtolftc.firmware_sim.vehicle.faults import FaultError, load_cases
 
@@ -167,7 +177,9 @@ def cmd_sitl(args: argparse.Namespace) -> int:
                      realtime=args.realtime, duration_s=args.duration, out_dir=out,
                      airframe=args.airframe, gains_dir=args.gains_dir,
                      rt_priority=args.rt_priority, spin_us=args.spin_us,
-                     autopilot_cpu=ap_cpu, vehicle_cpu=veh_cpu)
+                     autopilot_cpu=ap_cpu, vehicle_cpu=veh_cpu,
+                     zenoh_lowlatency=args.zenoh_lowlatency,
+                     zenoh_peer_cpu=args.zenoh_peer_cpu)
     mode = "real time" if args.realtime else "lockstep"
     print(f"SITL {scenario.name} ({scenario.description}), {args.controller}, "
           f"{args.transport}, {mode}; run folder {out}", flush=True)

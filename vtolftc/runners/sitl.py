@@ -128,6 +128,15 @@ class SitlConfig:
     (``--trace-steps``; ``<out>/{autopilot,vehicle}/step_trace.npz``; 0 = off)."""
     stop_grace_s: float = 10.0
     """Wall seconds a process gets to end by itself after SIGTERM before the SIGKILL."""
+    zenoh_lowlatency: bool = False
+    """zenoh: the HIL link (both ends) on zenoh's low-latency unicast transport
+    (``lowlatency=1``, :mod:`vtolftc.protocols.zenoh_transport`): the publishing thread writes
+    the socket, no TX thread hand-over per sample; ignored over UDP."""
+    zenoh_peer_cpu: bool = False
+    """zenoh, both processes pinned: each process's zenoh runtime threads on the *other*
+    process's CPU (``--zenoh-cpu``, :mod:`vtolftc.runners.processes.affinity`): the socket
+    reader wakes on the core the sample was sent from, while that process waits; ignored over
+    UDP."""
     hil_signing: bool = True
     """Sign the HIL link with a fresh random key for this run (``VTOLFTC_HIL_KEY`` in both
     processes' environment): only this run's autopilot can be pinned by the vehicle."""
@@ -162,6 +171,9 @@ class SitlRun:
     def __init__(self, config: SitlConfig) -> None:
         if config.transport not in TRANSPORTS:
             raise ValueError(f"transport {config.transport!r}: expected udp or zenoh")
+        if config.zenoh_peer_cpu and min(config.autopilot_cpu, config.vehicle_cpu) < 0:
+            raise ValueError("zenoh_peer_cpu needs both processes pinned (autopilot_cpu and "
+                             "vehicle_cpu)")
         self.cfg = config
         self.out = Path(config.out_dir)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
@@ -182,8 +194,9 @@ class SitlRun:
             return (f"udp-server://127.0.0.1:{hil}", f"udp-client://127.0.0.1:{hil}",
                     f"udp-client://127.0.0.1:{gcs}", f"udp-server://127.0.0.1:{gcs}")
         hil, gcs = free_tcp_port(), free_tcp_port()
-        return (f"zenoh://{v}/hil/up?listen=tcp/127.0.0.1:{hil}",
-                f"zenoh://{v}/hil/down?connect=tcp/127.0.0.1:{hil}",
+        low = "&lowlatency=1" if self.cfg.zenoh_lowlatency else ""
+        return (f"zenoh://{v}/hil/up?listen=tcp/127.0.0.1:{hil}{low}",
+                f"zenoh://{v}/hil/down?connect=tcp/127.0.0.1:{hil}{low}",
                 f"zenoh://{v}/gcs/up?listen=tcp/127.0.0.1:{gcs}",
                 f"zenoh://{v}/gcs/down?connect=tcp/127.0.0.1:{gcs}")
 
@@ -241,6 +254,9 @@ class SitlRun:
         timeout = f"{cfg.vehicle_timeout_s:g}"
         pin = {name: ["--cpu", str(int(n))] if n >= 0 else []
                for name, n in (("vehicle", cfg.vehicle_cpu), ("autopilot", cfg.autopilot_cpu))}
+        if cfg.zenoh_peer_cpu and cfg.transport == "zenoh":
+            pin["vehicle"] += ["--zenoh-cpu", str(int(cfg.autopilot_cpu))]
+            pin["autopilot"] += ["--zenoh-cpu", str(int(cfg.vehicle_cpu))]
         self._spawn("vehicle", ["-m", "vtolftc.runners.processes.vehicle", "--link", v_url,
                                 *mode, *common, *pin["vehicle"], "--out",
                                 str(self.out / "vehicle"),

@@ -199,6 +199,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parse_args(argv)
     err = sys.stderr
     for bad in (check_rt_priority(args.rt_priority), check_cpu(args.cpu),
+                check_cpu(args.zenoh_cpu, "--zenoh-cpu"),
                 check_trace_steps(args.trace_steps)):
         if bad is not None:
             print(f"autopilot: error: {bad}", file=err)
@@ -280,7 +281,7 @@ def main(argv: list[str] | None = None) -> int:
 
         warm_up(make, stop=lambda: proc is not None and not proc.running)
         apply_rt_priority(args.rt_priority, "autopilot", err)  # compiled: now real time
-        apply_cpu(args.cpu, "autopilot", err)  # and pinned
+        apply_cpu(args.cpu, "autopilot", err, args.zenoh_cpu)  # and pinned
 
     proc = AutopilotProcess(
         autopilot, hil, gcs_links, actuators=ActuatorTable.from_names(af.actuator_names),
@@ -291,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
         warmup=None if args.no_warmup else warm)
     if args.no_warmup:
         apply_rt_priority(args.rt_priority, "autopilot", err)
-        apply_cpu(args.cpu, "autopilot", err)
+        apply_cpu(args.cpu, "autopilot", err, args.zenoh_cpu)
     proc.spin_s = max(0.0, args.spin_us) * 1e-6
     proc.parts.enable_trace(args.trace_steps)
     for obs in observers:  # the ULog's sensor topics from HIL_SENSOR / HIL_GPS

@@ -91,12 +91,13 @@ class _Vehicle(VehicleProcess):
 
     rt_priority = 0
     cpu = -1
+    zenoh_cpu = -1
 
     def warm_up(self) -> None:
         """Compile (:meth:`VehicleProcess.warm_up`), then apply the priority and the CPU."""
         super().warm_up()
         apply_rt_priority(self.rt_priority, "vehicle", sys.stderr)
-        apply_cpu(self.cpu, "vehicle", sys.stderr)
+        apply_cpu(self.cpu, "vehicle", sys.stderr, self.zenoh_cpu)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -116,6 +117,7 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
     for bad in (check_rt_priority(args.rt_priority), check_cpu(args.cpu),
+                check_cpu(args.zenoh_cpu, "--zenoh-cpu"),
                 check_trace_steps(args.trace_steps)):
         if bad is not None:
             print(f"vehicle: error: {bad}", file=sys.stderr)
@@ -133,6 +135,7 @@ def main(argv: list[str] | None = None) -> int:
         proc.spin_s = max(0.0, args.spin_us) * 1e-6
         proc.rt_priority = args.rt_priority
         proc.cpu = args.cpu
+        proc.zenoh_cpu = args.zenoh_cpu
         proc.parts.enable_trace(args.trace_steps)
     except (AirframeError, ValueError, OSError) as exc:
         print(f"vehicle: error: {exc}", file=sys.stderr)
