@@ -392,6 +392,12 @@ class _Evaluator:
         self.compiled = True
         self._ecache: dict[bytes, list[tuple[Any, ...] | None]] = {}
         self._vcache: dict[bytes, NDArray[np.float64]] = {}
+        # derivatives by the chain rule through a realizer's local parameters (a surface
+        # problem's five gains per grid point) when there are fewer of them than of theta
+        rz = problem.realizer
+        self.chain_rule = (hasattr(rz, "gain_derivatives")
+                           and getattr(rz, "n_local", self.p) < self.p)
+        self._chcache: dict[bytes, list[tuple[Any, NDArray[np.float64]]] | None] = {}
 
     def realize(self, theta: NDArray[np.float64]) -> list[StateSpaceData]:
         key = theta.tobytes()
@@ -428,6 +434,22 @@ class _Evaluator:
         self._dcache[key] = out
         return out
 
+    def chain(self, theta: NDArray[np.float64],
+              ) -> list[tuple[Any, NDArray[np.float64]]] | None:
+        """Per channel ((dA, dB, dC, dD) over the realizer's q local parameters, each
+        (q, ., .); J (q, p) their Jacobian in theta), or None (no chain rule: ``chain_rule``
+        off, or a perturbed realisation not finite)."""
+        if not self.chain_rule:
+            return None
+        key = theta.tobytes()
+        if key in self._chcache:
+            return self._chcache[key]
+        r = self.pb.realizer.gain_derivatives(theta, self.scales)  # type: ignore[union-attr]
+        if len(self._chcache) > 1024:
+            self._chcache.clear()
+        self._chcache[key] = r
+        return r
+
     def derivative_stacks(self, theta: NDArray[np.float64],
                           ) -> list[tuple[NDArray[np.float64], ...]] | None:
         """:meth:`derivatives` stacked over the parameters: per channel (dA, dB, dC, dD),
@@ -437,7 +459,11 @@ class _Evaluator:
         key = theta.tobytes()
         if key in self._dstack:
             return self._dstack[key]
-        stacks = self._derivatives_batch(theta)
+        ch = self.chain(theta)
+        if ch is not None:  # d X / d theta_k = sum_j J[j, k] d X / d g_j
+            stacks = [tuple(np.tensordot(J.T, X, axes=1) for X in d) for d, J in ch]
+        else:
+            stacks = self._derivatives_batch(theta)
         if len(self._dstack) > 1024:
             self._dstack.clear()
         self._dstack[key] = stacks
@@ -557,7 +583,8 @@ class _Evaluator:
         if not self.compiled or any(B.shape[1] != 1 for _, B, _, _ in sys):
             return self._sigma_and_grad_numpy(theta, omegas, grad)
         dstk = None
-        if grad:
+        ch = self.chain(theta) if grad else None
+        if grad and ch is None:
             dstk = self.derivative_stacks(theta)
             if dstk is None:
                 dsys = self.derivatives(theta)
@@ -568,7 +595,11 @@ class _Evaluator:
             w = omegas[i]
             if w.size == 0:
                 continue
-            if dstk is None:
+            if ch is not None:  # the gradient in the local parameters, then J
+                s, g = siso_sigma_grad(A, B, C, D, w, *ch[i][0])
+                sig_all.append(s)
+                grad_all.append(g @ ch[i][1])
+            elif dstk is None:
                 sig_all.append(siso_sigma(A, B, C, D, w))
             else:
                 s, g = siso_sigma_grad(A, B, C, D, w, *dstk[i])
@@ -671,7 +702,8 @@ class _Evaluator:
                 vals[i] = e[0].real
         if not grad:
             return vals, None
-        dstk = self.derivative_stacks(theta)
+        ch = self.chain(theta)
+        dstk = self.derivative_stacks(theta) if ch is None else [d for d, _ in ch]
         dsys = self.derivatives(theta) if dstk is None else None
         grads = np.zeros((len(sys), self.p))
         for i, e in enumerate(eigs):
@@ -685,7 +717,8 @@ class _Evaluator:
             dAx = (dstk[i][0] @ x if dstk is not None
                    else [dsys[i][k][0] @ x for k in range(self.p)])  # type: ignore[index]
             # the same complex quotient per k as float(np.real(...)), less call overhead
-            grads[i] = [(np.vdot(y, v) / den).real for v in dAx]
+            gi = [(np.vdot(y, v) / den).real for v in dAx]
+            grads[i] = gi if ch is None else np.asarray(gi) @ ch[i][1]
         return vals, grads
 
 

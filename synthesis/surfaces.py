@@ -509,6 +509,65 @@ class SurfaceRealizer:
             return [as_state_space(m) for m in out]   # raises for the first bad channel
         return out
 
+    n_local = len(PARAM_NAMES)
+    """Gains per grid point: the parameters :meth:`gain_derivatives` differentiates in."""
+
+    def gain_derivatives(self, theta: NDArray[np.float64], scales: NDArray[np.float64],
+                         ) -> list[tuple[tuple[NDArray[np.float64], ...],
+                                         NDArray[np.float64]]] | None:
+        """Per channel the derivatives of (A, B, C, D) with respect to its grid point's five
+        gains, by central differences in the gains, and d gains / d theta (the chain rule).
+
+        The coefficients enter a channel only through ``g = clip(C phi, lower, upper)``, so
+        d X / d theta = sum_j d X / d g_j * d g_j / d theta: 10 perturbed realisations per
+        grid point instead of the 2 p of differences in theta. d g_j / d C[j, m] =
+        ``phi[m]`` where ``lower_j < (C phi)_j < upper_j``, 0 where clipped and 1/2 on a
+        bound (what central differences in theta see there). The gain steps are
+        ``1e-6 max(|g_j|, s_j)``, s_j the scale of gain j's coefficient c_0.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (5 (d + 1),)
+            The coefficient vector (gain-major).
+        scales : ndarray of float, shape (5 (d + 1),)
+            The coefficients' scales (gain-major); those of the c_0 are the gains'.
+
+        Returns
+        -------
+        list of tuple or None
+            Per channel ``((dA, dB, dC, dD), J)``: each derivative stacked over the five
+            gains (5, ., .), ``J`` of shape (5, 5 (d + 1)) the gains' Jacobian; None when a
+            perturbed realisation is not finite.
+        """
+        chans = self.channels
+        theta = np.asarray(theta, float)
+        out: list[Any] = [None] * len(chans)
+        ng = len(PARAM_NAMES)
+        for idx in self.groups:
+            first = chans[idx[0]]
+            phi = first.phi
+            raw = theta.reshape(ng, phi.size) @ phi
+            g = np.clip(raw, first.lower, first.upper)
+            hs = 1e-6 * np.maximum(np.abs(g), scales[::phi.size])
+            pts = np.repeat(g[None, :], 2 * ng, axis=0)
+            for j in range(ng):
+                pts[2 * j, j] += hs[j]
+                pts[2 * j + 1, j] -= hs[j]
+            h2 = (2.0 * hs)[:, None, None]
+            slope = np.where((raw > first.lower) & (raw < first.upper), 1.0,
+                             np.where((raw == first.lower) | (raw == first.upper), 0.5, 0.0))
+            J = np.zeros((ng, theta.size))
+            for j in range(ng):
+                J[j, j * phi.size:(j + 1) * phi.size] = slope[j] * phi
+            for i in idx:
+                ders = []
+                for X in chans[i].inner.realize_batch(pts):
+                    if not np.isfinite(X).all():
+                        return None
+                    ders.append((X[0::2] - X[1::2]) / h2)
+                out[i] = (tuple(ders), J)
+        return out
+
     def batch(self, thetas: NDArray[np.float64]) -> list[tuple[NDArray[np.float64], ...]]:
         """Per channel ``c.realize_batch(thetas)``, bit for bit, the gains of each group
         computed once.
