@@ -808,6 +808,10 @@ def _same_freq(w1: float, w2: float) -> bool:
     return abs(w1 - w2) <= 1e-6 * max(abs(w1), abs(w2), 1e-9)
 
 
+INNER_FTOL = 1e-10
+"""Default tolerance of each trust-region step's SLSQP subproblem, relative to the current
+objective (:func:`tune`'s ``inner_ftol``)."""
+
 ITER_CAP = 1000
 """Safety cap on the iterations of one start when :func:`tune` runs to convergence
 (``max_iter=None``): the stationarity and progress tests below stop well before it."""
@@ -831,6 +835,7 @@ class _Options:
     t_start: float = 0.0
     interrupted: bool = False
     to_convergence: bool = False  # max_iter=None: stop on stationarity / progress
+    inner_ftol: float = INNER_FTOL  # SLSQP's ftol relative to the objective, per step
 
 
 @dataclass(frozen=True)
@@ -1040,7 +1045,7 @@ def _step(
         res = minimize(
             obj_f, y0, jac=obj_j, method="SLSQP",
             bounds=bounds, constraints=[{"type": "ineq", "fun": cons_f, "jac": cons_j}],
-            options={"maxiter": 100, "ftol": 1e-10 * max(f, 1e-12)},
+            options={"maxiter": 100, "ftol": opts.inner_ftol * max(f, 1e-12)},
         )
         y = res.x
     except (np.linalg.LinAlgError, ValueError):
@@ -1421,6 +1426,7 @@ def tune(
     progress: Callable[[Progress], None] | None = None,
     regularization: float = 0.0,
     polish: bool = False,
+    inner_ftol: float = INNER_FTOL,
 ) -> TuneResult:
     """Minimise max_i ||channel_i(theta)||_inf over theta (paper eqs. 7-8, ``systune`` role).
 
@@ -1477,6 +1483,9 @@ def tune(
         the result then stays :func:`collect_starts` of :func:`start_jobs`, bit for bit, and
         the DS-1 design's numbers are unchanged (COMPleib AC10: 14.554 without, 13.2365 with;
         ``benchmarks/bench_compleib.py``).
+    inner_ftol : float
+        Tolerance of each step's SLSQP subproblem relative to the current objective (> 0;
+        default :data:`INNER_FTOL`). A looser one visits fewer points per step.
 
     Returns
     -------
@@ -1486,8 +1495,8 @@ def tune(
     Raises
     ------
     ValueError
-        For n_starts < 0, max_iter < 1, time_limit <= 0 or a negative or non-finite
-        regularization.
+        For n_starts < 0, max_iter < 1, time_limit <= 0, a negative or non-finite
+        regularization or an inner_ftol that is not a finite float > 0.
 
     Examples
     --------
@@ -1507,7 +1516,7 @@ def tune(
                       max_freqs=max_freqs, trust_radius=trust_radius, spread=spread,
                       start_sampler=start_sampler, time_limit=time_limit,
                       progress=progress if map_fn is None else None,
-                      regularization=regularization)
+                      regularization=regularization, inner_ftol=inner_ftol)
     opts = jobs[0][3]
     records: list[StartRecord] = []
     stopped = ""
@@ -1551,6 +1560,7 @@ def start_jobs(
     time_limit: float | None = None,
     progress: Callable[[Progress], None] | None = None,
     regularization: float = 0.0,
+    inner_ftol: float = INNER_FTOL,
 ) -> list[tuple[Any, ...]]:
     """The independent local runs of :func:`tune`, one picklable job per start.
 
@@ -1564,7 +1574,7 @@ def start_jobs(
         The problem.
     n_starts, seed, max_iter, tol, max_freqs, trust_radius, spread : int, float or None
         As in :func:`tune`.
-    start_sampler, time_limit, progress, regularization : callable, float or None
+    start_sampler, time_limit, progress, regularization, inner_ftol : callable, float or None
         As in :func:`tune`.
 
     Returns
@@ -1580,11 +1590,14 @@ def start_jobs(
         raise ValueError(f"time_limit must be > 0 s (or None), got {time_limit}")
     if not (regularization >= 0 and math.isfinite(regularization)):
         raise ValueError(f"regularization must be a finite float >= 0, got {regularization}")
+    if not (inner_ftol > 0 and math.isfinite(inner_ftol)):
+        raise ValueError(f"inner_ftol must be a finite float > 0, got {inner_ftol}")
     t_start = time.monotonic()
     opts = _Options(ITER_CAP if max_iter is None else max_iter, tol, max_freqs, trust_radius,
                     200 * len(problem.parameters) + 200,
                     None if time_limit is None else t_start + time_limit, float(regularization),
-                    progress, t_start, to_convergence=max_iter is None)
+                    progress, t_start, to_convergence=max_iter is None,
+                    inner_ftol=float(inner_ftol))
     starts = [problem.initial]
     children = np.random.SeedSequence(seed).spawn(n_starts)
     ev: _Evaluator | None = None

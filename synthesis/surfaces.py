@@ -63,6 +63,7 @@ from vtolftc.synthesis.uncertainty import DesignPoint
 
 __all__ = [
     "GRID_NUMBER_OFFSET",
+    "SURFACE_INNER_FTOL",
     "SURFACE_TAG",
     "GainSurface",
     "SurfaceBasis",
@@ -84,6 +85,12 @@ __all__ = [
 GRID_NUMBER_OFFSET = 100
 #: The seed tag of a surface tune (point designs use their point number, SHIF 100).
 SURFACE_TAG = 200
+#: The surface (GS-SHIF) tune's SLSQP step tolerance relative to its objective
+#: (:func:`~vtolftc.synthesis.structured.tune`'s ``inner_ftol``; the point designs and SHIF
+#: keep :data:`~vtolftc.synthesis.structured.INNER_FTOL`, 1e-10): it started from SHIF, the
+#: outer trust-region loop converges anyway and each step visits far fewer points (issue 23:
+#: the surface design's time; ``benchmarks/bench_synth_surface.py``).
+SURFACE_INNER_FTOL = 1e-8
 
 
 # ------------------------------------------------------------------------------------------
@@ -841,7 +848,7 @@ class SurfaceDesign:
 def design_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
                     grid: Sequence[DesignPoint], degree: int = 2, *, n_starts: int = 2,
                     surface_starts: int = 0, seed: int = 0, max_iter: int | None = 40,
-                    ) -> SurfaceDesign:
+                    inner_ftol: float = SURFACE_INNER_FTOL) -> SurfaceDesign:
     """SHIF (degree 0) then GS-SHIF (``degree``, started from SHIF) for ``axis`` on ``grid``.
 
     Parameters
@@ -865,6 +872,9 @@ def design_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
         Seed (streams per axis, as the point designs').
     max_iter : int or None
         Iteration cap per start (:func:`~vtolftc.synthesis.structured.tune`).
+    inner_ftol : float
+        The surface tune's SLSQP step tolerance (``tune``'s ``inner_ftol``; SHIF keeps the
+        default).
 
     Returns
     -------
@@ -883,7 +893,8 @@ def design_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
     start = spd.problem.initial
     f0 = spd.problem.objective(start)
     rd = tune(spd.problem, n_starts=surface_starts,
-              seed=point_seed(seed, axis, SURFACE_TAG + 1), max_iter=max_iter)
+              seed=point_seed(seed, axis, SURFACE_TAG + 1), max_iter=max_iter,
+              inner_ftol=inner_ftol)
     fd = spd.problem.objective(rd.theta)
     kept = not (fd <= f0)
     theta = start if kept else rd.theta

@@ -106,3 +106,33 @@ def test_chain_rule_only_where_it_saves_realisations() -> None:
     pb = sp2.problem
     plain = TuningProblem(pb.parameters, pb.channels, pb.channel_names, pb.stability_margin)
     assert not _Evaluator(plain).chain_rule
+
+
+def test_inner_ftol_reaches_the_step_subproblem_and_is_checked(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """``tune(inner_ftol=...)`` is the SLSQP tolerance of each step (the surface tune's
+    looser one visits fewer points); the default is the point designs' 1e-10."""
+    from vtolftc.synthesis import structured
+
+    seen: list[float] = []
+    real = structured.minimize
+
+    def spy(*a, **k):  # type: ignore[no-untyped-def]
+        if k.get("method") == "SLSQP":
+            seen.append(k["options"]["ftol"])
+        return real(*a, **k)
+
+    monkeypatch.setattr(structured, "minimize", spy)
+    pb = _problem("yaw", 1).problem
+    f_init = pb.objective(pb.initial)
+    assert np.isfinite(f_init)
+    for tol in (structured.INNER_FTOL, 1e-8, 1e-3):
+        seen.clear()
+        kw = {} if tol == structured.INNER_FTOL else {"inner_ftol": tol}
+        res = structured.tune(pb, max_iter=2, **kw)
+        assert seen and res.starts[0].iterations >= 1
+        # relative to the objective at each step: between the final and the initial value
+        assert all(res.value * (1 - 1e-12) <= f / tol <= f_init * (1 + 1e-12) for f in seen)
+    assert structured.INNER_FTOL == 1e-10
+    for bad in (0.0, -1e-8, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="inner_ftol"):
+            structured.tune(pb, max_iter=1, inner_ftol=bad)
