@@ -96,6 +96,36 @@ Measured (session 13, 2026-12-03, 2 cores shared with 4 other helpers):
 - A fresh checkout pays numba's first compile of ``dg_kernel.dg_objective`` (30 s of CPU at
   load ~12, measured with cProfile) in the validation's first point; later runs load it
   from ``__pycache__`` (``cache=True``). Time a second run, not the first.
+- Session 16 (2026-12-03, 2 cores shared with 2 other helpers, load 9-12 throughout): the
+  surface (GS-SHIF) tune moves; SHIF and the point designs do not (``shif.json`` is main's
+  up to its time stamp). (1) Derivatives by the chain rule
+  (``SurfaceRealizer.gain_derivatives``): central differences in each grid point's five
+  gains (10 realisations instead of 30), the frequency-kernel and abscissa gradients in
+  those five, times d gains / d theta (0 where clipped, 1/2 on a bound); ~1e-8 relative to
+  the coefficient differences. (2) The surface tune's SLSQP step tolerance 1e-8 of the
+  objective instead of 1e-10 (``tune(inner_ftol=...)``, ``surfaces.SURFACE_INNER_FTOL``).
+  The surface tunes alone (``time.process_time``, SHIF start fixed, main and branch run at
+  the same time, outer iterations / SLSQP Jacobians in brackets): main roll 83.1 s (28 /
+  1884), pitch 35.6 s (20 / 892), yaw 11.9 s (12 / 393) = 130.6 s; chain rule only roll
+  16.7 (8 / 531), pitch 56.3 (39 / 1541), yaw 29.9 (17 / 875) = 102.9 s; chain rule and
+  1e-8 roll 6.2 (6 / 204), pitch 12.9 (20 / 501), yaw 15.2 (15 / 504) = 34.3 s (0.26x).
+  Roll's tolerance (chain rule on): 1e-4 1.7 s -> 1.49367, 1e-6 3.4 s -> 1.48968, 1e-7
+  3.1 s -> 1.48968, 1e-8 6.2 s -> 1.48822, 1e-9 12.7 s -> 1.48807, 1e-10 16.7 s ->
+  1.48810 (SLSQP maxiter 20 instead of 100 at 1e-10: 10.6 s -> 1.48957). End to end, this
+  benchmark on both trees at the same time (13:39-14:00 UTC, load 9 -> 10): main 1209 s
+  wall, 262.6 s CPU (designs 157.7, validation 102.3, report 2.6); branch 916 s wall,
+  176.8 s CPU (designs 67.2, validation 106.6, report 2.9): CPU 0.67x, designs 0.43x.
+  Objectives SHIF -> GS-SHIF: roll 1.51965 -> 1.48822 (main 1.48787, +0.02 %), pitch
+  1.99341 -> 1.45887 (main's to 5 digits), yaw 5.85483 -> 2.23894 (main 2.23861, +0.015 %).
+  The yaw surface is another point of a flat objective: its validation rows differ
+  (phase margin at 0 m/s 29.9 deg against 58.0, mu_RS 1.02-1.21 against 0.87-0.99 at
+  11.1-14.9 m/s), 76 failing rows against main's 72 (yaw 45 / 40, roll 13 / 14, pitch
+  18 / 18). ~177 s of CPU under load is at the < ~170 s line (loaded CPU runs a few % above
+  idle); what is left: the validation ~100-107 s (unchanged: SciPy's BFGS inside the D-G
+  bound, ``mu.mu_sweep``, ``robust_weights``' SLSQP), the SHIF tunes ~30 s, the surface
+  tunes ~35 s. The design stage's 3 jobs on 2 workers also leave a core idle at its end
+  (roll + yaw on one worker): finer jobs (the 9 SHIF starts of ``start_jobs``, then the 3
+  surface tunes) would balance it without moving any number.
 """
 
 from __future__ import annotations

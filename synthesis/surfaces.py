@@ -63,6 +63,7 @@ from vtolftc.synthesis.uncertainty import DesignPoint
 
 __all__ = [
     "GRID_NUMBER_OFFSET",
+    "SURFACE_INNER_FTOL",
     "SURFACE_TAG",
     "GainSurface",
     "SurfaceBasis",
@@ -84,6 +85,12 @@ __all__ = [
 GRID_NUMBER_OFFSET = 100
 #: The seed tag of a surface tune (point designs use their point number, SHIF 100).
 SURFACE_TAG = 200
+#: The surface (GS-SHIF) tune's SLSQP step tolerance relative to its objective
+#: (:func:`~vtolftc.synthesis.structured.tune`'s ``inner_ftol``; the point designs and SHIF
+#: keep :data:`~vtolftc.synthesis.structured.INNER_FTOL`, 1e-10): it started from SHIF, the
+#: outer trust-region loop converges anyway and each step visits far fewer points (issue 23:
+#: the surface design's time; ``benchmarks/bench_synth_surface.py``).
+SURFACE_INNER_FTOL = 1e-8
 
 
 # ------------------------------------------------------------------------------------------
@@ -509,6 +516,65 @@ class SurfaceRealizer:
             return [as_state_space(m) for m in out]   # raises for the first bad channel
         return out
 
+    n_local = len(PARAM_NAMES)
+    """Gains per grid point: the parameters :meth:`gain_derivatives` differentiates in."""
+
+    def gain_derivatives(self, theta: NDArray[np.float64], scales: NDArray[np.float64],
+                         ) -> list[tuple[tuple[NDArray[np.float64], ...],
+                                         NDArray[np.float64]]] | None:
+        """Per channel the derivatives of (A, B, C, D) with respect to its grid point's five
+        gains, by central differences in the gains, and d gains / d theta (the chain rule).
+
+        The coefficients enter a channel only through ``g = clip(C phi, lower, upper)``, so
+        d X / d theta = sum_j d X / d g_j * d g_j / d theta: 10 perturbed realisations per
+        grid point instead of the 2 p of differences in theta. d g_j / d C[j, m] =
+        ``phi[m]`` where ``lower_j < (C phi)_j < upper_j``, 0 where clipped and 1/2 on a
+        bound (what central differences in theta see there). The gain steps are
+        ``1e-6 max(|g_j|, s_j)``, s_j the scale of gain j's coefficient c_0.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (5 (d + 1),)
+            The coefficient vector (gain-major).
+        scales : ndarray of float, shape (5 (d + 1),)
+            The coefficients' scales (gain-major); those of the c_0 are the gains'.
+
+        Returns
+        -------
+        list of tuple or None
+            Per channel ``((dA, dB, dC, dD), J)``: each derivative stacked over the five
+            gains (5, ., .), ``J`` of shape (5, 5 (d + 1)) the gains' Jacobian; None when a
+            perturbed realisation is not finite.
+        """
+        chans = self.channels
+        theta = np.asarray(theta, float)
+        out: list[Any] = [None] * len(chans)
+        ng = len(PARAM_NAMES)
+        for idx in self.groups:
+            first = chans[idx[0]]
+            phi = first.phi
+            raw = theta.reshape(ng, phi.size) @ phi
+            g = np.clip(raw, first.lower, first.upper)
+            hs = 1e-6 * np.maximum(np.abs(g), scales[::phi.size])
+            pts = np.repeat(g[None, :], 2 * ng, axis=0)
+            for j in range(ng):
+                pts[2 * j, j] += hs[j]
+                pts[2 * j + 1, j] -= hs[j]
+            h2 = (2.0 * hs)[:, None, None]
+            slope = np.where((raw > first.lower) & (raw < first.upper), 1.0,
+                             np.where((raw == first.lower) | (raw == first.upper), 0.5, 0.0))
+            J = np.zeros((ng, theta.size))
+            for j in range(ng):
+                J[j, j * phi.size:(j + 1) * phi.size] = slope[j] * phi
+            for i in idx:
+                ders = []
+                for X in chans[i].inner.realize_batch(pts):
+                    if not np.isfinite(X).all():
+                        return None
+                    ders.append((X[0::2] - X[1::2]) / h2)
+                out[i] = (tuple(ders), J)
+        return out
+
     def batch(self, thetas: NDArray[np.float64]) -> list[tuple[NDArray[np.float64], ...]]:
         """Per channel ``c.realize_batch(thetas)``, bit for bit, the gains of each group
         computed once.
@@ -782,7 +848,7 @@ class SurfaceDesign:
 def design_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
                     grid: Sequence[DesignPoint], degree: int = 2, *, n_starts: int = 2,
                     surface_starts: int = 0, seed: int = 0, max_iter: int | None = 40,
-                    ) -> SurfaceDesign:
+                    inner_ftol: float = SURFACE_INNER_FTOL) -> SurfaceDesign:
     """SHIF (degree 0) then GS-SHIF (``degree``, started from SHIF) for ``axis`` on ``grid``.
 
     Parameters
@@ -806,6 +872,9 @@ def design_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
         Seed (streams per axis, as the point designs').
     max_iter : int or None
         Iteration cap per start (:func:`~vtolftc.synthesis.structured.tune`).
+    inner_ftol : float
+        The surface tune's SLSQP step tolerance (``tune``'s ``inner_ftol``; SHIF keeps the
+        default).
 
     Returns
     -------
@@ -824,7 +893,8 @@ def design_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
     start = spd.problem.initial
     f0 = spd.problem.objective(start)
     rd = tune(spd.problem, n_starts=surface_starts,
-              seed=point_seed(seed, axis, SURFACE_TAG + 1), max_iter=max_iter)
+              seed=point_seed(seed, axis, SURFACE_TAG + 1), max_iter=max_iter,
+              inner_ftol=inner_ftol)
     fd = spd.problem.objective(rd.theta)
     kept = not (fd <= f0)
     theta = start if kept else rd.theta
