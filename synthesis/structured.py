@@ -395,7 +395,7 @@ class _Evaluator:
         # derivatives by the chain rule through a realizer's local parameters (a surface
         # problem's five gains per grid point) when there are fewer of them than of theta
         rz = problem.realizer
-        self.chain_rule = (hasattr(rz, "gain_derivatives")
+        self.chain_rule = (hasattr(rz, "gain_derivatives") and getattr(rz, "chain_rule", True)
                            and getattr(rz, "n_local", self.p) < self.p)
         self._chcache: dict[bytes, list[tuple[Any, NDArray[np.float64]]] | None] = {}
 

@@ -136,3 +136,58 @@ def test_inner_ftol_reaches_the_step_subproblem_and_is_checked(monkeypatch) -> N
     for bad in (0.0, -1e-8, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="inner_ftol"):
             structured.tune(pb, max_iter=1, inner_ftol=bad)
+
+
+def test_chain_rule_off_is_the_coefficient_differences_bit_for_bit() -> None:
+    """``surface_problem(chain_rule=False)`` (the yaw surface tune's setting) gives the tuner
+    the central differences in the coefficients, bit for bit those of a problem without
+    the chain rule; True (the default) gives the chain rule."""
+    af = load_airframe()
+    by_v = {p.airspeed_m_s: p for p in robust_points(af)}
+    grid = surface_grid([by_v[0.0], by_v[4.0], by_v[10.0]], 2)
+    off = surface_problem(RobustMethod(), af, "yaw", grid, 2, chain_rule=False)
+    on = surface_problem(RobustMethod(), af, "yaw", grid, 2)
+    ev_off, ev_on, ref = _Evaluator(off.problem), _Evaluator(on.problem), _Evaluator(on.problem)
+    ref.chain_rule = False
+    assert not ev_off.chain_rule and ev_on.chain_rule
+    for theta in _thetas(on, 7)[:3]:
+        got, want = ev_off.derivative_stacks(theta), ref.derivative_stacks(theta)
+        assert got is not None and want is not None
+        for g, w in zip(got, want, strict=True):
+            for x, y in zip(g, w, strict=True):
+                assert x.tobytes() == y.tobytes()
+        chained = ev_on.derivative_stacks(theta)
+        assert chained is not None
+        assert any(x.tobytes() != y.tobytes()
+                   for g, w in zip(chained, want, strict=True) for x, y in zip(g, w, strict=True))
+
+
+@pytest.mark.parametrize("axis", ["roll", "yaw"])
+def test_design_surfaces_tunes_each_axis_with_its_settings(monkeypatch, axis: str) -> None:  # type: ignore[no-untyped-def]
+    """The surface (second) tune gets ``SURFACE_TUNE[axis]``: roll the fast tune (chain
+    rule, 1e-8), yaw the precise one (central differences, 1e-10); SHIF keeps the tuner's
+    defaults; an explicit ``settings`` wins."""
+    from vtolftc.synthesis import structured
+    from vtolftc.synthesis import surfaces as surf
+
+    seen: list[tuple[bool, float]] = []
+    real = surf.tune
+
+    def spy(problem, **kw):  # type: ignore[no-untyped-def]
+        seen.append((_Evaluator(problem).chain_rule,
+                     kw.get("inner_ftol", structured.INNER_FTOL)))
+        return real(problem, **{**kw, "max_iter": 1})
+
+    monkeypatch.setattr(surf, "tune", spy)
+    af = load_airframe()
+    by_v = {p.airspeed_m_s: p for p in robust_points(af)}
+    grid = surface_grid([by_v[4.0], by_v[10.0]], 1)
+    want = {"roll": (True, 1e-8), "yaw": (False, 1e-10)}[axis]
+    assert (surf.SURFACE_TUNE[axis].chain_rule, surf.SURFACE_TUNE[axis].inner_ftol) == want
+    d = surf.design_surfaces(RobustMethod(), af, axis, grid, 1, n_starts=0, max_iter=1)
+    assert seen == [(False, structured.INNER_FTOL), want]
+    assert d.surface_objective <= d.constant_objective
+    seen.clear()
+    surf.design_surfaces(RobustMethod(), af, axis, grid, 1, n_starts=0, max_iter=1,
+                         settings=surf.SurfaceTune(1e-3, not want[0]))
+    assert seen[1] == (not want[0], 1e-3)
