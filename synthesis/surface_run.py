@@ -5,7 +5,9 @@ grid (:func:`vtolftc.synthesis.surfaces.surface_grid`: the robust design points 
 midpoints between them), SHIF as the degree-0 surface and GS-SHIF as the degree-``D``
 surface started from it (:func:`vtolftc.synthesis.surfaces.design_surfaces`), the LQR
 baseline, then the validation of the GS-SHIF schedule between its breakpoints
-(:mod:`vtolftc.synthesis.validation`).
+(:mod:`vtolftc.synthesis.validation`). With ``jobs`` > 1 both run on one process pool: the
+axes' designs longest first, each axis' validation points as soon as its design is done (so
+the second core is busy while the last design runs), the same jobs as in order.
 
 Outputs in ``out_dir``, the layout of the other methods (``vtolftc fly --gains-dir`` flies
 it): ``gs-shif.json``, ``shif.json`` (``vtolftc-gain-schedule/1``, breakpoints = the grid,
@@ -61,8 +63,11 @@ class SurfaceRun:
     times : dict of str to float
         Wall time per stage [s].
     cpu_times : dict of str to float
-        CPU time per stage [s]: user + system of this process and of its worker processes
-        (counted when a stage's pool has shut down, so each stage's own).
+        CPU time per stage [s]. Serially (``jobs`` 1): user + system of this process. On a
+        pool the designs and the validation overlap: each is the CPU its jobs used in the
+        workers (``time.process_time``), and "designs and validation, all processes" is
+        user + system of this process and the workers from the pool's start to its shut
+        down (with the workers' start-up, imports and the transfers).
     """
 
     designs: dict[str, SurfaceDesign]
@@ -123,7 +128,9 @@ def run_surface_synthesis(af: Airframe, out_dir: str | Path, *, degree: int = 2,
     max_iter : int or None
         Iteration cap per start of the tuner.
     jobs : int
-        Worker processes (the three axes, then the validation's grid points).
+        Worker processes of one pool for the three axes' designs and the validation's
+        axis-points; an axis' validation starts when its design is done (1: all in this
+        process, in order). The numbers are the same either way.
     mu : bool
         Compute mu_RS and the mixed-mu certificate in the validation (False: stability and
         margins only).

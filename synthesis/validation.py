@@ -788,9 +788,17 @@ def plan_validation(af: Airframe, doc: Mapping[str, Any], *,
                     requirements: Requirements = Requirements(), grid_n: int = 21,
                     seed: int = 0, airspeeds_m_s: Sequence[float] | None = None,
                     ) -> ValidationPlan:
-    """The jobs of :func:`validate_schedule` (same parameters), to run in any order or pool.
+    """The jobs of :func:`validate_schedule`, to run in any order or pool.
 
-    ``doc`` needs only the ``axes`` validated (:class:`FlownSchedule`).
+    Parameters
+    ----------
+    af : Airframe
+        The airframe the schedule is for.
+    doc : mapping
+        The parsed gain-schedule document; it needs only the ``axes`` validated
+        (:class:`FlownSchedule`).
+    density, points, axes, mu, certificate, requirements, grid_n, seed, airspeeds_m_s
+        As in :func:`validate_schedule`.
 
     Returns
     -------
