@@ -126,6 +126,46 @@ Measured (session 13, 2026-12-03, 2 cores shared with 4 other helpers):
   tunes ~35 s. The design stage's 3 jobs on 2 workers also leave a core idle at its end
   (roll + yaw on one worker): finer jobs (the 9 SHIF starts of ``start_jobs``, then the 3
   surface tunes) would balance it without moving any number.
+- Session 17 (2026-12-03, 2 cores shared with 3 other helpers, load 6-14). (1) Which lever
+  moved the yaw surface: each alone, from the same SHIF (``time.process_time``, 4 runs at
+  the same time, load 2-7): central differences + 1e-10 (main) 12.6 s -> 2.238606; chain
+  rule + 1e-10 30.1 s -> 2.238937; central differences + 1e-8 12.5 s -> 2.238940; both
+  15.7 s -> 2.238937. Either alone lands on the other surface (kp_angle 2.56 at hover
+  against main's 0.30 on its bound; grid norms at 0-1 m/s 1.00-1.12 against 1.90-2.09, 5
+  grid points at the max against 4 near it: another point of a flat objective), and its yaw
+  validation is worse in every case (45 failing rows against 40, hover phase margin
+  29.5-29.9 deg against 58.0, mu_RS >= 1 at 11.1-11.9 and 14.3-14.9 m/s). A tight polish
+  (central differences, 1e-10) from the fast surface stays there (3.5 s -> 2.2389374). For
+  yaw neither lever pays, so the surface tune's settings are per axis
+  (``surfaces.SURFACE_TUNE``): roll and pitch fast (chain rule, 1e-8), yaw main's (its
+  surface, gains and validation rows are main's bit for bit). (2) One process pool for the
+  designs and the validation (``surface_run._pipeline``): designs submitted longest first
+  (yaw, pitch, roll), an axis' 49 validation jobs as soon as its design is done, the gain
+  files written while the workers validate; every number and file is the serial order's
+  (a test compares them). A stage's CPU is now its jobs' ``time.process_time`` in the
+  workers; "designs and validation, all processes" is the pool's whole.
+  End to end, this benchmark on both trees at the same time (16:08-16:29 UTC, load 9.4 ->
+  10-14, other helpers' SITL, callgrind and test runs): main 1251 s wall, 229.4 s CPU
+  (designs 143.8, validation 82.8, report 2.7); branch 1015 s wall, 151.7 s CPU (designs
+  59.6, validation 88.3, report 3.5; the pool in all 148.2): CPU 0.66x, designs 0.41x.
+  Objectives: roll 1.48822 (main 1.48787), pitch 1.458874 (main's to 6 digits), yaw
+  2.238606 (main's, bit for bit). Validation (``validation.json``): failing rows 71 against
+  main's 72 (roll 13 / 14: 2.875 m/s passes; pitch 18 / 18; yaw 40 / 40, its rows main's
+  byte for byte), no axis-point failing that passes on main; hover phase margin roll 44.27
+  deg (main 44.36), pitch 53.04 (53.03), yaw 58.00 (58.00). ``shif.json`` and ``lqr.json``
+  are main's. Wall time, the least loaded this session got (one run each, one after the
+  other, only the others' light jobs besides): this branch at 16:52 UTC, load 1.5 -> 3.9
+  (two of it this benchmark's own workers): 73.1 s wall (MET), 125.3 s CPU, 171 % of a
+  core (designs 32.6 s wall / 56.8 s CPU, validation tail 38.5 s / 66.1 s, report 2.1 s);
+  then main at 16:54, load 3.2 -> 4.4: 212.3 s wall, 241.0 s CPU (114 %; designs 130.0 /
+  162.4, validation 79.7 / 76.0, report 2.6); then this branch again, load 4.4 -> 4.2:
+  115.0 s wall, 140.3 s CPU (122 %): wall 0.54x, CPU 0.58x of main's. At load ~3.4 (16:49)
+  it was 101.2 s (131 %). The validation rows are the same in every run. On an idle
+  machine the pool keeps both cores busy to the end (the designs' ~60 s and the validation's
+  ~66 s of CPU: ~63 s of wall with perfect balance, plus ~5 s in this process: set-up, the
+  files, the report). What is left for a loaded machine: the validation (SciPy's BFGS in the
+  D-G bound: dgfast-17's branch) and the yaw and pitch designs (~28 s of CPU each, the
+  critical path at the start).
 """
 
 from __future__ import annotations
