@@ -117,10 +117,10 @@ class SurfaceTune:
 #: tune (chain rule, :data:`SURFACE_INNER_FTOL`), 13x / 2.8x less CPU than the precise one
 #: for objectives within 0.02 % and validations as good (session 16). Yaw: the precise one
 #: (central differences, 1e-10), where the fast one does not pay (15.7 s against 12.6 s of
-#: CPU, the same load) and, on this flat objective (5 of 13 grid points within 1e-5 of the
-#: max), lands on another surface that validates worse (hover phase margin 29.9 deg against
-#: 58.0, mu_RS >= 1 at 5 more airspeeds of 11-15 m/s): either lever alone moves it there
-#: (session 17, ``benchmarks/bench_synth_surface.py``).
+#: CPU, the same load) and, on this flat objective (2.238937 against 2.238606, hover gains
+#: far apart), lands on another surface that validates worse (hover phase margin 29.9 deg
+#: against 58.0, mu_RS >= 1 at 5 more airspeeds of 11-15 m/s): either lever alone moves it
+#: there (session 17, ``benchmarks/bench_synth_surface.py``).
 SURFACE_TUNE: dict[str, SurfaceTune] = {
     "roll": SurfaceTune(SURFACE_INNER_FTOL, True),
     "pitch": SurfaceTune(SURFACE_INNER_FTOL, True),
