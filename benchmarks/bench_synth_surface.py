@@ -126,6 +126,76 @@ Measured (session 13, 2026-12-03, 2 cores shared with 4 other helpers):
 - A fresh checkout pays numba's first compile of ``dg_kernel.dg_objective`` (30 s of CPU at
   load ~12, measured with cProfile) in the validation's first point; later runs load it
   from ``__pycache__`` (``cache=True``). Time a second run, not the first.
+- Session 16 (2026-12-03, 2 cores shared with 2 other helpers, load 9-12 throughout): the
+  surface (GS-SHIF) tune moves; SHIF and the point designs do not (``shif.json`` is main's
+  up to its time stamp). (1) Derivatives by the chain rule
+  (``SurfaceRealizer.gain_derivatives``): central differences in each grid point's five
+  gains (10 realisations instead of 30), the frequency-kernel and abscissa gradients in
+  those five, times d gains / d theta (0 where clipped, 1/2 on a bound); ~1e-8 relative to
+  the coefficient differences. (2) The surface tune's SLSQP step tolerance 1e-8 of the
+  objective instead of 1e-10 (``tune(inner_ftol=...)``, ``surfaces.SURFACE_INNER_FTOL``).
+  The surface tunes alone (``time.process_time``, SHIF start fixed, main and branch run at
+  the same time, outer iterations / SLSQP Jacobians in brackets): main roll 83.1 s (28 /
+  1884), pitch 35.6 s (20 / 892), yaw 11.9 s (12 / 393) = 130.6 s; chain rule only roll
+  16.7 (8 / 531), pitch 56.3 (39 / 1541), yaw 29.9 (17 / 875) = 102.9 s; chain rule and
+  1e-8 roll 6.2 (6 / 204), pitch 12.9 (20 / 501), yaw 15.2 (15 / 504) = 34.3 s (0.26x).
+  Roll's tolerance (chain rule on): 1e-4 1.7 s -> 1.49367, 1e-6 3.4 s -> 1.48968, 1e-7
+  3.1 s -> 1.48968, 1e-8 6.2 s -> 1.48822, 1e-9 12.7 s -> 1.48807, 1e-10 16.7 s ->
+  1.48810 (SLSQP maxiter 20 instead of 100 at 1e-10: 10.6 s -> 1.48957). End to end, this
+  benchmark on both trees at the same time (13:39-14:00 UTC, load 9 -> 10): main 1209 s
+  wall, 262.6 s CPU (designs 157.7, validation 102.3, report 2.6); branch 916 s wall,
+  176.8 s CPU (designs 67.2, validation 106.6, report 2.9): CPU 0.67x, designs 0.43x.
+  Objectives SHIF -> GS-SHIF: roll 1.51965 -> 1.48822 (main 1.48787, +0.02 %), pitch
+  1.99341 -> 1.45887 (main's to 5 digits), yaw 5.85483 -> 2.23894 (main 2.23861, +0.015 %).
+  The yaw surface is another point of a flat objective: its validation rows differ
+  (phase margin at 0 m/s 29.9 deg against 58.0, mu_RS 1.02-1.21 against 0.87-0.99 at
+  11.1-14.9 m/s), 76 failing rows against main's 72 (yaw 45 / 40, roll 13 / 14, pitch
+  18 / 18). ~177 s of CPU under load is at the < ~170 s line (loaded CPU runs a few % above
+  idle); what is left: the validation ~100-107 s (unchanged: SciPy's BFGS inside the D-G
+  bound, ``mu.mu_sweep``, ``robust_weights``' SLSQP), the SHIF tunes ~30 s, the surface
+  tunes ~35 s. The design stage's 3 jobs on 2 workers also leave a core idle at its end
+  (roll + yaw on one worker): finer jobs (the 9 SHIF starts of ``start_jobs``, then the 3
+  surface tunes) would balance it without moving any number.
+- Session 17 (2026-12-03, 2 cores shared with 3 other helpers, load 6-14). (1) Which lever
+  moved the yaw surface: each alone, from the same SHIF (``time.process_time``, 4 runs at
+  the same time, load 2-7): central differences + 1e-10 (main) 12.6 s -> 2.238606; chain
+  rule + 1e-10 30.1 s -> 2.238937; central differences + 1e-8 12.5 s -> 2.238940; both
+  15.7 s -> 2.238937. Either alone lands on the other surface (kp_angle 2.56 at hover
+  against main's 0.30 on its bound; grid norms at 0-1 m/s 1.00-1.12 against 1.90-2.09, 5
+  grid points at the max against 4 near it: another point of a flat objective), and its yaw
+  validation is worse in every case (45 failing rows against 40, hover phase margin
+  29.5-29.9 deg against 58.0, mu_RS >= 1 at 11.1-11.9 and 14.3-14.9 m/s). A tight polish
+  (central differences, 1e-10) from the fast surface stays there (3.5 s -> 2.2389374). For
+  yaw neither lever pays, so the surface tune's settings are per axis
+  (``surfaces.SURFACE_TUNE``): roll and pitch fast (chain rule, 1e-8), yaw main's (its
+  surface, gains and validation rows are main's bit for bit). (2) One process pool for the
+  designs and the validation (``surface_run._pipeline``): designs submitted longest first
+  (yaw, pitch, roll), an axis' 49 validation jobs as soon as its design is done, the gain
+  files written while the workers validate; every number and file is the serial order's
+  (a test compares them). A stage's CPU is now its jobs' ``time.process_time`` in the
+  workers; "designs and validation, all processes" is the pool's whole.
+  End to end, this benchmark on both trees at the same time (16:08-16:29 UTC, load 9.4 ->
+  10-14, other helpers' SITL, callgrind and test runs): main 1251 s wall, 229.4 s CPU
+  (designs 143.8, validation 82.8, report 2.7); branch 1015 s wall, 151.7 s CPU (designs
+  59.6, validation 88.3, report 3.5; the pool in all 148.2): CPU 0.66x, designs 0.41x.
+  Objectives: roll 1.48822 (main 1.48787), pitch 1.458874 (main's to 6 digits), yaw
+  2.238606 (main's, bit for bit). Validation (``validation.json``): failing rows 71 against
+  main's 72 (roll 13 / 14: 2.875 m/s passes; pitch 18 / 18; yaw 40 / 40, its rows main's
+  byte for byte), no axis-point failing that passes on main; hover phase margin roll 44.27
+  deg (main 44.36), pitch 53.04 (53.03), yaw 58.00 (58.00). ``shif.json`` and ``lqr.json``
+  are main's. Wall time, the least loaded this session got (one run each, one after the
+  other, only the others' light jobs besides): this branch at 16:52 UTC, load 1.5 -> 3.9
+  (two of it this benchmark's own workers): 73.1 s wall (MET), 125.3 s CPU, 171 % of a
+  core (designs 32.6 s wall / 56.8 s CPU, validation tail 38.5 s / 66.1 s, report 2.1 s);
+  then main at 16:54, load 3.2 -> 4.4: 212.3 s wall, 241.0 s CPU (114 %; designs 130.0 /
+  162.4, validation 79.7 / 76.0, report 2.6); then this branch again, load 4.4 -> 4.2:
+  115.0 s wall, 140.3 s CPU (122 %): wall 0.54x, CPU 0.58x of main's. At load ~3.4 (16:49)
+  it was 101.2 s (131 %). The validation rows are the same in every run. On an idle
+  machine the pool keeps both cores busy to the end (the designs' ~60 s and the validation's
+  ~66 s of CPU: ~63 s of wall with perfect balance, plus ~5 s in this process: set-up, the
+  files, the report). What is left for a loaded machine: the validation (SciPy's BFGS in the
+  D-G bound: dgfast-17's branch) and the yaw and pitch designs (~28 s of CPU each, the
+  critical path at the start).
 """
 
 from __future__ import annotations
@@ -165,6 +235,9 @@ def main(argv: list[str] | None = None) -> int:
     print("| stage | wall (s) | CPU (s) |\n|---|---:|---:|")
     for k, v in run.times.items():
         print(f"| {k} | {v:.1f} | {run.cpu_times.get(k, float('nan')):.1f} |")
+    for k, v in run.cpu_times.items():   # CPU-only entries (the pool's processes in all)
+        if k not in run.times:
+            print(f"| {k} | | {v:.1f} |")
     print(f"| total (with set-up and the gain files) | {wall:.1f} | {cpu:.1f} |")
     print(f"total {wall:.1f} s wall against the {TARGET_S:g} s target: "
           f"{'MET' if wall < TARGET_S else 'NOT MET'}; CPU {cpu:.1f} s "

@@ -392,6 +392,12 @@ class _Evaluator:
         self.compiled = True
         self._ecache: dict[bytes, list[tuple[Any, ...] | None]] = {}
         self._vcache: dict[bytes, NDArray[np.float64]] = {}
+        # derivatives by the chain rule through a realizer's local parameters (a surface
+        # problem's five gains per grid point) when there are fewer of them than of theta
+        rz = problem.realizer
+        self.chain_rule = (hasattr(rz, "gain_derivatives") and getattr(rz, "chain_rule", True)
+                           and getattr(rz, "n_local", self.p) < self.p)
+        self._chcache: dict[bytes, list[tuple[Any, NDArray[np.float64]]] | None] = {}
 
     def realize(self, theta: NDArray[np.float64]) -> list[StateSpaceData]:
         key = theta.tobytes()
@@ -428,6 +434,22 @@ class _Evaluator:
         self._dcache[key] = out
         return out
 
+    def chain(self, theta: NDArray[np.float64],
+              ) -> list[tuple[Any, NDArray[np.float64]]] | None:
+        """Per channel ((dA, dB, dC, dD) over the realizer's q local parameters, each
+        (q, ., .); J (q, p) their Jacobian in theta), or None (no chain rule: ``chain_rule``
+        off, or a perturbed realisation not finite)."""
+        if not self.chain_rule:
+            return None
+        key = theta.tobytes()
+        if key in self._chcache:
+            return self._chcache[key]
+        r = self.pb.realizer.gain_derivatives(theta, self.scales)  # type: ignore[union-attr]
+        if len(self._chcache) > 1024:
+            self._chcache.clear()
+        self._chcache[key] = r
+        return r
+
     def derivative_stacks(self, theta: NDArray[np.float64],
                           ) -> list[tuple[NDArray[np.float64], ...]] | None:
         """:meth:`derivatives` stacked over the parameters: per channel (dA, dB, dC, dD),
@@ -437,7 +459,11 @@ class _Evaluator:
         key = theta.tobytes()
         if key in self._dstack:
             return self._dstack[key]
-        stacks = self._derivatives_batch(theta)
+        ch = self.chain(theta)
+        if ch is not None:  # d X / d theta_k = sum_j J[j, k] d X / d g_j
+            stacks = [tuple(np.tensordot(J.T, X, axes=1) for X in d) for d, J in ch]
+        else:
+            stacks = self._derivatives_batch(theta)
         if len(self._dstack) > 1024:
             self._dstack.clear()
         self._dstack[key] = stacks
@@ -557,7 +583,8 @@ class _Evaluator:
         if not self.compiled or any(B.shape[1] != 1 for _, B, _, _ in sys):
             return self._sigma_and_grad_numpy(theta, omegas, grad)
         dstk = None
-        if grad:
+        ch = self.chain(theta) if grad else None
+        if grad and ch is None:
             dstk = self.derivative_stacks(theta)
             if dstk is None:
                 dsys = self.derivatives(theta)
@@ -568,7 +595,11 @@ class _Evaluator:
             w = omegas[i]
             if w.size == 0:
                 continue
-            if dstk is None:
+            if ch is not None:  # the gradient in the local parameters, then J
+                s, g = siso_sigma_grad(A, B, C, D, w, *ch[i][0])
+                sig_all.append(s)
+                grad_all.append(g @ ch[i][1])
+            elif dstk is None:
                 sig_all.append(siso_sigma(A, B, C, D, w))
             else:
                 s, g = siso_sigma_grad(A, B, C, D, w, *dstk[i])
@@ -671,7 +702,8 @@ class _Evaluator:
                 vals[i] = e[0].real
         if not grad:
             return vals, None
-        dstk = self.derivative_stacks(theta)
+        ch = self.chain(theta)
+        dstk = self.derivative_stacks(theta) if ch is None else [d for d, _ in ch]
         dsys = self.derivatives(theta) if dstk is None else None
         grads = np.zeros((len(sys), self.p))
         for i, e in enumerate(eigs):
@@ -685,7 +717,8 @@ class _Evaluator:
             dAx = (dstk[i][0] @ x if dstk is not None
                    else [dsys[i][k][0] @ x for k in range(self.p)])  # type: ignore[index]
             # the same complex quotient per k as float(np.real(...)), less call overhead
-            grads[i] = [(np.vdot(y, v) / den).real for v in dAx]
+            gi = [(np.vdot(y, v) / den).real for v in dAx]
+            grads[i] = gi if ch is None else np.asarray(gi) @ ch[i][1]
         return vals, grads
 
 
@@ -775,6 +808,10 @@ def _same_freq(w1: float, w2: float) -> bool:
     return abs(w1 - w2) <= 1e-6 * max(abs(w1), abs(w2), 1e-9)
 
 
+INNER_FTOL = 1e-10
+"""Default tolerance of each trust-region step's SLSQP subproblem, relative to the current
+objective (:func:`tune`'s ``inner_ftol``)."""
+
 ITER_CAP = 1000
 """Safety cap on the iterations of one start when :func:`tune` runs to convergence
 (``max_iter=None``): the stationarity and progress tests below stop well before it."""
@@ -798,6 +835,7 @@ class _Options:
     t_start: float = 0.0
     interrupted: bool = False
     to_convergence: bool = False  # max_iter=None: stop on stationarity / progress
+    inner_ftol: float = INNER_FTOL  # SLSQP's ftol relative to the objective, per step
 
 
 @dataclass(frozen=True)
@@ -1007,7 +1045,7 @@ def _step(
         res = minimize(
             obj_f, y0, jac=obj_j, method="SLSQP",
             bounds=bounds, constraints=[{"type": "ineq", "fun": cons_f, "jac": cons_j}],
-            options={"maxiter": 100, "ftol": 1e-10 * max(f, 1e-12)},
+            options={"maxiter": 100, "ftol": opts.inner_ftol * max(f, 1e-12)},
         )
         y = res.x
     except (np.linalg.LinAlgError, ValueError):
@@ -1413,6 +1451,7 @@ def tune(
     progress: Callable[[Progress], None] | None = None,
     regularization: float = 0.0,
     polish: bool = False,
+    inner_ftol: float = INNER_FTOL,
 ) -> TuneResult:
     """Minimise max_i ||channel_i(theta)||_inf over theta (paper eqs. 7-8, ``systune`` role).
 
@@ -1469,6 +1508,9 @@ def tune(
         the result then stays :func:`collect_starts` of :func:`start_jobs`, bit for bit, and
         the DS-1 design's numbers are unchanged (COMPleib AC10: 14.554 without, 13.2365 with;
         ``benchmarks/bench_compleib.py``).
+    inner_ftol : float
+        Tolerance of each step's SLSQP subproblem relative to the current objective (> 0;
+        default :data:`INNER_FTOL`). A looser one visits fewer points per step.
 
     Returns
     -------
@@ -1478,8 +1520,8 @@ def tune(
     Raises
     ------
     ValueError
-        For n_starts < 0, max_iter < 1, time_limit <= 0 or a negative or non-finite
-        regularization.
+        For n_starts < 0, max_iter < 1, time_limit <= 0, a negative or non-finite
+        regularization or an inner_ftol that is not a finite float > 0.
 
     Examples
     --------
@@ -1499,7 +1541,7 @@ def tune(
                       max_freqs=max_freqs, trust_radius=trust_radius, spread=spread,
                       start_sampler=start_sampler, time_limit=time_limit,
                       progress=progress if map_fn is None else None,
-                      regularization=regularization)
+                      regularization=regularization, inner_ftol=inner_ftol)
     opts = jobs[0][3]
     records: list[StartRecord] = []
     stopped = ""
@@ -1543,6 +1585,7 @@ def start_jobs(
     time_limit: float | None = None,
     progress: Callable[[Progress], None] | None = None,
     regularization: float = 0.0,
+    inner_ftol: float = INNER_FTOL,
 ) -> list[tuple[Any, ...]]:
     """The independent local runs of :func:`tune`, one picklable job per start.
 
@@ -1556,7 +1599,7 @@ def start_jobs(
         The problem.
     n_starts, seed, max_iter, tol, max_freqs, trust_radius, spread : int, float or None
         As in :func:`tune`.
-    start_sampler, time_limit, progress, regularization : callable, float or None
+    start_sampler, time_limit, progress, regularization, inner_ftol : callable, float or None
         As in :func:`tune`.
 
     Returns
@@ -1572,11 +1615,14 @@ def start_jobs(
         raise ValueError(f"time_limit must be > 0 s (or None), got {time_limit}")
     if not (regularization >= 0 and math.isfinite(regularization)):
         raise ValueError(f"regularization must be a finite float >= 0, got {regularization}")
+    if not (inner_ftol > 0 and math.isfinite(inner_ftol)):
+        raise ValueError(f"inner_ftol must be a finite float > 0, got {inner_ftol}")
     t_start = time.monotonic()
     opts = _Options(ITER_CAP if max_iter is None else max_iter, tol, max_freqs, trust_radius,
                     200 * len(problem.parameters) + 200,
                     None if time_limit is None else t_start + time_limit, float(regularization),
-                    progress, t_start, to_convergence=max_iter is None)
+                    progress, t_start, to_convergence=max_iter is None,
+                    inner_ftol=float(inner_ftol))
     starts = [problem.initial]
     children = np.random.SeedSequence(seed).spawn(n_starts)
     ev: _Evaluator | None = None

@@ -5,7 +5,9 @@ grid (:func:`vtolftc.synthesis.surfaces.surface_grid`: the robust design points 
 midpoints between them), SHIF as the degree-0 surface and GS-SHIF as the degree-``D``
 surface started from it (:func:`vtolftc.synthesis.surfaces.design_surfaces`), the LQR
 baseline, then the validation of the GS-SHIF schedule between its breakpoints
-(:mod:`vtolftc.synthesis.validation`).
+(:mod:`vtolftc.synthesis.validation`). With ``jobs`` > 1 both run on one process pool: the
+axes' designs longest first, each axis' validation points as soon as its design is done (so
+the second core is busy while the last design runs), the same jobs as in order.
 
 Outputs in ``out_dir``, the layout of the other methods (``vtolftc fly --gains-dir`` flies
 it): ``gs-shif.json``, ``shif.json`` (``vtolftc-gain-schedule/1``, breakpoints = the grid,
@@ -19,7 +21,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,9 +31,21 @@ from vtolftc.synthesis.baselines import LQR_Q, LQR_R, lqr_design
 from vtolftc.synthesis.export import atomic_write_text, lqr_document, write_json
 from vtolftc.synthesis.models import AXES, Axis
 from vtolftc.synthesis.surfaces import SurfaceDesign, design_surfaces, surface_grid
-from vtolftc.synthesis.validation import ValidationResult, validate_schedule
+from vtolftc.synthesis.validation import (
+    FlownSchedule,
+    GridPointResult,
+    ValidationResult,
+    plan_validation,
+    validate_job,
+    validate_schedule,
+)
 
-__all__ = ["SurfaceRun", "run_surface_synthesis"]
+__all__ = ["DESIGN_ORDER", "SurfaceRun", "run_surface_synthesis"]
+
+#: The order the axes' design jobs are submitted to the pool, longest first (so that the
+#: last one to start is the shortest and the validation jobs of the axes done fill the
+#: other core).
+DESIGN_ORDER: tuple[Axis, ...] = ("yaw", "pitch", "roll")
 
 
 @dataclass
@@ -49,8 +63,11 @@ class SurfaceRun:
     times : dict of str to float
         Wall time per stage [s].
     cpu_times : dict of str to float
-        CPU time per stage [s]: user + system of this process and of its worker processes
-        (counted when a stage's pool has shut down, so each stage's own).
+        CPU time per stage [s]. Serially (``jobs`` 1): user + system of this process. On a
+        pool the designs and the validation overlap: each is the CPU its jobs used in the
+        workers (``time.process_time``), and "designs and validation, all processes" is
+        user + system of this process and the workers from the pool's start to its shut
+        down (with the workers' start-up, imports and the transfers).
     """
 
     designs: dict[str, SurfaceDesign]
@@ -67,6 +84,18 @@ def _cpu_s() -> float:
     s = resource.getrusage(resource.RUSAGE_SELF)
     c = resource.getrusage(resource.RUSAGE_CHILDREN)
     return s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime
+
+
+def _timed_design_job(args: tuple[Any, ...]) -> tuple[SurfaceDesign, float]:
+    c = time.process_time()
+    d = _design_job(args)
+    return d, time.process_time() - c
+
+
+def _timed_validate_job(j: tuple[Any, ...]) -> tuple[GridPointResult, float]:
+    c = time.process_time()
+    r = validate_job(j)
+    return r, time.process_time() - c
 
 
 def _design_job(args: tuple[Any, ...]) -> SurfaceDesign:
@@ -99,7 +128,9 @@ def run_surface_synthesis(af: Airframe, out_dir: str | Path, *, degree: int = 2,
     max_iter : int or None
         Iteration cap per start of the tuner.
     jobs : int
-        Worker processes (the three axes, then the validation's grid points).
+        Worker processes of one pool for the three axes' designs and the validation's
+        axis-points; an axis' validation starts when its design is done (1: all in this
+        process, in order). The numbers are the same either way.
     mu : bool
         Compute mu_RS and the mixed-mu certificate in the validation (False: stability and
         margins only).
@@ -125,19 +156,7 @@ def run_surface_synthesis(af: Airframe, out_dir: str | Path, *, degree: int = 2,
     times: dict[str, float] = {}
     cpu: dict[str, float] = {}
     t0, c0 = time.perf_counter(), _cpu_s()
-    args = [(af, ax, grid, degree, n_starts, seed, max_iter) for ax in AXES]
-    designs: dict[str, SurfaceDesign] = {}
-    if jobs > 1:
-        with ProcessPoolExecutor(min(jobs, len(AXES))) as ex:
-            for ax, d in zip(AXES, ex.map(_design_job, args), strict=True):
-                designs[ax] = d
-                tick(f"surface {ax}", 1)
-    else:
-        for ax, a in zip(AXES, args, strict=True):
-            designs[ax] = _design_job(a)
-            tick(f"surface {ax}", 1)
-    times["surface designs"] = time.perf_counter() - t0
-    cpu["surface designs"] = _cpu_s() - c0
+    args = {ax: (af, ax, grid, degree, n_starts, seed, max_iter) for ax in AXES}
     meta = {"design_points": [{"number": p.number, "airspeed_m_s": p.airspeed_m_s,
                                "v_min_m_s": p.v_min_m_s, "v_max_m_s": p.v_max_m_s}
                               for p in grid],
@@ -146,14 +165,31 @@ def run_surface_synthesis(af: Airframe, out_dir: str | Path, *, degree: int = 2,
             "method": "surface: robust design channels (synthesis/robust.py) on a dense "
                       "airspeed grid, gains as Legendre polynomials of the airspeed tuned "
                       "as one design (synthesis/surfaces.py)"}
-    files = dict(write_surface_gains_all(af, designs, out, meta))
-    t1, c1 = time.perf_counter(), _cpu_s()
-    doc = json.loads(files["gs-shif"].read_text(encoding="utf-8"))
-    val = validate_schedule(af, doc, density=density, mu=mu, certificate=mu, seed=seed,
-                            jobs=jobs, progress=lambda label: tick(label, 1))
+    val_kw: dict[str, Any] = {"density": density, "mu": mu, "certificate": mu, "seed": seed}
+    if jobs > 1:
+        files: dict[str, Path] = {}
+        c0 = _cpu_s()
+        designs, scheds, rows = _pipeline(
+            af, args, val_kw, jobs, tick, times, cpu,
+            lambda ds: files.update(write_surface_gains_all(af, ds, out, meta)), meta)
+        cpu["designs and validation, all processes"] = _cpu_s() - c0  # the pool is down
+        doc = json.loads(files["gs-shif"].read_text(encoding="utf-8"))
+        _check_same_gains(doc, scheds)
+        val = plan_validation(af, doc, **val_kw).result(rows)
+    else:
+        designs = {}
+        for ax in AXES:
+            designs[ax] = _design_job(args[ax])
+            tick(f"surface {ax}", 1)
+        times["surface designs"] = time.perf_counter() - t0
+        cpu["surface designs"] = _cpu_s() - c0
+        files = dict(write_surface_gains_all(af, designs, out, meta))
+        t1, c1 = time.perf_counter(), _cpu_s()
+        doc = json.loads(files["gs-shif"].read_text(encoding="utf-8"))
+        val = validate_schedule(af, doc, **val_kw, progress=lambda label: tick(label, 1))
+        times["validation"] = time.perf_counter() - t1
+        cpu["validation"] = _cpu_s() - c1
     files["validation"] = val.write(out / "validation.json")
-    times["validation"] = time.perf_counter() - t1
-    cpu["validation"] = _cpu_s() - c1
     run = SurfaceRun(designs, val, files, times, cpu)
     if report:
         t2, c2 = time.perf_counter(), _cpu_s()
@@ -165,6 +201,77 @@ def run_surface_synthesis(af: Airframe, out_dir: str | Path, *, degree: int = 2,
         cpu["report"] = _cpu_s() - c2
         tick("report", 1)
     return run
+
+
+def _axis_document(af: Airframe, axis: Axis, design: SurfaceDesign,
+                   meta: dict[str, Any]) -> dict[str, Any]:
+    """``gs-shif.json`` of one axis as parsed back (the same numbers as the whole file's)."""
+    from vtolftc.base.jsonio import json_safe
+    from vtolftc.synthesis.surfaces import schedule_from_surfaces
+
+    doc = schedule_from_surfaces(af, dict.fromkeys(AXES, design.surface),  # a whole doc
+                                 [p.airspeed_m_s for p in design.grid], "gs-shif", meta)
+    doc["axes"] = {axis: doc["axes"][axis]}
+    return json.loads(json.dumps(json_safe(doc), allow_nan=False))
+
+
+def _pipeline(af: Airframe, args: dict[str, tuple[Any, ...]], val_kw: dict[str, Any],
+              jobs: int, tick: Callable[[str, int], None], times: dict[str, float],
+              cpu: dict[str, float], on_designs: Callable[[dict[str, SurfaceDesign]], None],
+              meta: dict[str, Any],
+              ) -> tuple[dict[str, SurfaceDesign], dict[str, FlownSchedule],
+                         list[GridPointResult]]:
+    """The designs and the validation on one pool of ``jobs`` processes: the axes' designs
+    longest first (:data:`DESIGN_ORDER`), each axis' validation jobs as soon as its design
+    is done, ``on_designs(designs)`` in this process once all are (the gain files, while the
+    workers validate). Every job is the serial order's, so are the numbers.
+
+    Returns the designs (in :data:`AXES` order), the flown schedule each axis was validated
+    with, and the validation rows (axis-major, as :func:`validate_schedule`'s). ``times`` /
+    ``cpu`` get "surface designs" (wall until the last design; the designs' CPU in their
+    workers) and "validation" (wall from then on; the rows' CPU in their workers).
+    """
+    t0 = time.perf_counter()
+    pending: dict[Future[tuple[SurfaceDesign, float]], str] = {}
+    done: dict[str, SurfaceDesign] = {}
+    rows: dict[str, list[Future[tuple[GridPointResult, float]]]] = {}
+    scheds: dict[str, FlownSchedule] = {}
+    c_design = c_val = 0.0
+    with ProcessPoolExecutor(jobs) as ex:
+        pending = {ex.submit(_timed_design_job, args[ax]): ax for ax in DESIGN_ORDER}
+        while pending:
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for f in sorted(finished, key=lambda f: AXES.index(pending[f])):
+                ax = pending.pop(f)
+                done[ax], c = f.result()
+                c_design += c
+                tick(f"surface {ax}", 1)
+                plan = plan_validation(af, _axis_document(af, ax, done[ax], meta),
+                                       axes=(ax,), **val_kw)
+                scheds[ax] = plan.jobs[0][4]
+                rows[ax] = [ex.submit(_timed_validate_job, j) for j in plan.jobs]
+        t1 = time.perf_counter()
+        designs = {ax: done[ax] for ax in AXES}
+        on_designs(designs)
+        out: list[GridPointResult] = []
+        for ax in AXES:
+            for f in rows[ax]:
+                r, c = f.result()
+                c_val += c
+                out.append(r)
+                tick(f"validation {ax} {r.airspeed_m_s:g} m/s", 1)
+    times["surface designs"], cpu["surface designs"] = t1 - t0, c_design
+    times["validation"], cpu["validation"] = time.perf_counter() - t1, c_val
+    return designs, scheds, out
+
+
+def _check_same_gains(doc: dict[str, Any], scheds: dict[str, FlownSchedule]) -> None:
+    """Raise RuntimeError unless every axis was validated with ``doc``'s gains."""
+    whole = FlownSchedule(doc)
+    for ax, sc in scheds.items():
+        if (sc.breakpoints_m_s != whole.breakpoints_m_s
+                or sc.table[ax] != whole.table[ax]):
+            raise RuntimeError(f"the {ax} validation's gains are not gs-shif.json's")
 
 
 def write_surface_gains_all(af: Airframe, designs: dict[str, SurfaceDesign], out: Path,

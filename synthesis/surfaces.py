@@ -58,18 +58,21 @@ from vtolftc.synthesis.export import schedule_document, write_json
 from vtolftc.synthesis.hinfnorm import StateSpaceData, as_state_space
 from vtolftc.synthesis.loops import PARAM_NAMES, CascadeChannel
 from vtolftc.synthesis.models import Axis
-from vtolftc.synthesis.structured import Parameter, TuningProblem, tune
+from vtolftc.synthesis.structured import INNER_FTOL, Parameter, TuningProblem, tune
 from vtolftc.synthesis.uncertainty import DesignPoint
 
 __all__ = [
     "GRID_NUMBER_OFFSET",
+    "SURFACE_INNER_FTOL",
     "SURFACE_TAG",
+    "SURFACE_TUNE",
     "GainSurface",
     "SurfaceBasis",
     "SurfaceChannel",
     "SurfaceDesign",
     "SurfaceProblem",
     "SurfaceRealizer",
+    "SurfaceTune",
     "coefficient_parameters",
     "design_surfaces",
     "legendre_basis",
@@ -84,6 +87,45 @@ __all__ = [
 GRID_NUMBER_OFFSET = 100
 #: The seed tag of a surface tune (point designs use their point number, SHIF 100).
 SURFACE_TAG = 200
+#: The fast surface (GS-SHIF) tune's SLSQP step tolerance relative to its objective
+#: (:func:`~vtolftc.synthesis.structured.tune`'s ``inner_ftol``; the point designs and SHIF
+#: keep :data:`~vtolftc.synthesis.structured.INNER_FTOL`, 1e-10): it started from SHIF, the
+#: outer trust-region loop converges anyway and each step visits far fewer points (issue 23:
+#: the surface design's time; ``benchmarks/bench_synth_surface.py``).
+SURFACE_INNER_FTOL = 1e-8
+
+
+@dataclass(frozen=True)
+class SurfaceTune:
+    """How the surface (GS-SHIF) tune of one axis runs.
+
+    Parameters
+    ----------
+    inner_ftol : float
+        SLSQP step tolerance relative to the objective (``tune``'s ``inner_ftol``).
+    chain_rule : bool
+        Derivatives by the chain rule through each grid point's gains
+        (:meth:`SurfaceRealizer.gain_derivatives`) rather than central differences in the
+        coefficients.
+    """
+
+    inner_ftol: float
+    chain_rule: bool
+
+
+#: The surface tune per axis (:func:`design_surfaces`' default). Roll and pitch: the fast
+#: tune (chain rule, :data:`SURFACE_INNER_FTOL`), 13x / 2.8x less CPU than the precise one
+#: for objectives within 0.02 % and validations as good (session 16). Yaw: the precise one
+#: (central differences, 1e-10), where the fast one does not pay (15.7 s against 12.6 s of
+#: CPU, the same load) and, on this flat objective (2.238937 against 2.238606, hover gains
+#: far apart), lands on another surface that validates worse (hover phase margin 29.9 deg
+#: against 58.0, mu_RS >= 1 at 5 more airspeeds of 11-15 m/s): either lever alone moves it
+#: there (session 17, ``benchmarks/bench_synth_surface.py``).
+SURFACE_TUNE: dict[str, SurfaceTune] = {
+    "roll": SurfaceTune(SURFACE_INNER_FTOL, True),
+    "pitch": SurfaceTune(SURFACE_INNER_FTOL, True),
+    "yaw": SurfaceTune(INNER_FTOL, False),
+}
 
 
 # ------------------------------------------------------------------------------------------
@@ -467,10 +509,15 @@ class SurfaceRealizer:
     channels : sequence of SurfaceChannel
         The channels; their ``inner`` must be
         :class:`~vtolftc.synthesis.loops.CascadeChannel` (see :meth:`applies`).
+    chain_rule : bool
+        Offer :meth:`gain_derivatives` to the tuner (default True).
     """
 
-    def __init__(self, channels: Sequence[SurfaceChannel]):
+    def __init__(self, channels: Sequence[SurfaceChannel], chain_rule: bool = True):
         self.channels = list(channels)
+        #: Whether the tuner differentiates through :meth:`gain_derivatives` (False: central
+        #: differences in the coefficients, the tuner's default).
+        self.chain_rule = bool(chain_rule)
         if not self.applies(self.channels):
             raise ValueError("SurfaceRealizer needs SurfaceChannels around CascadeChannels")
         groups: dict[bytes, list[int]] = {}
@@ -507,6 +554,65 @@ class SurfaceRealizer:
                 out[i] = chans[i].inner.assemble(cl)
         if not np.isfinite(np.concatenate([x.ravel() for m in out for x in m])).all():
             return [as_state_space(m) for m in out]   # raises for the first bad channel
+        return out
+
+    n_local = len(PARAM_NAMES)
+    """Gains per grid point: the parameters :meth:`gain_derivatives` differentiates in."""
+
+    def gain_derivatives(self, theta: NDArray[np.float64], scales: NDArray[np.float64],
+                         ) -> list[tuple[tuple[NDArray[np.float64], ...],
+                                         NDArray[np.float64]]] | None:
+        """Per channel the derivatives of (A, B, C, D) with respect to its grid point's five
+        gains, by central differences in the gains, and d gains / d theta (the chain rule).
+
+        The coefficients enter a channel only through ``g = clip(C phi, lower, upper)``, so
+        d X / d theta = sum_j d X / d g_j * d g_j / d theta: 10 perturbed realisations per
+        grid point instead of the 2 p of differences in theta. d g_j / d C[j, m] =
+        ``phi[m]`` where ``lower_j < (C phi)_j < upper_j``, 0 where clipped and 1/2 on a
+        bound (what central differences in theta see there). The gain steps are
+        ``1e-6 max(|g_j|, s_j)``, s_j the scale of gain j's coefficient c_0.
+
+        Parameters
+        ----------
+        theta : ndarray of float, shape (5 (d + 1),)
+            The coefficient vector (gain-major).
+        scales : ndarray of float, shape (5 (d + 1),)
+            The coefficients' scales (gain-major); those of the c_0 are the gains'.
+
+        Returns
+        -------
+        list of tuple or None
+            Per channel ``((dA, dB, dC, dD), J)``: each derivative stacked over the five
+            gains (5, ., .), ``J`` of shape (5, 5 (d + 1)) the gains' Jacobian; None when a
+            perturbed realisation is not finite.
+        """
+        chans = self.channels
+        theta = np.asarray(theta, float)
+        out: list[Any] = [None] * len(chans)
+        ng = len(PARAM_NAMES)
+        for idx in self.groups:
+            first = chans[idx[0]]
+            phi = first.phi
+            raw = theta.reshape(ng, phi.size) @ phi
+            g = np.clip(raw, first.lower, first.upper)
+            hs = 1e-6 * np.maximum(np.abs(g), scales[::phi.size])
+            pts = np.repeat(g[None, :], 2 * ng, axis=0)
+            for j in range(ng):
+                pts[2 * j, j] += hs[j]
+                pts[2 * j + 1, j] -= hs[j]
+            h2 = (2.0 * hs)[:, None, None]
+            slope = np.where((raw > first.lower) & (raw < first.upper), 1.0,
+                             np.where((raw == first.lower) | (raw == first.upper), 0.5, 0.0))
+            J = np.zeros((ng, theta.size))
+            for j in range(ng):
+                J[j, j * phi.size:(j + 1) * phi.size] = slope[j] * phi
+            for i in idx:
+                ders = []
+                for X in chans[i].inner.realize_batch(pts):
+                    if not np.isfinite(X).all():
+                        return None
+                    ders.append((X[0::2] - X[1::2]) / h2)
+                out[i] = (tuple(ders), J)
         return out
 
     def batch(self, thetas: NDArray[np.float64]) -> list[tuple[NDArray[np.float64], ...]]:
@@ -606,7 +712,8 @@ def _embedded(c: NDArray[np.float64], size: int) -> NDArray[np.float64]:
 def surface_problem(method: DesignMethod, af: Airframe, axis: Axis,
                     grid: Sequence[DesignPoint], degree: int, *,
                     start: GainSurface | None = None,
-                    weights: Sequence[Any] | None = None) -> SurfaceProblem:
+                    weights: Sequence[Any] | None = None,
+                    chain_rule: bool = True) -> SurfaceProblem:
     """The multi-model problem of ``axis``' gain surface of ``degree`` over ``grid``.
 
     At every grid point the channels are those of ``method``'s point design
@@ -635,6 +742,10 @@ def surface_problem(method: DesignMethod, af: Airframe, axis: Axis,
         Initial coefficients (embedded into ``degree``; clipped into the coefficient bounds).
     weights : sequence, optional
         ``method.weights`` of every grid point, if already computed.
+    chain_rule : bool
+        Derivatives by the chain rule through each grid point's gains
+        (:meth:`SurfaceRealizer.gain_derivatives`; default True) rather than central
+        differences in the coefficients.
 
     Returns
     -------
@@ -663,8 +774,8 @@ def surface_problem(method: DesignMethod, af: Airframe, axis: Axis,
             names.append(f"{nm} @ {vs[i]:g} m/s")
             owner.append(i)
     pb = TuningProblem(coefficient_parameters(gp, basis, start), chans, names,
-                       realizer=SurfaceRealizer(chans) if SurfaceRealizer.applies(chans)
-                       else None)
+                       realizer=SurfaceRealizer(chans, chain_rule)
+                       if SurfaceRealizer.applies(chans) else None)
     return SurfaceProblem(pb, basis, grid, owner, lo, hi, gp)
 
 
@@ -782,7 +893,7 @@ class SurfaceDesign:
 def design_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
                     grid: Sequence[DesignPoint], degree: int = 2, *, n_starts: int = 2,
                     surface_starts: int = 0, seed: int = 0, max_iter: int | None = 40,
-                    ) -> SurfaceDesign:
+                    settings: SurfaceTune | None = None) -> SurfaceDesign:
     """SHIF (degree 0) then GS-SHIF (``degree``, started from SHIF) for ``axis`` on ``grid``.
 
     Parameters
@@ -806,6 +917,9 @@ def design_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
         Seed (streams per axis, as the point designs').
     max_iter : int or None
         Iteration cap per start (:func:`~vtolftc.synthesis.structured.tune`).
+    settings : SurfaceTune, optional
+        How the surface tune runs (default ``SURFACE_TUNE[axis]``; SHIF keeps the tuner's
+        defaults).
 
     Returns
     -------
@@ -820,11 +934,14 @@ def design_surfaces(method: DesignMethod, af: Airframe, axis: Axis,
               max_iter=max_iter)
     const = sp0.surface(r0.theta)
     t1 = time.perf_counter()
-    spd = surface_problem(method, af, axis, grid, degree, start=const, weights=ws)
+    st = SURFACE_TUNE[axis] if settings is None else settings
+    spd = surface_problem(method, af, axis, grid, degree, start=const, weights=ws,
+                          chain_rule=st.chain_rule)
     start = spd.problem.initial
     f0 = spd.problem.objective(start)
     rd = tune(spd.problem, n_starts=surface_starts,
-              seed=point_seed(seed, axis, SURFACE_TAG + 1), max_iter=max_iter)
+              seed=point_seed(seed, axis, SURFACE_TAG + 1), max_iter=max_iter,
+              inner_ftol=st.inner_ftol)
     fd = spd.problem.objective(rd.theta)
     kept = not (fd <= f0)
     theta = start if kept else rd.theta

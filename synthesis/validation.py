@@ -84,11 +84,14 @@ __all__ = [
     "FlownSchedule",
     "GridPointResult",
     "Requirements",
+    "ValidationPlan",
     "ValidationResult",
     "cell_bounds",
     "dense_grid",
     "design_grid",
     "loop_margins_classical",
+    "plan_validation",
+    "validate_job",
     "validate_point",
     "validate_schedule",
 ]
@@ -115,7 +118,8 @@ class FlownSchedule:
     Parameters
     ----------
     doc : mapping
-        The parsed gain-schedule document (``airspeed_breakpoints_m_s``, ``axes``).
+        The parsed gain-schedule document (``airspeed_breakpoints_m_s``, ``axes``: all three
+        axes or a subset; :meth:`gains_at` knows those given).
 
     Examples
     --------
@@ -131,7 +135,8 @@ class FlownSchedule:
             float(v) for v in doc["airspeed_breakpoints_m_s"])
         self.table: dict[str, list[tuple[float, ...]]] = {
             ax: [tuple(float(doc["axes"][ax][k][i]) for k in PARAM_NAMES)
-                 for i in range(len(self.breakpoints_m_s))] for ax in AXES}
+                 for i in range(len(self.breakpoints_m_s))]
+            for ax in AXES if ax in doc["axes"]}
         self._bp = list(self.breakpoints_m_s)
 
     def gains_at(self, axis: Axis, airspeed_m_s: float) -> dict[str, float]:
@@ -713,10 +718,105 @@ class ValidationResult:
         return write_json(Path(path), json.loads(json.dumps(self.to_dict())))
 
 
-def _point_job(j: tuple[Any, ...]) -> GridPointResult:
+def validate_job(j: tuple[Any, ...]) -> GridPointResult:
+    """Run one job of :attr:`ValidationPlan.jobs` (picklable, for worker processes).
+
+    Parameters
+    ----------
+    j : tuple
+        The job.
+
+    Returns
+    -------
+    GridPointResult
+        Its row.
+    """
     af, ax, p, cell, sched, is_dp, mu, cert, req, grid_n, seed = j
     return validate_point(af, ax, p, cell, sched, design_point=is_dp, mu=mu,
                           certificate=cert, requirements=req, grid_n=grid_n, seed=seed)
+
+
+@dataclass(frozen=True)
+class ValidationPlan:
+    """The axis-point jobs of a validation and how their rows make the table.
+
+    Parameters
+    ----------
+    controller : str
+        The schedule's controller name.
+    points : tuple of DesignPoint
+        The design grid.
+    grid : tuple of DesignPoint
+        The dense validation grid.
+    density : int
+        Grid intervals per design interval.
+    requirements : Requirements
+        What each grid point must meet.
+    jobs : list of tuple
+        One :func:`validate_job` argument per axis and grid point (axis-major, by airspeed).
+    """
+
+    controller: str
+    points: tuple[DesignPoint, ...]
+    grid: tuple[DesignPoint, ...]
+    density: int
+    requirements: Requirements
+    jobs: list[tuple[Any, ...]]
+
+    def result(self, rows: Sequence[GridPointResult]) -> ValidationResult:
+        """The table of the jobs' rows.
+
+        Parameters
+        ----------
+        rows : sequence of GridPointResult
+            The rows, in the order of :attr:`jobs`.
+
+        Returns
+        -------
+        ValidationResult
+            The table.
+        """
+        return ValidationResult(self.controller, [p.airspeed_m_s for p in self.points],
+                                self.density, list(rows), self.requirements,
+                                [p.airspeed_m_s for p in self.grid])
+
+
+def plan_validation(af: Airframe, doc: Mapping[str, Any], *,
+                    density: int = DEFAULT_DENSITY,
+                    points: Sequence[DesignPoint] | None = None,
+                    axes: Sequence[Axis] = AXES, mu: bool = True, certificate: bool = True,
+                    requirements: Requirements = Requirements(), grid_n: int = 21,
+                    seed: int = 0, airspeeds_m_s: Sequence[float] | None = None,
+                    ) -> ValidationPlan:
+    """The jobs of :func:`validate_schedule`, to run in any order or pool.
+
+    Parameters
+    ----------
+    af : Airframe
+        The airframe the schedule is for.
+    doc : mapping
+        The parsed gain-schedule document; it needs only the ``axes`` validated
+        (:class:`FlownSchedule`).
+    density, points, axes, mu, certificate, requirements, grid_n, seed, airspeeds_m_s
+        As in :func:`validate_schedule`.
+
+    Returns
+    -------
+    ValidationPlan
+        The jobs and the table they make.
+    """
+    pts = tuple(points) if points is not None else design_grid(doc)
+    grid = dense_grid(pts, density)
+    lo, hi = cell_bounds([p.airspeed_m_s for p in grid])
+    design_vs = {p.airspeed_m_s for p in pts}
+    sched = FlownSchedule(doc)
+    keep = None if airspeeds_m_s is None else {float(v) for v in airspeeds_m_s}
+    jobs_list = [(af, ax, p, (a, b), sched, p.airspeed_m_s in design_vs, mu, certificate,
+                  requirements, grid_n, seed)
+                 for ax in axes for p, a, b in zip(grid, lo, hi, strict=True)
+                 if keep is None or p.airspeed_m_s in keep]
+    return ValidationPlan(str(doc.get("controller", "")), pts, grid, density, requirements,
+                          jobs_list)
 
 
 def validate_schedule(af: Airframe, doc: Mapping[str, Any], *,
@@ -762,32 +862,23 @@ def validate_schedule(af: Airframe, doc: Mapping[str, Any], *,
     ValidationResult
         The table.
     """
-    pts = tuple(points) if points is not None else design_grid(doc)
-    grid = dense_grid(pts, density)
-    lo, hi = cell_bounds([p.airspeed_m_s for p in grid])
-    design_vs = {p.airspeed_m_s for p in pts}
-    sched = FlownSchedule(doc)
-    keep = None if airspeeds_m_s is None else {float(v) for v in airspeeds_m_s}
-    jobs_list = [(af, ax, p, (a, b), sched, p.airspeed_m_s in design_vs, mu, certificate,
-                  requirements, grid_n, seed)
-                 for ax in axes for p, a, b in zip(grid, lo, hi, strict=True)
-                 if keep is None or p.airspeed_m_s in keep]
+    plan = plan_validation(af, doc, density=density, points=points, axes=axes, mu=mu,
+                           certificate=certificate, requirements=requirements,
+                           grid_n=grid_n, seed=seed, airspeeds_m_s=airspeeds_m_s)
+    jobs_list = plan.jobs
+    rows: list[GridPointResult] = []
     if jobs > 1 and len(jobs_list) > 1:
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(min(jobs, len(jobs_list))) as ex:
-            futs = [ex.submit(_point_job, j) for j in jobs_list]
-            rows = []
+            futs = [ex.submit(validate_job, j) for j in jobs_list]
             for j, f in zip(jobs_list, futs, strict=True):
                 rows.append(f.result())
                 if progress is not None:
                     progress(f"validation {j[1]} {j[2].airspeed_m_s:g} m/s")
     else:
-        rows = []
         for j in jobs_list:
-            rows.append(_point_job(j))
+            rows.append(validate_job(j))
             if progress is not None:
                 progress(f"validation {j[1]} {j[2].airspeed_m_s:g} m/s")
-    return ValidationResult(str(doc.get("controller", "")),
-                            [p.airspeed_m_s for p in pts], density, rows, requirements,
-                            [p.airspeed_m_s for p in grid])
+    return plan.result(rows)

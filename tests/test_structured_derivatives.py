@@ -21,6 +21,9 @@ def test_lazy_derivative_lists_are_the_stacks_and_the_loop_bit_for_bit() -> None
     sp = surface_problem(RobustMethod(), af, "pitch", _small_grid(), 1)
     theta = sp.problem.initial * np.linspace(0.9, 1.1, sp.problem.initial.size)
     ev = _Evaluator(sp.problem)
+    # the differences in theta (the chain rule through the gains is
+    # tests/test_surface_chain_rule.py's; the lazy lists of its stacks are checked below)
+    ev.chain_rule = False
     stacks = ev.derivative_stacks(theta)
     assert stacks is not None
     lists = ev.derivatives(theta)          # built from the cached stacks
@@ -34,10 +37,20 @@ def test_lazy_derivative_lists_are_the_stacks_and_the_loop_bit_for_bit() -> None
                 np.testing.assert_array_equal(per_k[k][m], ref[k][m])
     # the other order (lists first) gives the same stacks
     ev2 = _Evaluator(sp.problem)
+    ev2.chain_rule = False
     ev2.derivatives(theta)
     for a, b in zip(ev2.derivative_stacks(theta) or [], stacks, strict=True):
         for x, y in zip(a, b, strict=True):
             np.testing.assert_array_equal(x, y)
+    # with the chain rule (the default for a degree >= 1 surface) the lists are its stacks
+    ev3 = _Evaluator(sp.problem)
+    assert ev3.chain_rule
+    chained, lists3 = ev3.derivative_stacks(theta), ev3.derivatives(theta)
+    assert chained is not None
+    for st, per_k in zip(chained, lists3, strict=True):
+        for k in range(ev3.p):
+            for m in range(4):
+                np.testing.assert_array_equal(per_k[k][m], st[m][k])
 
 
 def test_abscissa_values_alone_are_the_eigenpairs_bit_for_bit() -> None:
