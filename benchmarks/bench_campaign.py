@@ -165,6 +165,12 @@ neighbours).
     .venv/bin/python benchmarks/bench_campaign.py [--jobs 2] [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --whole [--scenarios 24]
     .venv/bin/python benchmarks/bench_campaign.py --memory 2000 [--duration 4]
+
+The lead's idle run (main with inproc-17 merged, 17:08-17:09 UTC, load 1.4 -> 2.1, ``--jobs 2
+--scenarios 24``, one run): in-process 0.40 s per 60 s scenario (151.3x); local pool 296.0
+scenarios/min, overhead +2.6 %; Dask LocalCluster 243.2-271.4/min (flights 0.82-0.92x of the
+pool; 0.91x with ``--preload``, 0.92x on a warm cluster's second campaign), tcp:// 250.6-268.6
+(0.85-0.91x). 300/min was missed by 1 %: session 16 measured 292.7-318.6 on the same code path.
 """
 
 from __future__ import annotations

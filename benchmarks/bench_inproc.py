@@ -464,6 +464,12 @@ Tried and not kept: nothing else was built; the aerodynamics inside the mode ker
 (``outer_aero_step``: one dispatch and a ``tolist`` per step, ~0.3-0.5 us by session 16's
 estimate, ~1 %) and the allocator's statistics in its kernel (``_count_solved``, one call,
 ~1 %) remain open.
+
+The lead, main with inproc-17 merged against the session's base (c84b3ba, a clean clone's venv),
+``--duration 120`` case 1, interleaved base / main, load 0.0-0.3 (17:12 UTC): 38.4 / 39.9,
+43.4 / 38.3, 39.6 / 36.6 us per step (92-109x): the host ran ~20 % slower than at 17:08
+(121.8 / 120.8x, 32.8-33.1 us, main) and than session 16 (127x); single runs move more than
+the branch's 3 %. 150x (26.7 us) is not met on this host.
 """
 
 from __future__ import annotations

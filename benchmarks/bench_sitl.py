@@ -463,6 +463,12 @@ the idle machine in session 14; after session 15's compiled outer loops, 4 inter
 of 120 s flights (load ~1.7, the host's noise +-20 % that hour) 119.8 / 162.9 / 140.3 /
 150.9x against 143.7 / 138.7 / 109.8 / 125.1x before (per-step ratios 1.20, 0.85, 0.78,
 0.83).
+
+The lead's idle re-measure (main with zenoh-17 merged, 17:08 UTC, load 1.4-1.6, 20 s of case 1,
+one flight each): ``--transport zenoh --spin-us 300 --pin --rt-priority 10 --zenoh-lowlatency
+--zenoh-peer-cpu`` **19.0x** (round trip mean / median / p90 / p99 327 / 113 / 227 / 719 us;
+CPU per step autopilot / vehicle 210 / 203 us): >= 15x met on two free cores; ``--transport
+udp --spin-us 300 --pin --rt-priority 10`` 22.5x (279 / 89 / 172 / 619 us; 182 / 162 us).
 """
 
 from __future__ import annotations

@@ -196,6 +196,14 @@ Measured (session 13, 2026-12-03, 2 cores shared with 4 other helpers):
   files, the report). What is left for a loaded machine: the validation (SciPy's BFGS in the
   D-G bound: dgfast-17's branch) and the yaw and pitch designs (~28 s of CPU each, the
   critical path at the start).
+- Session 17, the lead, main with both branches merged (surfspeed-17's per-axis settings and
+  one pool, dgfast-17's compiled BFGS; 17:07-17:16 UTC, the machine otherwise idle): this
+  benchmark 58.5 s wall, 114.0 s CPU (195 % of a core; designs 32.0 s / 55.2 s CPU,
+  validation 24.3 s / 56.4 s, report 2.2 s), load 0.1 -> 1.75: **MET**. With an empty
+  numba cache (``NUMBA_CACHE_DIR`` a new folder: every kernel compiled, in both workers, as
+  on a fresh clone's first run) 83.9 s wall, 164.8 s CPU (validation 47.1 s / 99.8 s), load
+  0.4 -> 2.2: also under 90 s. Objectives roll 1.5196 -> 1.4882, pitch 1.9934 -> 1.4589,
+  yaw 5.8548 -> 2.2386.
 """
 
 from __future__ import annotations
