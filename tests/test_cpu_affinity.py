@@ -12,7 +12,7 @@ import subprocess
 import sys
 
 import pytest
-from support.procs import sitl_command_lines
+from support.procs import sitl_command_lines, zenoh_probe
 
 from vtolftc.runners.processes import affinity
 from vtolftc.runners.processes.affinity import apply_cpu, check_cpu, thread_cpus
@@ -64,48 +64,16 @@ def test_zenoh_runtime_threads_on_their_own_cpu_only_when_asked():
     assert thread_cpus(3, -1, names) == dict.fromkeys(names, 3)
 
 
-_ZENOH_CHILD = """
-import os, sys, time
-from vtolftc.protocols.zenoh_transport import ZenohTransport
-from vtolftc.runners.processes.affinity import apply_cpu
-cpu, zcpu, port = (int(a) for a in sys.argv[1:4])
-up = ZenohTransport("ds1", "hil", "up", listen=[f"tcp/127.0.0.1:{port}"], receive="channel")
-down = ZenohTransport("ds1", "hil", "down", connect=[f"tcp/127.0.0.1:{port}"],
-                      receive="channel")
-deadline = time.monotonic() + 20.0
-while not (up.ready() and down.ready()) and time.monotonic() < deadline:
-    time.sleep(0.01)
-ok = apply_cpu(cpu, "probe", sys.stdout, zcpu)
-for tid in sorted(int(t) for t in os.listdir("/proc/self/task")):
-    name = open(f"/proc/self/task/{tid}/comm").read().strip()
-    print("thread", name, *sorted(os.sched_getaffinity(tid)))
-up.send_bytes(b"after")   # the link still works with its reader on the other CPU
-got = []
-while not got and time.monotonic() < deadline:
-    got = down.recv_datagrams(1.0)
-print("got", got)
-up.close(); down.close()
-print("ok", ok)
-"""
-
-
 @pytest.mark.skipif(len(_CPUS) < 2, reason="pinning is only visible with 2 CPUs or more")
 def test_a_zenoh_process_puts_zenoh_threads_on_the_zenoh_cpu():
-    from vtolftc.protocols.netutil import free_tcp_port
-
     cpu, zcpu = _CPUS[-1], _CPUS[0]
-    lines = subprocess.run([sys.executable, "-c", _ZENOH_CHILD, str(cpu), str(zcpu),
-                            str(free_tcp_port())], capture_output=True, text=True, timeout=90,
-                           check=True).stdout.splitlines()
-    assert lines[-1] == "ok True" and "got [b'after']" in lines, lines
-    threads = [ln.split()[1:] for ln in lines if ln.startswith("thread ")]
-    zenoh = [t for t in threads if t[0].split("-")[0] in ("rx", "tx", "app", "acc", "net")]
-    others = [t for t in threads if t not in zenoh]
-    assert zenoh and others, threads
-    assert all(t[1:] == [str(zcpu)] for t in zenoh), threads
-    assert all(t[1:] == [str(cpu)] for t in others), threads
-    assert lines[0] == (f"probe: pinned to CPU {cpu} ({len(threads)} threads), zenoh's "
-                        f"{len(zenoh)} runtime threads to CPU {zcpu}"), lines[0]
+    got = zenoh_probe(f"affinity.apply_cpu({cpu}, {zcpu})", "*sorted(os.sched_getaffinity(tid))")
+    assert got.applied and got.linked, got.lines
+    assert got.zenoh and got.others, got.threads
+    assert all(t[1:] == [str(zcpu)] for t in got.zenoh), got.threads
+    assert all(t[1:] == [str(cpu)] for t in got.others), got.threads
+    assert got.lines[0] == (f"probe: pinned to CPU {cpu} ({len(got.threads)} threads), zenoh's "
+                            f"{len(got.zenoh)} runtime threads to CPU {zcpu}"), got.lines[0]
 
 
 def test_off_does_nothing(monkeypatch):

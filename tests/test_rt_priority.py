@@ -10,6 +10,7 @@ import subprocess
 import sys
 
 import pytest
+from support.procs import zenoh_probe
 
 from vtolftc.runners.processes.priority import check_rt_priority, thread_priorities
 
@@ -61,49 +62,18 @@ def test_zenoh_runtime_threads_one_above_the_rest():
     assert thread_priorities(1, {4: "tx-0"}) == {4: 2}
 
 
-_ZENOH_CHILD = """
-import os, sys, time
-from vtolftc.protocols.zenoh_transport import ZenohTransport
-from vtolftc.runners.processes.priority import apply_rt_priority
-port = int(sys.argv[1])
-up = ZenohTransport("ds1", "hil", "up", listen=[f"tcp/127.0.0.1:{port}"], receive="channel")
-down = ZenohTransport("ds1", "hil", "down", connect=[f"tcp/127.0.0.1:{port}"],
-                      receive="channel")
-deadline = time.monotonic() + 20.0
-while not (up.ready() and down.ready()) and time.monotonic() < deadline:
-    time.sleep(0.01)
-ok = apply_rt_priority(7, "probe", sys.stdout)
-for tid in sorted(int(t) for t in os.listdir("/proc/self/task")):
-    name = open(f"/proc/self/task/{tid}/comm").read().strip()
-    print("thread", name, os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority)
-up.send_bytes(b"after")   # the link still works at those priorities
-got = []
-while not got and time.monotonic() < deadline:
-    got = down.recv_datagrams(1.0)
-print("got", got)
-up.close(); down.close()
-print("ok", ok)
-"""
-
-
 def test_a_zenoh_process_runs_zenoh_threads_one_above_when_permitted():
-    from vtolftc.protocols.netutil import free_tcp_port
-
-    out = subprocess.run([sys.executable, "-c", _ZENOH_CHILD, str(free_tcp_port())],
-                         capture_output=True, text=True, timeout=90, check=True).stdout
-    lines = out.splitlines()
-    if lines[-1] != "ok True":
-        assert lines[0].startswith("probe: --rt-priority 7 not applied"), out
+    got = zenoh_probe("priority.apply_rt_priority(7)",
+                      "os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority")
+    if not got.applied:
+        assert got.lines[0].startswith("probe: --rt-priority 7 not applied"), got.lines
         pytest.skip("SCHED_FIFO not permitted on this machine")
-    threads = [ln.split()[1:] for ln in lines if ln.startswith("thread ")]
-    zenoh = [t for t in threads if t[0].split("-")[0] in ("rx", "tx", "app", "acc", "net")]
-    others = [t for t in threads if t not in zenoh]
-    assert zenoh and others, threads
-    assert all(t[1:] == [str(os.SCHED_FIFO), "8"] for t in zenoh), threads
-    assert all(t[1:] == [str(os.SCHED_FIFO), "7"] for t in others), threads
-    assert lines[0] == (f"probe: SCHED_FIFO priority 7 ({len(threads)} threads), zenoh's "
-                        f"{len(zenoh)} runtime threads at 8"), lines[0]
-    assert "got [b'after']" in lines
+    assert got.zenoh and got.others, got.threads
+    assert all(t[1:] == [str(os.SCHED_FIFO), "8"] for t in got.zenoh), got.threads
+    assert all(t[1:] == [str(os.SCHED_FIFO), "7"] for t in got.others), got.threads
+    assert got.lines[0] == (f"probe: SCHED_FIFO priority 7 ({len(got.threads)} threads), "
+                            f"zenoh's {len(got.zenoh)} runtime threads at 8"), got.lines[0]
+    assert got.linked, got.lines
 
 
 @pytest.mark.parametrize("program, args", [
