@@ -64,6 +64,17 @@ GROUND = 4
 PROPULSION = 8
 ALL_PHYSICS = GRAVITY | AERODYNAMICS | GROUND | PROPULSION
 
+# An actuator position (normalised) smaller in magnitude than this is set to exactly zero at
+# the end of each integration step. A first-order lag commanded to zero decays geometrically
+# and, in float64, ends on a subnormal number that rounding holds there forever (an idle lift
+# rotor in cruise: x = 1.2e-322 about 35 s after the transition); arithmetic on subnormals
+# takes the CPU's microcode path, which made the physics step 2.7x slower after a minute of
+# cruise (case 1: 12 -> 32 us per control step). 1e-200 is far below anything that can reach
+# a force or moment (thrust = tmax * x: 1e-198 N against sums of order 1 N, below their last
+# bit) and far above the subnormal range (products of it with the airframe's coefficients
+# stay normal), so the flights' commands and rigid-body states are bit for bit what they were.
+ACT_ZERO = 1e-200
+
 # Indices into the packed scalar-parameter vector P.
 (P_MASS, P_G, P_RHO, P_S, P_B, P_C, P_CL0, P_CLA, P_CLMAX, P_STALL_RND, P_STALL_M, P_CLQ,
  P_CLDE, P_CD0, P_K, P_CYB, P_CYP, P_CYR, P_CYDA, P_CYDR, P_CLB, P_CLR, P_CLDA, P_CLDR,
@@ -583,7 +594,11 @@ def step_n_memo(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax
             x[i] /= nq
         for i in range(na):
             k = N_RIGID + i
-            x[k] = min(amax[i], max(amin[i], x[k]))
+            xa = min(amax[i], max(amin[i], x[k]))
+            # an actuator that has decayed to within ACT_ZERO of zero is at zero: else an
+            # idle lift rotor's lag ends on a subnormal number (~1e-322) that rounding never
+            # moves, and every product with it runs on the CPU's slow path from then on
+            x[k] = xa if abs(xa) >= ACT_ZERO else 0.0
     # Leave fm describing the final state.
     derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
                 atau, arate, amin, amax, tab_v, tab, gear, wind, flags, k1, fm)
