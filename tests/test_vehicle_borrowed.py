@@ -1,7 +1,7 @@
 """The RK4 kernel on borrowed (reference-count free) arrays against the kernel it replaced.
 
 ``dynamics.step_n_memo`` passes :func:`~vtolftc.firmware_sim.vehicle.dynamics.derivatives`
-views of its arrays that hold no reference (``dynamics.borrowed``), its stage arrays in one
+views of its arrays that hold no reference (``base.nrt.borrowed``), its stage arrays in one
 allocation: the same evaluations in the same order, so the same bits. ``_step_n_memo_main``
 below is main's kernel (d5536a1) word for word, five allocations and counted references; both
 fly random and adversarial states (ground contact, stall and post-stall, wind, lost and stuck
@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from numba import njit
 
+from vtolftc.base.nrt import borrowed
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.dynamics import (
     ACT_ZERO,
@@ -201,7 +202,7 @@ def test_borrowed_step_n_memo_without_memo_and_flat_equals_mains(ds1):
 
 @njit(cache=False)
 def _borrow_probe(a):  # pragma: no cover - compiled
-    b = dyn.borrowed(a)
+    b = borrowed(a)
     b[1] = 7.0  # writes through to a
     return b.shape[0], b.strides[0], b[0] + b[2]
 

@@ -52,10 +52,9 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
-from numba.core import cgutils, types
-from numba.extending import intrinsic
 
 from vtolftc.airframe.loader import Airframe
+from vtolftc.base.nrt import borrowed, keep_alive
 
 N_RIGID = 13
 
@@ -195,33 +194,6 @@ def perturb(pk: Packed, mass_scale: float = 1.0,
     return pk._replace(
         P=P, J=J, Jinv=np.linalg.inv(J) if np.any(s != 1.0) else pk.Jinv.copy(),
         rotor_pos=pk.rotor_pos - d, gear=pk.gear - d)
-
-
-@intrinsic
-def borrowed(typingctx, arr):  # pragma: no cover - compiled
-    """A view of the array ``arr`` (same data, shape, strides, type) that holds no reference
-    to its memory (no ``meminfo``, no ``parent``): passing it to a compiled callee costs no
-    atomic reference counting (numba increments and decrements the count of every array
-    argument at each call, ~20 cycles each: 36 per :func:`derivatives` call). Only valid while
-    ``arr`` itself is alive: for a kernel's arguments inside that kernel's call."""
-    if not isinstance(arr, types.Array):
-        return None
-
-    def codegen(context, builder, signature, args):
-        src = context.make_array(arr)(context, builder, value=args[0])
-        out = context.make_array(arr)(context, builder, value=src._getvalue())
-        out.meminfo = cgutils.get_null_value(out.meminfo.type)
-        out.parent = cgutils.get_null_value(out.parent.type)
-        return out._getvalue()
-
-    return arr(arr), codegen
-
-
-@njit(cache=True)
-def _keep_alive(a):  # pragma: no cover - compiled
-    """Nothing: a use of ``a`` that keeps it (and the memory of its borrowed views) alive
-    up to this point of a compiled function (numba releases an array after its last use)."""
-    return None
 
 
 # --------------------------------------------------------------------------------------------
@@ -589,7 +561,7 @@ def step_n_memo(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax
     the same numbers (the same bits).
     """
     nx = x.shape[0]
-    ws = np.empty(5 * nx)  # the RK4 stages' work arrays; alive to the end (_keep_alive)
+    ws = np.empty(5 * nx)  # the RK4 stages' work arrays; alive to the end (keep_alive)
     k1 = borrowed(ws[0:nx])
     k2 = borrowed(ws[nx:2 * nx])
     k3 = borrowed(ws[2 * nx:3 * nx])
@@ -597,7 +569,7 @@ def step_n_memo(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax
     xt = borrowed(ws[4 * nx:])
     na = atau.shape[0]
     use_memo = memo.shape[0] > 0
-    # the arrays derivatives() takes, as views without reference counting (see borrowed)
+    # the arrays derivatives() takes, as views without reference counting (base.nrt)
     x = borrowed(x)
     u = borrowed(u)
     eff = borrowed(eff)
@@ -656,7 +628,7 @@ def step_n_memo(x, u, eff, stuck, n, dt, P, J, Jinv, rpos, raxis, rtorque, rtmax
                 atau, arate, amin, amax, tab_v, tab, gear, wind, flags, k1, fm)
     if use_memo:
         _memo_store(memo, x, k1, eff, wind, flags)
-    _keep_alive(ws)  # the borrowed k1..xt point into ws: numba frees it after its last use
+    keep_alive(ws)  # the borrowed k1..xt point into ws: numba frees it after its last use
 
 
 @njit(cache=True)

@@ -21,6 +21,7 @@ import numba
 import numpy as np
 
 from vtolftc.airframe.loader import Airframe, load_airframe
+from vtolftc.base.nrt import borrowed
 from vtolftc.base.rotation import dcm, quat_to_euler
 from vtolftc.firmware_sim.vehicle import dynamics as dyn
 from vtolftc.firmware_sim.vehicle.faults import Fault, FaultError, FaultKind
@@ -75,6 +76,11 @@ def take_and_step_packed(src, ws, stuck, n, dt, buf, layout, flags,
     numbers: the same bits."""
     if wire:
         src = wire_round(src)
+    # views without reference counting for the callees (base.nrt: the caller holds them)
+    ws = borrowed(ws)
+    stuck = borrowed(stuck)
+    buf = borrowed(buf)
+    layout = borrowed(layout)
     x, u, eff, wind, fm, memo = packed_views(ws, src.size)
     return _take_and_step(src, x, u, eff, stuck, n, dt, buf, layout, wind, flags, fm, memo)
 

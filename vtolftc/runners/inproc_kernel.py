@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numba
 
+from vtolftc.base.nrt import borrowed
 from vtolftc.firmware_sim.vehicle.model import packed_views, take_and_step_packed
 from vtolftc.protocols.hil import round_trip_kernel
 from vtolftc.telemetry.metrics_kernel import metrics_step
@@ -56,6 +57,19 @@ def runner_tail_step(s, tail, time_usec, pos, roll, pitch, yaw, mode, armed, ref
         flown and ``nav_next`` written. 5 or 6: the same metrics' answer, but the commands
         were not finite: the vehicle and ``nav_next`` untouched (``Vehicle.step`` raises).
     """
+    # the arguments as views without reference counting for the callees (base.nrt: the
+    # caller holds the arrays for the whole call)
+    s = borrowed(s)
+    tail = borrowed(tail)
+    pos = borrowed(pos)
+    ref = borrowed(ref)
+    u = borrowed(u)
+    ws = borrowed(ws)
+    stuck = borrowed(stuck)
+    buf = borrowed(buf)
+    layout = borrowed(layout)
+    home = borrowed(home)
+    nav_next = borrowed(nav_next)
     r = metrics_step(s, tail, time_usec, pos, roll, pitch, yaw, mode, armed, ref, alt_ref,
                      airspeed)
     if r == 0:
