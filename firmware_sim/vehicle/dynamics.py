@@ -297,7 +297,9 @@ def actuator_rates(x, u, stuck, atau, arate, amin, amax, dx):  # pragma: no cove
             dx[k] = min(arate[i], max(-arate[i], rate))
 
 
-@njit(cache=True)
+# _nrt=False: no reference counting of the 22 arrays at each of the 16 calls per control step
+# (the function allocates nothing; see vtolftc.base.nrt); the same arithmetic
+@njit(cache=True, _nrt=False)
 def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_v0,
                 atau, arate, amin, amax, tab_v, tab, gear, wind, flags, dx, fm):
     """Time derivative of the state ``x`` under actuator commands ``u``, written into ``dx``.
