@@ -246,7 +246,8 @@ def saturate_angle(a: float, a_lin: float, a_sat: float) -> float:
     return math.copysign(a_lin + w * math.tanh((m - a_lin) / w), a)
 
 
-@njit(cache=True)
+# inlined: its sin / cos of alpha are then the caller's (one sincos a call, the same values)
+@njit(cache=True, inline="always")
 def lift_drag_coefficients(alpha: float, P: np.ndarray) -> tuple[float, float]:
     """CL(alpha), CD(alpha) of the wing (no control or rate terms).
 
@@ -338,13 +339,22 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
     # Propulsion: lift rotors and pushers.
     if flags & PROPULSION:
         for i in range(nr):
+            xa = x[N_RIGID + i]
+            er = eff[i] * rtmax[i]
+            if xa == 0.0 and math.isfinite(er):
+                # a rotor at exactly zero (idle lift rotors in cruise, pushers in hover):
+                # T = er * xa * fade is +-0 (fade is in [0, 1.25]), so is every term it
+                # adds below, and adding +-0 to a sum that started at +0.0 (so is never
+                # -0.0: in round-to-nearest a sum is -0.0 only if both terms are) changes
+                # no bit of it, NaN and inf included
+                continue
             ax0 = raxis[i, 0]
             ax1 = raxis[i, 1]
             ax2 = raxis[i, 2]
             v_axial = ub * ax0 + vb * ax1 + wb * ax2
             fade = 1.0 - v_axial * rinv_v0[i]
             fade = min(1.25, max(0.0, fade))
-            T = eff[i] * rtmax[i] * x[N_RIGID + i] * fade
+            T = er * xa * fade  # eff[i] * rtmax[i] * x[N_RIGID + i] * fade, left to right
             fx = T * ax0
             fy = T * ax1
             fz = T * ax2
