@@ -545,3 +545,23 @@ def test_lift_drag_coefficients_equal_mains(ds1, alpha):
         got = dyn.lift_drag_coefficients(a, P)
         ref = _lift_drag_main(a, P)
         assert np.array(got).tobytes() == np.array(ref).tobytes(), a
+
+
+def test_table_bracket_and_at_equal_table_interp(ds1):
+    """One search for the five derivative tables (``table_bracket`` + ``table_at``) against
+    ``table_interp`` per row: random airspeeds inside and outside the table, every grid
+    point and its neighbours, -0.0, inf, -inf, NaN; a random table too."""
+    pk = dyn.pack(ds1)
+    rng = np.random.default_rng(7)
+    tables = [(pk.tab_v, pk.tab),
+              (np.sort(rng.uniform(0.0, 30.0, 9)), rng.normal(0.0, 2.0, (5, 9)))]
+    for tab_v, tab in tables:
+        vs = [*rng.uniform(-5.0, 40.0, 3000), 0.0, -0.0, np.inf, -np.inf, np.nan]
+        for g in tab_v:
+            vs += [g, np.nextafter(g, -np.inf), np.nextafter(g, np.inf)]
+        for v in vs:
+            i, f = dyn.table_bracket(v, tab_v)
+            for row in tab:
+                got = dyn.table_at(i, f, row)
+                ref = dyn.table_interp(v, tab_v, row)
+                assert np.float64(got).tobytes() == np.float64(ref).tobytes(), (v, i, f)

@@ -237,6 +237,33 @@ def table_interp(v: float, tab_v: np.ndarray, row: np.ndarray) -> float:
 
 
 @njit(cache=True)
+def table_bracket(v: float, tab_v: np.ndarray) -> tuple[int, float]:
+    """Where :func:`table_interp` reads ``v`` in ``tab_v``: ``(i, f)`` with ``i`` = 0 below
+    the table (the first entry), ``-1`` above it (the last), else the interval's upper index
+    and ``f`` its fraction, computed as :func:`table_interp` does (so that
+    :func:`table_at` gives its bits for every row of one table: one search, one division)."""
+    n = tab_v.shape[0]
+    if v <= tab_v[0]:
+        return 0, 0.0
+    if v >= tab_v[n - 1]:
+        return -1, 0.0
+    i = 1
+    while tab_v[i] < v:
+        i += 1
+    return i, (v - tab_v[i - 1]) / (tab_v[i] - tab_v[i - 1])
+
+
+@njit(cache=True)
+def table_at(i: int, f: float, row: np.ndarray) -> float:
+    """:func:`table_interp` of one row at :func:`table_bracket`'s ``(i, f)``."""
+    if i == 0:
+        return row[0]
+    if i < 0:
+        return row[row.shape[0] - 1]
+    return row[i - 1] + f * (row[i] - row[i - 1])
+
+
+@njit(cache=True)
 def saturate_angle(a: float, a_lin: float, a_sat: float) -> float:
     """Identity for |a| <= a_lin, then a smooth (C1) approach to +-a_sat."""
     m = abs(a)
@@ -422,11 +449,13 @@ def derivatives(x, u, eff, stuck, P, J, Jinv, rpos, raxis, rtorque, rtmax, rinv_
 
         am = saturate_angle(alpha, P[P_ALIN], P[P_ASAT])
         bm = saturate_angle(beta, P[P_ALIN], P[P_ASAT])
-        clp = table_interp(Va, tab_v, tab[T_CLP])
-        cmq = table_interp(Va, tab_v, tab[T_CMQ])
-        cma = table_interp(Va, tab_v, tab[T_CMA])
-        cnr = table_interp(Va, tab_v, tab[T_CNR])
-        cnb = table_interp(Va, tab_v, tab[T_CNB])
+        # table_interp(Va, tab_v, row) of the five rows, the search and fraction done once
+        ti, tf = table_bracket(Va, tab_v)
+        clp = table_at(ti, tf, tab[T_CLP])
+        cmq = table_at(ti, tf, tab[T_CMQ])
+        cma = table_at(ti, tf, tab[T_CMA])
+        cnr = table_at(ti, tf, tab[T_CNR])
+        cnb = table_at(ti, tf, tab[T_CNB])
         Mx += (qbar * S * b * (P[P_CLB] * bm + P[P_CLDR] * d_r) + qbar_xz * S * b * P[P_CLDA] * d_a
                + k_xz * b * b * (clp * p + P[P_CLR] * r))
         My += (qbar_xz * S * c * (P[P_CM0] + cma * am + P[P_CMDE] * d_e)
