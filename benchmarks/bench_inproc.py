@@ -470,6 +470,35 @@ The lead, main with inproc-17 merged against the session's base (c84b3ba, a clea
 43.4 / 38.3, 39.6 / 36.6 us per step (92-109x): the host ran ~20 % slower than at 17:08
 (121.8 / 120.8x, 32.8-33.1 us, main) and than session 16 (127x); single runs move more than
 the branch's 3 %. 150x (26.7 us) is not met on this host.
+
+Session 18, issue 24, branch phys-18 (2026-12-03, 2 cores shared with two other helpers).
+The physics side of the step (the runner's fused ``runner_tail_step``: metrics sample, 4 RK4
+steps, HIL round trip). ``perf`` (6 warm 60 s case-1 flights with the process's start-up) put
+20.1 % of all samples on main on two instructions: the atomic increment / decrement of
+numba's reference counts (``NRT_incref`` / ``NRT_decref``), done for every array argument at
+every compiled call, 36 per call of the vehicle's 22-array ``derivatives`` (16 calls a step)
+and ~100 more down the fused tail. Built, every flight bit-identical (``command_digest.py``
+dbd91a71..., 121a7434..., e937b801... after each commit; ``/tmp/sub/longhash.py 150``: cases
+1, 2, 0 and case 1 lqr, commands, truth, nav, metrics, events equal to main's):
+``vtolftc.base.nrt.borrowed`` (views without ``meminfo``), taken by ``runner_tail_step`` and
+``take_and_step_packed`` of their arguments and by ``step_n_memo`` for ``derivatives``;
+``derivatives`` compiled with ``_nrt=False``; a rotor at exactly zero skipped; one ``sincos``
+and one table search per evaluation (``bench_vehicle.py``'s docstring has the kernel's
+figures; tests in ``tests/test_vehicle_borrowed.py``). After it: 8.3 % of the samples on
+those two instructions, nearly all from the autopilot's kernels (not touched here).
+
+Measured. Callgrind (``--instr-atstart=no``, one warm 60 s case-1 flight instrumented by
+``callgrind_control``): main 3,019.8 M -> 2,898.8 M instructions (x0.960, 201.3 k -> 193.3 k
+per control step; ``NRT_incref`` / ``NRT_decref`` 84.7 M -> 40.0 M, the physics block
+433.0 -> 385.8 M, ``__sincos_fma`` 27.9 M -> below 0.8 %): the instruction count understates
+the gain, an atomic read-modify-write being one instruction of ~20 cycles. Thread CPU per
+control step, case 1 60 s, main's tree and this branch's alternated in processes (warm-up,
+then the faster of two flights): 8 pairs at load 2.35-2.74: main 24.2-27.8 us (median 25.2),
+branch 20.2-22.6 (median 21.2), pair ratio 0.79-0.86 (median 0.85); 8 pairs at load 4.4-4.8
+(40 s, before the last two commits): ratio 0.84-0.94 (median 0.88). This script, ``--duration
+120``, 3 interleaved pairs at load 2.3-2.4: main 160.8 / 154.5 / 154.1x (24.9-26.0 us per
+step, physics 10.9-11.4 us), branch 198.3 / 200.9 / 205.0x (19.5-20.2 us, physics 6.3-6.5
+us): >= 150x with a ~30 % margin on this host today.
 """
 
 from __future__ import annotations
