@@ -473,8 +473,8 @@ the branch's 3 %. 150x (26.7 us) is not met on this host.
 
 Session 18, issue 24, branch phys-18 (2026-12-03, 2 cores shared with two other helpers).
 The physics side of the step (the runner's fused ``runner_tail_step``: metrics sample, 4 RK4
-steps, HIL round trip). ``perf`` (6 warm 60 s case-1 flights with the process's start-up) put
-20.1 % of all samples on main on two instructions: the atomic increment / decrement of
+steps, HIL round trip). ``perf`` attached to 8 warm 60 s case-1 flights (no start-up) put
+27.9 % of all samples on main on two instructions: the atomic increment / decrement of
 numba's reference counts (``NRT_incref`` / ``NRT_decref``), done for every array argument at
 every compiled call, 36 per call of the vehicle's 22-array ``derivatives`` (16 calls a step)
 and ~100 more down the fused tail. Built, every flight bit-identical (``command_digest.py``
@@ -484,8 +484,9 @@ dbd91a71..., 121a7434..., e937b801... after each commit; ``/tmp/sub/longhash.py 
 ``take_and_step_packed`` of their arguments and by ``step_n_memo`` for ``derivatives``;
 ``derivatives`` compiled with ``_nrt=False``; a rotor at exactly zero skipped; one ``sincos``
 and one table search per evaluation (``bench_vehicle.py``'s docstring has the kernel's
-figures; tests in ``tests/test_vehicle_borrowed.py``). After it: 8.3 % of the samples on
-those two instructions, nearly all from the autopilot's kernels (not touched here).
+figures; tests in ``tests/test_vehicle_borrowed.py``). After it: 12.0 % of the samples on
+those two instructions, from the autopilot's kernels (not touched here: the same treatment
+there is worth up to ~12 % of a step).
 
 Measured. Callgrind (``--instr-atstart=no``, one warm 60 s case-1 flight instrumented by
 ``callgrind_control``): main 3,019.8 M -> 2,898.8 M instructions (x0.960, 201.3 k -> 193.3 k
