@@ -5,6 +5,8 @@ scheduler, when the campaign's client leaves without ending it."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 pytest.importorskip("distributed")
@@ -147,3 +149,12 @@ def test_a_dask_campaign_quiets_the_scheduler_and_workers_while_it_runs():
             got[row["scenario_id"]] = row["max_attitude_excursion_deg"]
         assert got == serial
         assert (c.run_on_scheduler(sched), set(c.run(worker).values())) == on
+        # a campaign whose process dies before its end (no release): its client leaving
+        # the scheduler starts the scheduler's callbacks again and unregisters the plugin
+        with Client(cluster, set_as_default=False) as dying:
+            execute.prepare_dask(dying, scen)
+            assert c.run_on_scheduler(sched) == (False, False, True)
+        deadline = time.monotonic() + 30
+        while c.run_on_scheduler(sched) != on[0]:
+            assert time.monotonic() < deadline, c.run_on_scheduler(sched)
+            time.sleep(0.05)
