@@ -54,12 +54,14 @@ holds):
   (0.37-0.41 s) is the pool's (0.37-0.39 s) within this load's spread, and a flight with
   the collector frozen or off costs the same (one gen-0 collection per flight, 0.1 ms).
 - the build (``dask_plugin.QuietScheduler``, the workers' system monitor paused and their
-  memory check every 1 s): idle, scheduler + nannies 1.6-2.2 % -> 0.75-0.87 % of a core,
-  each worker 0.75-1.0 % -> 0.25-0.5 %. Per 24-scenario campaign, main then branch
-  interleaved (3 pairs ``LocalCluster``, 2 pairs ``tcp://``, load 1.8-4.7): the
-  ``LocalCluster`` parent 0.24 / 0.37 / 0.42 s -> 0.18 / 0.22 / 0.27 s (second campaigns),
-  the ``tcp://`` scheduler 0.19-0.31 s -> 0.12-0.17 s; ~0.1 s of ~9.5 s, ~1 % of the
-  campaign's CPU. The flights' own spread (+-3 % at this load) hides it in the totals.
+  memory check every 1 s): an idle ``LocalCluster`` of 2 with the campaign's plugins, main
+  then branch, 2 interleaved pairs (load 1.3-2.9): scheduler + nannies + client 1.5-2.25 %
+  -> 0.75-0.87 % of a core, the two workers 1.62-2.0 % -> 0.75-0.87 %. Per 24-scenario
+  campaign, main then branch interleaved (3 pairs ``LocalCluster``, 2 pairs ``tcp://``,
+  load 1.8-4.7): the ``LocalCluster`` parent 0.24 / 0.37 / 0.42 s -> 0.18 / 0.22 / 0.27 s
+  (second campaigns), the ``tcp://`` scheduler 0.19-0.31 s -> 0.12-0.17 s; ~0.1 s of ~9.5
+  s, ~1 % of the campaign's CPU. The flights' own spread (+-3 % at this load) hides it in
+  the totals.
 
 One run of this benchmark on the branch (19:00 UTC, load 1.5 rising to 2.7, neighbours
 taking 3-10 s of CPU per window): pool 0.403 s of CPU per scenario (parent 0.12 s in all),
