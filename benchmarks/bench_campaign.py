@@ -171,6 +171,26 @@ The lead's idle run (main with inproc-17 merged, 17:08-17:09 UTC, load 1.4 -> 2.
 scenarios/min, overhead +2.6 %; Dask LocalCluster 243.2-271.4/min (flights 0.82-0.92x of the
 pool; 0.91x with ``--preload``, 0.92x on a warm cluster's second campaign), tcp:// 250.6-268.6
 (0.85-0.91x). 300/min was missed by 1 %: session 16 measured 292.7-318.6 on the same code path.
+
+Session 18 (2026-12-03, branch dask-18: where a fresh Dask cluster loses, and the scheduler
+quieted during a campaign; ``bench_campaign_timeline.py`` has the per-worker timelines and
+docs/campaigns/README.md, "Where a Dask campaign loses, per worker", the table). Not the
+tail (the scheduler's queuing already balances 12/12, the early worker idle 0.02-0.41 s at
+the end against the pool's 0.01-0.86 s), not dispatch (gaps 1.4-7.1 ms, < 1 %): a fresh
+worker's start, ~0.7 s of CPU each (~2 flights; 14-18 % of this campaign's flights, which
+the pool's forked workers never pay), and Dask's own processes, ~3-5 % of the CPU.
+``bench_campaign.py --jobs 2 --scenarios 24``, main then this branch, two interleaved pairs
+(18:49-18:58 UTC, load 2.1 rising to 5.5 and falling to 3.5; other helpers' jobs came and
+went within runs, so the wall-time rates swung 0.57-1.88x of the pool in both trees and
+say nothing here). The load-robust figure, CPU of every process per scenario (the bench's
+two digits), the pool's in the same run first: main 0.40 / 0.39 s, Dask fresh
+``LocalCluster`` (the CLI's path) 0.45 / 0.45, its second campaign 0.40 / 0.41, fresh
+``tcp://`` 0.42 / 0.45, second 0.42 / 0.41; branch 0.40 / 0.37 s, fresh ``LocalCluster`` 0.43 /
+0.40, second 0.40 / 0.38, fresh ``tcp://`` 0.44 / 0.40, second 0.40 / 0.38. As a rate on 2
+saturated cores (the pool's CPU over Dask's): fresh ``LocalCluster`` 0.89x / 0.87x -> 0.93x /
+0.93x, fresh ``tcp://`` 0.95x / 0.87x -> 0.91x / 0.93x, second campaigns 0.95-1.00x ->
+0.97-1.00x: in the right direction, by more than the ~1 % the quieting was measured to
+save, within the bench's rounding (0.01 s is 2.5 %) and this load's spread.
 """
 
 from __future__ import annotations

@@ -11,14 +11,19 @@ than inside the first flights, and a long-lived worker, already warm, returns at
 
 A Dask worker samples the stack of its task threads every 10 ms
 (``distributed.worker.profile``) on its event loop, which takes the GIL from the flight
-running in the task thread each time, and every worker and nanny checks its event loop's
-health every 20 ms (``distributed.admin.tick``, which only logs). A campaign's tasks are
-flights whose profile nobody reads, so :class:`PauseProfiler` stops the profiling and tick
-callbacks of each worker and :class:`QuietNanny` the ticks of each nanny while they are
-registered (:func:`vtolftc.runners.campaign.execute.run_dask` registers them for the
-campaign and unregisters them at the end, which starts the profiler again). Imported only
-with Dask; importing this module does not import the flight code (a worker unpickles the
-plugin on its event loop).
+running in the task thread each time, and every worker, nanny and scheduler checks its
+event loop's health every 20 ms (``distributed.admin.tick``, which only logs) and samples
+the machine every 0.5 s for the dashboard (``distributed.admin.system-monitor``). A
+campaign's tasks are flights whose profile and graphs nobody reads, and on a machine whose
+cores all fly each wake-up is CPU a flight loses, so while a campaign runs
+:class:`PauseProfiler` stops the profiling, tick and system-monitor callbacks of each worker
+(its memory check every :data:`MEMORY_CHECK_MS`), :class:`QuietNanny` the ticks and system
+monitor of each nanny and :class:`QuietScheduler` those of the scheduler
+(:func:`vtolftc.runners.campaign.execute.run_dask` registers them for the campaign and
+unregisters them at the end, which starts them again; the scheduler's start again by
+themselves if the campaign's client disconnects without it). Imported only with Dask;
+importing this module does not import the flight code (a worker unpickles the plugin on its
+event loop).
 """
 
 from __future__ import annotations
@@ -27,18 +32,24 @@ import asyncio
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from distributed.diagnostics.plugin import NannyPlugin, WorkerPlugin
+from distributed.diagnostics.plugin import NannyPlugin, SchedulerPlugin, WorkerPlugin
 
-__all__ = ["NANNY_PLUGIN_NAME", "PLUGIN_NAME", "WARM_PLUGIN_NAME", "PauseProfiler", "QuietNanny",
-           "WarmWorker"]
+__all__ = ["MEMORY_CHECK_MS", "NANNY_PLUGIN_NAME", "PLUGIN_NAME", "SCHEDULER_PLUGIN_NAME",
+           "WARM_PLUGIN_NAME", "PauseProfiler", "QuietNanny", "QuietScheduler", "WarmWorker",
+           "quiet_scheduler_off"]
 
 PLUGIN_NAME = "vtolftc-campaign-pause-profiler"
 NANNY_PLUGIN_NAME = "vtolftc-campaign-quiet-nanny"
+SCHEDULER_PLUGIN_NAME = "vtolftc-campaign-quiet-scheduler"
 WARM_PLUGIN_NAME = "vtolftc-campaign-warm"
-_CALLBACKS = ("profile", "profile-cycle", "tick", "ticks")
+_CALLBACKS = ("profile", "profile-cycle", "tick", "ticks", "monitor")
 _NANNY_CALLBACKS = ("tick", "ticks", "monitor")
-NANNY_MEMORY_CHECK_MS = 1000.0
-"""Period of a nanny's memory check while a campaign runs (ms; Dask's default is 100)."""
+_SCHEDULER_CALLBACKS = ("tick", "ticks", "monitor")
+MEMORY_CHECK_MS = 1000.0
+"""Period of a worker's and a nanny's memory check while a campaign runs (ms; Dask's default
+is 100): a campaign's worker grows by MB over hundreds of flights."""
+NANNY_MEMORY_CHECK_MS = MEMORY_CHECK_MS
+"""The nanny's (the same; the name of round 10)."""
 
 
 _STATE = "_vtolftc_campaign_paused"
@@ -79,14 +90,18 @@ def _resume(server: Any) -> None:
 
 
 class PauseProfiler(WorkerPlugin):
-    """Stop the worker's profiling callbacks and its event-loop tick (a health check every
-    20 ms that only logs) on setup, start them again on teardown."""
+    """Quiet a worker while a campaign runs: its profiling callbacks (every 10 ms), its
+    event-loop tick (every 20 ms; it only logs) and its system monitor (every 0.5 s; the
+    dashboard's graphs and the memory the scheduler displays) stop on setup, its memory
+    check (spilling and pausing near the memory limit) runs every :data:`MEMORY_CHECK_MS`
+    instead of 100 ms; teardown undoes it."""
 
     name = PLUGIN_NAME
 
     def setup(self, worker: Any) -> None:
-        """Stop the running profiling and tick callbacks of ``worker``."""
-        _pause(worker, _CALLBACKS)
+        """Stop the running profiling, tick and monitor callbacks of ``worker``, slow its
+        memory check."""
+        _pause(worker, _CALLBACKS, MEMORY_CHECK_MS)
 
     def teardown(self, worker: Any) -> None:
         """Start again what :meth:`setup` stopped."""
@@ -97,18 +112,55 @@ class QuietNanny(NannyPlugin):
     """Quiet a nanny while a campaign runs: on a machine whose cores all fly, its wake-ups
     are CPU the flights lose. Its event-loop tick (every 20 ms; it only logs) and system
     monitor (every 0.5 s; the dashboard's graphs) stop; its memory monitor, which restarts a
-    worker near its memory limit, keeps running but every :data:`NANNY_MEMORY_CHECK_MS`
+    worker near its memory limit, keeps running but every :data:`MEMORY_CHECK_MS`
     instead of 100 ms (a campaign's worker grows by MB over hundreds of flights)."""
 
     name = NANNY_PLUGIN_NAME
 
     def setup(self, nanny: Any) -> None:
         """Stop the tick and system monitor callbacks of ``nanny``, slow its memory check."""
-        _pause(nanny, _NANNY_CALLBACKS, NANNY_MEMORY_CHECK_MS)
+        _pause(nanny, _NANNY_CALLBACKS, MEMORY_CHECK_MS)
 
     def teardown(self, nanny: Any) -> None:
         """Undo :meth:`setup`."""
         _resume(nanny)
+
+
+class QuietScheduler(SchedulerPlugin):
+    """Quiet the scheduler while the campaign of client ``client_id`` runs: its event-loop
+    tick (every 20 ms; it only logs) and its system monitor (every 0.5 s; the dashboard's
+    graphs) stop when the plugin is registered (:meth:`start`). They start again with
+    :func:`quiet_scheduler_off` (what :func:`vtolftc.runners.campaign.dask_run.release_workers`
+    runs at the campaign's end) or, should the campaign die without it, when that client
+    leaves the scheduler (:meth:`remove_client`). The scheduler must be able to import this
+    module (this package installed beside it); otherwise the campaign runs without it.
+    Idempotent: registered again while it is (``vtolftc campaign`` prepares the workers,
+    then :func:`~vtolftc.runners.campaign.execute.run_dask` does), it stays as it is."""
+
+    name = SCHEDULER_PLUGIN_NAME
+    idempotent = True
+
+    def __init__(self, client_id: str) -> None:
+        self.client_id = client_id
+
+    def start(self, scheduler: Any) -> None:
+        """Stop the running tick and monitor callbacks of ``scheduler``."""
+        _pause(scheduler, _SCHEDULER_CALLBACKS)
+
+    def remove_client(self, scheduler: Any, client: str) -> None:
+        """Start them again, and unregister this plugin, when the campaign's client
+        leaves."""
+        if client == self.client_id:
+            _resume(scheduler)
+            if scheduler.plugins.get(SCHEDULER_PLUGIN_NAME) is self:
+                del scheduler.plugins[SCHEDULER_PLUGIN_NAME]
+
+
+def quiet_scheduler_off(dask_scheduler: Any) -> bool:
+    """Undo :class:`QuietScheduler` and unregister it (run on the scheduler, e.g. by
+    ``client.run_on_scheduler``); True if it was registered."""
+    _resume(dask_scheduler)
+    return dask_scheduler.plugins.pop(SCHEDULER_PLUGIN_NAME, None) is not None
 
 
 class WarmWorker(WorkerPlugin):

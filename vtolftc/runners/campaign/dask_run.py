@@ -4,9 +4,9 @@
 :class:`ConnectionError` with one line). :func:`prepare_workers` registers the campaign's
 worker plugins (:mod:`vtolftc.runners.campaign.dask_plugin`): every worker, and every worker
 that joins later, warms itself for the campaign's (airframe, gains, controller) in its task
-thread without blocking anyone, and pauses its statistical profiler and its event-loop
-ticks (and its nanny's). ``vtolftc campaign``
-calls it before it computes the recoverability oracle, so a fresh cluster's workers import
+thread without blocking anyone, and pauses its statistical profiler, its event-loop ticks
+and its system monitor (and its nanny's, and the scheduler's). ``vtolftc campaign`` calls
+it before it computes the recoverability oracle, so a fresh cluster's workers import
 the flight code and load their kernels meanwhile, as the local pool's workers inherit them
 from the campaign process. :func:`vtolftc.runners.campaign.execute.run_dask` submits the
 scenarios in batches of :func:`dask_batch_size`. :func:`cluster_pids` and
@@ -73,30 +73,37 @@ def prepare_workers(client: Any, warm: Callable[[list[tuple[Any, ...]]], Any],
     from vtolftc.runners.campaign.dask_plugin import (
         NANNY_PLUGIN_NAME,
         PLUGIN_NAME,
+        SCHEDULER_PLUGIN_NAME,
         WARM_PLUGIN_NAME,
         PauseProfiler,
         QuietNanny,
+        QuietScheduler,
         WarmWorker,
     )
 
     client.register_plugin(PauseProfiler(), name=PLUGIN_NAME)
     client.register_plugin(QuietNanny(), name=NANNY_PLUGIN_NAME)
     client.register_plugin(WarmWorker(warm, keys), name=WARM_PLUGIN_NAME)
+    with contextlib.suppress(Exception):  # a scheduler without this package: not quieted
+        client.register_plugin(QuietScheduler(client.id), name=SCHEDULER_PLUGIN_NAME)
 
 
 def release_workers(client: Any) -> None:
-    """Unregister :func:`prepare_workers`' plugins (the workers' profiler back on; what they
-    loaded stays for the next campaign)."""
+    """Unregister :func:`prepare_workers`' plugins (the workers' profiler and the
+    scheduler's tick back on; what the workers loaded stays for the next campaign)."""
     from vtolftc.runners.campaign.dask_plugin import (
         NANNY_PLUGIN_NAME,
         PLUGIN_NAME,
         WARM_PLUGIN_NAME,
+        quiet_scheduler_off,
     )
 
     try:  # only those registered (the scheduler logs a missing one as an error)
         workers, nannies = client.run_on_scheduler(_plugin_names)
     except Exception:
         return
+    with contextlib.suppress(Exception):
+        client.run_on_scheduler(quiet_scheduler_off)
     for name in (WARM_PLUGIN_NAME, PLUGIN_NAME):
         if name in workers:
             with contextlib.suppress(Exception):
