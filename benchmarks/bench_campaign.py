@@ -2,8 +2,10 @@
 overhead per scenario, and a Dask LocalCluster next to the local process pool.
 
 The scenarios are 60 s flights of the paper's timeline that all fly to the end (a 10 % loss
-of one lift rotor at t = 40 s in cruise, each rotor, the three controllers: up to 24
-scenarios, 12 by default), so each one costs a full 60 s of simulation. Figures printed:
+of one lift rotor at t = 40 s in cruise, each rotor, the three controllers: 24 scenarios,
+12 by default; beyond 24, the same at losses of 20 %, 30 %, ... for a campaign long enough
+that a fresh cluster's start-up weighs what it does in a real one), so each one costs a full
+60 s of simulation. Figures printed:
 
 - the in-process run alone (``run_scenario``): wall time and real-time factor per scenario;
 - the campaign's fixed costs: ``vtolftc`` start-up (imports), airframe load, autopilot and
@@ -191,6 +193,20 @@ saturated cores (the pool's CPU over Dask's): fresh ``LocalCluster`` 0.89x / 0.8
 0.93x, fresh ``tcp://`` 0.95x / 0.87x -> 0.91x / 0.93x, second campaigns 0.95-1.00x ->
 0.97-1.00x: in the right direction, by more than the ~1 % the quieting was measured to
 save, within the bench's rounding (0.01 s is 2.5 %) and this load's spread.
+
+Session 19 (main with dask-18 merged, idle machine, 2026-12-03 22:17-22:31 UTC, load 0.1-2.1;
+each ratio within one run; docs/campaigns/README.md, "The idle figures (issue 24, session
+19)", has the table): ``--scenarios 24``: in-process 0.29 s per flight (209.6x), local pool
+413.9 scenarios/min, overhead +2.6 % (406.9, +3.9 % with bytecode caches); Dask with warm
+workers (preloaded, or a second campaign) 0.95-0.98x; fresh clusters without the preload
+0.85-0.90x oracle + flights, 0.89-0.94x flights alone. ``--scenarios 96`` (two runs):
+pool 415.8 / 420.1 scenarios/min, +2.0 %; every Dask configuration 0.90-0.98x, preloaded
+0.96-0.97x. ``--whole``: fresh ``LocalCluster`` / ``tcp://`` 0.88x / 0.86x at 24 scenarios,
+0.95x / 0.92x at 96. What a fresh worker without the preload pays before its first flight,
+in a fresh interpreter: ``distributed`` 0.33-0.35 s of CPU, the flight code 0.45 s (~0.3 s
+of it numba's first typing-context set-up, with the SciPy BLAS check it makes), warm-up
+0.10 s; this sandbox's ``PYTHONDONTWRITEBYTECODE=1`` adds 0.07 s (this package's modules
+compiled from source in every process).
 """
 
 from __future__ import annotations
@@ -222,10 +238,19 @@ magnitudes = [0.1]
 """
 
 
+def spec_of(n: int) -> str:
+    """The campaign of ``n`` scenarios: :data:`SPEC` with as many loss magnitudes (0.1, 0.2,
+    ...) as 24 scenarios each need."""
+    k = -(-n // 24)
+    return SPEC.replace("magnitudes = [0.1]",
+                        f"magnitudes = {[round(0.1 * (i + 1), 1) for i in range(k)]}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--scenarios", type=int, default=12, help="at most 24")
+    ap.add_argument("--scenarios", type=int, default=12,
+                    help="24 per loss magnitude (10 %%, 20 %%, ...)")
     ap.add_argument("--no-dask", action="store_true")
     ap.add_argument("--memory", type=int, default=0, metavar="N",
                     help="memory run: N short scenarios, RSS growth per process")
@@ -246,7 +271,9 @@ def main() -> None:
     from vtolftc.runners.campaign.scenarios import expand
     from vtolftc.runners.campaign.spec import parse_spec
 
-    scen = expand(parse_spec(SPEC))[: args.scenarios]
+    if args.scenarios < 1:
+        ap.error("--scenarios: give a positive number")
+    scen = expand(parse_spec(spec_of(args.scenarios)))[: args.scenarios]
     n = len(scen)
     print(f"load average at start: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; "
           f"{n} scenarios of 60 s")
@@ -451,7 +478,7 @@ def whole_runs(n: int, jobs: int) -> None:
     drifting during the run shows as the two pools' spread. Ratios: the mean pool wall time
     over each Dask one (target >= 0.9x). An untimed campaign of 2 s flights first loads the
     file and numba caches."""
-    spec = SPEC.replace('name = "bench"', f'name = "whole{n}"')
+    spec = spec_of(n).replace('name = "bench"', f'name = "whole{n}"')
     vtolftc = str(Path(sys.executable).parent / "vtolftc")
     with tempfile.TemporaryDirectory() as d:
         (Path(d) / "spec.toml").write_text(spec)

@@ -198,7 +198,7 @@ def main() -> None:
     ap.add_argument("--kinds", default="pool,LocalCluster,tcp")
     args = ap.parse_args()
     sys.path.insert(0, HERE)
-    from bench_campaign import SPEC, fresh_cluster
+    from bench_campaign import fresh_cluster, spec_of
 
     import vtolftc.runners.campaign.execute as ex
     from vtolftc.runners.campaign.dask_run import cluster_pids, connect
@@ -206,7 +206,7 @@ def main() -> None:
     from vtolftc.runners.campaign.scenarios import expand
     from vtolftc.runners.campaign.spec import parse_spec
 
-    scen = expand(parse_spec(SPEC))[: args.scenarios]
+    scen = expand(parse_spec(spec_of(args.scenarios)))[: args.scenarios]
     print(f"load average at start: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; "
           f"{len(scen)} scenarios of 60 s, 2 workers")
     ex.fly_scenario(scen[0])  # this process warm, as the campaign's is after its oracle

@@ -469,6 +469,15 @@ one flight each): ``--transport zenoh --spin-us 300 --pin --rt-priority 10 --zen
 --zenoh-peer-cpu`` **19.0x** (round trip mean / median / p90 / p99 327 / 113 / 227 / 719 us;
 CPU per step autopilot / vehicle 210 / 203 us): >= 15x met on two free cores; ``--transport
 udp --spin-us 300 --pin --rt-priority 10`` 22.5x (279 / 89 / 172 / 619 us; 182 / 162 us).
+
+Session 19 (main with session 18's physics, 2026-12-03 22:29-22:31 UTC, idle, load 1.1-1.3,
+20 s of case 1, one flight each): ``--transport udp --spin-us 300 --pin --rt-priority 10``
+**25.3x** (round trip mean / median / p90 / p99 280 / 74 / 186 / 474 us; CPU per step
+autopilot / vehicle 158 / 145 us; ``autopilot_step`` 22 us, the vehicle's
+``record_and_physics`` 10 us); zenoh with the same flags and ``--zenoh-lowlatency
+--zenoh-peer-cpu`` **22.6x** (315 / 95 / 188 / 584 us; 175 / 170 us). Without flags: UDP
+13.1x (413 / 190 / 321 / 895 us; 249 / 167 us), zenoh 7.5x (628 / 396 / 578 / 1709 us; 366
+/ 289 us).
 """
 
 from __future__ import annotations
