@@ -205,8 +205,9 @@ pool 415.8 / 420.1 scenarios/min, +2.0 %; every Dask configuration 0.90-0.98x, p
 0.95x / 0.92x at 96. What a fresh worker without the preload pays before its first flight,
 in a fresh interpreter: ``distributed`` 0.33-0.35 s of CPU, the flight code 0.45 s (numba's
 import ~0.15 s, its first target and typing-context set-up ~0.23 s with the SciPy BLAS check
-it makes, this package's modules ~0.07 s), warm-up 0.10 s; this sandbox's ``PYTHONDONTWRITEBYTECODE=1`` adds 0.07 s (this package's modules
-compiled from source in every process).
+it makes, this package's modules ~0.07 s), warm-up 0.10 s; this sandbox's
+``PYTHONDONTWRITEBYTECODE=1`` adds 0.07 s (this package's modules compiled from source in
+every process).
 """
 
 from __future__ import annotations
