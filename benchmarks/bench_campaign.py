@@ -251,7 +251,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--scenarios", type=int, default=12,
-                    help="24 per loss magnitude (10 %%, 20 %%, ...)")
+                    help="24 per loss magnitude (10 %%, 20 %%, ... 100 %%): at most 240")
     ap.add_argument("--no-dask", action="store_true")
     ap.add_argument("--memory", type=int, default=0, metavar="N",
                     help="memory run: N short scenarios, RSS growth per process")
@@ -272,8 +272,8 @@ def main() -> None:
     from vtolftc.runners.campaign.scenarios import expand
     from vtolftc.runners.campaign.spec import parse_spec
 
-    if args.scenarios < 1:
-        ap.error("--scenarios: give a positive number")
+    if not 1 <= args.scenarios <= 240:
+        ap.error("--scenarios: give 1 to 240 (24 per loss magnitude, 10 % to 100 %)")
     scen = expand(parse_spec(spec_of(args.scenarios)))[: args.scenarios]
     n = len(scen)
     print(f"load average at start: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; "

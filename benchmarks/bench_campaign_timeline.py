@@ -194,9 +194,12 @@ def summarize(label: str, got: tuple[Any, ...]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scenarios", type=int, default=24)
+    ap.add_argument("--scenarios", type=int, default=24,
+                    help="24 per loss magnitude (10 %%, 20 %%, ... 100 %%): at most 240")
     ap.add_argument("--kinds", default="pool,LocalCluster,tcp")
     args = ap.parse_args()
+    if not 1 <= args.scenarios <= 240:
+        ap.error("--scenarios: give 1 to 240 (24 per loss magnitude, 10 % to 100 %)")
     sys.path.insert(0, HERE)
     from bench_campaign import fresh_cluster, spec_of
 
