@@ -144,10 +144,14 @@ class DashboardView:
             ("GPS", esc(self.gps_text)),
             ("mission", esc(self.mission_text)),
         ]
-        if self.statustext:
-            rows.append(("autopilot", f"<i>{esc(self.statustext)}</i>"))
-        body = "".join(f'<tr><td style="color:#666;padding-right:8px">{k}</td><td>{v}</td></tr>'
-                       for k, v in rows)
+        # the autopilot row is always there and no cell wraps (a long text ends in an
+        # ellipsis, whole in its tooltip): the panel keeps one height, so the command buttons
+        # below it never move under the operator's pointer while the texts change
+        rows.append(("autopilot", f'<i title="{esc(self.statustext)}">{esc(self.statustext)}</i>'
+                     if self.statustext else "—"))
+        cell = "white-space:nowrap;overflow:hidden;text-overflow:ellipsis"
+        body = "".join(f'<tr><td style="color:#666;padding-right:8px;{cell}">{k}</td>'
+                       f'<td style="{cell}">{v}</td></tr>' for k, v in rows)
         return (
             f'<div id="vtolftc-status" data-link="{self.link_state}" '
             f'data-mode="{esc(self.mode_text)}" data-vtol="{esc(self.vtol_text)}" '
@@ -155,8 +159,9 @@ class DashboardView:
             f'data-north="{n:.2f}" data-altitude="{self.altitude_m:.2f}" '
             f'data-airspeed="{self.airspeed_m_s:.2f}" style="font-size:13px">'
             f'<div id="vtolftc-link" style="background:{colour};color:white;padding:4px 8px;'
-            f'border-radius:4px;margin-bottom:6px">{esc(self.link_text)}</div>'
-            f"<table>{body}</table></div>")
+            f'border-radius:4px;margin-bottom:6px;{cell}">{esc(self.link_text)}</div>'
+            f'<table style="table-layout:fixed;width:100%"><colgroup><col style="width:7.5em">'
+            f"<col></colgroup>{body}</table></div>")
 
     @property
     def commands_html(self) -> str:

@@ -117,6 +117,23 @@ def test_snapshot_to_displayed_values(ds1):
     assert v2.actuators["rotor_2a"] is None and "—" in v2.actuator_html
 
 
+def test_status_panel_keeps_its_rows_whatever_the_texts(ds1):
+    """The panel above the command buttons has one height: the same rows with or without an
+    autopilot message, and no cell that wraps (long texts end in an ellipsis)."""
+    m = _model(ds1)
+    quiet = m.update(Snap(sim_time_s=1.0), 0.0).status_html
+    long = "Transition denied: " + "not armed, " * 30
+    loud = m.update(Snap(sim_time_s=2.0, last_statustext=long,
+                         mode_name="AUTO.LOITER " * 10), 0.1).status_html
+    for h in (quiet, loud):
+        cells = re.findall(r"<td style=\"([^\"]*)\"", h)
+        assert h.count("<tr>") == 11 and len(cells) == 22, h
+        assert all("white-space:nowrap" in c and "text-overflow:ellipsis" in c for c in cells)
+        assert "table-layout:fixed" in h
+    assert "—</td>" in quiet
+    assert f'title="{long}"' in loud                    # the whole message, in its tooltip
+
+
 def test_traces_keep_a_window_and_reset_on_restart(ds1):
     m = _model(ds1, history_s=5.0)
     for k in range(100):

@@ -83,6 +83,14 @@ def _scene_change(a: np.ndarray, b: np.ndarray) -> float:
 # -- what a screenshot of the dashboard must show -------------------------------------------
 _PANEL_LEFT_JS = ("const e = document.getElementById('vtolftc-status');"
                   "return e ? e.getBoundingClientRect().left : null;")
+# Where the command buttons sit below the top of the status panel (px): the same before the
+# first command and after the transition, whatever texts the panel shows meanwhile.
+_BUTTONS_BELOW_STATUS_JS = (
+    "const s = document.getElementById('vtolftc-status'); if (!s) return null;"
+    "const top = s.getBoundingClientRect().top;"
+    "return Array.from(document.querySelectorAll('button'))"
+    ".filter(b => ['Arm', 'Takeoff', 'Transition to fixed-wing'].includes(b.innerText.trim()))"
+    ".map(b => b.getBoundingClientRect().top - top);")
 _TOAST_W = 330     # the "software WebGL" notice at the top left of the view (not the scene)
 
 
@@ -286,6 +294,8 @@ def test_transition_from_the_browser(chromium, sitl, tmp_path):
         page.wait(lambda s: page.driver.execute_script(
             "return document.querySelectorAll('canvas').length") > 0, 180, "the 3-D canvas")
 
+        below0 = page._call(lambda: page.driver.execute_script(_BUTTONS_BELOW_STATUS_JS),
+                            180.0, "the buttons' position")
         # the autopilot refuses a transition on the ground: the page must say so
         state, text, _ = page.press("Transition to fixed-wing")
         assert state == "refused" and "DENIED" in text, text
@@ -313,6 +323,11 @@ def test_transition_from_the_browser(chromium, sitl, tmp_path):
             shot_after = page.screenshot_array()
             problems = view_problems(shot_after, panel_left)
         assert not problems, problems
+        # the status panel kept its height through the flight's texts (an autopilot message,
+        # longer lines): the buttons did not move under the pointer
+        below1 = page._call(lambda: page.driver.execute_script(_BUTTONS_BELOW_STATUS_JS),
+                            180.0, "the buttons' position")
+        assert below0 is not None and len(below0) == 3 and below1 == below0, (below0, below1)
         path = page.screenshot(tmp_path / "dashboard_after_transition.png")
         print(f"\nscreenshot: {path}")
         if os.environ.get("VTOLFTC_ARTIFACTS"):          # CI: keep it beyond pytest's tmp
@@ -327,6 +342,8 @@ def test_transition_from_the_browser(chromium, sitl, tmp_path):
         assert _scene_change(shot_before, shot_after) > 0.01
         assert int(after["update"]) > int(before["update"])
         assert path.stat().st_size > 10_000
+        print(f"clicks the driver sent that missed their button (repeated): "
+              f"{page.missed_clicks or 'none'}")
 
         # the page stays live after the transition; its update *rate* is a speed figure and
         # lives in benchmarks/bench_dashboard.py (a software-rendered WebGL page beside a

@@ -45,6 +45,28 @@ window.__vtolftcObs.observe(document.body, {childList: true, subtree: true,
                                              attributes: true, attributeFilter: ['data-update']});
 """
 
+# Records, in the capture phase (before the page's own handlers), where every click event of
+# the page lands: the label of the button it reached, or "" when it reached no button. While
+# ``window.__vtolftcAim`` names a button, a click that lands anywhere else is swallowed (no
+# handler of the page sees it), so a click the driver aimed at one button can never act on
+# another; the harness reads the log to tell a click that never reached its button (the
+# driver's, e.g. the layout moved between its hit test and the mouse events) from a click the
+# page received and did not act on (the dashboard's).
+_CLICK_LOG_JS = """
+if (!window.__vtolftcClickLog) {
+  window.__vtolftcClickLog = []; window.__vtolftcAim = null;
+  window.addEventListener('click', (e) => {
+    const b = e.target && e.target.closest ? e.target.closest('button') : null;
+    const label = b ? b.innerText.trim() : '';
+    window.__vtolftcClickLog.push(label);
+    if (window.__vtolftcAim !== null && label !== window.__vtolftcAim) {
+      e.stopPropagation(); e.preventDefault();
+    }
+  }, true);
+}
+window.__vtolftcClickLog.length = 0; window.__vtolftcAim = arguments[0];
+"""
+
 # Caps requestAnimationFrame at one frame per %g ms (installed before the page's scripts).
 _FPS_CAP_JS = """
 (() => { const dt = %g; let next = 0;
@@ -136,6 +158,7 @@ class DashboardPage:
         for a in (*CHROMIUM_ARGS, f"--window-size={width},{height}"):
             opts.add_argument(a)
         self.driver = webdriver.Chrome(service=Service(driver), options=opts)
+        self.missed_clicks: list[tuple[str, str]] = []
         # chromedriver gives up on a renderer that does not answer after this timeout
         # (TimeoutException, which the calls below retry); keep it under Selenium's own HTTP
         # read timeout (120 s), which would otherwise fire first as a urllib3 error
@@ -194,33 +217,58 @@ class DashboardPage:
 
     # -- acting --------------------------------------------------------------------------
     def click(self, text: str, timeout_s: float = 180.0) -> None:
-        """Click the button labelled ``text`` (a real mouse click through the driver), once:
-        finding it is retried while the renderer is slow to answer; a click whose
-        acknowledgement times out has been dispatched and is not repeated (the caller waits
-        for its result)."""
+        """Click the button labelled ``text`` (a real mouse click through the driver) until
+        the page has received one click on it: finding it is retried while the renderer is
+        slow to answer; a click that the page saw land elsewhere, or not at all, is swallowed
+        by :data:`_CLICK_LOG_JS` and repeated, as a user whose click missed clicks again; a
+        click whose acknowledgement times out has been dispatched and is not repeated (the
+        caller waits for its result).
+
+        Every click that missed is appended to :attr:`missed_clicks` (label, where it landed)."""
         from selenium.common.exceptions import (
             ElementClickInterceptedException,
             StaleElementReferenceException,
         )
 
         # the panel's layout moves while the status and command texts update (a line more
-        # or less above the button): a click that lands on the text that just slid over the
-        # button is not dispatched to it, and a user clicks again; bounded by a count
-        for _ in range(50):
-            el = self._call(lambda: self.driver.execute_script(
-                "const b = Array.from(document.querySelectorAll('button'))"
-                ".find(b => b.innerText.trim() === arguments[0]) || null;"
-                "if (b) { b.scrollIntoView({block: 'center'}); } return b;", text),
-                timeout_s, f"finding the button {text!r}")
-            if el is None:
-                raise AssertionError(f"page: no button {text!r}")
-            try:
-                with contextlib.suppress(*_slow()):
+        # or less above the button): the driver hit-tests the button's centre, then sends the
+        # mouse events there, and a layout change in between sends them to whatever slid
+        # under that point (chromedriver reports it only when the hit test itself fails);
+        # bounded by a count
+        try:
+            for _ in range(50):
+                el = self._call(lambda: self.driver.execute_script(
+                    _CLICK_LOG_JS + "const b = Array.from(document.querySelectorAll('button'))"
+                    ".find(b => b.innerText.trim() === arguments[0]) || null;"
+                    "if (b) { b.scrollIntoView({block: 'center'}); } return b;", text),
+                    timeout_s, f"finding the button {text!r}")
+                if el is None:
+                    raise AssertionError(f"page: no button {text!r}")
+                try:
                     el.click()
-                return
-            except (ElementClickInterceptedException, StaleElementReferenceException):
+                except (ElementClickInterceptedException, StaleElementReferenceException):
+                    time.sleep(0.2)
+                    continue
+                except _slow():
+                    return                   # dispatched; the page is too busy to say more
+                landed: list[str] = []
+                for _wait in range(5):       # the driver returns once the events were sent
+                    landed = self._call(lambda: self.driver.execute_script(
+                        "return window.__vtolftcClickLog.slice();"), timeout_s,
+                        f"reading where the click on {text!r} landed")
+                    if landed:
+                        break
+                    time.sleep(0.2)
+                if text in landed:
+                    return
+                self.missed_clicks.append((text, ", ".join(repr(x) for x in landed)
+                                           or "no click event"))
                 time.sleep(0.2)
-        raise AssertionError(f"page: the button {text!r} stayed covered by another element")
+            raise AssertionError(f"page: no click reached the button {text!r} in 50 tries "
+                                 f"(missed: {self.missed_clicks[-3:]})")
+        finally:
+            with contextlib.suppress(Exception):
+                self.driver.execute_script("window.__vtolftcAim = null;")
 
     def press(self, button: str, timeout_s: float = 60.0) -> tuple[str, str, int]:
         """Click ``button`` and wait (at most ``timeout_s`` after the click) for the page to
@@ -239,8 +287,10 @@ class DashboardPage:
             if new:
                 return new[-1]                 # the oldest new one: this click's
             time.sleep(0.05)
-        raise AssertionError(f"page: no result for {button!r} within {timeout_s:g} s: "
-                             f"{self._call(self.commands, 60.0, 'the last results')[:3]}")
+        raise AssertionError(f"page: no result for {button!r} within {timeout_s:g} s of the "
+                             f"click: "
+                             f"{self._call(self.commands, 60.0, 'the last results')[:3]}; "
+                             f"missed clicks before it: {self.missed_clicks}")
 
     def press_until_accepted(self, button: str, timeout_s: float) -> tuple[str, str, int]:
         """Press ``button`` until its command is accepted (e.g. arming is refused while the
