@@ -22,7 +22,6 @@ from pymavlink import mavutil
 from vtolftc.firmware_sim.autopilot.mission import MissionItem
 from vtolftc.firmware_sim.vehicle.faults import case_faults
 from vtolftc.protocols.generated import constants as mav
-from vtolftc.protocols.netutil import free_udp_port
 from vtolftc.protocols.px4 import mode_name
 from vtolftc.runners.mission_run import rectangle_mission
 from vtolftc.runners.sitl import SitlConfig, SitlError, SitlRun
@@ -86,20 +85,27 @@ def fly_sitl_mission(out_dir: Path, inject_case: int | None = None, transport: s
     returns the record (lists of reached items, samples, modes, battery readings, checks).
     ``airframe`` / ``gains_dir``: another airframe file and its gain files (default DS-1 and
     the shipped gains)."""
-    port = free_udp_port()
+    # this ground station's socket is bound first, on a port the kernel picks, and the
+    # autopilot is told that port: a port found free and bound only after the processes
+    # started could be taken meanwhile (a loaded CI run: EADDRINUSE)
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=245,
+                                      source_component=190)
+    port = int(conn.port.getsockname()[1])
     cfg = SitlConfig(out_dir=out_dir, transport=transport, hold_at_start=False,
                      failure_injection=True, airframe=airframe, gains_dir=gains_dir,
                      plots=False, extra_autopilot_args=[
                          "--gcs-link", f"udp-client://127.0.0.1:{port}"])
-    run = SitlRun(cfg)
+    try:
+        run = SitlRun(cfg)
+    except BaseException:
+        conn.close()
+        raise
     rec: dict = {"reached": [], "t": [], "pos": [], "fw": [], "seq": [], "modes": set(),
                  "battery": [], "ground_modes": set(), "fault_acks": [], "items": items or
                  rectangle_mission()}
     try:
-        run.start()
-        conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=245,
-                                          source_component=190)
         try:
+            run.start()
             if _recv(conn, ["HOME_POSITION"], 60.0) is None:
                 raise SitlError("no HOME_POSITION from the autopilot: no vehicle")
             items = rec["items"]

@@ -51,6 +51,7 @@ the run folder is kept.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import math
 import os
@@ -78,6 +79,16 @@ KILL_WAIT_S = 60.0
 
 class SitlError(RuntimeError):
     """A SITL run could not start or did not complete (the message says why)."""
+
+
+class _PortTakenError(SitlError):
+    """A port this run chose was bound by someone else before its process bound it."""
+
+
+START_ATTEMPTS = 3
+"""Times :meth:`SitlRun.start` tries, with fresh ports, when a port it chose was taken."""
+
+_IN_USE = ("address already in use", "os error 98")
 
 
 @dataclass
@@ -215,18 +226,54 @@ class SitlRun:
             [_python(), *args], stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             start_new_session=True, env=env)
 
-    def _check_alive(self) -> None:
+    def _check_alive(self, starting: bool = False) -> None:
+        """SitlError if a process has ended (:class:`_PortTakenError` while ``starting``, when it
+        ended because a port of its link was in use)."""
         for name, p in self.procs.items():
             rc = p.poll()
             if rc is not None:
                 tail = ""
                 with contextlib.suppress(OSError):
                     tail = (self.out / f"{name}.log").read_text(errors="replace")[-800:]
-                raise SitlError(f"the {name} process ended early (exit status {rc}); end of "
-                                f"{self.out / (name + '.log')}:\n{tail}")
+                err = _PortTakenError if starting and any(
+                    m in tail.lower() for m in _IN_USE) else SitlError
+                raise err(f"the {name} process ended early (exit status {rc}); end of "
+                          f"{self.out / (name + '.log')}:\n{tail}")
 
     def start(self) -> None:
-        """Start both processes and connect the ground station (autopilot held at t = 0)."""
+        """Start both processes and connect the ground station (autopilot held at t = 0).
+
+        The links' ports are ones the kernel just reported free; one that another program
+        binds before this run's process does (a loaded machine running many links) is not an
+        error of the run: the processes are stopped, their logs kept as
+        ``<name>.attempt<k>.log``, and the start is tried again with fresh ports, at most
+        :data:`START_ATTEMPTS` times in all."""
+        for attempt in range(1, START_ATTEMPTS + 1):
+            try:
+                self._start_once()
+                return
+            except _PortTakenError:
+                if attempt == START_ATTEMPTS:
+                    raise
+                self._undo_start(attempt)
+
+    def _undo_start(self, attempt: int) -> None:
+        """Stop what a failed start began; keep its logs beside the next attempt's."""
+        self.stop(grace_s=5.0)
+        if self.gs is not None:
+            self.gs.close()
+            self.gs = None
+        for f in self._logs:
+            with contextlib.suppress(OSError):
+                f.close()
+        for name in self.procs:
+            with contextlib.suppress(OSError):
+                (self.out / f"{name}.log").replace(self.out / f"{name}.attempt{attempt}.log")
+        self.procs.clear()
+        self._logs.clear()
+        self._log_of.clear()
+
+    def _start_once(self) -> None:
         cfg = self.cfg
         self.out.mkdir(parents=True, exist_ok=True)
         v_url, a_hil, a_gcs, gs_url = self._urls()
@@ -238,7 +285,13 @@ class SitlRun:
         mode = ["--realtime"] if cfg.realtime else ["--lockstep"]
         # the ground station first: a udp-server must be bound before the autopilot sends
         if cfg.transport == "udp":
-            self.gs = GroundStation(gs_url)
+            try:
+                self.gs = GroundStation(gs_url)
+            except (OSError, GcsError) as e:
+                cause = e if isinstance(e, OSError) else e.__cause__
+                if getattr(cause, "errno", None) == errno.EADDRINUSE:
+                    raise _PortTakenError(f"the ground station's port: {e}") from e
+                raise
         common += ["--parent-pid", str(os.getpid())]  # no orphans if this process is killed
         if cfg.spin_us > 0:
             common += ["--spin-us", f"{cfg.spin_us:g}"]
@@ -281,7 +334,7 @@ class SitlRun:
         self.gs.add_listener(self._on_message)
         deadline = time.monotonic() + cfg.startup_timeout_s
         while not self.ready():
-            self._check_alive()
+            self._check_alive(starting=True)
             if time.monotonic() > deadline:
                 raise SitlError(f"the autopilot did not report ready (heartbeat, "
                                 f"MAV_STATE_STANDBY) within {cfg.startup_timeout_s:g} s "
